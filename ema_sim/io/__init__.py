@@ -1,0 +1,1 @@
+"""Data in and out: the measured-data CSV contract (and, with the node suite, rosbag2)."""

@@ -1,0 +1,372 @@
+"""The one stepping interface every model fidelity shares.
+
+A model holds ``n`` independent instances (one channel, or a Monte Carlo batch). It is driven by
+zero-order-held inputs, command in surface degrees and hinge moment in in·lb, and integrates
+internally at its own rate:
+
+* :meth:`ActuatorModel.step` advances by one frame (the FMU's 200 Hz frame, say) and returns the
+  outputs at the end of the frame; non-finite inputs are held at their last good value and counted.
+* :meth:`ActuatorModel.run` advances through a whole record of input breakpoints in one compiled call
+  and samples the outputs where asked (a DAU at 1 kHz, say); non-finite inputs are rejected.
+
+Both share the same state, so a node may ``run`` a warm-up and then ``step`` frame by frame.
+Sign convention: a positive hinge moment aids positive deflection.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ema_sim.config import ChannelConfig, load_channel
+from ema_sim.errors import EmaError
+from ema_sim.models import stages
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+OUTPUT_FIELDS: tuple[str, ...] = ("position_deg", "surface_deg", "rate_dps", "current_a", "bus_v", "flags")
+"""Columns of every kernel's output block, in order."""
+N_OUT = len(OUTPUT_FIELDS)
+O_POS, O_SURF, O_RATE, O_CUR, O_BUS, O_FLAGS = range(N_OUT)
+
+HISTORY_START_S = -1e9
+"""Time stamp of the trim breakpoint: the held input the model has seen 'forever'."""
+
+
+class Flags(enum.IntFlag):
+    """Which limits were active at a sample; every model reports the ones it has."""
+
+    RATE_LIMIT = stages.FLAG_RATE
+    POSITION_LIMIT = stages.FLAG_POSITION
+    FREE_PLAY_STOP = stages.FLAG_FREE_PLAY
+    THRESHOLD = stages.FLAG_THRESHOLD
+    CURRENT_LIMIT = stages.FLAG_CURRENT
+    PWM_DEAD_BAND = stages.FLAG_PWM_DEAD_BAND
+    BRAKE = stages.FLAG_BRAKE
+    STALL = stages.FLAG_STALL
+
+
+@dataclass(frozen=True)
+class Sample:
+    """Outputs of all instances at one instant; every array has shape ``(n,)``."""
+
+    time_s: float
+    position_deg: FloatArray
+    """LVDT position feedback, surface degrees (inside the servo loop)."""
+    surface_deg: FloatArray
+    """True surface angle, what an external sensor reads (free play and compliance included)."""
+    rate_dps: FloatArray
+    current_a: FloatArray
+    """Motor current; NaN for models without a motor."""
+    bus_v: FloatArray
+    """150 V bus voltage; NaN for models without one."""
+    flags: NDArray[np.int64]
+
+    def active(self, i: int = 0) -> Flags:
+        """The limit flags of instance ``i``."""
+        return Flags(int(self.flags[i]))
+
+
+@dataclass(frozen=True)
+class Record:
+    """Outputs sampled over time: ``time_s`` has shape ``(k,)``, every other array ``(n, k)``."""
+
+    model: str
+    channel: str
+    time_s: FloatArray
+    command_deg: FloatArray
+    """The command in effect at each sample (before any delay)."""
+    hinge_moment_inlb: FloatArray
+    position_deg: FloatArray
+    surface_deg: FloatArray
+    rate_dps: FloatArray
+    current_a: FloatArray
+    bus_v: FloatArray
+    flags: NDArray[np.int64]
+
+    def columns(self, i: int = 0) -> dict[str, FloatArray]:
+        """Instance ``i`` as named 1-D columns (data-contract names)."""
+        return {
+            "time_s": self.time_s,
+            "command_deg": self.command_deg[i],
+            "position_deg": self.position_deg[i],
+            "surface_deg": self.surface_deg[i],
+            "hinge_moment_inlb": self.hinge_moment_inlb[i],
+            "rate_dps": self.rate_dps[i],
+            "current_a": self.current_a[i],
+            "bus_v": self.bus_v[i],
+            "flags": self.flags[i].astype(float),
+        }
+
+
+def _as_batch(value: ArrayLike, n: int, what: str) -> FloatArray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{what}: expected a scalar or {n} values, got shape {arr.shape}")
+    return arr.copy()
+
+
+def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 1 and arr.shape[0] == m:
+        return np.broadcast_to(arr, (n, m)).copy()
+    if arr.shape != (n, m):
+        raise ValueError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
+    return arr
+
+
+class ActuatorModel(ABC):
+    """Base of every fidelity: inputs, time, history, validation; families supply the physics.
+
+    Subclasses set the class attributes and implement :meth:`_trim_states` and :meth:`_integrate`.
+    """
+
+    name: ClassVar[str]
+    """Registry name (``loada``...)."""
+    title: ClassVar[str]
+    """The report's name for it (table 4)."""
+    continuous: ClassVar[bool] = False
+    default_rate_hz: ClassVar[float] = 0.0
+    """Internal integration rate of a discrete model; 0 for the continuous ones."""
+    has_current: ClassVar[bool] = False
+    """True when the model knows motor current and bus voltage."""
+
+    def __init__(self, channel: str | ChannelConfig = "left_wing", *, n: int = 1, rate_hz: float | None = None) -> None:
+        if n < 1:
+            raise ValueError("n must be at least 1")
+        self.channel = load_channel(channel) if isinstance(channel, str) else channel
+        self.n = int(n)
+        rate = self.default_rate_hz if rate_hz is None else float(rate_hz)
+        if not self.continuous and not (math.isfinite(rate) and rate > 0.0):
+            raise EmaError(f"{self.name}: rate must be a positive number of Hz, got {rate_hz!r}")
+        self.rate_hz = rate
+        self.rejected_inputs = 0
+        """How many non-finite command or hinge-moment values :meth:`step` has held instead of using."""
+        self._last_reject_log = -math.inf
+        self._t = 0.0
+        self._hist_t = np.array([HISTORY_START_S])
+        self._hist_u = np.zeros((self.n, 1))
+        self._hist_h = np.zeros((self.n, 1))
+
+    # ----------------------------------------------------------------- family interface
+    @property
+    @abstractmethod
+    def max_delay_s(self) -> float:
+        """The longest input delay any instance applies (how much input history to keep)."""
+
+    @abstractmethod
+    def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
+        """Set every state to the equilibrium of the held command and load."""
+
+    @abstractmethod
+    def _integrate(
+        self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float, sample_t: FloatArray
+    ) -> FloatArray:
+        """Advance from ``self._t`` to ``t_end`` through the ZOH inputs; outputs at ``sample_t``.
+
+        Returns an array ``(n, len(sample_t), N_OUT)``; the caller updates ``self._t``.
+        """
+
+    def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
+        """The held command whose equilibrium is ``position_deg`` (families with command maps refine)."""
+        del hinge_moment_inlb
+        return position_deg
+
+    # ----------------------------------------------------------------- public interface
+    @property
+    def time_s(self) -> float:
+        """Model time: seconds since the last :meth:`trim`."""
+        return self._t
+
+    def trim(
+        self,
+        command_deg: ArrayLike | None = 0.0,
+        hinge_moment_inlb: ArrayLike = 0.0,
+        *,
+        position_deg: ArrayLike | None = None,
+    ) -> Sample:
+        """Restart at time 0 in equilibrium, with no transient.
+
+        Give either the held ``command_deg`` or the ``position_deg`` to trim at (the command is then
+        solved for; a quantized command lands within half a quantization step of it).
+        """
+        hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
+        if position_deg is not None:
+            u = self.trim_command(_as_batch(position_deg, self.n, "position_deg"), hm)
+        else:
+            u = _as_batch(0.0 if command_deg is None else command_deg, self.n, "command_deg")
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(hm))):
+            raise EmaError("trim needs finite command, position and hinge moment")
+        self._t = 0.0
+        self._hist_t = np.array([HISTORY_START_S])
+        self._hist_u = u[:, None].copy()
+        self._hist_h = hm[:, None].copy()
+        self._trim_states(u, hm)
+        return self._sample(self._integrate(self._hist_t, self._hist_u, self._hist_h, 0.0, np.zeros(1))[:, 0])
+
+    def step(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike = 0.0, frame_s: float = 0.005) -> Sample:
+        """Advance one frame with the command and load held over it; outputs at the frame's end."""
+        if not (math.isfinite(frame_s) and frame_s > 0.0):
+            raise ValueError(f"frame_s must be positive, got {frame_s!r}")
+        u = _as_batch(command_deg, self.n, "command_deg")
+        hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
+        u, hm = self._hold_bad(u, hm)
+        t0 = self._t
+        bp_t = np.append(self._hist_t, t0)
+        bp_u = np.concatenate([self._hist_u, u[:, None]], axis=1)
+        bp_h = np.concatenate([self._hist_h, hm[:, None]], axis=1)
+        t_end = t0 + frame_s
+        out = self._integrate(bp_t, bp_u, bp_h, t_end, np.array([t_end]))
+        self._t = t_end
+        self._keep_history(bp_t, bp_u, bp_h)
+        return self._sample(out[:, 0])
+
+    def run(
+        self,
+        time_s: ArrayLike,
+        command_deg: ArrayLike,
+        hinge_moment_inlb: ArrayLike | None = None,
+        *,
+        sample_times: ArrayLike | None = None,
+        end_s: float | None = None,
+        progress: Callable[[float], None] | None = None,
+    ) -> Record:
+        """Run through a record of zero-order-held inputs starting at ``time_s[0]``.
+
+        ``time_s`` are the instants the held inputs change (the FMU frames); ``sample_times``
+        (default: ``time_s``) where the outputs are read, each from the state at or before it.
+        ``end_s`` (default: the last sample) is where the model stops. ``progress`` gets the
+        fraction done after each chunk of about a second of simulated time.
+        """
+        bp_t = np.asarray(time_s, dtype=float).ravel()
+        m = bp_t.shape[0]
+        if m == 0:
+            raise EmaError("run needs at least one input breakpoint")
+        u = _as_record(command_deg, self.n, m, "command_deg")
+        if hinge_moment_inlb is None:
+            hm = np.zeros((self.n, m))
+        else:
+            hm = _as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
+        _check_finite(bp_t, "time_s")
+        _check_finite(u, "command_deg")
+        _check_finite(hm, "hinge_moment_inlb")
+        if np.any(np.diff(bp_t) <= 0.0):
+            raise EmaError("time_s must be strictly increasing")
+        if bp_t[0] < self._t - stages.TIME_EPS_S:
+            raise EmaError(f"time_s starts at {bp_t[0]:.6g} s, before the model time {self._t:.6g} s")
+        samples = bp_t.copy() if sample_times is None else np.asarray(sample_times, dtype=float).ravel()
+        _check_finite(samples, "sample_times")
+        if samples.size and (np.any(np.diff(samples) < 0.0) or samples[0] < self._t - stages.TIME_EPS_S):
+            raise EmaError("sample_times must be ascending and not before the model time")
+        t_end = float(samples[-1]) if end_s is None else float(end_s)
+        if samples.size and samples[-1] > t_end + stages.TIME_EPS_S:
+            raise EmaError("sample_times go past end_s")
+        all_t = np.concatenate([self._hist_t, bp_t])
+        all_u = np.concatenate([self._hist_u, u], axis=1)
+        all_h = np.concatenate([self._hist_h, hm], axis=1)
+        out = np.empty((self.n, samples.size, N_OUT))
+        t_start = self._t
+        span = max(t_end - t_start, 1e-12)
+        chunk_s = 1.0 if progress is not None else math.inf
+        done = 0
+        while True:
+            t_stop = min(t_end, self._t + chunk_s)
+            last = t_stop >= t_end
+            upto = samples.size if last else int(np.searchsorted(samples, t_stop, side="left"))
+            out[:, done:upto] = self._integrate(all_t, all_u, all_h, t_stop, samples[done:upto])
+            self._t = t_stop
+            done = upto
+            if progress is not None:
+                progress((t_stop - t_start) / span)
+            if last:
+                break
+        self._keep_history(all_t, all_u, all_h)
+        held = np.clip(np.searchsorted(all_t, samples + stages.TIME_EPS_S, side="right") - 1, 0, None)
+        return Record(
+            model=self.name,
+            channel=self.channel.channel,
+            time_s=samples,
+            command_deg=all_u[:, held],
+            hinge_moment_inlb=all_h[:, held],
+            position_deg=out[:, :, O_POS],
+            surface_deg=out[:, :, O_SURF],
+            rate_dps=out[:, :, O_RATE],
+            current_a=out[:, :, O_CUR],
+            bus_v=out[:, :, O_BUS],
+            flags=out[:, :, O_FLAGS].astype(np.int64),
+        )
+
+    def describe(self) -> dict[str, Any]:
+        """Name, title, rate and channel, for logs and bag metadata."""
+        return {
+            "model": self.name,
+            "title": self.title,
+            "channel": self.channel.channel,
+            "rate_hz": self.rate_hz if not self.continuous else "continuous",
+            "instances": self.n,
+        }
+
+    # ----------------------------------------------------------------- helpers
+    def _hold_bad(self, u: FloatArray, hm: FloatArray) -> tuple[FloatArray, FloatArray]:
+        bad_u = ~np.isfinite(u)
+        bad_h = ~np.isfinite(hm)
+        if bad_u.any() or bad_h.any():
+            self.rejected_inputs += int(bad_u.sum() + bad_h.sum())
+            u = np.where(bad_u, self._hist_u[:, -1], u)
+            hm = np.where(bad_h, self._hist_h[:, -1], hm)
+            now = time.monotonic()
+            if now - self._last_reject_log >= 1.0:
+                self._last_reject_log = now
+                log.error(
+                    "%s/%s: non-finite input held at its last value (%d rejected so far)",
+                    self.name, self.channel.channel, self.rejected_inputs,
+                )
+        return u, hm
+
+    def _keep_history(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray) -> None:
+        horizon = self._t - self.max_delay_s - 1e-6
+        first = max(int(np.searchsorted(bp_t, horizon, side="right")) - 1, 0)
+        self._hist_t = bp_t[first:].copy()
+        self._hist_u = bp_u[:, first:].copy()
+        self._hist_h = bp_h[:, first:].copy()
+
+    def _sample(self, block: FloatArray) -> Sample:
+        return Sample(
+            time_s=self._t,
+            position_deg=block[:, O_POS].copy(),
+            surface_deg=block[:, O_SURF].copy(),
+            rate_dps=block[:, O_RATE].copy(),
+            current_a=block[:, O_CUR].copy(),
+            bus_v=block[:, O_BUS].copy(),
+            flags=block[:, O_FLAGS].astype(np.int64),
+        )
+
+
+def _check_finite(arr: FloatArray, what: str) -> None:
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        idx = np.argwhere(bad)[0]
+        raise EmaError(f"{what}: non-finite value at index {tuple(int(i) for i in idx)}")
+
+
+def batch_params(params: object | Sequence[object] | None, n: int, default: Callable[[], object]) -> list[Any]:
+    """Normalise a family's ``params`` argument: None, one set for all, or one per instance."""
+    if params is None:
+        return [default()] * n
+    if isinstance(params, Sequence) and not isinstance(params, str | bytes):
+        if len(params) != n:
+            raise ValueError(f"got {len(params)} parameter sets for {n} instances")
+        return list(params)
+    return [params] * n

@@ -1,0 +1,174 @@
+"""Linear models (section 3.4, 4.2.7): transfer functions built with python-control.
+
+A :class:`LinearModel` wraps a continuous state-space system with inputs (command deg, hinge moment
+in·lb) and outputs (LVDT position deg, surface deg), plus a pure delay on the command. In the time
+domain it steps the exact zero-order-hold discretization at ``rate_hz`` (10 kHz by default), exact
+whenever the inputs change on that grid; in the frequency domain :meth:`LinearModel.frequency_response`
+evaluates the continuous system and the delay exactly.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import control as ct
+import numba as nb
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ema_sim.config import ChannelConfig, load_channel
+from ema_sim.models import stages as st
+from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel, FloatArray
+from ema_sim.models.second_order import SecondOrderParams
+
+
+@nb.njit(cache=True)
+def run_lti(Ad, Bd, Cd, Dd, Crate, Drate, X, bp_t, bp_u, bp_h, delay_s, t0, dt, n_steps, sample_t, out):  # noqa: ANN001, ANN201
+    """Step ``x ← Ad·x + Bd·[u(t − delay), hm]`` for every instance; samples as the discrete models."""
+    k_samples = sample_t.shape[0]
+    nx = Ad.shape[0]
+    xn = np.empty(nx)
+    uin = np.empty(2)
+    for i in range(X.shape[0]):
+        x = X[i]
+        jd = st.zoh_index(bp_t, t0 - delay_s, 0)
+        jh = st.zoh_index(bp_t, t0, 0)
+        js = 0
+        for k in range(n_steps + 1):
+            t = t0 + k * dt
+            jd = st.zoh_index(bp_t, t - delay_s, jd)
+            jh = st.zoh_index(bp_t, t, jh)
+            uin[0] = bp_u[i, jd]
+            uin[1] = bp_h[i, jh]
+            while js < k_samples and (k == n_steps or sample_t[js] < t + dt - st.TIME_EPS_S):
+                row = out[i, js]
+                row[O_POS] = Dd[0, 0] * uin[0] + Dd[0, 1] * uin[1]
+                row[O_SURF] = Dd[1, 0] * uin[0] + Dd[1, 1] * uin[1]
+                row[O_RATE] = Drate[0] * uin[0] + Drate[1] * uin[1]
+                for a in range(nx):
+                    row[O_POS] += Cd[0, a] * x[a]
+                    row[O_SURF] += Cd[1, a] * x[a]
+                    row[O_RATE] += Crate[a] * x[a]
+                row[O_CUR] = np.nan
+                row[O_BUS] = np.nan
+                row[O_FLAGS] = 0.0
+                js += 1
+            if k == n_steps:
+                break
+            for a in range(nx):
+                acc = Bd[a, 0] * uin[0] + Bd[a, 1] * uin[1]
+                for b in range(nx):
+                    acc += Ad[a, b] * x[b]
+                xn[a] = acc
+            for a in range(nx):
+                x[a] = xn[a]
+
+
+class LinearModel(ActuatorModel):
+    """A continuous LTI system (2 inputs, 2 outputs) with a command delay, stepped exactly."""
+
+    default_rate_hz = 10_000.0
+    linear: ClassVar[bool] = True
+
+    def __init__(
+        self,
+        system: ct.StateSpace,
+        delay_s: float,
+        channel: str | ChannelConfig = "left_wing",
+        *,
+        n: int = 1,
+        rate_hz: float | None = None,
+    ) -> None:
+        super().__init__(channel, n=n, rate_hz=rate_hz)
+        if system.ninputs != 2 or system.noutputs != 2 or not system.isctime():
+            raise ValueError("a linear actuator model is a continuous system with 2 inputs and 2 outputs")
+        if not delay_s >= 0.0:
+            raise ValueError("delay_s must not be negative")
+        self.system = system
+        self.delay_s = float(delay_s)
+        dt = 1.0 / self.rate_hz
+        disc = ct.c2d(system, dt, method="zoh")
+        self._Ad = np.ascontiguousarray(disc.A, dtype=float)
+        self._Bd = np.ascontiguousarray(disc.B, dtype=float)
+        self._Cd = np.ascontiguousarray(disc.C, dtype=float)
+        self._Dd = np.ascontiguousarray(disc.D, dtype=float)
+        # Position rate: d/dt (C0·x + D0·u) = C0·A·x + C0·B·u for held inputs.
+        A, B, C = (np.asarray(m, dtype=float) for m in (system.A, system.B, system.C))
+        self._Crate = np.ascontiguousarray(C[0] @ A)
+        self._Drate = np.ascontiguousarray(C[0] @ B)
+        self._X = np.zeros((self.n, A.shape[0]))
+        self.trim()
+
+    @property
+    def max_delay_s(self) -> float:  # noqa: D102
+        return self.delay_s
+
+    def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
+        A = np.asarray(self.system.A, dtype=float)
+        B = np.asarray(self.system.B, dtype=float)
+        u = np.stack([command_deg, hinge_moment_inlb])  # (2, n)
+        self._X[:] = np.linalg.solve(A, -B @ u).T  # steady state: A·x + B·u = 0
+        self._steps = 0
+
+    def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
+        """The command whose steady state (DC gain) is ``position_deg`` under the given load."""
+        dc = np.asarray(ct.dcgain(self.system), dtype=float)
+        return (position_deg - dc[0, 1] * hinge_moment_inlb) / dc[0, 0]
+
+    def _integrate(self, bp_t, bp_u, bp_h, t_end, sample_t):  # noqa: ANN001, ANN202
+        dt = 1.0 / self.rate_hz
+        t0 = self._steps * dt
+        n_steps = max(int(np.floor((t_end - t0) / dt + 1e-6)), 0)
+        out = np.empty((self.n, sample_t.size, N_OUT))
+        run_lti(
+            self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X,
+            bp_t, bp_u, bp_h, self.delay_s, t0, dt, n_steps, sample_t, out,
+        )
+        self._steps += n_steps
+        return out
+
+    def frequency_response(self, freq_hz: ArrayLike, output: int = 0) -> tuple[FloatArray, FloatArray]:
+        """Gain (dB) and phase (deg) from command to ``output`` (0 position, 1 surface), delay included."""
+        f = np.atleast_1d(np.asarray(freq_hz, dtype=float))
+        w = 2.0 * np.pi * f
+        resp = ct.frequency_response(self.system[output, 0], w)
+        h = np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * self.delay_s)
+        return 20.0 * np.log10(np.abs(h)), np.degrees(np.unwrap(np.angle(h)))
+
+    def describe(self) -> dict[str, Any]:  # noqa: D102
+        info = super().describe()
+        info["delay_s"] = self.delay_s
+        info["states"] = int(self.system.nstates)
+        return info
+
+
+def second_order_system(wn_rad_s: float, zeta: float) -> ct.StateSpace:
+    """ωn²/(s² + 2ζωn·s + ωn²) from the command; the hinge moment does not enter; surface = position."""
+    g = ct.ss(ct.tf([wn_rad_s**2], [1.0, 2.0 * zeta * wn_rad_s, wn_rad_s**2]))
+    A = np.asarray(g.A, dtype=float)
+    B = np.hstack([np.asarray(g.B, dtype=float), np.zeros((A.shape[0], 1))])
+    C = np.vstack([np.asarray(g.C, dtype=float)] * 2)
+    return ct.ss(A, B, C, np.zeros((2, 2)), inputs=["command_deg", "hinge_moment_inlb"],
+                 outputs=["position_deg", "surface_deg"])
+
+
+class Sloac(LinearModel):
+    """SLOAC: LOAC reduced to its second-order transfer function and delay (section 4.2.7)."""
+
+    name = "sloac"
+    title = "Simplified low-order actuator continuous model (SLOAC)"
+
+    def __init__(
+        self,
+        channel: str | ChannelConfig = "left_wing",
+        *,
+        n: int = 1,
+        rate_hz: float | None = None,
+        **overrides: float,
+    ) -> None:
+        ch = load_channel(channel) if isinstance(channel, str) else channel
+        self.params = SecondOrderParams.from_channel(ch, **overrides)
+        super().__init__(
+            second_order_system(self.params.wn_rad_s, self.params.zeta), self.params.delay_s, ch,
+            n=n, rate_hz=rate_hz,
+        )

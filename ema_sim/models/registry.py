@@ -1,0 +1,36 @@
+"""Models by name, as table 5 lists them; an unknown name is an error that lists the known ones."""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+from ema_sim.errors import UnknownNameError
+from ema_sim.models.base import ActuatorModel
+
+_MODELS: dict[str, str] = {
+    "loac": "ema_sim.models.second_order:Loac",
+    "loadf": "ema_sim.models.second_order:Loadf",
+    "loada": "ema_sim.models.second_order:Loada",
+    "sloac": "ema_sim.models.linear:Sloac",
+}
+"""Registry name → ``module:class`` (imported on first use, so listing names stays cheap)."""
+
+
+def model_names() -> list[str]:
+    """The names ``create`` accepts, in table 5's order."""
+    return list(_MODELS)
+
+
+def model_class(name: str) -> type[ActuatorModel]:
+    """The class registered under ``name``."""
+    key = name.strip().lower()
+    if key not in _MODELS:
+        raise UnknownNameError("model", name, _MODELS)
+    module, cls = _MODELS[key].split(":")
+    return getattr(import_module(module), cls)
+
+
+def create(name: str, channel: str = "left_wing", **kwargs: Any) -> ActuatorModel:
+    """Build model ``name`` for ``channel`` (``n``, ``rate_hz`` and parameter overrides pass through)."""
+    return model_class(name)(channel, **kwargs)

@@ -1,0 +1,40 @@
+"""ament_python package ema_sim; also installs with pip (see README)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ema_sim"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=["ema_sim", "ema_sim.*", "ema_msgs_py", "ema_msgs_py.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.26",
+        "scipy>=1.11",
+        "numba>=0.59",
+        "control>=0.10",
+        "rosbags>=0.10",
+        "mcap>=1.1",
+        "matplotlib>=3.8",
+        "PyYAML>=6",
+    ],
+    zip_safe=True,
+    maintainer="ema_sim maintainers",
+    maintainer_email="ema-sim@example.org",
+    description="X-43A electromechanical actuator emulation: models, ROS 2 nodes, analysis, identification.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "ema = ema_sim.cli:main",
+        ],
+    },
+)

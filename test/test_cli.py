@@ -1,0 +1,71 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ema_sim.cli import main
+from ema_sim.io.csv import read_csv
+
+
+def test_simulate_writes_a_contract_csv_sampled_like_a_dau(tmp_path, capsys):
+    out = tmp_path / "sweep.csv"
+    rc = main(["simulate", "--model", "loada", "--channel", "right_rudder", "--maneuver",
+               "sweep:f0_hz=0.5,f1_hz=5,amp_deg=1,sweep_s=4", "--load", "const:inlb=100",
+               "--sample-hz", "500", "--csv", str(out)])
+    assert rc == 0
+    data = read_csv(out)
+    assert data.metadata["model"] == "loada"
+    assert data.metadata["channel"] == "right_rudder"
+    assert data.sample_hz == pytest.approx(500.0)
+    assert data.time_s[-1] == pytest.approx(5.0)
+    assert data.outputs == ["position_deg", "surface_deg"]
+    assert np.allclose(data.hinge_moment_inlb, 100.0)
+    assert data.command_v is not None
+    assert data.position_v is not None
+    # right rudder: direct degrees-to-volts relation, ≈ 0.235 V per degree.
+    assert np.corrcoef(data.command_deg, data.command_v)[0, 1] > 0.999
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_simulate_inverse_channels_have_negative_volts(tmp_path):
+    out = tmp_path / "lw.csv"
+    assert main(["simulate", "--model", "loac", "--maneuver", "step:amp_deg=5", "--csv", str(out)]) == 0
+    data = read_csv(out)
+    held = data.command_deg == 5.0
+    assert np.all(data.command_v[held] < -1.0)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--model", "hoad9", "--maneuver", "step"], "unknown model 'hoad9'; known: loac"),
+        (["--model", "loada", "--maneuver", "step:amp=1"], "unknown field 'amp'"),
+        (["--model", "loada", "--maneuver", "step", "--channel", "tail"], "unknown channel 'tail'"),
+        (["--model", "loada", "--maneuver", "step", "--rate", "-5"], "rate must be a positive"),
+        (["--model", "loada", "--maneuver", "step", "--set", "wn=3"], "unknown second-order parameter 'wn'"),
+        (["--model", "loada", "--maneuver", "step", "--set", "zeta=-1"], "zeta must be positive"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_status_2(tmp_path, capsys, args, message):
+    rc = main(["simulate", *args, "--csv", str(tmp_path / "x.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert message in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_compare_prints_table6_and_writes_json(tmp_path, capsys):
+    out = tmp_path / "t6.json"
+    assert main(["compare", "--models", "loadf@200,loada@800", "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())
+    assert [r["model"] for r in rows] == ["loadf", "loada"]
+    assert rows[0]["max_abs_deg"] > 5 * rows[1]["max_abs_deg"]
+    assert "| LOADF | 200 Hz |" in capsys.readouterr().out
+
+
+def test_console_script_is_installed():
+    res = subprocess.run([sys.executable, "-m", "ema_sim.cli", "models"], capture_output=True, text=True, check=True)
+    assert "loada" in res.stdout

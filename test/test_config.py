@@ -1,0 +1,72 @@
+import re
+
+import numpy as np
+import pytest
+
+from ema_sim.calibration import command_error
+from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
+from ema_sim.errors import ConfigError, UnknownNameError
+
+UNIT = re.compile(
+    r"_(deg|v|inlb|inlbs2|s|hz|in|in_s|dps|lbf|lbf_per_in|rad_s|dps_per_lb|per_kinlb|deg_per_kinlb|a|ohm)$"
+)
+DIMENSIONLESS = {"channel", "surface", "zeta", "kb", "command_cal_v", "feedback_cal_deg"}
+
+
+@pytest.mark.parametrize("channel", CHANNELS)
+def test_every_channel_loads_with_report_values(channel):
+    cfg = load_channel(channel)
+    assert cfg.channel == channel
+    assert cfg.slew_rate_dps == pytest.approx(115.8)
+    assert cfg.slew_rate_dps / cfg.slew_rate_in_s == pytest.approx(cfg.deg_per_in, rel=1e-3)
+    assert cfg.stall_force_lbf == 2500.0
+    assert cfg.full_scale_v == 10.0
+    inertia = {"wing": 3.896, "rudder": 0.3261, "cowl": 3.006}[cfg.surface]
+    assert cfg.surface_inertia_inlbs2 == inertia
+    # ±10 V is the full stroke: the feedback curve reaches the position limits at full scale.
+    assert abs(cfg.v_to_deg(cfg.full_scale_v)) == pytest.approx(cfg.position_max_deg, abs=0.1)
+
+
+def test_three_of_four_surfaces_have_an_inverse_degree_to_volt_relation():
+    signs = {ch: load_channel(ch).command_cal.sign for ch in CHANNELS if ch != "cowl_door"}
+    assert sorted(signs.values()) == [-1, -1, -1, 1]
+    assert signs["right_rudder"] == 1  # section 4.4.1: both wings and the left rudder are inverse
+
+
+@pytest.mark.parametrize("channel", CHANNELS)
+def test_command_error_in_config_matches_its_calibration_curves(channel):
+    cfg = load_channel(channel)
+    fit = command_error(cfg.command_cal, cfg.feedback_cal, np.linspace(-40, 40, 81))
+    so = cfg.section("second_order")
+    assert so["kb"] == pytest.approx(fit.kb, abs=2e-4)
+    assert so["offset_deg"] == pytest.approx(fit.offset_deg, abs=2e-3)
+
+
+@pytest.mark.parametrize("channel", CHANNELS)
+def test_every_parameter_name_carries_its_unit(channel):
+    params = ros_parameters(config_dir() / f"{channel}.yaml")
+
+    def walk(mapping):
+        for key, value in mapping.items():
+            if isinstance(value, dict):
+                yield from walk(value)
+            else:
+                yield key
+
+    bad = [k for k in walk(params) if k not in DIMENSIONLESS and not UNIT.search(k)]
+    assert bad == []
+
+
+def test_unknown_channel_lists_the_known_ones():
+    with pytest.raises(UnknownNameError, match="known: cowl_door, left_rudder, left_wing"):
+        load_channel("tail")
+
+
+def test_malformed_channel_parameters_name_the_problem():
+    good = ros_parameters(config_dir() / "left_wing.yaml")
+    bad = dict(good, crank_arm_in="long")
+    with pytest.raises(ConfigError, match="crank_arm_in"):
+        parse_channel(bad)
+    missing = {k: v for k, v in good.items() if k != "stroke_in"}
+    with pytest.raises(ConfigError, match="stroke_in"):
+        parse_channel(missing)
