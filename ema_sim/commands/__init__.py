@@ -1,0 +1,11 @@
+"""``ema`` subcommands, one module each; every module has ``register(subparsers)``.
+
+Add a command by adding its module name to ``COMMANDS`` (in the order ``ema --help`` lists them).
+"""
+
+COMMANDS: tuple[str, ...] = (
+    "simulate",
+    "compare",
+    "bench",
+    "listing",
+)

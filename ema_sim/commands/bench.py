@@ -1,0 +1,37 @@
+"""``ema bench``: the speed and memory targets under ``bench/``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmarks; exit 1 when one misses its target."""
+    from ema_sim.benchmark import discover  # noqa: PLC0415
+
+    results = []
+    failed = 0
+    for bench in discover():
+        if args.only and not any(key in bench.name for key in args.only):
+            continue
+        res = bench.run()
+        failed += not res.passed
+        mark = "PASS" if res.passed else "FAIL"
+        print(f"{mark}  {bench.name:34s} {res.value:12.4g} {res.unit:12s} target {bench.target:18s} {res.detail}",
+              flush=True)
+        results.append({"name": bench.name, "target": bench.target, "value": res.value, "unit": res.unit,
+                        "passed": res.passed, "detail": res.detail})
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
+    return 1 if failed else 0
+
+
+def register(sub: Any) -> None:
+    """Add ``bench`` to the ``ema`` parser."""
+    p = sub.add_parser("bench", help="run the speed and memory benchmarks under bench/")
+    p.add_argument("--only", action="append", help="run benchmarks whose name contains this (repeatable)")
+    p.add_argument("--json", default=None, help="write the results as JSON")
+    p.set_defaults(func=run)
