@@ -5,8 +5,9 @@ Dynamic crosstalk: it follows a slow 0.5 Hz triangle while the others move; nois
 ramp. The noise is what is left after removing what the command explains:
 
 * held command: the output minus its mean and linear trend;
-* moving command: the output minus ``g·u(t − τ) + c``, τ the lag of best cross-correlation of the
-  rates (fractional, by linear interpolation), ``g`` and ``c`` by least squares.
+* moving command: the output minus ``g·ū(t − τ) + c``, ū the command smoothed over one frame (the
+  actuator does not follow the D/A staircase), τ the lag of least residual (parabolic refinement
+  between samples), ``g`` and ``c`` by least squares.
 
 Peak-to-peak and RMS of that residual, the RMS in excess of the white sensor noise floor, the same in
 volts through the feedback curve's slope, and the verdict against the threshold: the report's right
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis.noise import cross_correlation
+from ema_sim.analysis.series import moving_average
 from ema_sim.analysis.sine_fit import dominant_frequency
 
 FloatArray = NDArray[np.float64]
@@ -63,20 +64,35 @@ class CrosstalkResult:
         }
 
 
+def _frame_samples(u: FloatArray) -> int:
+    """Median length of the runs over which a held digital command keeps its value (its frame)."""
+    change = np.flatnonzero(np.diff(u) != 0.0)
+    if change.size < 2:
+        return 1
+    return max(1, int(np.median(np.diff(change))))
+
+
 def _tracking_residual(t: FloatArray, u: FloatArray, y: FloatArray) -> tuple[FloatArray, float]:
+    """``y − (g·ū(t − τ) + c)``: ū the command smoothed over one frame, τ the lag of least residual."""
     dt = float(np.median(np.diff(t)))
-    lags, c = cross_correlation(np.diff(u), np.diff(y), round(MAX_LAG_S / dt))
-    i = int(np.argmax(c))
+    us = moving_average(u, _frame_samples(u))
+    lags = np.arange(0, round(MAX_LAG_S / dt) + 1)
+    ones = np.ones_like(t)
+
+    def fit(lag: float) -> tuple[float, FloatArray]:
+        X = np.column_stack([np.interp(t - lag * dt, t, us), ones])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ coef
+        return float(r @ r), r
+
+    cost = np.array([fit(float(k))[0] for k in lags])
+    i = int(np.argmin(cost))
     lag = float(lags[i])
-    if 0 < i < c.size - 1:
-        den = c[i - 1] - 2 * c[i] + c[i + 1]
-        if den != 0:
-            lag += 0.5 * (c[i - 1] - c[i + 1]) / den
-    tau = lag * dt
-    shifted = np.interp(t - tau, t, u)
-    X = np.column_stack([shifted, np.ones_like(t)])
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    return y - X @ coef, tau
+    if 0 < i < lags.size - 1:
+        den = cost[i - 1] - 2 * cost[i] + cost[i + 1]
+        if den > 0:
+            lag += 0.5 * (cost[i - 1] - cost[i + 1]) / den
+    return fit(lag)[1], lag * dt
 
 
 def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: float, *, output: str,

@@ -106,7 +106,8 @@ def analyze_hysteresis(t: FloatArray, hinge_moment: FloatArray, deflection_deg: 
     period = 1.0 / sine.freq_hz
     # Upward zero crossings of the fitted load, 2π·f·t + φ = 2πk: the cycle boundaries.
     cyc = sine.phase_rad / (2 * np.pi)
-    k = np.arange(np.ceil(t[0] * sine.freq_hz + cyc - 1e-9), np.floor(t[-1] * sine.freq_hz + cyc + 1e-9))
+    half = 0.5 / fs * sine.freq_hz  # half a sample, in cycles: a crossing that close to an end counts
+    k = np.arange(np.ceil(t[0] * sine.freq_hz + cyc - half), np.floor(t[-1] * sine.freq_hz + cyc + half))
     starts = (k - cyc) / sine.freq_hz
     force = hinge_moment / crank_arm_in
     x = np.radians(deflection_deg) * crank_arm_in

@@ -9,7 +9,8 @@ Used by the offline analysis (`ema analyze`) to set detection thresholds and by 
   ignore the few samples at steps and edges.
 * :func:`whiteness` is the Ljung-Box portmanteau test on the residual's autocorrelation.
 * :func:`input_independence` tests the residual's cross-correlation with the input (a model that
-  explains everything leaves a residual uncorrelated with the input at every lag).
+  explains everything leaves a residual uncorrelated with the input at every lag); the band holds
+  all 2L + 1 lags at once with 99 % probability (Bonferroni).
 """
 
 from __future__ import annotations
@@ -101,13 +102,13 @@ class IndependenceTest:
     peak_correlation: float
     peak_lag: int
     bound: float
-    """The 99 % band for uncorrelated sequences, 2.58/√N."""
+    """The band uncorrelated sequences stay inside at every lag with 99 % probability (Bonferroni over the lags)."""
     independent: bool
 
     def as_dict(self) -> dict[str, float | int | bool]:
         """Plain values for JSON."""
         return {"max_lag": self.max_lag, "peak_correlation": self.peak_correlation, "peak_lag": self.peak_lag,
-                "bound_99": self.bound, "independent": self.independent}
+                "bound_99_all_lags": self.bound, "independent": self.independent}
 
 
 def input_independence(residual: FloatArray, u: FloatArray, max_lag: int = 50) -> IndependenceTest:
@@ -116,12 +117,14 @@ def input_independence(residual: FloatArray, u: FloatArray, max_lag: int = 50) -
     Differencing the input removes its own strong low-frequency autocorrelation, which would widen
     the band of a raw cross-correlation far beyond 2.58/√N.
     """
+    from scipy.stats import norm  # noqa: PLC0415
+
     du = np.diff(np.asarray(u, dtype=float))
     r = np.asarray(residual, dtype=float)[1:]
     n = r.size
+    bound = float(norm.isf(0.005 / (2 * max_lag + 1))) / np.sqrt(max(n, 1))
     if np.allclose(du, 0.0):
-        return IndependenceTest(max_lag, 0.0, 0, 2.58 / np.sqrt(max(n, 1)), True)
+        return IndependenceTest(max_lag, 0.0, 0, bound, True)
     lags, c = cross_correlation(du, r, max_lag)
     i = int(np.argmax(np.abs(c)))
-    bound = 2.58 / np.sqrt(n)
     return IndependenceTest(int(max_lag), float(c[i]), int(lags[i]), float(bound), bool(abs(c[i]) <= bound))

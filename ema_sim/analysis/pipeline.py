@@ -193,7 +193,13 @@ def _overlay(options: Options, ch: ChannelConfig, data: MeasuredData, sl: slice)
 def _frequency(ra: RecordAnalysis, seg: Segment, options: Options) -> None:
     data = ra.data
     fs = data.sample_hz
-    sl = slice(seg.start, seg.stop)
+    stop = seg.stop
+    if seg.kind == "schroeder" and "period_s" in seg.params:
+        # Whole periods from the start of the sweep (the command holds its value after the last change).
+        n_per = seg.params["period_s"] * fs
+        periods = int(np.floor((seg.stop - seg.start) / n_per + 0.02))
+        stop = max(stop, min(len(data), seg.start + round(periods * n_per)))
+    sl = slice(seg.start, stop)
     u = data.command_deg[sl]
     outs = _outputs(data, sl)
     t0 = float(data.time_s[seg.start])

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from ema_sim.analysis import series
 from ema_sim.analysis.noise import autocorrelation
 from ema_sim.analysis.series import Edge, Hold
-from ema_sim.analysis.sine_fit import sine_at
+from ema_sim.analysis.sine_fit import fit_sine
 from ema_sim.errors import EmaError
 from ema_sim.io.csv import MeasuredData
 from ema_sim.signals import Load, Maneuver, parse_load, parse_maneuver
@@ -130,16 +130,23 @@ def _spearman(x: FloatArray) -> float:
 
 
 def _period_by_autocorrelation(u: FloatArray, dt: float) -> tuple[float, float] | None:
+    """Lag (≥ 1 s, ≤ 60 % of the record) of the highest unbiased autocorrelation, refined parabolically."""
     n = u.size
     lo = round(1.0 / dt)
-    if n < 2 * lo + 2:
+    hi = int(0.6 * n)
+    if hi < lo + 2:
         return None
-    rho = autocorrelation(u, n // 2)
-    # The biased estimator shrinks by (1 − k/N); undo it so a repeat over half the record counts fully.
+    rho = autocorrelation(u, hi)
+    # The biased estimator shrinks by (1 − k/N); undo it so a repeat late in the record counts fully.
     k = np.arange(rho.size)
     rho = rho / (1.0 - k / n)
-    i = lo + int(np.argmax(rho[lo:]))
-    return i * dt, float(rho[i])
+    i = lo + int(np.argmax(rho[lo:hi]))
+    lag = float(i)
+    if lo < i < hi - 1:
+        den = rho[i - 1] - 2 * rho[i] + rho[i + 1]
+        if den < 0:
+            lag += 0.5 * (rho[i - 1] - rho[i + 1]) / den
+    return float(lag * dt), float(rho[i])
 
 
 def _classify_moving(t: FloatArray, u: FloatArray) -> tuple[str, str, dict[str, float]]:  # noqa: PLR0911 - per kind
@@ -162,9 +169,11 @@ def _classify_moving(t: FloatArray, u: FloatArray) -> tuple[str, str, dict[str, 
         if growth > 1.5:
             kind = "static_threshold" if freq < 1.0 else "dynamic_threshold"
             return kind, f"{freq:.3g} Hz tone whose amplitude grows {growth:.2g}×", {"freq_hz": freq}
-        r2 = sine_at(t, u, freq).r2
+        tone = fit_sine(t, u, freq)
+        r2 = tone.r2 if tone else 0.0
+        freq = tone.freq_hz if tone else freq
         kind = "sine" if r2 > 0.99 else "triangle"
-        return kind, f"steady {freq:.3g} Hz {'sine' if kind == 'sine' else 'triangle'} (sine R² {r2:.3f})", \
+        return kind, f"steady {freq:.4g} Hz {'sine' if kind == 'sine' else 'triangle'} (sine R² {r2:.3f})", \
             {"freq_hz": freq, "amp_deg": float(np.median(swing) / 2)}
     if turns.size >= 12:
         rho = _spearman(half)
@@ -251,12 +260,17 @@ def recognize(data: MeasuredData) -> Recognition:
             merged[-1] = (merged[-1][0], b)
         else:
             merged.append((a, b))
-    for a, b in merged:
+    for lo, hi in merged:
+        # Leading and trailing samples where the command sits still belong to no test.
+        a, b = lo, hi
+        before = max(lo - 1, 0)
+        changes = np.flatnonzero(np.abs(np.diff(u[before:hi])) > tol)
+        if changes.size:
+            a, b = before + int(changes[0]) + 1, before + int(changes[-1]) + 2
         if (b - a) * dt < MIN_MOVING_S:
             continue
-        a0 = max(a - 1, 0)
-        kind, why, params = _classify_moving(t[a0:b], u[a0:b])
-        segments.append(Segment(kind, a0, b, f"signal: {why}", params))
+        kind, why, params = _classify_moving(t[a:b], u[a:b])
+        segments.append(Segment(kind, a, b, f"signal: {why}", params))
     for h in long_holds:
         if (h.stop - h.start) * dt >= HELD_TEST_S:
             kind, why, hs = _classify_held(t, data.hinge_moment_inlb, h.start, h.stop)

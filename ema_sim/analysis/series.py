@@ -33,16 +33,33 @@ def is_uniform(time_s: FloatArray) -> bool:
     return bool(np.all(np.abs(dt - med) <= UNIFORM_TOLERANCE * med))
 
 
-def uniform_record(data: MeasuredData) -> MeasuredData:
-    """``data`` on a uniform grid at its median rate (unchanged when it already is uniform).
+JITTER_LIMIT = 0.25
+"""Intervals within 25 % of the median (no gap, no burst) are regular sampling with jittery time stamps."""
 
-    Held columns (the command) are resampled by zero-order hold, as the contract defines the command;
-    measured columns by linear interpolation.
+
+def uniform_record(data: MeasuredData) -> MeasuredData:
+    """``data`` on a uniform grid (unchanged when it already is uniform).
+
+    Time stamps that only jitter (every interval within 25 % of the median) belong to regular
+    sampling: they are replaced by the least-squares line through them and the samples are kept as
+    they are (resampling would delay the held command by up to a sample against the outputs). Records
+    with gaps or mixed rates are resampled at the median rate: held columns (the command) by
+    zero-order hold, as the contract defines the command, measured columns by linear interpolation.
     """
     t = data.time_s
     if is_uniform(t):
         return data
-    dt = float(np.median(np.diff(t)))
+    dt_all = np.diff(t)
+    med = float(np.median(dt_all))
+    meta = dict(data.metadata)
+    if np.all(np.abs(dt_all - med) <= JITTER_LIMIT * med):
+        k = np.arange(t.size, dtype=float)
+        slope, icpt = np.polyfit(k, t, 1)
+        jitter = float(np.max(np.abs(t - (icpt + slope * k))))
+        meta["resampled"] = (f"time stamps jitter by up to {1e3 * jitter:.3g} ms: samples taken as uniform at "
+                             f"{1.0 / slope:.6g} Hz (least-squares line through the stamps), not resampled")
+        return replace(data, time_s=icpt + slope * k, metadata=meta)
+    dt = med
     n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
     grid = t[0] + dt * np.arange(n)
     idx = np.clip(np.searchsorted(t, grid + 1e-12, side="right") - 1, 0, t.size - 1)
@@ -52,8 +69,8 @@ def uniform_record(data: MeasuredData) -> MeasuredData:
         if not isinstance(value, np.ndarray) or f.name == "time_s":
             continue
         changes[f.name] = value[idx] if f.name in HELD else np.interp(grid, t, value)
-    meta = dict(data.metadata)
-    meta["resampled"] = f"uniform at {1.0 / dt:g} Hz from non-uniform time"
+    meta["resampled"] = (f"time stamps not uniform (intervals {1e3 * dt_all.min():.3g}-{1e3 * dt_all.max():.3g} ms): "
+                         f"resampled at {1.0 / dt:.6g} Hz, command held, outputs interpolated")
     changes["metadata"] = meta
     return replace(data, **changes)  # type: ignore[arg-type]
 
@@ -99,8 +116,17 @@ def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hol
     padded = np.concatenate([[True], moving, [True]])
     change = np.flatnonzero(np.diff(padded.astype(np.int8)))
     starts, stops = change[::2], change[1::2]
+    # A noise spike breaks a run; runs that meet again at the same level are one hold.
+    ends = stops  # last sample of each run
+    merge = np.zeros(starts.size, dtype=bool)
+    if starts.size > 1:
+        merge[1:] = (starts[1:] - ends[:-1] <= 2) & (np.abs(x[starts[1:]] - x[ends[:-1]]) <= 3 * tol)
+    group = np.cumsum(~merge) - 1
+    first = starts[~merge]
+    last = np.zeros(first.size, dtype=int)
+    np.maximum.at(last, group, ends)
     out = []
-    for s, e in zip(starts, stops, strict=True):
+    for s, e in zip(first.tolist(), last.tolist(), strict=True):
         stop = e + 1
         if stop - s >= min_samples:
             out.append(Hold(int(s), int(stop), float(np.median(x[s:stop]))))

@@ -1,8 +1,8 @@
 """Least-squares sine fits: the frequency, amplitude and phase of a tone in a record.
 
-The frequency is found from the FFT peak (Hann, zero-padded), then refined by maximising the
-least-squares amplitude (golden section over ±1 bin); amplitude and phase are linear least squares on
-``[sin, cos, 1]``.
+The frequency is found from the FFT peak (Hann, zero-padded), then refined by minimising the
+least-squares residual (bounded scalar search over ±1 bin); amplitude and phase are linear least
+squares on ``[sin, cos, 1]``.
 """
 
 from __future__ import annotations
@@ -67,6 +67,6 @@ def fit_sine(t: FloatArray, y: FloatArray, freq_hz: float | None = None, f_min: 
         return None
     span = float(t[-1] - t[0])
     df = 1.0 / span
-    res = minimize_scalar(lambda f: -sine_at(t, y, f).amplitude, bounds=(max(f0 - df, 1e-6), f0 + df),
+    res = minimize_scalar(lambda f: -sine_at(t, y, f).r2, bounds=(max(f0 - df, 1e-6), f0 + df),
                           method="bounded", options={"xatol": 1e-6 * f0})
     return sine_at(t, y, float(res.x))

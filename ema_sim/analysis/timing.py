@@ -8,7 +8,10 @@ inclinometer on it) and 2 ms more until the LVDT feedback reached the FMU, on a 
   rise ``z = (y − y₀)/A`` (up to 30 % of the step or 0.5°, whichever is less) is fitted with
   ``c·s²·(1 − d·s + e·s²)``, ``s = t − t₀``, for t > t₀ and 0 before; t₀ is the first-motion
   instant, to a fraction of a sample, and the cubic and quartic terms absorb the curvature a plain
-  threshold crossing or parabola would turn into bias.
+  threshold crossing or parabola would turn into bias. The quartic term is dropped (e = 0) for steps
+  under 500 noise standard deviations, where its variance costs more than the bias it removes
+  (LOAC, 0.003° noise, 30 seeds: 0.5° steps σ 0.42 ms without it, 0.72 ms with it; 20° steps bias
+  −0.3 ms without it, −0.03 ms with it).
 * command → first motion: t₀ of the surface angle (external sensor) minus the edge time; without
   a surface column, of the LVDT position.
 * motion → feedback: t₀ of the LVDT position minus t₀ of the surface, per edge.
@@ -29,6 +32,8 @@ FloatArray = NDArray[np.float64]
 
 FIT_TOP = 0.3
 """Fraction of the step fitted for first motion..."""
+QUARTIC_SNR = 500.0
+"""Steps larger than this many noise standard deviations get the quartic term."""
 FIT_TOP_DEG = 0.5
 """...but no more than this many degrees: a large step soon runs into its rate limit and stops being a parabola."""
 
@@ -68,8 +73,9 @@ def first_motion(t: FloatArray, y: FloatArray, edge: int, y0: float, amplitude: 
     def resid(p: FloatArray) -> FloatArray:
         return model(p) - fit_z
 
-    lo = [tt[0] - 0.01, 0.0, -1.0 / span, -1.0 / span**2]
-    hi = [t2, np.inf, 2.0 / span, 1.0 / span**2]
+    quartic = 1.0 / span**2 if abs(amplitude) > QUARTIC_SNR * noise else 1e-12 / span**2
+    lo = [tt[0] - 0.01, 0.0, -1.0 / span, -quartic]
+    hi = [t2, np.inf, 2.0 / span, quartic]
     x0 = np.clip([t0_init, c_init, 0.0, 0.0], np.array(lo) + 1e-12, np.array(hi) - 1e-12)
     sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[span, c_init, 1.0 / span, 1.0 / span**2])
     return float(sol.x[0])

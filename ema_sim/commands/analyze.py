@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.analysis.pipeline import Options, analyze_record  # noqa: PLC0415
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415
 
-    options = Options(at_hz=args.at_hz, model=args.model, threshold_deg=args.threshold_deg,
+    options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
                       compliance_deg_per_kinlb=args.compliance, channel=args.channel)
     if args.model:
         from ema_sim.models import model_class  # noqa: PLC0415
@@ -107,7 +107,7 @@ def register(sub: Any) -> None:
     p.add_argument("--json", default=None, help="write every figure as JSON")
     p.add_argument("--report", default=None, help="write report.md and PNG plots into this directory")
     p.add_argument("--model", default=None, help="also simulate this model on the measured command; overlay it")
-    p.add_argument("--at-hz", type=_floats, default=(1.0, 2.0, 5.0, 7.5, 10.0),
+    p.add_argument("--at-hz", default="1,2,5,7.5,10",
                    help="frequencies for gain and phase, comma-separated (default 1,2,5,7.5,10)")
     p.add_argument("--threshold-deg", type=float, default=None,
                    help="threshold the crosstalk noise is judged against (default: measured, else table A2)")
