@@ -43,7 +43,8 @@ def _overview(ra: RecordAnalysis, path: Path) -> str:
     plt = _plt()
     d = ra.data
     t = d.time_s
-    rows = 2 + (d.hinge_moment_inlb is not None)
+    loaded = d.hinge_moment_inlb is not None and bool(np.ptp(d.hinge_moment_inlb) > 0)
+    rows = 2 + loaded
     fig, ax = plt.subplots(rows, 1, figsize=(10, 2.2 * rows + 0.5), sharex=True)
     ax[0].plot(t, d.command_deg, color="0.3", lw=0.8, label="command")
     for name in d.outputs:
@@ -53,7 +54,8 @@ def _overview(ra: RecordAnalysis, path: Path) -> str:
     main = d.position_deg if d.position_deg is not None else d.surface_deg
     ax[1].plot(t, main - d.command_deg, color="tab:red", lw=0.6)
     ax[1].set_ylabel("output − command, deg")
-    if d.hinge_moment_inlb is not None:
+    if loaded:
+        assert d.hinge_moment_inlb is not None
         ax[2].plot(t, d.hinge_moment_inlb, color="tab:purple", lw=0.8)
         ax[2].set_ylabel("hinge moment, in·lb")
     for k, s in enumerate(ra.recognition.segments):
@@ -145,10 +147,13 @@ def _spread(records: Sequence[RecordAnalysis], path: Path) -> str:
     fig, ax = plt.subplots(1, 3, figsize=(12, 3.8))
     for a, key, scale, label in ((ax[0], "wn_rad_s", 1.0, "ωn, rad/s"), (ax[1], "zeta", 1.0, "ζ"),
                                  (ax[2], "delay_s", 1e3, "delay, ms")):
+        seen: set[str] = set()
         for k, f in enumerate(fits):
             e = getattr(f, key)
             mark = "o" if f.method.startswith("time") else "s"
-            a.errorbar(k, scale * e.value, yerr=scale * e.sigma, fmt=mark, color=COLORS.get(f.output, "k"), ms=4)
+            a.errorbar(k, scale * e.value, yerr=scale * e.sigma, fmt=mark, color=COLORS.get(f.output, "k"), ms=4,
+                       label=None if f.output in seen else f.output)
+            seen.add(f.output)
         vals = [scale * getattr(f, key).value for f in fits]
         for v in (min(vals), max(vals)):
             a.axhline(v, color="0.4", ls="--", lw=0.8)
@@ -156,6 +161,7 @@ def _spread(records: Sequence[RecordAnalysis], path: Path) -> str:
         a.set_xlabel("test (o step, □ frequency response)")
         a.grid(lw=0.3)
     ax[0].set_title("second-order estimates across tests (figure 23)", fontsize=9)
+    ax[0].legend(fontsize=7)
     return _save(fig, path)
 
 
@@ -202,14 +208,14 @@ def _command_error(ra: RecordAnalysis, k: int, path: Path) -> str:
     ax[0].legend(fontsize=8)
     ax[0].grid(lw=0.3)
     if c.command_curve and c.feedback_curve and "command_v" in c.levels and "position_v" in c.levels:
-        ax[1].plot(cmd, c.levels["command_v"], "o", ms=4, label="command volts")
-        ax[1].plot(c.nominal_deg, c.command_curve(c.nominal_deg), "-", lw=1, label="command curve (deg → V)")
-        pv = np.array(c.levels["position_v"])
-        ax[1].plot(meas, pv, "s", ms=3, label="feedback volts")
-        grid = np.linspace(pv.min(), pv.max(), 100)
-        ax[1].plot(c.feedback_curve(grid), grid, "-", lw=1, label="feedback curve (V → deg)")
+        cv, pv = np.array(c.levels["command_v"]), np.array(c.levels["position_v"])
+        ax[1].plot(cmd, 1e3 * (cv - c.command_curve(cmd)), "o-", ms=4, lw=0.8,
+                   label=f"command curve, deg → V (RMS {1e3 * (c.command_curve_rms_v or 0):.2g} mV)")
+        ax[1].plot(meas, 1e3 * (meas - c.feedback_curve(pv)) * abs(float(c.command_curve.c1)), "s-", ms=3, lw=0.8,
+                   label=f"feedback curve, V → deg (RMS {1e3 * (c.feedback_curve_rms_deg or 0):.2g} m°), in mV")
         ax[1].set_xlabel("degrees")
-        ax[1].set_ylabel("volts")
+        ax[1].set_ylabel("third-order fit residual, mV")
+        ax[1].set_title("calibration curves: what the third-order fits leave", fontsize=9)
         ax[1].legend(fontsize=8)
         ax[1].grid(lw=0.3)
     else:
@@ -231,8 +237,10 @@ def _thresholds(ra: RecordAnalysis, kind: str, path: Path) -> str:
     else:
         s2 = ra.dynamic_threshold[0]
         ax.plot(s2.command_amp_deg, s2.output_amp_deg, "o", ms=3, label="output amplitude")
-        ax.plot(s2.command_amp_deg, s2.r2 * s2.command_amp_deg.max(), "-", color="0.6", lw=0.8,
-                label="R² (scaled to the axis)")
+        twin = ax.twinx()
+        twin.plot(s2.command_amp_deg, np.clip(s2.r2, 0, 1), "-", color="0.6", lw=0.8)
+        twin.set_ylim(0, 1.05)
+        twin.set_ylabel(f"R² of the {s2.freq_hz:g} Hz tone in the output (grey)")
         if s2.onset_deg is not None:
             ax.axvline(s2.onset_deg, color="r", ls="--", lw=0.8, label=f"onset {s2.onset_deg:.4f}°")
         ax.set_xlabel("command amplitude, deg")

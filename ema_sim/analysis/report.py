@@ -301,7 +301,13 @@ def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]: 
         lines += _img(plots, f"r{i}_regeneration", "bus voltage")
 
     if ra.not_computed:
-        lines += ["### Not computed", ""] + [f"- **{k}**: {v}" for k, v in ra.not_computed.items()] + [""]
+        absent = [k for k, v in ra.not_computed.items() if "recognised" in v and not v.startswith("no hinge")]
+        limited = {k: v for k, v in ra.not_computed.items() if k not in absent}
+        lines += ["### Not computed", ""]
+        lines += [f"- **{k}**: {v}" for k, v in limited.items()]
+        if absent:
+            lines.append(f"- not in this record (no such test recognised): {', '.join(absent)}")
+        lines.append("")
     if ra.notes:
         lines += ["### Notes", ""] + [f"- {n}" for n in ra.notes] + [""]
     return lines
