@@ -129,3 +129,12 @@ def test_hand_calculation_inverts_its_own_formulas():
     assert hand.wn_rad_s == pytest.approx(wn)
     assert hand.zeta == pytest.approx(zeta)
     assert sof.hand_calculation(0.0, 1.0) is None
+
+
+@pytest.mark.parametrize("freq", [2.0, 7.5])
+def test_sine_dwell_gain_and_phase(freq):
+    ra = analyze_record(measured("sloac", f"sine:freq_hz={freq:g},amp_deg=0.4,cycles=30", seed=6))
+    (dwell,) = [d for d in ra.sine_dwell if d["output"] == "position_deg"]
+    h = sof.response(np.array([freq]), 56.5, 0.65, 0.004)[0]
+    assert dwell["gain_db"] == pytest.approx(20 * np.log10(abs(h)), abs=0.05)
+    assert dwell["phase_deg"] == pytest.approx(np.degrees(np.angle(h)), abs=0.5)

@@ -1,6 +1,7 @@
 """``ema analyze`` end to end: JSON, Markdown and PNGs; bad input is one line and exit status 2."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -159,3 +160,48 @@ def test_unrecognisable_record_says_what_is_missing(tmp_path):
     assert rec["not_computed"]["compliance"] == "no hinge moment: compliance not computed"
     assert rec["not_computed"]["regeneration"].startswith("no bus voltage column")
     assert any("no channel in the metadata" in n for n in rec["notes"])
+
+
+def test_a_reader_failure_is_one_data_error_line(monkeypatch, capsys):
+    def load_data(path, channel=None):
+        raise KeyError(f"topic /{channel or 'left_wing'}/position missing in {path}")
+
+    monkeypatch.setattr(ema_sim.io, "load_data", load_data, raising=False)
+    assert main(["analyze", "broken_bag"]) == 2
+    err = capsys.readouterr().err
+    assert "broken_bag: cannot read (KeyError" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_every_plot_is_drawn(tmp_path):
+    """One record of each remaining kind through --report: every plot function runs and writes a PNG."""
+    d = tmp_path / "more"
+    d.mkdir()
+    hold = measured("loada", "hold:value_deg=1,hold_s=12", noise_deg=0.002)
+    t = hold.time_s
+    dither = replace(hold, position_deg=hold.position_deg + 0.05 * np.sin(2 * np.pi * 3 * t))
+    regen = measured("loada", "regen:sweep_s=10")
+    bus = 150 + 5 * (np.abs(np.diff(regen.command_deg, prepend=0)) > 0)
+    files = [
+        write(dither, d / "dither.csv"),
+        write(measured("loada", "static_threshold:amp_max_deg=0.3,cycles=4", threshold_deg=0.05), d / "sth.csv"),
+        write(measured("loada", "dynamic_threshold:amp0_deg=0,amp1_deg=0.3,ramp_s=10", threshold_deg=0.05),
+              d / "dth.csv"),
+        write(measured("loada", "hold:value_deg=0,hold_s=11", "reversal:inlb=50"), d / "fp.csv"),
+        write(measured("loada", "hold:value_deg=0,hold_s=90", "sine:amp_inlb=500,freq_hz=0.05,cycles=3"), d / "h.csv"),
+        write(measured("loada", "schroeder:f0_hz=0.5,f1_hz=10,period_s=5,periods=2"), d / "sch.csv"),
+    ]
+    rpath = d / "regen.csv"
+    cols = {k: getattr(regen, k) for k in ("time_s", "command_deg", "position_deg")}
+    write_csv(rpath, {**cols, "bus_v": bus}, regen.metadata)
+    files.append(str(rpath))
+    rep = tmp_path / "rep"
+    assert main(["analyze", *files, "--report", str(rep), "--model", "loada"]) == 0
+    names = {p.name for p in rep.glob("*.png")}
+    for key in ("r0_dither", "r0_crosstalk", "r1_static_threshold", "r2_dynamic_threshold", "r3_free_play",
+                "r4_hysteresis", "r5_bode0", "r6_regeneration"):
+        assert f"{key}.png" in names
+    md = (rep / "report.md").read_text()
+    assert "limit cycle at 3 Hz" in md
+    assert "Voltage regeneration" in md
+    assert "h = A/(π·Pk²)" in md

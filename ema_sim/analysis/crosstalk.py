@@ -5,9 +5,9 @@ Dynamic crosstalk: it follows a slow 0.5 Hz triangle while the others move; nois
 ramp. The noise is what is left after removing what the command explains:
 
 * held command: the output minus its mean and linear trend;
-* moving command: the output minus ``g·ū(t − τ) + c``, ū the command smoothed over one frame (the
-  actuator does not follow the D/A staircase), τ the lag of least residual (parabolic refinement
-  between samples), ``g`` and ``c`` by least squares.
+* moving command: the output minus a second order with delay, gain and bias fitted to it on the same
+  command (:func:`ema_sim.analysis.second_order_fit.fit_step`), which takes out the tracking and the
+  actuator's own transients at the triangle's corners.
 
 Peak-to-peak and RMS of that residual, the RMS in excess of the white sensor noise floor, the same in
 volts through the feedback curve's slope, and the verdict against the threshold: the report's right
@@ -22,13 +22,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis.series import moving_average
+from ema_sim.analysis.second_order_fit import fit_step, simulate
 from ema_sim.analysis.sine_fit import dominant_frequency
 
 FloatArray = NDArray[np.float64]
-
-MAX_LAG_S = 0.2
-
 
 @dataclass(frozen=True)
 class CrosstalkResult:
@@ -64,35 +61,15 @@ class CrosstalkResult:
         }
 
 
-def _frame_samples(u: FloatArray) -> int:
-    """Median length of the runs over which a held digital command keeps its value (its frame)."""
-    change = np.flatnonzero(np.diff(u) != 0.0)
-    if change.size < 2:
-        return 1
-    return max(1, int(np.median(np.diff(change))))
-
-
-def _tracking_residual(t: FloatArray, u: FloatArray, y: FloatArray) -> tuple[FloatArray, float]:
-    """``y − (g·ū(t − τ) + c)``: ū the command smoothed over one frame, τ the lag of least residual."""
+def _tracking_residual(t: FloatArray, u: FloatArray, y: FloatArray) -> tuple[FloatArray, str]:
+    """``y`` less a second order with delay fitted to it on the same command (time domain)."""
+    fit = fit_step(t, u, y, test="tracking", output_name="", wn0=50.0, zeta0=0.7, delay0=0.005)
     dt = float(np.median(np.diff(t)))
-    us = moving_average(u, _frame_samples(u))
-    lags = np.arange(0, round(MAX_LAG_S / dt) + 1)
-    ones = np.ones_like(t)
-
-    def fit(lag: float) -> tuple[float, FloatArray]:
-        X = np.column_stack([np.interp(t - lag * dt, t, us), ones])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        r = y - X @ coef
-        return float(r @ r), r
-
-    cost = np.array([fit(float(k))[0] for k in lags])
-    i = int(np.argmin(cost))
-    lag = float(lags[i])
-    if 0 < i < lags.size - 1:
-        den = cost[i - 1] - 2 * cost[i] + cost[i + 1]
-        if den > 0:
-            lag += 0.5 * (cost[i - 1] - cost[i + 1]) / den
-    return fit(lag)[1], lag * dt
+    model = fit.gain.value * simulate(u, dt, fit.wn_rad_s.value, fit.zeta.value, fit.delay_s.value)
+    model += fit.bias_deg.value if fit.bias_deg else 0.0
+    how = (f"tracking removed by a fitted second order (ωn {fit.wn_rad_s.value:.1f} rad/s, ζ {fit.zeta.value:.2f}, "
+           f"delay {1e3 * fit.delay_s.value:.1f} ms)")
+    return y - model, how
 
 
 def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: float, *, output: str,
@@ -105,9 +82,9 @@ def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: f
         resid = y - np.polyval(coef, t - t[0])
         kind = "static (command held)"
     else:
-        resid, tau = _tracking_residual(t, u, y)
+        resid, how = _tracking_residual(t, u, y)
         kind = "dynamic (command moving)"
-        notes.append(f"tracking removed as gain x command delayed {1e3 * tau:.1f} ms")
+        notes.append(how)
     rms = float(np.sqrt(np.mean(resid**2)))
     excess = float(np.sqrt(max(rms * rms - sensor_noise * sensor_noise, 0.0)))
     dom = dominant_frequency(t, resid, f_min=0.2)

@@ -3,7 +3,8 @@
 Bags are read by the node suite's reader, ``ema_sim.io.load_data(path, channel=None)``, which
 dispatches CSV against bag and turns the wire's volts into degrees through the calibration. When this
 build has no such reader, CSVs are read here (:func:`ema_sim.io.csv.read_csv`) and a bag gets a clear
-error instead of a traceback.
+error instead of a traceback. Whatever the reader raises on a malformed bag reaches the user as one
+:class:`~ema_sim.errors.DataError` line.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import importlib
 from collections.abc import Callable
 from pathlib import Path
 
-from ema_sim.errors import DataError
+from ema_sim.errors import DataError, EmaError
 from ema_sim.io.csv import MeasuredData, read_csv
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -38,7 +39,12 @@ def load_record(path: str | Path, channel: str | None = None) -> MeasuredData:
     path = Path(path)
     reader = _bag_reader()
     if reader is not None:
-        return reader(path, channel=channel)
+        try:
+            return reader(path, channel=channel)
+        except EmaError:
+            raise
+        except Exception as exc:  # untrusted input: any failure of the reader is the data's
+            raise DataError(f"{path}: cannot read ({type(exc).__name__}: {exc})") from exc
     if not path.exists():
         raise DataError(f"{path}: no such file or directory")
     if looks_like_bag(path):
