@@ -8,7 +8,7 @@ import pytest
 from analysis_data import measured
 
 from ema_sim.analysis.hysteresis import hysteretic_damping_constant
-from ema_sim.analysis.pipeline import Options, analyze_record
+from ema_sim.analysis.pipeline import Options, analyze_record, analyze_records
 from ema_sim.calibration import command_error
 from ema_sim.config import load_channel
 from ema_sim.io.csv import MeasuredData
@@ -252,3 +252,20 @@ def test_regeneration_bus_peak_against_185_volts(spike, within):
     assert g.peak_v == pytest.approx(150 + spike, abs=1.5)
     assert (g.peak_v <= 185.0) is within
     assert analyze_record(data).not_computed["regeneration"].startswith("no bus voltage column")
+
+
+def test_records_of_one_channel_share_their_threshold_and_compliance():
+    thr = measured("loada", "static_threshold:amp_max_deg=0.3,cycles=6", threshold_deg=0.05, quantization_deg=0.0)
+    hold = measured("loada", "hold:value_deg=0,hold_s=10", noise_deg=0.002)
+    noisy = replace(hold, position_deg=hold.position_deg + square_noise(hold.time_s, 0.08, 4.0))
+    comp = measured("loada", "hold:value_deg=0,hold_s=67", LOAD_STEPS, compliance_deg_per_kinlb=0.5)
+    rev = measured("loada", "hold:value_deg=0,hold_s=11", "reversal:inlb=200,period_s=2,reversals=4",
+                   compliance_deg_per_kinlb=0.5)
+    r_thr, r_hold, r_comp, r_rev = analyze_records([thr, noisy, comp, rev])
+    (c,) = r_hold.crosstalk
+    assert c.threshold_deg == pytest.approx(r_thr.static_threshold[0].onset_deg)
+    assert "static threshold measured in" in c.threshold_source
+    assert not c.below_threshold  # 0.09° of noise against a 0.048° threshold
+    (fp,) = r_rev.free_play
+    assert fp.width_deg == pytest.approx(0.2, abs=0.005)
+    assert fp.compliance_deg_per_kinlb == pytest.approx(r_comp.compliance[0].total.slope_deg_per_kinlb)

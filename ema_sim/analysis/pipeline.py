@@ -25,7 +25,7 @@ Every analysis that finds nothing to work on says why in ``not_computed``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -399,9 +399,11 @@ def _free_play(ra: RecordAnalysis, rec: Recognition, hm: FloatArray, options: Op
     """Free play of every load-reversal segment, less the compliance when one is known."""
     data, t = ra.data, ra.data.time_s
     compliance = options.compliance_deg_per_kinlb
+    source = "given (--compliance)" if compliance is not None else None
     if compliance is None:
         measured = [c.total.slope_deg_per_kinlb for c in ra.compliance if c.total and c.total.slope_deg_per_kinlb]
         compliance = measured[0] if measured else None
+        source = "total compliance measured in this record" if measured else None
     for seg in rec.of("load_reversal"):
         if data.surface_deg is None:
             ra.not_computed["free_play"] = ("no external surface angle: free play lies outside the servo loop, "
@@ -415,7 +417,7 @@ def _free_play(ra: RecordAnalysis, rec: Recognition, hm: FloatArray, options: Op
                               series.Hold(e.after.start + seg.start, e.after.stop + seg.start, e.after.value))
                   for e in series.edges(hm[sl], dt, min_hold_s=0.2, min_jump=0.3 * swing,
                                         tol=max(series.hold_tolerance(hm[sl]), 1e-3 * swing))]
-        fp = reversal_free_play(t, hedges, hm, data.surface_deg, data.position_deg, compliance)
+        fp = reversal_free_play(t, hedges, hm, data.surface_deg, data.position_deg, compliance, source)
         if fp:
             ra.free_play.append(fp)
 
@@ -427,6 +429,32 @@ def _threshold_reference(ra: RecordAnalysis, options: Options, ch: ChannelConfig
     if measured:
         return float(measured[0]), "static threshold measured in this record"
     return SPEC_THRESHOLD_IN * ch.deg_per_in, f"table A2: {SPEC_THRESHOLD_IN} in × {ch.deg_per_in:.2f} °/in"
+
+
+def analyze_records(records: list[MeasuredData], options: Options | None = None) -> list[RecordAnalysis]:
+    """Analyse several records, then let each use what another of the same channel measured.
+
+    A crosstalk record judged against table A2's threshold is judged again against a static threshold
+    measured on the same channel; free-play jumps with no compliance taken out get the total compliance
+    measured on a load staircase of the same channel.
+    """
+    options = options or Options()
+    done = [analyze_record(d, options) for d in records]
+    for ra in done:
+        ch = ra.channel.channel
+        same = [o for o in done if o.channel.channel == ch and o is not ra]
+        onsets = [(s.onset_deg, o.data.source) for o in same for s in o.static_threshold if s.onset_deg is not None]
+        if options.threshold_deg is None and onsets and not ra.static_threshold:
+            value, src = onsets[0]
+            ra.crosstalk = [replace(c, threshold_deg=value, threshold_source=f"static threshold measured in {src}")
+                            for c in ra.crosstalk]
+        slopes = [(c.total.slope_deg_per_kinlb, o.data.source) for o in same for c in o.compliance
+                  if c.total and c.total.slope_deg_per_kinlb]
+        if slopes:
+            value, src = slopes[0]
+            ra.free_play = [f.with_compliance(value, f"total compliance measured in {src}")
+                            if f.compliance_deg_per_kinlb is None else f for f in ra.free_play]
+    return done
 
 
 # ---------------------------------------------------------------------------------------------- across tests

@@ -68,7 +68,7 @@ def _summary(ra: Any) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Analyse every DATA and write what was asked."""
     from ema_sim.analysis.loading import load_record  # noqa: PLC0415 - keep `ema --help` fast
-    from ema_sim.analysis.pipeline import Options, analyze_record  # noqa: PLC0415
+    from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415
 
     options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         from ema_sim.models import model_class  # noqa: PLC0415
 
         model_class(args.model)  # an unknown name is one clear error before any work
-    records = [analyze_record(load_record(path, args.channel), options) for path in args.data]
+    records = analyze_records([load_record(path, args.channel) for path in args.data], options)
     for ra in records:
         print("\n".join(_summary(ra)))
     if args.json:
