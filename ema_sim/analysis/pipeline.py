@@ -261,7 +261,7 @@ def _volts_per_deg(ch: ChannelConfig) -> float:
     return abs(float(ch.command_cal.slope(0.0)))
 
 
-def analyze_record(data: MeasuredData, options: Options | None = None) -> RecordAnalysis:  # noqa: PLR0912, PLR0915
+def analyze_record(data: MeasuredData, options: Options | None = None) -> RecordAnalysis:
     """Recognise and analyse one record (see the module docstring)."""
     options = options or Options()
     data = series.uniform_record(data)
@@ -274,49 +274,63 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
     if "resampled" in data.metadata:
         ra.notes.append(data.metadata["resampled"])
     ra.notes += rec.notes
-    t = data.time_s
-    vpd = _volts_per_deg(ch)
-
-    # Frequency response.
     for seg in rec.of("sweep", "schroeder", "broadband"):
         _frequency(ra, seg, options)
     for seg in rec.of("sine"):
         _sine_dwell(ra, seg)
     if not ra.frequency and not ra.sine_dwell:
         ra.not_computed["frequency_response"] = "no sweep, Schroeder sweep or sine dwell recognised"
-
-    # Steps and timing.
-    step_segs = rec.of("steps", "square")
-    edges = [e for s in step_segs for e in s.edges]
-    if edges:
-        name, y = _primary(data, ("position_deg", "surface_deg"))
-        ra.steps = analyze_steps(t, data.command_deg, y, edges, output=name, noise_floor=noise[name],
-                                 rated_slew_dps=ch.slew_rate_dps)
-        ra.slew = slew_rates(ra.steps)
-        ra.timing = edge_timing(t, edges, data.position_deg, data.surface_deg, noise)
-    else:
-        ra.not_computed["steps"] = "no step or square-wave command recognised"
-        ra.not_computed["timing"] = "no step or square-wave command edges to time"
-
-    # Calibration staircase.
+    _steps_and_timing(ra)
     for seg in rec.of("staircase"):
         ra.calibration.append(fit_calibration(data, list(seg.holds)))
     if not ra.calibration:
         ra.not_computed["command_error"] = "no calibration staircase recognised"
+    _thresholds(ra)
+    _crosstalk_and_dither(ra, options)
+    for seg in rec.of("ramp"):
+        t = data.time_s
+        ra.notes.append(f"slow ramp at {t[seg.start]:.1f}-{t[seg.stop - 1]:.1f} s: tracking is in the time-history "
+                        "plot; no figure of this tool applies to it")
+    _loaded(ra, rec, data.hinge_moment_inlb, options)
+    if data.bus_v is not None:
+        ra.regeneration = bus_peak(data.time_s, data.bus_v)
+        if not rec.of("regen"):
+            ra.notes.append("bus voltage assessed on a record that is not the regeneration square sweep")
+    else:
+        ra.not_computed["regeneration"] = "no bus voltage column (bus_v): regeneration not assessed"
+    return ra
 
-    # Thresholds.
-    for seg in rec.of("static_threshold"):
+
+def _steps_and_timing(ra: RecordAnalysis) -> None:
+    """Step metrics and fits of every command edge of the step and square-wave segments; their timing."""
+    data, t = ra.data, ra.data.time_s
+    edges = [e for s in ra.recognition.of("steps", "square") for e in s.edges]
+    if not edges:
+        ra.not_computed["steps"] = "no step or square-wave command recognised"
+        ra.not_computed["timing"] = "no step or square-wave command edges to time"
+        return
+    name, y = _primary(data, ("position_deg", "surface_deg"))
+    ra.steps = analyze_steps(t, data.command_deg, y, edges, output=name, noise_floor=ra.noise_deg[name],
+                             rated_slew_dps=ra.channel.slew_rate_dps)
+    ra.slew = slew_rates(ra.steps)
+    ra.timing = edge_timing(t, edges, data.position_deg, data.surface_deg, ra.noise_deg)
+
+
+def _thresholds(ra: RecordAnalysis) -> None:
+    """Static and dynamic thresholds on the external sensor (the LVDT when there is none)."""
+    data, t = ra.data, ra.data.time_s
+    vpd = _volts_per_deg(ra.channel)
+    name, y = _primary(data, ("surface_deg", "position_deg"))
+    for seg in ra.recognition.of("static_threshold"):
         sl = slice(seg.start, seg.stop)
-        name, y = _primary(data, ("surface_deg", "position_deg"))
-        r = static_threshold(t[sl], data.command_deg[sl], y[sl], noise[name], output=name, volts_per_deg=vpd)
+        r = static_threshold(t[sl], data.command_deg[sl], y[sl], ra.noise_deg[name], output=name, volts_per_deg=vpd)
         if r:
             ra.static_threshold.append(r)
-    for seg in rec.of("dynamic_threshold"):
+    for seg in ra.recognition.of("dynamic_threshold"):
         sl = slice(seg.start, seg.stop)
-        name, y = _primary(data, ("surface_deg", "position_deg"))
         f = seg.params.get("freq_hz")
         if f:
-            r2 = dynamic_threshold(t[sl], data.command_deg[sl], y[sl], f, noise[name], output=name,
+            r2 = dynamic_threshold(t[sl], data.command_deg[sl], y[sl], f, ra.noise_deg[name], output=name,
                                    volts_per_deg=vpd)
             if r2:
                 ra.dynamic_threshold.append(r2)
@@ -325,12 +339,15 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
     if not ra.dynamic_threshold:
         ra.not_computed["dynamic_threshold"] = "no tone of growing amplitude recognised"
 
-    # Crosstalk and dither on held or slowly moving observed channels.
+
+def _crosstalk_and_dither(ra: RecordAnalysis, options: Options) -> None:
+    """Crosstalk noise on held or slow-triangle observed channels (LVDT feedback); dither on the held ones."""
+    data, t, ch = ra.data, ra.data.time_s, ra.channel
     threshold, source = _threshold_reference(ra, options, ch)
-    for seg in rec.of("hold", "triangle"):
+    name, y = _primary(data, ("position_deg", "surface_deg"))
+    for seg in ra.recognition.of("hold", "triangle"):
         sl = slice(seg.start, seg.stop)
-        name, y = _primary(data, ("position_deg", "surface_deg"))
-        ra.crosstalk.append(crosstalk_noise(t[sl], data.command_deg[sl], y[sl], noise[name], output=name,
+        ra.crosstalk.append(crosstalk_noise(t[sl], data.command_deg[sl], y[sl], ra.noise_deg[name], output=name,
                                             threshold_deg=threshold, threshold_source=source,
                                             volts_per_deg=abs(1.0 / float(ch.feedback_cal.slope(0.0)))))
         if seg.kind == "hold":
@@ -340,24 +357,7 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
     if not ra.crosstalk:
         ra.not_computed["crosstalk"] = "no held or slow-triangle observed channel recognised"
     if not ra.dither:
-        ra.not_computed["dither"] = "no command held for ≥ 4 s with a constant load"
-
-    for seg in rec.of("ramp"):
-        ra.notes.append(f"slow ramp at {t[seg.start]:.1f}-{t[seg.stop - 1]:.1f} s: tracking is in the time-history "
-                        "plot; no figure of this tool applies to it")
-
-    # Loaded tests.
-    hm = data.hinge_moment_inlb
-    _loaded(ra, rec, hm, options)
-
-    # Regeneration.
-    if data.bus_v is not None:
-        ra.regeneration = bus_peak(t, data.bus_v)
-        if not rec.of("regen"):
-            ra.notes.append("bus voltage assessed on a record that is not the regeneration square sweep")
-    else:
-        ra.not_computed["regeneration"] = "no bus voltage column (bus_v): regeneration not assessed"
-    return ra
+        ra.not_computed["dither"] = "no command held for ≥ 5 s with a constant load"
 
 
 def _loaded(ra: RecordAnalysis, rec: Recognition, hm: FloatArray | None, options: Options) -> None:
