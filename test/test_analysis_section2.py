@@ -269,3 +269,11 @@ def test_records_of_one_channel_share_their_threshold_and_compliance():
     (fp,) = r_rev.free_play
     assert fp.width_deg == pytest.approx(0.2, abs=0.005)
     assert fp.compliance_deg_per_kinlb == pytest.approx(r_comp.compliance[0].total.slope_deg_per_kinlb)
+
+
+def test_a_quantized_still_output_has_no_limit_cycle():
+    data = measured("loada", "hold:value_deg=3,hold_s=10", noise_deg=0.0)
+    still = replace(data, position_deg=np.round(data.position_deg / 0.02125) * 0.02125)
+    (d,) = analyze_record(still).dither
+    assert not d.detected
+    assert d.statement == "no limit cycle: the output does not move (peak to peak < 0.0001°)"

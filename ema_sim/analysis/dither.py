@@ -24,6 +24,8 @@ FloatArray = NDArray[np.float64]
 BAND_HZ = (1.0, 50.0)
 DETECT_DB = 15.0
 PHASE_BINS = 64
+MIN_PP_DEG = 1e-4
+"""An output steadier than this (a quantized, noise-free feedback) has no limit cycle to look for."""
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,7 @@ class DitherResult:
     peak_to_peak_deg: float | None
     fundamental_amplitude_deg: float | None
     waveform_deg: FloatArray | None
+    reason: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON."""
@@ -54,6 +57,8 @@ class DitherResult:
     @property
     def statement(self) -> str:
         """One line for the report."""
+        if self.reason:
+            return f"no limit cycle: {self.reason}"
         if self.detected:
             return (f"limit cycle at {self.freq_hz:.3g} Hz, {self.peak_to_peak_deg:.3g}° peak to peak "
                     f"({self.peak_db_above_floor:.0f} dB above the noise floor)")
@@ -68,6 +73,9 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str) -> DitherResult 
     if span < 4.0 / BAND_HZ[0]:
         return None
     yd = y - np.polyval(np.polyfit(t - t[0], y, 1), t - t[0])
+    if np.ptp(yd) < MIN_PP_DEG:
+        return DitherResult(output, float(t[0]), float(t[-1]), False, 0.0, 0.0, None, None, None, None,
+                            f"the output does not move (peak to peak < {MIN_PP_DEG:g}°)")
     sp = spectra.welch(yd, yd[None, :], fs, min(8.0, span / 2.0), overlap=0.5)
     f, p = sp.freq_hz, sp.gxx
     band = (f >= BAND_HZ[0]) & (f <= min(BAND_HZ[1], fs / 2.5))
