@@ -55,12 +55,23 @@ def pwm_segment(v_demand: float, dead_band_v: float, v_max: float) -> int:
 
 # ------------------------------------------------------------------------- figure 30 stages
 @jit
-def position_loop(x_command_in: float, x_feedback_in: float, kp_per_s: float) -> float:
-    """Position-loop controller electronics: the velocity demand ``Kp·(command − LVDT)`` (in/s).
+def position_loop(x_command_in: float, x_feedback_in: float, kp_per_s: float, integral_in_s: float) -> float:
+    """Position-loop controller electronics: the velocity demand ``Kp·(command − LVDT) + ∫Ki·e`` (in/s).
 
     Saturated at the slew limit with :func:`saturate`; the tachometer closes the velocity loop next.
+    The integral (:func:`integrating`) gives the loaded servo its static stiffness (section 2.8).
     """
-    return kp_per_s * (x_command_in - x_feedback_in)
+    return kp_per_s * (x_command_in - x_feedback_in) + integral_in_s
+
+
+@jit
+def integrating(rate_segment: int, current_segment: int, pwm_segment_: int) -> bool:
+    """Conditional integration: only while the PWM drives linearly and nothing saturates.
+
+    Frozen inside the PWM dead band, an unloaded actuator at rest keeps its dead zone (no hunting on
+    stiction), while a loaded one, driven outside the band, integrates its error away.
+    """
+    return rate_segment == 0 and current_segment == 0 and pwm_segment_ in (1, -1)
 
 
 @jit

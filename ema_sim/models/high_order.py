@@ -44,6 +44,7 @@ bus = bus voltage. Power is an input the node layer can drive: :meth:`HighOrderM
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, ClassVar
 
@@ -97,6 +98,7 @@ class HighOrderParams:
 
     # position-loop controller electronics, velocity and current loops, PWM (EMAC channel)
     position_gain_per_s: float
+    position_integral_per_s2: float
     rate_limit_in_s: float
     velocity_gain_a_per_in_s: float
     lvdt_filter_hz: float
@@ -312,6 +314,7 @@ class HighOrderParams:
         h = self.hysteretic_damping_lbf_per_in if (hysteresis and figure33) else 0.0
         v = np.zeros(N_KERNEL)
         v[K_KP] = self.position_gain_per_s
+        v[K_KI] = self.position_integral_per_s2
         v[K_VMAX] = self.rate_limit_in_s
         v[K_KV] = self.velocity_gain_a_per_in_s
         v[K_WLF] = st.TWO_PI * self.lvdt_filter_hz
@@ -372,14 +375,14 @@ def _as_value(name: str, value: Any) -> Any:
     K_FB_DELAY, K_QUANT, K_NCMD, K_NFB, K_NBW, K_FIG33,
     K_T_F1, K_T_F2, K_T_D1, K_T_D2, K_T_K1, K_T_K2, K_T_K3,  # figure 33 total curve: force form
     K_A_F1, K_A_F2, K_A_G1, K_A_G2, K_A_C1, K_A_C2, K_A_C3,  # figure 33 actuator curve: deflection form
-    K_CLINK, K_HC, K_KAVG, K_DPI, K_FBC0, K_FBC1, K_FBC2, K_FBC3, K_FH,
-) = range(57)
-N_KERNEL = 57
+    K_CLINK, K_HC, K_KAVG, K_DPI, K_FBC0, K_FBC1, K_FBC2, K_FBC3, K_FH, K_KI,
+) = range(58)
+N_KERNEL = 58
 
 # State columns shared by the implementations (the continuous model integrates the first seven).
-X_XM, X_VM, X_XS, X_VS, X_I, X_LF, X_VBUS, X_NCMD, X_NFB, X_TFB, X_FLAGS, X_HEAD = range(12)
-N_STATE = 12
-N_CONTINUOUS = 7
+X_XM, X_VM, X_XS, X_VS, X_I, X_LF, X_VBUS, X_XI, X_NCMD, X_NFB, X_TFB, X_FLAGS, X_HEAD = range(13)
+N_STATE = 13
+N_CONTINUOUS = 8
 
 
 # ================================================================================ shared stages
@@ -473,6 +476,7 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
         buf = BUF[i]
         nbuf = buf.shape[0]
         kp = p[K_KP]
+        ki_dt = p[K_KI] * dt
         vmax = p[K_VMAX]
         kv = p[K_KV]
         imax = p[K_IMAX]
@@ -510,6 +514,7 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
         lf = x[X_LF]
         vbus = x[X_VBUS]
         ncmd = x[X_NCMD]
+        xi = x[X_XI]
         flags = int(x[X_FLAGS])
         head = int(x[X_HEAD])
         jd = st.zoh_index(bp_t, t0 - delay, 0)
@@ -553,7 +558,8 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
             buf[head] = lf
             # stages 4–8: controller electronics, current loop, PWM, motor
             if on:
-                vc_raw = dr.position_loop(xc, lf, kp)
+                err = xc - lf
+                vc_raw = dr.position_loop(xc, lf, kp, xi)
                 sv = dr.saturation_segment(vc_raw, vmax)
                 ic_raw = dr.velocity_loop(dr.saturate(vc_raw, vmax, sv), vm, kv)
                 si = dr.saturation_segment(ic_raw, imax)
@@ -562,6 +568,8 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
                 sp = dr.pwm_segment(vd, vdb, vlim)
                 v = dr.pwm(vd, vdb, vlim, sp)
                 cur = dr.motor_current_step(v, cur, vm, inv_r, ke, decay_i)
+                if dr.integrating(sv, si, sp):
+                    xi += ki_dt * err
                 if sv != 0:
                     flags |= st.FLAG_RATE
                 if si != 0:
@@ -598,6 +606,7 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
         x[X_LF] = lf
         x[X_VBUS] = vbus
         x[X_NCMD] = ncmd
+        x[X_XI] = xi
         x[X_FLAGS] = flags
         x[X_HEAD] = head
 
@@ -614,7 +623,7 @@ INF = math.inf
 @nb.njit(cache=True)
 def _hoac1_drive(p, y, u):  # noqa: ANN001, ANN202
     """Stages 4–8 with the held regimes: (velocity demand raw, current demand raw, voltage demand, V)."""
-    vc_raw = dr.position_loop(u[U_XC], y[X_LF], p[K_KP])
+    vc_raw = dr.position_loop(u[U_XC], y[X_LF], p[K_KP], y[X_XI])
     vc = dr.saturate(vc_raw, p[K_VMAX], int(u[U_VC]))
     ic_raw = dr.velocity_loop(vc, y[X_VM], p[K_KV])
     ic = dr.saturate(ic_raw, p[K_IMAX], int(u[U_IC]))
@@ -641,9 +650,12 @@ def _hoac1_rhs(t, y, p, u, dydt):  # noqa: ANN001, ANN202, ARG001 - the integrat
     """HOAC1 right-hand side with every regime held (see :mod:`ema_sim.models.hybrid`)."""
     fk, f, fapp = _hoac1_forces(p, y, u)
     dydt[X_LF] = p[K_WLF] * (gt.lvdt_fig32(y[X_XS], fk, p[K_KB]) - y[X_LF])
+    dydt[X_XI] = 0.0
     if u[U_POWER] > 0.5:
         _, _, _, v = _hoac1_drive(p, y, u)
         dydt[X_I] = dr.motor_current_rate(v, y[X_I], y[X_VM], p[K_R], p[K_L], p[K_KE])
+        if dr.integrating(int(u[U_VC]), int(u[U_IC]), int(u[U_PWM])):
+            dydt[X_XI] = p[K_KI] * (u[U_XC] - y[X_LF])
     else:
         v = 0.0
         dydt[X_I] = 0.0
@@ -790,8 +802,9 @@ def _hoac1_transition(k, t, y, p, u):  # noqa: ANN001, ANN202, ARG001
 def _hoac1_settle(t, y, p, u):  # noqa: ANN001, ANN202, ARG001
     """Classify every regime from the state (after an input change, or several events at once)."""
     if u[U_POWER] > 0.5:
-        u[U_VC] = dr.saturation_segment(dr.position_loop(u[U_XC], y[X_LF], p[K_KP]), p[K_VMAX])
-        vc = dr.saturate(dr.position_loop(u[U_XC], y[X_LF], p[K_KP]), p[K_VMAX], int(u[U_VC]))
+        vc_raw = dr.position_loop(u[U_XC], y[X_LF], p[K_KP], y[X_XI])
+        u[U_VC] = dr.saturation_segment(vc_raw, p[K_VMAX])
+        vc = dr.saturate(vc_raw, p[K_VMAX], int(u[U_VC]))
         ic_raw = dr.velocity_loop(vc, y[X_VM], p[K_KV])
         u[U_IC] = dr.saturation_segment(ic_raw, p[K_IMAX])
         _, _, vd, _ = _hoac1_drive(p, y, u)
@@ -909,9 +922,11 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
     """The state in which a held command and load leave every stage at rest (trim).
 
     The gear train carries the load (``F = −hm/r``) and the motor current holds it with friction
-    carrying nothing; the servo error is what the current loop and the PWM dead band need for that
-    current. A load the motor cannot hold (beyond stall plus stiction) leaves the motor on the stop
-    the load pushes it to, with the current demand limited.
+    carrying nothing. The current demand is what the current loop and the PWM dead band need for that
+    current; the position integral supplies it with no servo error (without the integral, a servo
+    error does). Unloaded, the PWM rests in its dead band with the integral at zero. A load the motor
+    cannot hold (beyond stall plus stiction) leaves the motor on the stop the load pushes it to, with
+    the current demand limited.
     """
     xc = min(max(x_command_in, p[K_XMIN]), p[K_XMAX])
     force = -hinge_moment_inlb / p[K_ARM]
@@ -920,6 +935,7 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
     motor = MOTOR_STUCK
     cur = 0.0
     lf = xc
+    xi = 0.0
     if powered:
         cur = force / kf
         if abs(cur) > p[K_IMAX] - i_db + p[K_FS] / kf:
@@ -927,7 +943,10 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
             cur = 0.0
         elif cur != 0.0:
             ic = cur + math.copysign(i_db, cur)
-            lf = xc - ic / (kv * kp)
+            if p[K_KI] > 0.0:
+                xi = ic / kv
+            else:
+                lf = xc - ic / (kv * kp)
     if motor == MOTOR_STUCK:
         xm, xs = _positions_from_lvdt(p, lf, force)
     else:
@@ -936,7 +955,15 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
     volts = r * cur
     power = volts * cur
     vbus = dr.steady_bus_voltage(p[K_VSUP], p[K_RSRC], power) if powered else p[K_VSUP]
-    return {"xm": xm, "xs": xs, "cur": cur, "lf": lf, "vbus": vbus, "motor": motor}
+    flags = 0 if powered else st.FLAG_BRAKE
+    if powered and cur == 0.0:
+        flags |= st.FLAG_PWM_DEAD_BAND
+    if motor != MOTOR_STUCK or x_command_in != xc:
+        flags |= st.FLAG_POSITION
+    free = abs(force) <= p[K_T_F1] if p[K_FIG33] > 0.5 else gt.dead_zone_segment(xm - xs, p[K_HB]) == 0
+    if free:
+        flags |= st.FLAG_FREE_PLAY
+    return {"xm": xm, "xs": xs, "cur": cur, "lf": lf, "vbus": vbus, "xi": xi, "motor": motor, "flags": flags}
 
 
 def _positions_from_lvdt(p: FloatArray, lvdt: float, force: float) -> tuple[float, float]:
@@ -970,7 +997,8 @@ class LinearizedActuator:
     """HOAD3 linearized about a load, for HOALM (section 4.2.7): matrices of ``ẋ = A·x + B·u``, ``y = C·x``.
 
     States: motor-side screw position and rate, surface position and rate (in, in/s), motor current (A),
-    filtered LVDT (in). Inputs: command (deg), hinge moment (in·lb). Outputs: position and surface (deg).
+    filtered LVDT (in), position integral (in/s). Inputs: command (deg), hinge moment (in·lb). Outputs:
+    position and surface (deg).
     """
 
     a: FloatArray
@@ -981,7 +1009,7 @@ class LinearizedActuator:
     total_stiffness_lbf_per_in: float
     actuator_compliance_in_per_lbf: float
     states: tuple[str, ...] = ("x_motor_in", "v_motor_in_s", "x_surface_in", "v_surface_in_s", "current_a",
-                               "lvdt_filtered_in")
+                               "lvdt_filtered_in", "integral_in_s")
 
 
 def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound: float = 0.0,
@@ -991,8 +1019,9 @@ def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound:
     As section 4.2.7 describes for HOALM: the PWM dead band, stiction and Coulomb friction, the current,
     rate and voltage limits and the switching are taken out; the piecewise-linear compliance curves
     are replaced by their slopes at the operating force; quantization and noise are dropped; the
-    command and feedback delays stay (exactly, as delays). Hysteretic damping is frequency dependent
-    and is left out.
+    command and feedback delays stay (exactly, as delays). The position integral is linear and stays
+    (it integrates whenever the PWM is out of its dead band, which without a dead band is always).
+    Hysteretic damping is frequency dependent and is left out.
     """
     v = params.kernel_vector(figure33=figure33, bound=bound, hysteresis=False, noise=False)
     force = -hinge_moment_inlb / v[K_ARM]
@@ -1007,15 +1036,18 @@ def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound:
         damping = v[K_CG]
     kp, kv, kc, r, ll, kf = v[K_KP], v[K_KV], v[K_KC], v[K_R], v[K_L], v[K_KF]
     mm, ms, wf, dpi = v[K_MM], v[K_MS], v[K_WLF], v[K_DPI]
-    a = np.zeros((6, 6))
-    b = np.zeros((6, 2))
-    xm, vm, xs, vs, cur, lf = range(6)
-    # current loop without the dead band: L·di/dt = (Kc + R)·(i_c − i), i_c = Kv·(Kp·(x_c − lf) − v_m)
+    a = np.zeros((7, 7))
+    b = np.zeros((7, 2))
+    xm, vm, xs, vs, cur, lf, xi = range(7)
+    # current loop without the dead band: L·di/dt = (Kc + R)·(i_c − i), i_c = Kv·(Kp·(x_c − lf) + ∫ − v_m)
     g = (kc + r) / ll
     a[cur, cur] = -g
     a[cur, vm] = -g * kv
     a[cur, lf] = -g * kv * kp
+    a[cur, xi] = g * kv
     b[cur, 0] = g * kv * kp / dpi
+    a[xi, lf] = -v[K_KI]
+    b[xi, 0] = v[K_KI] / dpi
     # motor and surface through the linearized gear train
     a[xm, vm] = 1.0
     a[vm, cur] = kf / mm
@@ -1033,7 +1065,7 @@ def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound:
     a[lf, xm] = wf * (1.0 - ca * kt)
     a[lf, xs] = wf * ca * kt
     a[lf, lf] = -wf
-    c = np.zeros((2, 6))
+    c = np.zeros((2, 7))
     c[0, lf] = dpi
     c[1, xs] = dpi
     return LinearizedActuator(a, b, c, params.command_delay_s, params.feedback_delay_s, float(kt), float(ca))
@@ -1057,7 +1089,7 @@ class HighOrderModel(ActuatorModel):
         bound: str | float = "mean",
         hysteresis: bool | float = False,
         noise: bool | float = True,
-        seed: int | float = 0,
+        seed: int | float | Sequence[int] = 0,
         **overrides: Any,
     ) -> None:
         super().__init__(channel, n=n, rate_hz=rate_hz)
@@ -1066,7 +1098,7 @@ class HighOrderModel(ActuatorModel):
         self.bound = _bound_value(bound)
         self.hysteresis = bool(hysteresis)
         self.noise = bool(noise)
-        self.seed = int(seed)
+        self.seed = seed if isinstance(seed, Sequence) else int(seed)
         self.params: list[HighOrderParams] = batch_params(
             params, self.n, lambda: HighOrderParams.from_channel(self.channel, self.variant, **overrides)
         )
@@ -1125,6 +1157,17 @@ class HighOrderModel(ActuatorModel):
             out[i] = (2.0 * target - eq["lf"]) * p[K_DPI] if eq["motor"] == MOTOR_STUCK else position_deg[i]
         return out
 
+    def stream_seeds(self) -> list[int]:
+        """The noise stream of each instance: ``seed`` and the instance number, or one seed per instance.
+
+        A batch given the seeds ``[a, b, …]`` reproduces single models seeded ``a``, ``b``, ….
+        """
+        if isinstance(self.seed, Sequence):
+            if len(self.seed) != self.n:
+                raise EmaError(f"got {len(self.seed)} seeds for {self.n} instances")
+            return [int(s) * 1_000_003 for s in self.seed]
+        return [self.seed * 1_000_003 + i for i in range(self.n)]
+
     def _equilibria(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> list[dict[str, float]]:
         x_in, _ = self._command_in(command_deg[:, None])
         return [equilibrium(self._P[i], float(x_in[i, 0]), float(hinge_moment_inlb[i]), self._power[i] > 0.5)
@@ -1168,7 +1211,8 @@ class Hoac1(HighOrderModel):
         self._Y = np.zeros((self.n, N_CONTINUOUS))
         self._U = np.zeros((self.n, N_U))
         for i, eq in enumerate(self._equilibria(command_deg, hinge_moment_inlb)):
-            self._Y[i, [X_XM, X_XS, X_I, X_LF, X_VBUS]] = eq["xm"], eq["xs"], eq["cur"], eq["lf"], eq["vbus"]
+            self._Y[i, [X_XM, X_XS, X_I, X_LF, X_VBUS, X_XI]] = (eq["xm"], eq["xs"], eq["cur"], eq["lf"], eq["vbus"],
+                                                                  eq["xi"])
             self._U[i, U_MOTOR] = eq["motor"]
         self._h = np.full(self.n, 1e-5)
         self.events = 0
@@ -1201,9 +1245,11 @@ class Hoad2(HighOrderModel):
         self._X = np.zeros((self.n, N_STATE))
         self._buf = np.zeros((self.n, nbuf))
         for i, eq in enumerate(self._equilibria(command_deg, hinge_moment_inlb)):
-            self._X[i, [X_XM, X_XS, X_I, X_LF, X_VBUS]] = eq["xm"], eq["xs"], eq["cur"], eq["lf"], eq["vbus"]
+            self._X[i, [X_XM, X_XS, X_I, X_LF, X_VBUS, X_XI]] = (eq["xm"], eq["xs"], eq["cur"], eq["lf"], eq["vbus"],
+                                                                  eq["xi"])
+            self._X[i, X_FLAGS] = eq["flags"]
             self._buf[i] = eq["lf"]
-        self._rng = np.array([[nz.splitmix64(self.seed * 1_000_003 + i)] for i in range(self.n)], dtype=np.uint64)
+        self._rng = np.array([[nz.splitmix64(s)] for s in self.stream_seeds()], dtype=np.uint64)
         self._spare = np.zeros((self.n, nz.NORMAL_WORDS))
         self._steps = 0
 
