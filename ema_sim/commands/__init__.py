@@ -7,6 +7,7 @@ COMMANDS: tuple[str, ...] = (
     "simulate",
     "compare",
     "loes",
+    "acceptance",
     "bench",
     "listing",
 )

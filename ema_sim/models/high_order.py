@@ -442,7 +442,7 @@ def _cubic_inverse(c0, c1, c2, c3, y):  # noqa: ANN001, ANN202
 
 
 @nb.njit(cache=True)
-def _feedback_deg(p, lf_in, s, x, rng, spare):  # noqa: ANN001, ANN202
+def _feedback_deg(p, lf_in, s, x, rng):  # noqa: ANN001, ANN202
     """Stages 16–17 at a sample instant ``s``: LVDT degrees → volts (+ noise) → 5 mV → degrees."""
     deg = lf_in * p[K_DPI]
     if p[K_QUANT] <= 0.0 and p[K_NFB] <= 0.0:
@@ -451,15 +451,15 @@ def _feedback_deg(p, lf_in, s, x, rng, spare):  # noqa: ANN001, ANN202
     volts = _cubic_inverse(c0, c1, c2, c3, deg)
     if p[K_NFB] > 0.0:
         decay = math.exp(-st.TWO_PI * p[K_NBW] * max(s - x[X_TFB], 0.0)) if p[K_NBW] > 0.0 else 0.0
-        x[X_NFB] = nz.band_limited_step(x[X_NFB], p[K_NFB], decay, rng, spare)
+        x[X_NFB] = nz.band_limited_step(x[X_NFB], decay, p[K_NFB] * math.sqrt(1.0 - decay * decay), rng)
         x[X_TFB] = s
         volts += x[X_NFB]
     volts = st.quantize(volts, p[K_QUANT])
     return _cubic(c0, c1, c2, c3, volts)
 
 
-@nb.njit(cache=True, error_model="numpy")
-def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0, dt, n_steps, sample_t, out):  # noqa: ANN001, ANN201, PLR0912, PLR0915
+@nb.njit(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz"})
+def run_discrete(P, X, RNG, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0, dt, n_steps, sample_t, out):  # noqa: ANN001, ANN201, PLR0912, PLR0915
     """HOAD2/HOAD3 fixed-step kernel: every instance through ``n_steps`` steps from ``t0``.
 
     ``cmd_in`` is the command after stages 2 (in, per input breakpoint), ``cmd_slope`` its inches per
@@ -472,7 +472,6 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
         p = P[i]
         x = X[i]
         rng = RNG[i]
-        spare = SPARE[i]
         buf = BUF[i]
         nbuf = buf.shape[0]
         kp = p[K_KP]
@@ -500,6 +499,7 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
         g_lf = 1.0 - math.exp(-p[K_WLF] * dt)
         decay_bus = math.exp(-dt / (rsrc * p[K_CBUS]))
         a_cmd = math.exp(-st.TWO_PI * p[K_NBW] * dt) if p[K_NBW] > 0.0 else 0.0
+        w_cmd = p[K_NCMD] * math.sqrt(1.0 - a_cmd * a_cmd)
         n_delay = min(round(p[K_FB_DELAY] / dt), nbuf - 1)
         on = POWER[i] > 0.5
         brake = 0.0 if on else p[K_FB]
@@ -525,7 +525,7 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
             while js < k_samples and (k == n_steps or sample_t[js] < t + dt - st.TIME_EPS_S):
                 row = out[i, js]
                 lagged = buf[head - n_delay if head >= n_delay else head - n_delay + nbuf]
-                row[O_POS] = _feedback_deg(p, lagged, sample_t[js], x, rng, spare)
+                row[O_POS] = _feedback_deg(p, lagged, sample_t[js], x, rng)
                 row[O_SURF] = xs * p[K_DPI]
                 row[O_RATE] = vm * p[K_DPI]
                 row[O_CUR] = cur
@@ -539,7 +539,7 @@ def run_discrete(P, X, RNG, SPARE, BUF, POWER, bp_t, cmd_in, cmd_slope, bp_h, t0
             hm = bp_h[i, jh]
             flags = 0
             # stages 1–3: delayed, quantized command with noise (volts → inches at its calibration slope)
-            ncmd = nz.band_limited_step(ncmd, p[K_NCMD], a_cmd, rng, spare)
+            ncmd = nz.band_limited_step(ncmd, a_cmd, w_cmd, rng)
             xc = cmd_in[i, jd] + ncmd * cmd_slope[i, jd]
             if xc > xmax:
                 xc = xmax
@@ -1165,8 +1165,8 @@ class HighOrderModel(ActuatorModel):
         if isinstance(self.seed, Sequence):
             if len(self.seed) != self.n:
                 raise EmaError(f"got {len(self.seed)} seeds for {self.n} instances")
-            return [int(s) * 1_000_003 for s in self.seed]
-        return [self.seed * 1_000_003 + i for i in range(self.n)]
+            return [(int(s) * 1_000_003) % 2**63 for s in self.seed]
+        return [(self.seed * 1_000_003 + i) % 2**63 for i in range(self.n)]
 
     def _equilibria(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> list[dict[str, float]]:
         x_in, _ = self._command_in(command_deg[:, None])
@@ -1250,7 +1250,6 @@ class Hoad2(HighOrderModel):
             self._X[i, X_FLAGS] = eq["flags"]
             self._buf[i] = eq["lf"]
         self._rng = np.array([[nz.splitmix64(s)] for s in self.stream_seeds()], dtype=np.uint64)
-        self._spare = np.zeros((self.n, nz.NORMAL_WORDS))
         self._steps = 0
 
     def set_power(self, on: bool | ArrayLike) -> None:  # noqa: D102
@@ -1264,7 +1263,7 @@ class Hoad2(HighOrderModel):
         x_in, slope = self._command_in(bp_u)
         out = np.empty((self.n, sample_t.size, N_OUT))
         run_discrete(
-            self._P, self._X, self._rng, self._spare, self._buf, self._power, bp_t, np.ascontiguousarray(x_in),
+            self._P, self._X, self._rng, self._buf, self._power, bp_t, np.ascontiguousarray(x_in),
             np.ascontiguousarray(slope), np.ascontiguousarray(bp_h), t0, dt, n_steps, sample_t, out,
         )
         self._steps += n_steps

@@ -3,7 +3,8 @@
 Each model instance owns its generator state (xorshift64*, seeded by splitmix64), so a run gives the
 same noise whether it is stepped frame by frame or run whole, and instances in a batch or in other
 models never share a stream. Noise is band-limited: a first-order (Ornstein–Uhlenbeck) process of a
-given rms and bandwidth, so its effect does not change with the model's step size.
+given rms and bandwidth, so its effect does not change with the model's step size. Normal draws
+use the ziggurat method, a few nanoseconds each, so a 10 kHz kernel can draw every step.
 """
 
 from __future__ import annotations
@@ -13,11 +14,6 @@ import math
 import numpy as np
 
 from ema_sim.models.stages import jit
-
-RNG_WORDS = 1
-"""uint64 words of generator state per instance."""
-NORMAL_WORDS = 2
-"""float64 words per instance for the Box–Muller spare: (have one, value)."""
 
 _U53 = 1.0 / 9007199254740992.0  # 2**-53
 
@@ -46,31 +42,77 @@ def uniform(state: np.ndarray) -> float:
     return (float(r >> np.uint64(11)) + 1.0) * _U53
 
 
-@jit
-def normal(state: np.ndarray, spare: np.ndarray) -> float:
-    """A standard normal draw (Box–Muller, the second value of each pair kept in ``spare``)."""
-    if spare[0] != 0.0:
-        spare[0] = 0.0
-        return spare[1]
-    u1 = uniform(state)
-    u2 = uniform(state)
-    rad = math.sqrt(-2.0 * math.log(u1))
-    ang = 2.0 * math.pi * u2
-    spare[0] = 1.0
-    spare[1] = rad * math.sin(ang)
-    return rad * math.cos(ang)
+def _ziggurat_tables(levels: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Marsaglia and Tsang's (2000) ziggurat for the standard normal: (k, w, f) for 128 layers."""
+    m1 = 2147483648.0
+    dn = 3.442619855899
+    tn = dn
+    vn = 9.91256303526217e-3
+    k = np.zeros(levels)
+    w = np.zeros(levels)
+    f = np.zeros(levels)
+    q = vn / math.exp(-0.5 * dn * dn)
+    k[0] = dn / q * m1
+    k[1] = 0.0
+    w[0] = q / m1
+    w[levels - 1] = dn / m1
+    f[0] = 1.0
+    f[levels - 1] = math.exp(-0.5 * dn * dn)
+    for i in range(levels - 2, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(vn / dn + math.exp(-0.5 * dn * dn)))
+        k[i + 1] = dn / tn * m1
+        tn = dn
+        f[i] = math.exp(-0.5 * dn * dn)
+        w[i] = dn / m1
+    return k, w, f
+
+
+_ZIG_K, _ZIG_W, _ZIG_F = _ziggurat_tables()
+_ZIG_R = 3.442619855899
+"""Where the ziggurat's base strip hands over to the exact tail."""
 
 
 @jit
-def band_limited_step(value: float, rms: float, decay: float, state: np.ndarray, spare: np.ndarray) -> float:
-    """One step of first-order noise of rms ``rms``: ``n ← a·n + rms·√(1 − a²)·w`` with ``a = decay``."""
-    if rms <= 0.0:
-        return 0.0
-    return decay * value + rms * math.sqrt(1.0 - decay * decay) * normal(state, spare)
+def _signed_draw(state: np.ndarray) -> tuple:
+    """A signed 32-bit integer and an independent 7-bit layer from one 64-bit draw."""
+    x = state[0]
+    x ^= x >> np.uint64(12)
+    x ^= x << np.uint64(25)
+    x ^= x >> np.uint64(27)
+    state[0] = x
+    r = x * np.uint64(0x2545F4914F6CDD1D)
+    hz = np.int64(r >> np.uint64(32))
+    if hz >= 2147483648:
+        hz -= 4294967296
+    return hz, np.int64(r & np.uint64(127))
 
 
-def noise_decay(bandwidth_hz: float, dt_s: float) -> float:
-    """``a = exp(−2π·f·dt)`` of the first-order noise over ``dt_s`` (0: white at that step)."""
-    if bandwidth_hz <= 0.0:
+@jit
+def normal(state: np.ndarray) -> float:
+    """A standard normal draw by the ziggurat: one multiply on 98.8 % of draws, exact in the tails."""
+    hz, iz = _signed_draw(state)
+    while True:
+        if abs(hz) < _ZIG_K[iz]:
+            return hz * _ZIG_W[iz]
+        x = hz * _ZIG_W[iz]
+        if iz == 0:  # the tail beyond r, by Marsaglia's exponential method
+            while True:
+                x = -math.log(uniform(state)) / _ZIG_R
+                y = -math.log(uniform(state))
+                if y + y >= x * x:
+                    break
+            return _ZIG_R + x if hz > 0 else -_ZIG_R - x
+        if _ZIG_F[iz] + uniform(state) * (_ZIG_F[iz - 1] - _ZIG_F[iz]) < math.exp(-0.5 * x * x):
+            return x
+        hz, iz = _signed_draw(state)
+
+
+@jit
+def band_limited_step(value: float, decay: float, innovation: float, state: np.ndarray) -> float:
+    """One step of first-order noise: ``n ← a·n + σ·√(1 − a²)·w`` with ``a = decay``.
+
+    ``innovation = σ·√(1 − a²)`` (0 when the noise is off); the rms stays σ whatever the step.
+    """
+    if innovation == 0.0:
         return 0.0
-    return math.exp(-2.0 * math.pi * bandwidth_hz * dt_s)
+    return decay * value + innovation * normal(state)
