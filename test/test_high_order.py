@@ -396,6 +396,8 @@ def test_unknown_parameters_and_bad_options_are_clear_errors():
         create("hoad3", bound="typical")
     with pytest.raises(EmaError, match="must be positive"):
         create("hoac1", lvdt_filter_hz=0.0)
+    with pytest.raises(EmaError, match="belong to HOAD3"):
+        create("hoad2", hysteresis=True)
 
 
 @pytest.mark.parametrize("name", HIGH_ORDER)

@@ -10,7 +10,8 @@ flight/test environment (HOAD2, HOAD3; section 4.2.5)
     2. command quantization  5 mV through the channel's command calibration, degrees → volts → degrees
     3. command noise         band-limited, seeded, measured rms in volts
 EMAC channel and motor (figure 30; :mod:`ema_sim.models.drive`)
-    4. position-loop controller electronics  Kp·(command − filtered LVDT), limited at the slew rate
+    4. position-loop controller electronics  Kp·(command − filtered LVDT) plus an integral that runs
+                             only while the PWM drives; limited at the slew rate
     5. velocity loop         tachometer feedback, current demand limited at the current limit
     6. current loop          proportional, resistive and back-EMF feed-forward
     7. PWM with dead band    no drive for small demands, duty limit on the bus voltage
@@ -23,7 +24,7 @@ gear train and surface (:mod:`ema_sim.models.gear_train`)
                              figure 33 (HOAD3): three-segment total and actuator compliance;
                              figure 36 (option): hysteretic damping h/ω scaled by stiffness
    13. servo crank arm       force ↔ hinge moment, screw travel ↔ surface angle
-   14. surface inertia       with the hinge-moment input
+   14. surface inertia       with the hinge-moment input and spindle (hinge) friction
    15. LVDT with its filter  fed back to stage 4 (inside the servo loop)
 flight/test environment, feedback side
    16. feedback delay        motion to feedback (HOAD3: 2 ms, section 2.3)
@@ -1097,6 +1098,9 @@ class HighOrderModel(ActuatorModel):
             raise ValueError("give either params or keyword overrides, not both")
         self.bound = _bound_value(bound)
         self.hysteresis = bool(hysteresis)
+        if not self.figure33 and (self.bound != 0.0 or self.hysteresis):
+            raise EmaError(f"{self.name}: compliance bounds and hysteretic damping belong to HOAD3's figure-33 "
+                           "gear train")
         self.noise = bool(noise)
         self.seed = seed if isinstance(seed, Sequence) else int(seed)
         self.params: list[HighOrderParams] = batch_params(
