@@ -285,6 +285,10 @@ def test_hoad3_compliance_curves_follow_section_2_8_and_3_2_1(channel, loads, ou
     upper, _ = params.curves(1.0)
     lower, _ = params.curves(-1.0)
     assert upper[2:] < total[2:] < lower[2:]  # upper bound = most compliant
+    # A Monte Carlo batch picks a bound per instance: the most compliant deflects most under load.
+    batch = create("hoad3", channel, n=3, bound=["lower", 0.0, "upper"], noise=False)
+    deflection = batch.trim(0.0, loads).surface_deg - batch.trim(0.0, 0.0).surface_deg
+    assert deflection[0] < deflection[1] < deflection[2]
 
 
 def test_hoad3_with_the_servo_on_the_lvdt_barely_sees_what_the_surface_does():

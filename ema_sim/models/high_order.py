@@ -418,7 +418,8 @@ def _gear_train(p, xm, xs):  # noqa: ANN001, ANN202
     if p[K_FIG33] > 0.5:
         fk, ktan, seg = _total_force(p, d)
         c = p[K_CLINK] + gt.hysteretic_damping(p[K_HC], ktan)
-        return fk, c, xm - _actuator_deflection(p, fk), seg == 1
+        lvdt = gt.lvdt_fig33(xm, fk, p[K_A_F1], p[K_A_F2], p[K_A_G1], p[K_A_G2], p[K_A_C1], p[K_A_C2], p[K_A_C3])
+        return fk, c, lvdt, seg == 1
     seg = gt.dead_zone_segment(d, p[K_HB])
     fk, _ = gt.gear_train_fig32(d, 0.0, p[K_HB], p[K_KSER], p[K_CG], seg)
     c = p[K_CG] if seg != 0 else 0.0
@@ -1087,7 +1088,7 @@ class HighOrderModel(ActuatorModel):
         n: int = 1,
         rate_hz: float | None = None,
         params: HighOrderParams | list[HighOrderParams] | None = None,
-        bound: str | float = "mean",
+        bound: str | float | Sequence[str | float] = "mean",
         hysteresis: bool | float = False,
         noise: bool | float = True,
         seed: int | float | Sequence[int] = 0,
@@ -1096,9 +1097,12 @@ class HighOrderModel(ActuatorModel):
         super().__init__(channel, n=n, rate_hz=rate_hz)
         if params is not None and overrides:
             raise ValueError("give either params or keyword overrides, not both")
-        self.bound = _bound_value(bound)
+        bounds = list(bound) if isinstance(bound, Sequence) and not isinstance(bound, str) else [bound] * self.n
+        if len(bounds) != self.n:
+            raise EmaError(f"got {len(bounds)} compliance bounds for {self.n} instances")
+        self.bounds = [_bound_value(b) for b in bounds]
         self.hysteresis = bool(hysteresis)
-        if not self.figure33 and (self.bound != 0.0 or self.hysteresis):
+        if not self.figure33 and (any(self.bounds) or self.hysteresis):
             raise EmaError(f"{self.name}: compliance bounds and hysteretic damping belong to HOAD3's figure-33 "
                            "gear train")
         self.noise = bool(noise)
@@ -1108,9 +1112,9 @@ class HighOrderModel(ActuatorModel):
         )
         fb = self.channel.feedback_cal
         self._P = np.stack([
-            prm.kernel_vector(figure33=self.figure33, bound=self.bound, hysteresis=self.hysteresis,
-                              noise=self.noise, feedback_cal=(fb.c0, fb.c1, fb.c2, fb.c3))
-            for prm in self.params
+            prm.kernel_vector(figure33=self.figure33, bound=b, hysteresis=self.hysteresis, noise=self.noise,
+                              feedback_cal=(fb.c0, fb.c1, fb.c2, fb.c3))
+            for prm, b in zip(self.params, self.bounds, strict=True)
         ])
         self._power = np.ones(self.n)
         self.trim()
@@ -1179,7 +1183,7 @@ class HighOrderModel(ActuatorModel):
 
     def describe(self) -> dict[str, Any]:  # noqa: D102
         info = super().describe()
-        info.update(bound=self.bound, hysteresis=self.hysteresis, noise=self.noise, seed=self.seed)
+        info.update(bounds=self.bounds, hysteresis=self.hysteresis, noise=self.noise, seed=self.seed)
         return info
 
 
