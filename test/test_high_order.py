@@ -388,6 +388,8 @@ def test_unknown_parameters_and_bad_options_are_clear_errors():
         create("hoac1", lvdt_filter_hz=0.0)
     with pytest.raises(EmaError, match="belong to HOAD3"):
         create("hoad2", hysteresis=True)
+    with pytest.raises(EmaError, match="no flight/test environment"):
+        create("hoac1", command_delay_s=0.004)
 
 
 @pytest.mark.parametrize("name", HIGH_ORDER)

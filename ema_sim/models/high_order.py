@@ -1110,6 +1110,8 @@ class HighOrderModel(ActuatorModel):
         self.params: list[HighOrderParams] = batch_params(
             params, self.n, lambda: HighOrderParams.from_channel(self.channel, self.variant, **overrides)
         )
+        if self.continuous and any(getattr(prm, f) > 0.0 for prm in self.params for f in _ENVIRONMENT_FIELDS[:5]):
+            raise EmaError(f"{self.name} has no flight/test environment (delay, quantization, noise): use hoad2/hoad3")
         fb = self.channel.feedback_cal
         self._P = np.stack([
             prm.kernel_vector(figure33=self.figure33, bound=b, hysteresis=self.hysteresis, noise=self.noise,
