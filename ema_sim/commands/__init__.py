@@ -7,6 +7,8 @@ COMMANDS: tuple[str, ...] = (
     "simulate",
     "compare",
     "analyze",
+    "loes",
+    "acceptance",
     "bench",
     "listing",
 )
