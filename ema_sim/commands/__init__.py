@@ -7,5 +7,6 @@ COMMANDS: tuple[str, ...] = (
     "simulate",
     "compare",
     "bench",
+    "launch",
     "listing",
 )

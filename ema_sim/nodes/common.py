@@ -1,0 +1,138 @@
+"""What every node shares: start-up, the executor loop, signals, throttled logs, readiness, summaries.
+
+The executor is rclpy's ``EventsExecutor`` driven by ``spin_once`` calls from our own loop, which
+also keeps every deadline itself (no rclpy timers): measured here, taking a message costs 12 µs raw
+and 38 µs deserialized with it against 200–290 µs with the ``SingleThreadedExecutor``, and its
+``spin()`` does not fire timers in this wheel (see README, "Executor").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import rclpy
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+from std_msgs.msg import String
+
+from ema_msgs_py import contract as ct
+from ema_msgs_py.ros import qos
+from ema_sim.errors import EmaError
+
+SUMMARY_PREFIX = "EMA_SUMMARY "
+"""Each node prints one line with this prefix and a JSON summary when it stops."""
+MAX_SPIN_S = 0.05
+"""Longest wait in one spin, so a stop request is seen within it."""
+
+
+def make_executor(context: Any = None) -> Any:
+    """The executor every node uses (see the module docstring for the measurement behind it)."""
+    from rclpy.experimental import EventsExecutor  # noqa: PLC0415
+
+    return EventsExecutor(context=context)
+
+
+class SuiteNode(Node):
+    """Base of the suite's nodes: ``poll`` does the deadline work, ``close`` the last words."""
+
+    def __init__(self, name: str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.done = False
+        self._last_log: dict[str, float] = {}
+        self._ready_pub = self.create_publisher(String, ct.READY, qos(ct.LATCHED_QOS))
+
+    @property
+    def sim_time(self) -> bool:
+        """True under ``use_sim_time`` (lockstep)."""
+        return bool(self.get_parameter("use_sim_time").value)
+
+    def poll(self) -> float:
+        """Work that is due; returns seconds until something is next due."""
+        return MAX_SPIN_S
+
+    def close(self) -> None:
+        """Called once when the node stops (signal, end of test or error)."""
+
+    def summary(self) -> dict[str, Any]:
+        """Printed as one JSON line when the node stops."""
+        return {}
+
+    def announce_ready(self) -> None:
+        """Tell the clock and the maneuver node this node is up (latched ``/ema/ready``)."""
+        self._ready_pub.publish(String(data=self.get_name()))
+
+    def throttled(self, key: str, message: str, *, period_s: float = 1.0, level: str = "warning") -> None:
+        """Log at most once per ``period_s`` (wall time) per key."""
+        now = time.monotonic()
+        if now - self._last_log.get(key, -math.inf) >= period_s:
+            self._last_log[key] = now
+            getattr(self.get_logger(), level)(message)
+
+
+def ros_args(argv: Sequence[str] | None) -> list[str]:
+    """The full argv (ROS arguments included) for ``rclpy.init``."""
+    return list(sys.argv if argv is None else ["node", *argv])
+
+
+def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.ArgumentParser,
+        argv: Sequence[str] | None = None) -> int:
+    """Parse arguments, start rclpy, loop until stopped, close cleanly; returns the exit status.
+
+    SIGINT and SIGTERM end the loop; the node's ``close`` then runs (a recorder closes its bag, so every
+    message it received is readable). A user error is one line on stderr and status 2.
+    """
+    full = ros_args(argv)
+    args = parser.parse_args(remove_ros_args(full)[1:])
+    stop = {"signal": None}
+
+    def on_signal(signum: int, frame: Any) -> None:  # noqa: ARG001
+        stop["signal"] = signum
+
+    rclpy.init(args=full, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    node: SuiteNode | None = None
+    status = 0
+    try:
+        node = factory(args)
+        executor = make_executor()
+        executor.add_node(node)
+        while stop["signal"] is None and not node.done:
+            timeout = node.poll()
+            if node.done:
+                break
+            executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
+
+    except EmaError as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        status = 2
+    except KeyboardInterrupt:
+        status = 130
+    finally:
+        if node is not None:
+            try:
+                node.close()
+                print(SUMMARY_PREFIX + json.dumps({"node": node.get_name(), "cpu_s": round(time.process_time(), 3),
+                                                   **node.summary()}), flush=True)
+            finally:
+                node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status
+
+
+def percentile_ms(values: Sequence[float], q: float) -> float:
+    """A percentile of seconds, in ms (NaN when empty)."""
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    k = min(len(ordered) - 1, max(0, math.ceil(q / 100.0 * len(ordered)) - 1))
+    return ordered[k] * 1e3
