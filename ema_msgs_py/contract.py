@@ -47,7 +47,7 @@ class QosSpec:
 
 FRAME_QOS = QosSpec("reliable", "volatile", 1000)
 """Per-frame signals: reliable so lockstep never loses a frame; deep so a recorder may lag."""
-CLOCK_QOS = QosSpec("reliable", "transient_local", 1)
+CLOCK_QOS = QosSpec("reliable", "transient_local", 100)
 """``/clock`` from the lockstep clock: the latest frame reaches a late joiner (rclpy's best-effort,
 volatile TimeSource subscription is compatible). Nodes step every frame up to the clock's value, so
 only the latest matters."""

@@ -147,6 +147,7 @@ class ManeuverNode(SuiteNode):
         if now < self.settle_until:
             return self.settle_until - now
         self.phase = "running"
+        self.get_logger().info("running")
         self.announce_ready()
         self.start_wall = now + 0.05
         self.start_ns = self.get_clock().now().nanoseconds + 50_000_000
