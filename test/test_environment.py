@@ -1,9 +1,10 @@
 import math
+import re
 
 import numpy as np
 import pytest
 
-from ema_sim.config import load_channel
+from ema_sim.config import config_dir, load_channel, ros_parameters
 from ema_sim.environment import (
     FirstOrderLag,
     Noise,
@@ -137,3 +138,16 @@ def test_bad_profiles_are_one_clear_error():
         Profile.from_parameters({"command": {"lag_hz": -1.0}})
     with pytest.raises(ConfigError, match="unknown parameter 'lag'"):
         Profile.from_parameters({"feedback": {"lag": 50.0}})
+
+
+@pytest.mark.parametrize("name", ["ail", "flight", "emac"])
+def test_suite_parameter_files_carry_units_in_every_name(name):
+    unit = re.compile(r"_(deg|v|inlb|s|hz)$")
+    plain = {"profile", "seed", "failure", "motor_power_on"}  # names, seeds, switches
+
+    def walk(mapping):
+        for key, value in mapping.items():
+            yield from walk(value) if isinstance(value, dict) else [key]
+
+    params = ros_parameters(config_dir() / f"{name}.yaml")
+    assert [k for k in walk(params) if k not in plain and not unit.search(k)] == []

@@ -95,6 +95,19 @@ def test_lockstep_advances_the_model_exactly_once_per_frame(lockstep_ail):
     assert np.ptp(data.hinge_moment_inlb) == pytest.approx(600.0, abs=1.0)
 
 
+def test_crosstalk_shows_on_the_right_wing_feedback_while_the_left_wing_slews(lockstep_ail):
+    """Every channel moves a little with the AIL command noise; only the right wing's feedback jumps."""
+    bag, _ = lockstep_ail
+    settled = slice(100, None)  # after the release from the start-up brake
+
+    def jumps(channel):
+        return np.abs(np.diff(read_bag(bag, channel).position_v[settled])).max()
+
+    assert 0.005 < jumps("right_wing") <= 0.0201  # section 2.2.1: ≈ 0.02 V peak to peak
+    for other in ("left_rudder", "right_rudder", "cowl_door"):
+        assert jumps(other) < 0.003  # nominal: only the actuator's smooth response to the command noise
+
+
 # --------------------------------------------------------------------------- real time
 def test_real_time_run_measures_command_to_feedback_latency(tmp_path):
     bag = tmp_path / "rt"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
         rt_priority=args.rt_priority,
     )
     suite = Suite(cfg)
+    signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops the suite as Ctrl-C does: the bag is closed
     mode = "lockstep" if args.lockstep else "real time"
     print(f"ema launch: {plan.test} on {', '.join(plan.channels)} for {plan.duration_s:g} s, {args.model}, "
           f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
@@ -57,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
         raise EmaError(f"the maneuver node exited with status {status}; see {suite.log_dir / 'maneuver.log'}")
     _report(suite, bag, bag_info)
     return 0
+
+
+def _interrupt(signum: int, frame: Any) -> None:  # noqa: ARG001
+    raise KeyboardInterrupt
 
 
 def _report(suite: Any, bag: Path, bag_info: Any) -> None:
