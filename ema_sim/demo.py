@@ -52,12 +52,14 @@ def summarize(bag: Path) -> None:
         if count:
             print(f"  {topic:28s} {count:7d}  {msgtype}")
     emac, fmu = read_bag(bag, "left_wing"), read_bag(bag, "left_wing", side="fmu")
-    err = emac.position_deg - emac.command_deg
-    lag = np.argmax(np.abs(emac.command_deg) > 0.5) - np.argmax(np.abs(fmu.command_deg) > 0.5)
-    print(f"  left wing: {len(emac)} frames; command peak {np.abs(emac.command_deg).max():.2f}°, LVDT peak "
-          f"{np.abs(emac.position_deg).max():.2f}°, surface peak {np.abs(emac.surface_deg).max():.2f}°; "
-          f"LVDT − command rms {np.sqrt(np.mean(err**2)):.3f}°; the AIL environment delays the command "
-          f"{lag * 5} ms on its way to the EMAC")
+    a, b = fmu.command_deg - fmu.command_deg.mean(), emac.command_deg - emac.command_deg.mean()
+    lags = np.arange(0, 20)
+    corr = [np.dot(a[: a.size - k], b[k:]) for k in lags]
+    frame_ms = 1e3 * float(np.median(np.diff(emac.time_s)))
+    print(f"  left wing: {len(emac)} frames on the EMAC side, {len(fmu)} on the FMU side; command peak "
+          f"{np.abs(emac.command_deg).max():.2f}°, LVDT peak {np.abs(emac.position_deg).max():.2f}°, surface peak "
+          f"{np.abs(emac.surface_deg).max():.2f}°; the AIL environment delays the command by "
+          f"{lags[int(np.argmax(corr))] * frame_ms:.0f} ms (best correlation) on its way to the EMAC")
 
 
 def main() -> int:

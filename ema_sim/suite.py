@@ -82,7 +82,7 @@ class Suite:
         return env
 
     def _spawn(self, name: str, module: str, args: list[str]) -> None:
-        cmd = [sys.executable, "-m", f"ema_sim.nodes.{module}", *args]
+        cmd = [sys.executable, "-m", f"ema_sim.nodes.{module}", *args, "--peers", ",".join(self.node_names())]
         if self.cfg.lockstep and module != "clock":
             cmd += ["--ros-args", "-p", "use_sim_time:=true"]
         log = (self.log_dir / f"{name}.log").open("wb")
@@ -99,6 +99,10 @@ class Suite:
 
         self.procs[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env(),
                                             start_new_session=True, preexec_fn=pre)  # noqa: PLW1509
+
+    def node_names(self) -> list[str]:
+        """Every node of the run."""
+        return [*self.emac_nodes(), "testenv", "maneuver", *(["simclock"] if self.cfg.lockstep else [])]
 
     def emac_nodes(self) -> list[str]:
         """Node names of the EMACs."""

@@ -57,7 +57,6 @@ class BridgeNode(SuiteNode):
         self.create_subscription(JointState, ct.FMU_FEEDBACK, self._on_feedback, fq)
         if self.lockstep:
             self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
-        self.announce_ready()
 
     def _on_joint_commands(self, msg: JointState) -> None:
         try:

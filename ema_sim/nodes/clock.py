@@ -30,6 +30,7 @@ class ClockNode(SuiteNode):
 
     def __init__(self, args: argparse.Namespace) -> None:
         super().__init__("simclock")
+        self.auto_ready = False
         self.frame_ns = round(NS / args.frame_hz)
         self.last_frame = round(args.duration * args.frame_hz) if args.duration > 0 else None
         self.window = max(1, int(args.window))
@@ -66,7 +67,7 @@ class ClockNode(SuiteNode):
     def poll(self) -> float:  # noqa: D102
         now = time.monotonic()
         if self.started_wall is None:
-            if not self.wait_for <= self.ready:
+            if not (self.wait_for <= self.ready and self.matched()):
                 return 0.01
             self.started_wall = now
             self._tick()

@@ -47,8 +47,14 @@ class SuiteNode(Node):
     def __init__(self, name: str, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
         self.done = False
+        self.peers: set[str] = set()
+        """Suite nodes that must be in the graph before this one calls itself ready (``--peers``)."""
+        self.auto_ready = True
+        """Announce readiness as soon as matched (the maneuver node announces itself when it starts)."""
         self._last_log: dict[str, float] = {}
         self._ready_pub = self.create_publisher(String, ct.READY, qos(ct.LATCHED_QOS))
+        self._ready_sent = False
+        self._matched_since: float | None = None
 
     @property
     def sim_time(self) -> bool:
@@ -69,6 +75,30 @@ class SuiteNode(Node):
     def announce_ready(self) -> None:
         """Tell the clock and the maneuver node this node is up (latched ``/ema/ready``)."""
         self._ready_pub.publish(String(data=self.get_name()))
+        self._ready_sent = True
+
+    def matched(self) -> bool:
+        """Every peer is in the graph and every endpoint of ours is matched with all the graph has.
+
+        Messages on a reliable, volatile topic reach only the readers a writer has matched when it
+        publishes, so a node is ready only when its endpoints are matched, held for 0.2 s.
+        """
+        now = time.monotonic()
+        ok = self.peers <= set(self.get_node_names())
+        if ok:
+            ok = all(p.get_subscription_count() >= self.count_subscribers(p.topic_name) for p in self.publishers) \
+                and all(s.get_publisher_count() >= self.count_publishers(s.topic_name) for s in self.subscriptions)
+        if not ok:
+            self._matched_since = None
+            return False
+        if self._matched_since is None:
+            self._matched_since = now
+        return now - self._matched_since >= 0.2
+
+    def check_ready(self) -> None:
+        """Announce readiness once matched (called by the loop until it is sent)."""
+        if self.auto_ready and not self._ready_sent and self.matched():
+            self.announce_ready()
 
     def throttled(self, key: str, message: str, *, period_s: float = 1.0, level: str = "warning") -> None:
         """Log at most once per ``period_s`` (wall time) per key."""
@@ -91,6 +121,8 @@ def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.Arg
     message it received is readable). A user error is one line on stderr and status 2.
     """
     full = ros_args(argv)
+    parser.add_argument("--peers", action="append", default=[],
+                        help="suite node names to see in the graph (and be matched with) before calling ready")
     args = parser.parse_args(remove_ros_args(full)[1:])
     stop = {"signal": None}
 
@@ -104,6 +136,7 @@ def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.Arg
     status = 0
     try:
         node = factory(args)
+        node.peers = {n for item in args.peers for n in item.split(",") if n} - {node.get_name()}
         executor = make_executor()
         executor.add_node(node)
         # Per-frame objects die by reference counting; keep the collector's full passes (whose pauses
@@ -112,6 +145,8 @@ def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.Arg
         gc.freeze()
         gc.set_threshold(50_000, 50, 1_000)
         while stop["signal"] is None and not node.done:
+            if not node._ready_sent:
+                node.check_ready()
             timeout = node.poll()
             if node.done:
                 break

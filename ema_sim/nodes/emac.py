@@ -116,7 +116,6 @@ class EmacNode(SuiteNode):
         self.get_logger().info(
             f"{args.model} on {', '.join(channels)}; {'lockstep' if self.lockstep else 'real time'} at "
             f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
-        self.announce_ready()
 
     def _build_units(self, args: argparse.Namespace, name: str, crosstalk: dict[str, Any]) -> dict[str, EmacChannel]:
         """A model and an EMAC channel for each hosted channel."""

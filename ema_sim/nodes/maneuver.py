@@ -46,6 +46,7 @@ class ManeuverNode(SuiteNode):
 
     def __init__(self, args: argparse.Namespace) -> None:
         super().__init__("maneuver", automatically_declare_parameters_from_overrides=True)
+        self.auto_ready = False  # ready when the test starts, after its recorder is matched
         self.lockstep = self.sim_time
         self.plan = build_plan(args.test, maneuver=args.maneuver, load=args.load,
                                channels=args.channels or ["left_wing"], duration_s=args.duration)
@@ -89,7 +90,6 @@ class ManeuverNode(SuiteNode):
         self._load = JointState(name=list(self.commanded))
         self.phase = "waiting"
         self.k = 0
-        self.settle_until = 0.0
         self.start_wall = 0.0
         self.start_ns = 0
         self.pub_wall: list[float] = []
@@ -140,15 +140,13 @@ class ManeuverNode(SuiteNode):
         return self._finish_up(now)
 
     def _wait_ready(self, now: float) -> float:
-        if not self.wait_for <= self.ready:
+        del now
+        if not (self.wait_for <= self.ready and self.matched()):
             return 0.01
-        if not self.settle_until:
-            self.settle_until = now + 0.3  # let the recorder's subscriptions match the new publishers
-        if now < self.settle_until:
-            return self.settle_until - now
         self.phase = "running"
         self.get_logger().info("running")
         self.announce_ready()
+        now = time.monotonic()
         self.start_wall = now + 0.05
         self.start_ns = self.get_clock().now().nanoseconds + 50_000_000
         return 0.05

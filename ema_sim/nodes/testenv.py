@@ -53,7 +53,6 @@ class TestEnvNode(SuiteNode):
         self.create_subscription(JointState, ct.EMAC_FEEDBACK, self._on_feedback, fq)
         d = self.profile.describe()
         self.get_logger().info(f"profile {d['profile']}: command {d['command_path']}; feedback {d['feedback_path']}")
-        self.announce_ready()
 
     def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> Any:
         path = table.get(channel)
