@@ -222,11 +222,19 @@ def test_a_node_never_dies_on_bad_messages_and_failures_switch_at_run_time(ros_p
         assert spin_until(ex, lambda: len(fb) > 5 and cmd.get_subscription_count() > 0)
         sc = scaling("left_wing")
 
-        def command(deg, seconds):
+        held = {"deg": 0.0}
+
+        def command(deg, seconds, until=None):
+            held["deg"] = deg
             end = time.monotonic() + seconds
-            while time.monotonic() < end:
+            while time.monotonic() < end and not (until is not None and until()):
                 cmd.publish(JointState(name=["left_wing"], position=[sc.command_deg_to_v(deg)]))
                 spin_until(ex, lambda: False, 0.005)
+
+        def failure(spec):  # switch, holding the last command until the node says it switched
+            fail.publish(String(data=spec))
+            command(held["deg"], 15.0, until=lambda: diag.get("emac/left_wing", {}).get("failure") == spec)
+            assert diag["emac/left_wing"]["failure"] == spec
 
         command(2.0, 1.0)
         send_garbage(cmd, load)
@@ -235,11 +243,10 @@ def test_a_node_never_dies_on_bad_messages_and_failures_switch_at_run_time(ros_p
         values = np.array([p for m in fb for p in m.position])
         assert np.isfinite(values).all()
         assert sc.feedback_v_to_deg(fb[-1].position[0]) == pytest.approx(2.0, abs=0.05)
-        fail.publish(String(data="stuck"))
+        failure("stuck")
         command(6.0, 1.0)
         assert sc.feedback_v_to_deg(fb[-1].position[0]) == pytest.approx(2.0, abs=0.05)
-        assert spin_until(ex, lambda: diag.get("emac/left_wing", {}).get("failure") == "stuck")
-        fail.publish(String(data="none"))
+        failure("none")
         command(6.0, 1.0)
         assert sc.feedback_v_to_deg(fb[-1].position[0]) == pytest.approx(6.0, abs=0.05)
         fail.publish(String(data="melt"))  # an unknown failure is refused, the node goes on
@@ -249,7 +256,10 @@ def test_a_node_never_dies_on_bad_messages_and_failures_switch_at_run_time(ros_p
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=20)
     assert proc.returncode == 0
-    out = log.read_text()
+    check_counters(log.read_text())
+
+
+def check_counters(out):
     summary = json.loads(next(line for line in out.splitlines() if line.startswith("EMA_SUMMARY "))[12:])
     counters = summary["counters"]["left_wing"]
     assert counters["rejected_commands"] >= 4  # NaN, ±inf, the missing value
