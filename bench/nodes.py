@@ -50,11 +50,13 @@ def realtime(box: bool, rt: int) -> Result:
     man = sums["maneuver"]
     p99, missed = man["latency_p99_ms"], man["missed_frames"]
     late = sum(s.get("late_frames", 0) for s in sums.values())
+    turn = max((s["turnaround_p99_ms"] for s in sums.values() if "turnaround_p99_ms" in s), default=float("nan"))
     return Result(p99, "ms p99", p99 <= 2.0 and missed == 0,
                   f"{MODEL}, {'EMAC box' if box else 'one process per channel'}, "
                   f"{'SCHED_FIFO ' + str(rt) if rt else 'normal scheduling'}: {man['frames']} frames over "
                   f"{REALTIME_S:g} s; p50 {man['latency_p50_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
-                  f"{missed} missed frames; {late} EMAC frames without a timely command")
+                  f"{missed} missed frames; {late} EMAC frames without a timely command; inside the EMAC node, "
+                  f"command received to feedback published p99 {turn:.2f} ms")
 
 
 PINGPONG = r'''

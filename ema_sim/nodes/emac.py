@@ -37,7 +37,7 @@ from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ro
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
-from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.common import SuiteNode, percentile_ms, run
 from ema_sim.nodes.params import merged, overrides
 from ema_sim.signals.plans import channel_list
 
@@ -89,7 +89,7 @@ class EmacNode(SuiteNode):
         if args.frame_hz:
             self.settings = EmacSettings.from_parameters({**vars(self.settings), "frame_hz": args.frame_hz})
         crosstalk = node_params.get("crosstalk", {})
-        self.wait_s = float(node_params.get("lockstep_wait_s", 1.0))
+        self.wait_s = float(node_params.get("lockstep_wait_s", 5.0))
         self.frame_ns = round(NS / self.settings.frame_hz)
         self.frame_s = self.frame_ns / NS
         self.units = self._build_units(args, name, crosstalk)
@@ -108,6 +108,7 @@ class EmacNode(SuiteNode):
         self.model_ns: int | None = None
         self.last_step_wall = time.monotonic()
         self.late_frames = 0
+        self.turnaround: list[float] = []
         self.waits_given_up = 0
         self.published = 0
         self.bad_messages = 0
@@ -263,6 +264,7 @@ class EmacNode(SuiteNode):
             stamp, item = self.commands.queue.popleft()
             self._apply_commands([(stamp, item)])
             self._step_all(stamp, lambda ch: self._age_wall(ch, now))
+            self.turnaround.append(time.monotonic() - item[1])  # command received → feedback published
             stepped = True
         if stepped:
             self.last_step_wall = now
@@ -387,6 +389,9 @@ class EmacNode(SuiteNode):
             "channels": self.channels, "mode": "lockstep" if self.lockstep else "realtime",
             "frames_published": self.published, "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
+            "turnaround_p50_ms": percentile_ms(self.turnaround, 50),
+            "turnaround_p99_ms": percentile_ms(self.turnaround, 99),
+            "turnaround_max_ms": percentile_ms(self.turnaround, 100),
             "counters": {ch: dict(u.counters) for ch, u in self.units.items()},
         }
 
