@@ -5,7 +5,8 @@ import pytest
 
 from ema_msgs_py import CHANNELS, TOPICS, failure_topic, scaling
 from ema_msgs_py import typestore as ts
-from ema_sim.config import load_channel
+from ema_sim.config import load_channel, parse_channel, ros_parameters
+from ema_sim.nodes.params import merged, nested
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,3 +55,21 @@ def test_typestore_messages_round_trip_without_ros():
     assert back.position.tolist() == [1.5, -2.5]
     assert back.velocity.size == 0
     assert ts.deserialize(ts.serialize(ts.string("x")), "std_msgs/msg/String").data == "x"
+
+
+def test_console_scripts_are_the_node_names():
+    text = (ROOT / "setup.py").read_text()
+    for script, module in [("emac", "emac"), ("testenv", "testenv"), ("maneuver", "maneuver"),
+                           ("simclock", "clock"), ("fmu_bridge", "bridge")]:
+        assert f'"{script} = ema_sim.nodes.{module}:main"' in text
+        assert (ROOT / "ema_sim" / "nodes" / f"{module}.py").is_file()
+
+
+def test_ros_parameters_merge_over_the_config_files():
+    flat = {"second_order.zeta": 0.9, "crank_arm_in": 1.8}
+    assert nested(flat) == {"second_order": {"zeta": 0.9}, "crank_arm_in": 1.8}
+    base = ROOT / "config" / "left_wing.yaml"
+    cfg = parse_channel(merged(ros_parameters(base), nested(flat)))
+    assert cfg.section("second_order")["zeta"] == 0.9
+    assert cfg.section("second_order")["wn_rad_s"] == 56.5  # untouched values come from the file
+    assert cfg.crank_arm_in == 1.8
