@@ -149,6 +149,29 @@ def test_sigterm_mid_run_leaves_a_readable_bag(tmp_path):
     assert int(data.metadata["frames_commanded"]) < int(data.metadata["frames"])
 
 
+def test_ema_launch_stops_cleanly_on_sigterm_and_leaves_a_complete_bag(tmp_path):
+    bag = tmp_path / "launch"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain(5)))
+    cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "ramp:rate_dps=0.5,peak_deg=10",
+           "--lockstep", "--emac-box", "--bag", str(bag)]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    log = tmp_path / "launch.logs" / "maneuver.log"
+    deadline = time.monotonic() + 60
+    while not (log.is_file() and "running" in log.read_text()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 130
+    assert "interrupted; closing the bag" in out
+    for node_log in (tmp_path / "launch.logs").glob("*.log"):
+        assert "EMA_SUMMARY" in node_log.read_text(), node_log.name  # every node stopped on its own
+    data = read_bag(bag)
+    assert bag_info(bag).complete
+    assert data.metadata["completed"] == "false"
+    assert len(data) >= 100
+
+
 # --------------------------------------------------------------------------- bad messages, failures
 @pytest.fixture(scope="module")
 def ros_context():

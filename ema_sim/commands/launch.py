@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
         rt_priority=args.rt_priority,
     )
     suite = Suite(cfg)
-    signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops the suite as Ctrl-C does: the bag is closed
+    for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
+        signal.signal(signum, _interrupt)
     mode = "lockstep" if args.lockstep else "real time"
     print(f"ema launch: {plan.test} on {', '.join(plan.channels)} for {plan.duration_s:g} s, {args.model}, "
           f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
