@@ -131,8 +131,9 @@ class ManeuverNode(SuiteNode):
         self.cmd_pub.publish(self._cmd)
 
     def poll(self) -> float:  # noqa: D102
-        self.recorder.discover()
         now = time.monotonic()
+        if self.lockstep or self.phase != "running" or self._slack(now) > 0.003:
+            self.recorder.discover()  # a graph query: in real time only where a frame has room for it
         if self.phase == "waiting":
             return self._wait_ready(now)
         if self.phase == "running":
@@ -162,6 +163,9 @@ class ManeuverNode(SuiteNode):
         if now >= self.drain_until:
             self.done = True
         return max(self.drain_until - now, 0.0)
+
+    def _slack(self, now: float) -> float:
+        return self.start_wall + self.k * self.frame_ns / NS - now
 
     def _run_realtime(self, now: float) -> float:
         due = self.start_wall + self.k * self.frame_ns / NS
