@@ -150,3 +150,12 @@ def test_settings_and_failures_are_validated():
     with pytest.raises(SpecError, match="direction"):
         parse_failure("hard_over:direction=3")
     assert parse_failure("stall").load_factor == 1.25
+
+
+def test_activity_of_the_other_channels_only():
+    meter = ActivityMeter(0.005)
+    for ch, dv in (("left_wing", 0.135), ("right_wing", 0.0)):
+        meter.observe(ch, 0.0, 27.0)
+        meter.observe(ch, dv, 27.0)
+    assert meter.activity_except("right_wing") == pytest.approx(1.0)
+    assert meter.activity_except("left_wing") == 0.0

@@ -111,7 +111,7 @@ def test_crosstalk_shows_on_the_right_wing_feedback_while_the_left_wing_slews(lo
 # --------------------------------------------------------------------------- real time
 def test_real_time_run_measures_command_to_feedback_latency(tmp_path):
     bag = tmp_path / "rt"
-    cfg = SuiteConfig(bag=bag, model="loada", profile="flight", maneuver="steps:amps_deg=2,lead_s=0.2,hold_s=0.5",
+    cfg = SuiteConfig(bag=bag, model="loada", profile="flight", maneuver="steps:amps_deg=20,lead_s=0.2,hold_s=0.5",
                       channels=["left_wing"], emac_box=True, domain_id=domain(2))
     summaries = run_suite(cfg, timeout_s=120)
     man = summaries["maneuver"]
@@ -121,7 +121,9 @@ def test_real_time_run_measures_command_to_feedback_latency(tmp_path):
     data = read_bag(bag)
     assert data.metadata["clock"] == "realtime"
     assert float(data.metadata["realtime.frames"]) == 240
-    assert 2.0 < data.position_deg.max() < 2.3
+    assert 19.9 < data.position_deg.max() < 20.6
+    right = read_bag(bag, "right_wing").position_v[40:]  # in an EMAC box the channels couple inside it
+    assert 0.008 < np.abs(np.diff(right)).max() <= 0.0201  # 35 frames of full slew: noise up to ±0.01 V
 
 
 # --------------------------------------------------------------------------- SIGTERM keeps the bag

@@ -38,6 +38,10 @@ class ActivityMeter:
         """Largest activity of any source, 0 to 1."""
         return max(self._activity.values(), default=0.0)
 
+    def activity_except(self, channel: str) -> float:
+        """Largest activity of the sources other than ``channel`` (an EMAC box observes its own channels)."""
+        return max((a for name, a in self._activity.items() if name != channel), default=0.0)
+
 
 class Crosstalk:
     """Noise volts on the observed channel's feedback for a given source activity."""

@@ -95,8 +95,8 @@ class EmacNode(SuiteNode):
         self.units = self._build_units(args, name, crosstalk)
         self.has_current = all(u.model.has_current for u in self.units.values())
         self.meter = ActivityMeter(self.frame_s)
-        self.sources = [c for c in CHANNELS if c not in self.units] if any(
-            u.crosstalk.active for u in self.units.values()) else []
+        self.coupled = any(u.crosstalk.active for u in self.units.values())
+        self.sources = [c for c in CHANNELS if c not in self.units] if self.coupled else []
         self.slew_v_per_s = {c: load_channel(c).slew_rate_dps * ct.scaling(c).volts_per_deg for c in CHANNELS}
         # streams
         self.commands = Stream()
@@ -337,14 +337,16 @@ class EmacNode(SuiteNode):
         return go
 
     def _step_all(self, start_ns: int, age: Any) -> None:
-        activity = self.meter.activity
         out: dict[str, Feedback] = {}
         for ch, unit in self.units.items():
             was = (unit.last.braked, unit.failure.kind)
-            out[ch] = unit.step(age(ch), activity)
+            out[ch] = unit.step(age(ch), self.meter.activity_except(ch))
             if (out[ch].braked, unit.failure.kind) != was:
                 self._publish_diagnostics()
         self.model_ns = start_ns + self.frame_ns
+        if self.coupled:  # an EMAC box: its channels are each other's crosstalk sources
+            for ch, fb in out.items():
+                self.meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
         self._publish(self.model_ns, out)
         if (self.model_ns // self.frame_ns) % round(self.settings.frame_hz) == 0:
             self._publish_diagnostics()
