@@ -113,7 +113,6 @@ class EmacNode(SuiteNode):
         self.published = 0
         self.bad_messages = 0
         self._make_topics()
-        self.start_ns = self.get_clock().now().nanoseconds
         self.get_logger().info(
             f"{args.model} on {', '.join(channels)}; {'lockstep' if self.lockstep else 'real time'} at "
             f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
