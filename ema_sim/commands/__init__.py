@@ -10,5 +10,6 @@ COMMANDS: tuple[str, ...] = (
     "loes",
     "acceptance",
     "bench",
+    "launch",
     "listing",
 )
