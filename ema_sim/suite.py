@@ -58,6 +58,12 @@ class SuiteConfig:
     rt_priority: int = 0
     """SCHED_FIFO priority for every node (0: normal scheduling)."""
     extra_emac_args: list[str] = field(default_factory=list)
+    fmu: bool = False
+    """Aircraft in the loop: the ``fmu`` node (vehicle and autopilot) drives the suite instead of the maneuver."""
+    fmu_args: list[str] = field(default_factory=list)
+    """Extra ``fmu`` arguments (``--open-loop``, ``--bungee 100``...)."""
+    seed: int | None = None
+    """The test environment's noise seed (default: the profile's)."""
 
 
 class Suite:
@@ -100,9 +106,14 @@ class Suite:
         self.procs[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env(),
                                             start_new_session=True, preexec_fn=pre)  # noqa: PLW1509
 
+    @property
+    def driver(self) -> str:
+        """The node that drives the test and records the bag: ``maneuver``, or ``fmu`` in the loop."""
+        return "fmu" if self.cfg.fmu else "maneuver"
+
     def node_names(self) -> list[str]:
         """Every node of the run."""
-        return [*self.emac_nodes(), "testenv", "maneuver", *(["simclock"] if self.cfg.lockstep else [])]
+        return [*self.emac_nodes(), "testenv", self.driver, *(["simclock"] if self.cfg.lockstep else [])]
 
     def emac_nodes(self) -> list[str]:
         """Node names of the EMACs."""
@@ -111,9 +122,14 @@ class Suite:
     def start(self) -> None:
         """Start every process (returns at once; the nodes find each other on their own)."""
         cfg = self.cfg
-        plan = build_plan(cfg.test, maneuver=cfg.maneuver, load=cfg.load, channels=cfg.channels,
-                          duration_s=cfg.duration_s)  # a bad spec is one clear error before anything starts
-        self.duration_s = plan.duration_s
+        if cfg.fmu:
+            if cfg.duration_s is None or not cfg.duration_s > 0.0:
+                raise EmaError("the aircraft-in-the-loop run needs a positive duration")
+            self.duration_s = cfg.duration_s
+        else:
+            plan = build_plan(cfg.test, maneuver=cfg.maneuver, load=cfg.load, channels=cfg.channels,
+                              duration_s=cfg.duration_s)  # a bad spec is one clear error before anything starts
+            self.duration_s = plan.duration_s
         if cfg.bag.exists():
             raise EmaError(f"{cfg.bag} exists already; give a new bag directory")
         self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -128,8 +144,31 @@ class Suite:
         env_args = ["--profile", cfg.profile, *fh]
         for item in cfg.disable:
             env_args += ["--disable", item]
+        if cfg.seed is not None:
+            env_args += ["--seed", str(cfg.seed)]
         self._spawn("testenv", "testenv", env_args)
         wait_for = [*self.emac_nodes(), "testenv"]
+        if cfg.fmu:
+            self._spawn_fmu(wait_for, fh)
+        else:
+            self._spawn_maneuver(wait_for, fh)
+        if cfg.lockstep:
+            clk = ["--wait-for", ",".join([*wait_for, self.driver]), "--channels", ",".join(cfg.emac_channels),
+                   "--window", str(cfg.window), "--duration", f"{self.duration_s:.9g}", *fh]
+            self._spawn("simclock", "clock", clk)
+
+    def _spawn_fmu(self, wait_for: list[str], fh: list[str]) -> None:
+        cfg = self.cfg
+        args = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
+                "--wait-for", ",".join(wait_for), "--duration", f"{self.duration_s:g}"]
+        if cfg.seed is not None:
+            args += ["--seed", str(cfg.seed)]
+        for item in cfg.disable:
+            args += ["--disable", item]
+        self._spawn("fmu", "fmu", [*args, *cfg.fmu_args])
+
+    def _spawn_maneuver(self, wait_for: list[str], fh: list[str]) -> None:
+        cfg = self.cfg
         man = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
                "--wait-for", ",".join(wait_for), "--channels", ",".join(cfg.channels),
                "--command-channels", ",".join(cfg.emac_channels),
@@ -140,18 +179,14 @@ class Suite:
         if cfg.duration_s is not None:
             man += ["--duration", f"{cfg.duration_s:g}"]
         self._spawn("maneuver", "maneuver", man)
-        if cfg.lockstep:
-            clk = ["--wait-for", ",".join([*wait_for, "maneuver"]), "--channels", ",".join(cfg.emac_channels),
-                   "--window", str(cfg.window), "--duration", f"{plan.duration_s:.9g}", *fh]
-            self._spawn("simclock", "clock", clk)
 
     def wait(self, timeout_s: float | None = None) -> int:
-        """Wait for the maneuver node to finish (its bag closed); returns its exit status."""
+        """Wait for the driving node (maneuver or fmu) to finish (its bag closed); returns its exit status."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        man = self.procs["maneuver"]
+        man = self.procs[self.driver]
         while man.poll() is None:
             for name, proc in self.procs.items():
-                if name != "maneuver" and proc.poll() not in (None, 0):
+                if name != self.driver and proc.poll() not in (None, 0):
                     self.stop()
                     raise EmaError(f"node {name} exited with status {proc.returncode}; see {self.log_dir / name}.log")
             if deadline is not None and time.monotonic() > deadline:
@@ -161,8 +196,8 @@ class Suite:
         return int(man.returncode)
 
     def stop(self) -> dict[str, int | None]:
-        """SIGINT to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
-        order = ["simclock", "maneuver", *[n for n in self.procs if n not in ("simclock", "maneuver")]]
+        """SIGINT to every process still running (the driver first: it closes the bag), then SIGKILL."""
+        order = ["simclock", self.driver, *[n for n in self.procs if n not in ("simclock", self.driver)]]
         for name in order:
             proc = self.procs.get(name)
             if proc is not None and proc.poll() is None:
@@ -212,5 +247,6 @@ def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dic
         raise
     suite.stop()
     if status != 0:
-        raise EmaError(f"the maneuver node exited with status {status}; see {suite.log_dir / 'maneuver.log'}")
+        raise EmaError(f"the {suite.driver} node exited with status {status}; "
+                       f"see {suite.log_dir / (suite.driver + '.log')}")
     return suite.summaries()

@@ -11,5 +11,6 @@ COMMANDS: tuple[str, ...] = (
     "acceptance",
     "bench",
     "launch",
+    "ail",
     "listing",
 )
