@@ -242,7 +242,7 @@ def test_non_finite_commands_are_held_and_counted_never_propagated(name, caplog)
 
 
 def test_unknown_model_and_parameter_names_list_the_known_ones():
-    with pytest.raises(UnknownNameError, match="known: loac, loada, loadf, sloac"):
+    with pytest.raises(UnknownNameError, match="known: loac, loada, loadf, second_order, sloac"):
         create("hoad9")
     with pytest.raises(UnknownNameError, match="second-order parameter 'wn_hz'"):
         create("loada", wn_hz=3.0)

@@ -13,6 +13,7 @@ _MODELS: dict[str, str] = {
     "loadf": "ema_sim.models.second_order:Loadf",
     "loada": "ema_sim.models.second_order:Loada",
     "sloac": "ema_sim.models.linear:Sloac",
+    "second_order": "ema_sim.models.second_order:SecondOrder",
 }
 """Registry name → ``module:class`` (imported on first use, so listing names stays cheap)."""
 
