@@ -6,6 +6,7 @@ Add a command by adding its module name to ``COMMANDS`` (in the order ``ema --he
 COMMANDS: tuple[str, ...] = (
     "simulate",
     "compare",
+    "analyze",
     "identify",
     "bench",
     "listing",

@@ -22,7 +22,9 @@ FloatArray = NDArray[np.float64]
 
 REQUIRED = ("time_s", "command_deg")
 OUTPUTS = ("position_deg", "surface_deg")
-OPTIONAL = ("hinge_moment_inlb", "current_a", "command_v", "position_v")
+OPTIONAL = ("hinge_moment_inlb", "current_a", "command_v", "position_v", "bus_v", "rate_dps")
+"""Recognised optional columns; ``bus_v`` (150 V bus, for regeneration) and ``rate_dps`` (surface rate)
+extend the contract's table and are read when a file has them."""
 KNOWN = REQUIRED + OUTPUTS + OPTIONAL
 MIN_ROWS = 100
 
@@ -41,6 +43,10 @@ class MeasuredData:
     position_v: FloatArray | None = None
     metadata: dict[str, str] = field(default_factory=dict)
     source: str = ""
+    bus_v: FloatArray | None = None
+    """Motor bus voltage (section 2.5), when the rig or model records it."""
+    rate_dps: FloatArray | None = None
+    """Surface rate, when recorded."""
 
     @property
     def outputs(self) -> list[str]:

@@ -1,0 +1,140 @@
+"""Command error from a calibration staircase (sections 2.6 and 3.1.2.2, figures 27 and 28).
+
+At every held level of the staircase the settled command (degrees and volts), LVDT feedback (volts
+and degrees) and external surface angle are averaged. Two estimates of the command error
+``position = (1 + Kb)·command + offset`` come out:
+
+* **calibration curves**, the report's method: a third-order *command* curve (degrees → volts)
+  fitted to the command data, a third-order *feedback* curve (volts → degrees) fitted to the feedback
+  volts against the measured surface angle; nominal angles go through the command curve to volts and
+  the volts through the feedback curve back to degrees (the loop nulls command volts against
+  feedback volts); a line through (feedback − nominal) gives Kb and offset
+  (:func:`ema_sim.calibration.command_error`).
+* **direct**: a line through the settled surface angle (or LVDT position) minus the command, against
+  the command, with the regression's standard errors.
+
+The four-corner Monte Carlo bounds (:func:`ema_sim.calibration.four_corner_bounds`) take the largest
+|Kb| and |offset| of the calibrations at hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ema_sim.analysis.series import Hold, settled
+from ema_sim.calibration import CommandError, Cubic, command_error, four_corner_bounds
+from ema_sim.io.csv import MeasuredData
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The command error found on one staircase."""
+
+    levels: dict[str, list[float]]
+    """Settled value of each recorded column at each held level, in staircase order."""
+    direct: CommandError
+    direct_sigma: tuple[float, float]
+    direct_reference: str
+    command_curve: Cubic | None
+    command_curve_rms_v: float | None
+    feedback_curve: Cubic | None
+    feedback_curve_rms_deg: float | None
+    feedback_reference: str | None
+    curve_error: CommandError | None
+    nominal_deg: FloatArray
+    bounds_deg: tuple[FloatArray, FloatArray]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def error(self) -> CommandError:
+        """The calibration's command error: from the curves when they exist, else the direct fit."""
+        return self.curve_error or self.direct
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        def curve(c: Cubic | None) -> list[float] | None:
+            return c.coefficients() if c else None
+
+        return {
+            "levels": len(self.nominal_levels), "settled": self.levels,
+            "command_curve_v_per_deg": curve(self.command_curve), "command_curve_rms_v": self.command_curve_rms_v,
+            "feedback_curve_deg_per_v": curve(self.feedback_curve),
+            "feedback_curve_rms_deg": self.feedback_curve_rms_deg, "feedback_curve_against": self.feedback_reference,
+            "curve_error": ({"kb": self.curve_error.kb, "offset_deg": self.curve_error.offset_deg}
+                            if self.curve_error else None),
+            "direct_error": {"kb": self.direct.kb, "kb_sigma": self.direct_sigma[0],
+                             "offset_deg": self.direct.offset_deg, "offset_sigma_deg": self.direct_sigma[1],
+                             "against": self.direct_reference},
+            "kb": self.error.kb, "offset_deg": self.error.offset_deg,
+            "four_corner_bounds": {"nominal_deg": self.nominal_deg.tolist(), "lower_deg": self.bounds_deg[0].tolist(),
+                                   "upper_deg": self.bounds_deg[1].tolist()},
+            "notes": self.notes,
+        }
+
+    @property
+    def nominal_levels(self) -> list[float]:
+        """The commanded levels."""
+        return self.levels["command_deg"]
+
+
+def _rms(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
+    """Command error of a staircase whose held levels are ``holds`` (see the module docstring)."""
+    notes: list[str] = []
+    cols = [c for c in ("command_deg", "command_v", "position_v", "position_deg", "surface_deg")
+            if getattr(data, c) is not None]
+    levels = {c: [settled(getattr(data, c), h.start, h.stop, 0.5)[0] for h in holds] for c in cols}
+    cmd = np.array(levels["command_deg"])
+    ref_name = "surface_deg" if data.surface_deg is not None else "position_deg"
+    if ref_name == "position_deg":
+        notes.append("no external surface angle: direct error taken from the LVDT position")
+    measured = np.array(levels[ref_name])
+    A = np.column_stack([cmd, np.ones_like(cmd)])
+    coef, *_ = np.linalg.lstsq(A, measured - cmd, rcond=None)
+    resid = measured - cmd - A @ coef
+    dof = max(cmd.size - 2, 1)
+    cov = np.linalg.pinv(A.T @ A) * float(resid @ resid) / dof
+    direct = CommandError(float(coef[0]), float(coef[1]))
+    sig = (float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1])))
+
+    command_curve = feedback_curve = None
+    c_rms = f_rms = None
+    fb_ref = None
+    curve_err = None
+    if "command_v" in levels and "position_v" in levels:
+        cv, pv = np.array(levels["command_v"]), np.array(levels["position_v"])
+        command_curve = Cubic.fit(cmd, cv)
+        c_rms = _rms(command_curve(cmd) - cv)
+        fb_ref = ref_name
+        if ref_name == "position_deg":
+            notes.append("feedback curve fitted against the recorded LVDT degrees (no external surface angle): "
+                         "it reproduces the recorder's own calibration")
+        feedback_curve = Cubic.fit(pv, measured)
+        f_rms = _rms(feedback_curve(pv) - measured)
+    else:
+        notes.append("no command_v/position_v columns: calibration curves not computed (direct error only)")
+    nominal = np.linspace(cmd.min(), cmd.max(), 81)
+    if command_curve is not None and feedback_curve is not None:
+        curve_err = command_error(command_curve, feedback_curve, nominal)
+    err = curve_err or direct
+    bounds = four_corner_bounds([err], nominal)
+    return Calibration(levels, direct, sig, ref_name, command_curve, c_rms, feedback_curve, f_rms, fb_ref,
+                       curve_err, nominal, bounds, notes)
+
+
+def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> dict[str, Any]:
+    """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1)."""
+    nominal = np.linspace(lo_deg, hi_deg, 81)
+    lo, hi = four_corner_bounds(errors, nominal)
+    return {"calibrations": len(errors), "kb_max_abs": max(abs(e.kb) for e in errors),
+            "offset_max_abs_deg": max(abs(e.offset_deg) for e in errors), "nominal_deg": nominal.tolist(),
+            "lower_deg": lo.tolist(), "upper_deg": hi.tolist()}

@@ -1,0 +1,214 @@
+"""Time-series helpers shared by the analyses: uniform grids, held levels, step edges, smoothing.
+
+The data contract allows non-uniform time; spectral and filter-based analyses need a uniform grid, so
+:func:`uniform_record` resamples onto one (the command by zero-order hold, as the contract defines
+it, the measured columns linearly). A *hold* is a run of samples over which a signal keeps its value
+(the digital command of a step or staircase, a static load level); an *edge* is a jump between two
+holds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from itertools import pairwise
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ema_sim.errors import DataError
+from ema_sim.io.csv import MeasuredData
+
+FloatArray = NDArray[np.float64]
+
+UNIFORM_TOLERANCE = 0.01
+"""Sample intervals within 1 % of the median count as uniform."""
+MEASURED = ("position_deg", "surface_deg", "hinge_moment_inlb", "current_a", "position_v", "bus_v", "rate_dps")
+HELD = ("command_deg", "command_v")
+
+
+def is_uniform(time_s: FloatArray) -> bool:
+    """True when every sample interval is within 1 % of the median interval."""
+    dt = np.diff(time_s)
+    med = float(np.median(dt))
+    return bool(np.all(np.abs(dt - med) <= UNIFORM_TOLERANCE * med))
+
+
+JITTER_LIMIT = 0.25
+"""Intervals within 25 % of the median (no gap, no burst) are regular sampling with jittery time stamps."""
+
+
+def uniform_record(data: MeasuredData) -> MeasuredData:
+    """``data`` on a uniform grid (unchanged when it already is uniform).
+
+    Time stamps that only jitter (every interval within 25 % of the median) belong to regular
+    sampling: they are replaced by the least-squares line through them and the samples are kept as
+    they are (resampling would delay the held command by up to a sample against the outputs). Records
+    with gaps or mixed rates are resampled at the median rate: held columns (the command) by
+    zero-order hold, as the contract defines the command, measured columns by linear interpolation.
+    """
+    t = data.time_s
+    if is_uniform(t):
+        return data
+    dt_all = np.diff(t)
+    med = float(np.median(dt_all))
+    meta = dict(data.metadata)
+    if np.all(np.abs(dt_all - med) <= JITTER_LIMIT * med):
+        k = np.arange(t.size, dtype=float)
+        slope, icpt = np.polyfit(k, t, 1)
+        jitter = float(np.max(np.abs(t - (icpt + slope * k))))
+        meta["resampled"] = (f"time stamps jitter by up to {1e3 * jitter:.3g} ms: samples taken as uniform at "
+                             f"{1.0 / slope:.6g} Hz (least-squares line through the stamps), not resampled")
+        return replace(data, time_s=icpt + slope * k, metadata=meta)
+    dt = med
+    n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
+    grid = t[0] + dt * np.arange(n)
+    idx = np.clip(np.searchsorted(t, grid + 1e-12, side="right") - 1, 0, t.size - 1)
+    changes: dict[str, object] = {"time_s": grid}
+    for f in fields(data):
+        value = getattr(data, f.name)
+        if not isinstance(value, np.ndarray) or f.name == "time_s":
+            continue
+        changes[f.name] = value[idx] if f.name in HELD else np.interp(grid, t, value)
+    meta["resampled"] = (f"time stamps not uniform (intervals {1e3 * dt_all.min():.3g}-{1e3 * dt_all.max():.3g} ms): "
+                         f"resampled at {1.0 / dt:.6g} Hz, command held, outputs interpolated")
+    changes["metadata"] = meta
+    return replace(data, **changes)  # type: ignore[arg-type]
+
+
+def sample_period(data: MeasuredData) -> float:
+    """Median sample interval, s."""
+    return float(np.median(np.diff(data.time_s)))
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Samples ``[start, stop)`` over which a signal keeps ``value``."""
+
+    start: int
+    stop: int
+    value: float
+
+    @property
+    def length(self) -> int:
+        """Number of samples."""
+        return self.stop - self.start
+
+
+def hold_tolerance(x: FloatArray) -> float:
+    """How much a held signal may wander and still count as held.
+
+    A digital command is exact (a rounding allowance of 1e-6 of its scale); a recorded analog signal
+    gets five times its sample-to-sample noise, estimated robustly from second differences.
+    """
+    scale = max(1.0, float(np.max(np.abs(x))) if x.size else 1.0)
+    d2 = np.abs(np.diff(x, 2))
+    noise = 1.4826 * float(np.median(d2)) / np.sqrt(6.0) if d2.size else 0.0
+    return max(1e-6 * scale, 5.0 * noise)
+
+
+def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hold]:
+    """Runs of at least ``min_samples`` samples whose consecutive changes are within ``tol``."""
+    if x.size < 2:
+        return []
+    tol = hold_tolerance(x) if tol is None else tol
+    moving = np.abs(np.diff(x)) > tol
+    # Boundaries of runs of "not moving" steps: a run of k quiet steps spans k + 1 samples.
+    padded = np.concatenate([[True], moving, [True]])
+    change = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    starts, stops = change[::2], change[1::2]
+    # A noise spike breaks a run; runs that meet again at the same level are one hold.
+    ends = stops  # last sample of each run
+    merge = np.zeros(starts.size, dtype=bool)
+    if starts.size > 1:
+        merge[1:] = (starts[1:] - ends[:-1] <= 2) & (np.abs(x[starts[1:]] - x[ends[:-1]]) <= 3 * tol)
+    group = np.cumsum(~merge) - 1
+    first = starts[~merge]
+    last = np.zeros(first.size, dtype=int)
+    np.maximum.at(last, group, ends)
+    out = []
+    for s, e in zip(first.tolist(), last.tolist(), strict=True):
+        stop = e + 1
+        if stop - s >= min_samples:
+            out.append(Hold(int(s), int(stop), float(np.median(x[s:stop]))))
+    return out
+
+
+@dataclass(frozen=True)
+class Edge:
+    """A jump of a held signal: from hold ``before`` to hold ``after``."""
+
+    index: int
+    """First sample at the new level."""
+    before: Hold
+    after: Hold
+
+    @property
+    def jump(self) -> float:
+        """New level minus old level."""
+        return self.after.value - self.before.value
+
+
+def edges(x: FloatArray, dt: float, *, min_hold_s: float = 0.04, min_jump: float = 0.05,
+          max_gap_s: float = 0.02, tol: float | None = None) -> list[Edge]:
+    """Jumps of at least ``min_jump`` between two holds of at least ``min_hold_s`` each.
+
+    ``max_gap_s`` allows a recorded (analog) command a short transition between the two levels.
+    """
+    hs = holds(x, max(2, round(min_hold_s / dt)), tol)
+    out = []
+    max_gap = round(max_gap_s / dt) + 1
+    for a, b in pairwise(hs):
+        if b.start - a.stop <= max_gap and abs(b.value - a.value) >= min_jump:
+            out.append(Edge(b.start if b.start > a.stop else a.stop, a, b))
+    return out
+
+
+def settled(y: FloatArray, start: int, stop: int, fraction: float = 0.5) -> tuple[float, float]:
+    """Mean and standard deviation of ``y`` over the last ``fraction`` of ``[start, stop)``."""
+    first = stop - max(1, int((stop - start) * fraction))
+    seg = y[first:stop]
+    return float(np.mean(seg)), float(np.std(seg))
+
+
+def moving_average(y: FloatArray, n: int) -> FloatArray:
+    """Centred moving average over ``n`` samples (edges use the samples available)."""
+    n = max(1, int(n))
+    if n == 1:
+        return y.astype(float, copy=True)
+    c = np.concatenate([[0.0], np.cumsum(y, dtype=float)])
+    half = n // 2
+    idx = np.arange(y.size)
+    lo = np.clip(idx - half, 0, y.size)
+    hi = np.clip(idx - half + n, 0, y.size)
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
+    """Smoothed derivative (Savitzky-Golay, quadratic, over ``window_s``)."""
+    from scipy.signal import savgol_filter  # noqa: PLC0415
+
+    n = max(5, round(window_s / dt) | 1)
+    if y.size < n:
+        return np.gradient(y, dt)
+    return savgol_filter(y, n, 2, deriv=1, delta=dt)
+
+
+def extrema(x: FloatArray) -> NDArray[np.int64]:
+    """Indices of the turning points of ``x`` (plateaus count once, at their middle)."""
+    d = np.diff(x)
+    nz = np.flatnonzero(d != 0.0)
+    if nz.size < 2:
+        return np.zeros(0, dtype=np.int64)
+    s = np.sign(d[nz])
+    turn = np.flatnonzero(s[1:] != s[:-1])
+    # A turn lies between the last change of one sign (nz[turn]) and the first of the other.
+    left = nz[turn] + 1
+    right = nz[turn + 1]
+    return ((left + right) // 2).astype(np.int64)
+
+
+def require_length(data: MeasuredData, seconds: float, what: str) -> None:
+    """Raise a DataError when the record is shorter than ``seconds``."""
+    span = float(data.time_s[-1] - data.time_s[0])
+    if span < seconds:
+        raise DataError(f"{data.source or 'data'}: {what} needs at least {seconds:g} s of data, got {span:g} s")

@@ -1,0 +1,241 @@
+"""Step responses (section 2.7): rise, settling, overshoot, slew rate, and a second-order fit per step.
+
+Steps of 0.5°, 1° and 20° give the small- and large-amplitude slew rates. For each command edge:
+
+* initial level: mean over the last 0.1 s before the edge; final: mean over the last 30 % of the hold;
+* first motion (:func:`ema_sim.analysis.timing.first_motion`), 10-90 % rise time, settling time into
+  a band of ±max(2 %, 4σ/|A|) about the final value, counted from the edge, and overshoot;
+* peak rate from a Savitzky-Golay derivative (11 ms, quadratic), and the plateau rate, the slope of a
+  line through the samples whose rate is within 5 % of the peak (not biased up by noise as a peak is);
+* rate limiting: a step is rate-limited when its rate holds within 5 % of its peak for ≥ 25 ms, when
+  its peak reaches 80 % of the channel's rated slew (table 1), or when its peak falls 15 % short of
+  what a second order fitted to a smaller step predicts. Rate-limited steps give the large-amplitude
+  slew rate and no linear fit; the others get :func:`ema_sim.analysis.second_order_fit.fit_step` and
+  the hand calculation from rise and settling time beside it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ema_sim.analysis.second_order_fit import SecondOrderFit, fit_step, hand_calculation
+from ema_sim.analysis.series import Edge, derivative, moving_average, settled
+from ema_sim.analysis.timing import first_motion
+
+FloatArray = NDArray[np.float64]
+
+PRE_S = 0.1
+PLATEAU_S = 0.025
+RATED_FRACTION = 0.8
+SHORTFALL = 0.85
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    """Metrics (and fit) of one step."""
+
+    time_s: float
+    command_from_deg: float
+    command_to_deg: float
+    output: str
+    initial_deg: float
+    final_deg: float
+    noise_deg: float
+    delay_s: float | None
+    rise_s: float | None
+    settling_s: float | None
+    settling_band: float
+    overshoot_pct: float | None
+    peak_rate_dps: float
+    plateau_s: float
+    plateau_rate_dps: float | None
+    """Slope of a line through the samples whose rate is within 5 % of the peak (the slew rate)."""
+    rate_limited: bool
+    rate_reason: str
+    fit: SecondOrderFit | None
+    fit_note: str
+    start: int
+    stop: int
+
+    @property
+    def command_step_deg(self) -> float:
+        """Commanded change."""
+        return self.command_to_deg - self.command_from_deg
+
+    @property
+    def amplitude_deg(self) -> float:
+        """Measured change."""
+        return self.final_deg - self.initial_deg
+
+    @property
+    def label(self) -> str:
+        """``step +1.00° at 2.500 s``."""
+        return f"step {self.command_step_deg:+.2f}° at {self.time_s:.3f} s"
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        return {
+            "time_s": self.time_s, "command_from_deg": self.command_from_deg, "command_to_deg": self.command_to_deg,
+            "command_step_deg": self.command_step_deg, "output": self.output, "initial_deg": self.initial_deg,
+            "final_deg": self.final_deg, "amplitude_deg": self.amplitude_deg, "noise_deg": self.noise_deg,
+            "first_motion_s": self.delay_s, "rise_10_90_s": self.rise_s, "settling_s": self.settling_s,
+            "settling_band_pct": 100.0 * self.settling_band, "overshoot_pct": self.overshoot_pct,
+            "peak_rate_dps": self.peak_rate_dps, "rate_plateau_s": self.plateau_s,
+            "plateau_rate_dps": self.plateau_rate_dps, "rate_limited": self.rate_limited,
+            "rate_limit_evidence": self.rate_reason, "fit": self.fit.as_dict() if self.fit else None,
+            "fit_note": self.fit_note,
+        }
+
+
+def _crossing(t: FloatArray, z: FloatArray, level: float) -> float | None:
+    idx = np.flatnonzero(z >= level)
+    if idx.size == 0:
+        return None
+    i = int(idx[0])
+    if i == 0:
+        return float(t[0])
+    return float(t[i - 1] + (t[i] - t[i - 1]) * (level - z[i - 1]) / (z[i] - z[i - 1]))
+
+
+def _metrics(t: FloatArray, y: FloatArray, e: Edge, dt: float, noise_floor: float) -> dict[str, Any]:
+    pre = max(e.before.start, e.index - max(5, round(PRE_S / dt)))
+    y0 = float(np.mean(y[pre:e.index]))
+    noise = float(np.std(y[pre:e.index])) if e.index - pre > 5 else noise_floor
+    noise = max(min(noise, 5.0 * noise_floor) if noise_floor > 0 else noise, noise_floor)
+    y1, _ = settled(y, e.index, e.after.stop, 0.3)
+    amp = y1 - y0
+    seg = slice(e.index, e.after.stop)
+    tt = t[seg] - t[e.index]
+    z = (y[seg] - y0) / amp if amp != 0.0 else np.zeros(tt.size)
+    zs = moving_average(z, max(1, round(0.005 / dt)))
+    t_motion = first_motion(t, y, e.index, y0, amp, noise, e.after.stop)
+    t10, t90 = _crossing(tt, zs, 0.1), _crossing(tt, zs, 0.9)
+    rise = None if t10 is None or t90 is None else t90 - t10
+    band = max(0.02, 4.0 * noise / abs(amp)) if amp != 0 else 0.02
+    outside = np.flatnonzero(np.abs(z - 1.0) > band)
+    settling = None
+    if outside.size and outside[-1] + 1 < tt.size:
+        settling = float(tt[outside[-1] + 1])
+    elif outside.size == 0:
+        settling = 0.0
+    overshoot = float(max(0.0, (zs.max() - 1.0) * 100.0)) if amp != 0 else None
+    rate = derivative(y[seg], dt)
+    direction = math.copysign(1.0, amp) if amp != 0 else 1.0
+    peak = float(np.max(rate * direction)) if rate.size else 0.0
+    on_plateau = rate * direction >= 0.95 * peak if peak > 0 else np.zeros(rate.size, dtype=bool)
+    plateau = float(np.sum(on_plateau) * dt)
+    plateau_rate = None
+    if on_plateau.sum() >= 5:
+        idx = np.flatnonzero(on_plateau)
+        plateau_rate = float(abs(np.polyfit(tt[idx], y[seg][idx], 1)[0]))
+    return {
+        "start": pre, "stop": e.after.stop, "y0": y0, "y1": y1, "noise": noise,
+        "delay": None if t_motion is None else t_motion - float(t[e.index]),
+        "rise": rise, "settling": settling, "band": band, "overshoot": overshoot, "peak": peak, "plateau": plateau,
+        "plateau_rate": plateau_rate,
+    }
+
+
+def _predicted_peak_rate(amp: float, wn: float, zeta: float) -> float:
+    """Peak rate of a linear second-order step of amplitude ``amp``."""
+    if zeta >= 1.0:
+        # Critically/over-damped: evaluate numerically.
+        tt = np.linspace(0.0, 10.0 / wn, 2001)
+        s1 = -wn * (zeta - np.sqrt(zeta * zeta - 1.0 + 1e-12))
+        s2 = -wn * (zeta + np.sqrt(zeta * zeta - 1.0 + 1e-12))
+        v = (np.exp(s1 * tt) - np.exp(s2 * tt)) * wn * wn / (s1 - s2 if s1 != s2 else 1e-12)
+        return float(abs(amp) * np.max(np.abs(v)))
+    wd = wn * np.sqrt(1.0 - zeta * zeta)
+    tp = np.arctan2(np.sqrt(1.0 - zeta * zeta), zeta) / wd
+    return float(abs(amp) * wn / np.sqrt(1.0 - zeta * zeta) * np.exp(-zeta * wn * tp) * np.sin(wd * tp))
+
+
+def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge], *, output: str,
+                  noise_floor: float, rated_slew_dps: float | None = None, fit: bool = True) -> list[StepResponse]:
+    """Metrics of every step, then fits in order of increasing amplitude (see the module docstring)."""
+    dt = float(np.median(np.diff(t)))
+    rows = [(e, _metrics(t, y, e, dt, noise_floor)) for e in edges]
+    order = sorted(range(len(rows)), key=lambda i: abs(rows[i][1]["y1"] - rows[i][1]["y0"]))
+    reference: SecondOrderFit | None = None
+    results: dict[int, StepResponse] = {}
+    for i in order:
+        e, m = rows[i]
+        amp = m["y1"] - m["y0"]
+        reasons = []
+        if m["plateau"] >= PLATEAU_S:
+            reasons.append(f"rate within 5 % of its {m['peak']:.1f} °/s peak for {1e3 * m['plateau']:.0f} ms")
+        if rated_slew_dps and m["peak"] >= RATED_FRACTION * rated_slew_dps:
+            reasons.append(f"peak rate {m['peak']:.1f} °/s ≥ {RATED_FRACTION:.0%} of the rated {rated_slew_dps:g} °/s")
+        if reference is not None:
+            pred = _predicted_peak_rate(amp, reference.wn_rad_s.value, reference.zeta.value)
+            if m["peak"] < SHORTFALL * pred:
+                reasons.append(f"peak rate {m['peak']:.1f} °/s below the {pred:.1f} °/s a linear second order predicts")
+        limited = bool(reasons)
+        hand = hand_calculation(m["rise"], m["settling"] - (m["delay"] or 0.0)) \
+            if m["rise"] and m["settling"] else None
+        step_fit = None
+        if limited:
+            note = "rate-limited: a linear second-order fit does not apply (slew rate reported)"
+        elif not fit:
+            note = "fit not requested"
+        elif abs(amp) < 10.0 * m["noise"]:
+            note = f"step {abs(amp):.3g}° is within 10× the noise ({m['noise']:.2g}°): not fitted"
+        else:
+            sl = slice(m["start"], m["stop"])
+            wn0 = hand.wn_rad_s if hand else 50.0
+            z0 = hand.zeta if hand else 0.7
+            step_fit = fit_step(t[sl], u[sl], y[sl], test=f"step {e.jump:+.2f}° at {t[e.index]:.3f} s",
+                                output_name=output, wn0=min(max(wn0, 5.0), 1000.0), zeta0=min(max(z0, 0.1), 2.0),
+                                delay0=m["delay"] or 0.005, hand=hand)
+            note = "fitted"
+            if reference is None:
+                reference = step_fit
+        results[i] = StepResponse(
+            time_s=float(t[e.index]), command_from_deg=e.before.value, command_to_deg=e.after.value, output=output,
+            initial_deg=m["y0"], final_deg=m["y1"], noise_deg=m["noise"], delay_s=m["delay"], rise_s=m["rise"],
+            settling_s=m["settling"], settling_band=m["band"], overshoot_pct=m["overshoot"], peak_rate_dps=m["peak"],
+            plateau_s=m["plateau"], plateau_rate_dps=m["plateau_rate"], rate_limited=limited,
+            rate_reason="; ".join(reasons), fit=step_fit, fit_note=note, start=m["start"], stop=m["stop"],
+        )
+    return [results[i] for i in range(len(rows))]
+
+
+@dataclass(frozen=True)
+class SlewRates:
+    """Small- and large-amplitude slew rates (section 2.7)."""
+
+    small_dps: float | None
+    small_steps_deg: list[float]
+    large_dps: float | None
+    large_steps_deg: list[float]
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        return {"small_amplitude_dps": self.small_dps, "small_amplitude_steps_deg": self.small_steps_deg,
+                "large_amplitude_dps": self.large_dps, "large_amplitude_steps_deg": self.large_steps_deg,
+                "definition": "small: peak rate of the steps that are not rate-limited; large: slope of the "
+                              "rate plateau of the rate-limited step that stays on its limit longest"}
+
+
+def _longest_plateau_rate(large: list[StepResponse]) -> float | None:
+    """Slew rate of the rate-limited step that stays on its limit longest (closest to the steady limit)."""
+    if not large:
+        return None
+    best = max(large, key=lambda s: s.plateau_s)
+    return best.plateau_rate_dps if best.plateau_rate_dps is not None else best.peak_rate_dps
+
+
+def slew_rates(steps: list[StepResponse]) -> SlewRates:
+    """Peak rates of the linear steps (small amplitude) and of the rate-limited ones (large amplitude)."""
+    small = [s for s in steps if not s.rate_limited]
+    large = [s for s in steps if s.rate_limited]
+    return SlewRates(
+        max((s.peak_rate_dps for s in small), default=None), sorted({round(abs(s.command_step_deg), 4) for s in small}),
+        _longest_plateau_rate(large),
+        sorted({round(abs(s.command_step_deg), 4) for s in large}),
+    )

@@ -1,0 +1,84 @@
+"""Every section-2 test is recognised from its signals alone, and the metadata confirms or relabels it."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from analysis_data import measured
+
+from ema_sim.analysis import series
+from ema_sim.analysis.recognize import recognize
+
+CASES = [
+    ("sweep:f0_hz=0.2,f1_hz=18,amp_deg=1,sweep_s=60", None, ["sweep"]),
+    ("schroeder:f0_hz=0.2,f1_hz=18,amp_deg=1,period_s=20,periods=2", None, ["schroeder"]),
+    ("steps:amps_deg=0.5/1/20", None, ["steps"]),
+    ("square:freq_hz=1,amp_deg=4.3,cycles=5", None, ["square"]),
+    ("staircase:step_deg=5,max_deg=40,hold_s=3", None, ["staircase"]),
+    ("static_threshold:amp_max_deg=0.3,cycles=6", None, ["static_threshold"]),
+    ("dynamic_threshold", None, ["dynamic_threshold"]),
+    ("hold:value_deg=0,hold_s=10", None, ["hold"]),
+    ("triangle:freq_hz=0.5,amp_deg=2.15,cycles=5", None, ["triangle"]),
+    ("sine:freq_hz=3,amp_deg=0.4,cycles=20", None, ["sine"]),
+    ("hold:value_deg=15,hold_s=67", "steps:step_inlb=222.5,max_inlb=1780,hold_s=2", ["load_steps"]),
+    ("hold:value_deg=0,hold_s=30", "steps:step_inlb=470,max_inlb=470,hold_s=5", ["load_steps"]),
+    ("hold:value_deg=0,hold_s=11", "reversal:inlb=50,period_s=2,reversals=4", ["load_reversal"]),
+    ("hold:value_deg=0,hold_s=90", "sine:amp_inlb=500,freq_hz=0.0333,cycles=3", ["load_sine"]),
+    ("regen", None, ["regen"]),
+    ("pid", None, ["steps", "sweep", "schroeder"]),
+    ("ramp:rate_dps=0.05,peak_deg=2", None, ["ramp"]),
+]
+
+
+IDS = [c[0].split(":")[0] + (":" + c[1].split(":")[0] if c[1] else "") for c in CASES]
+
+
+@pytest.mark.parametrize(("maneuver", "load", "kinds"), CASES, ids=IDS)
+@pytest.mark.parametrize("with_metadata", [True, False], ids=["metadata", "signals"])
+def test_each_test_is_recognised(maneuver, load, kinds, with_metadata):
+    data = measured("loada", maneuver, load, metadata=with_metadata)
+    rec = recognize(data)
+    assert [s.kind for s in rec.segments] == kinds
+    for s in rec.segments:
+        assert s.evidence.startswith("signal: ")
+        assert ("metadata agrees" in s.evidence) is with_metadata or s.kind == "hold"
+
+
+def test_signal_parameters_match_the_spec():
+    rec = recognize(measured("loada", "sweep:f0_hz=0.5,f1_hz=12,amp_deg=1,sweep_s=40", metadata=False))
+    (s,) = rec.segments
+    assert s.params["f0_hz"] == pytest.approx(0.5, rel=0.5)
+    assert s.params["f1_hz"] == pytest.approx(12, rel=0.15)
+    rec = recognize(measured("loada", "schroeder:f0_hz=0.5,f1_hz=10,period_s=12.5,periods=2", metadata=False))
+    assert rec.segments[0].params["period_s"] == pytest.approx(12.5, abs=0.002)
+
+
+def test_metadata_relabels_a_compatible_reading_and_keeps_a_contradicted_one():
+    data = measured("loada", "square:freq_hz=1,amp_deg=2,cycles=3")
+    relabel = replace(data, metadata={**data.metadata, "maneuver": "steps:amps_deg=2"})
+    (s,) = recognize(relabel).segments
+    assert s.kind == "steps"
+    assert "metadata says steps" in s.evidence
+    contra = replace(data, metadata={**data.metadata, "maneuver": "sweep"})
+    rec = recognize(contra)
+    assert rec.segments[0].kind == "square"
+    assert any("no such test found" in n for n in rec.notes)
+
+
+def test_unparseable_metadata_is_a_note_not_an_error():
+    data = measured("loada", "steps:amps_deg=1")
+    rec = recognize(replace(data, metadata={"maneuver": "wobble:x=1"}))
+    assert rec.segments[0].kind == "steps"
+    assert "not understood" in rec.notes[0]
+
+
+def test_holds_survive_noise_spikes_and_edges_need_real_jumps():
+    x = np.concatenate([np.zeros(500), np.ones(500)])
+    noisy = x + np.random.default_rng(1).normal(0, 0.001, x.size)
+    noisy[200] += 0.02  # a spike inside the first hold
+    hs = series.holds(noisy, 50)
+    assert [(h.start, round(h.value)) for h in hs] == [(0, 0), (500, 1)]
+    (e,) = series.edges(noisy, 0.001)
+    assert e.index == 500
+    assert e.jump == pytest.approx(1.0, abs=0.01)
+    assert series.edges(0.01 * x, 0.001) == []  # below 0.05°: not a step
