@@ -15,9 +15,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import savgol_filter
 
+from ema_sim.analysis.noise import noise_floor
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
-from ema_sim.identify.noise import noise_floor
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.base import O_POS, O_RATE, O_SURF
 from ema_sim.models.second_order import SecondOrder, SecondOrderParams

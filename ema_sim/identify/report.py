@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.analysis.noise import input_independence, whiteness
 from ema_sim.identify.effects import EFFECTS, FREE
 from ema_sim.identify.fit import Fit
-from ema_sim.identify.noise import independence, whiteness
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stepwise import Identification
 from ema_sim.models import create
@@ -59,10 +59,10 @@ def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
         "max_abs_deg": {o: _round(float(np.max(np.abs(e)))) for o, e in errors.items()},
         "nrmse": {o: _round(rms[o] / float(np.std(problem.data.column(o)[problem.mask]))) for o in errors},
         "rms_over_noise": {o: _round(rms[o] / problem.sigma_deg[o], 4) for o in errors},
-        "whiteness": {o: whiteness(e).as_dict() for o, e in errors.items()},
+        "whiteness": {o: whiteness(e, lags=50).as_dict() for o, e in errors.items()},
         "independence": {
-            o: [independence(e, problem.data.command_deg[problem.mask], "command_deg").as_dict(),
-                independence(e, problem.hinge_moment[problem.mask], "hinge_moment_inlb").as_dict()]
+            o: {"command_deg": input_independence(e, problem.data.command_deg[problem.mask]).as_dict(),
+                "hinge_moment_inlb": input_independence(e, problem.hinge_moment[problem.mask]).as_dict()}
             for o, e in errors.items()
         },
     }
