@@ -40,7 +40,7 @@ def test_simulate_inverse_channels_have_negative_volts(tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--model", "hoad9", "--maneuver", "step"], "unknown model 'hoad9'; known: loac"),
+        (["--model", "hoad9", "--maneuver", "step"], "unknown model 'hoad9'; known: "),
         (["--model", "loada", "--maneuver", "step:amp=1"], "unknown field 'amp'"),
         (["--model", "loada", "--maneuver", "step", "--channel", "tail"], "unknown channel 'tail'"),
         (["--model", "loada", "--maneuver", "step", "--rate", "-5"], "rate must be a positive"),

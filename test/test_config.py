@@ -8,7 +8,8 @@ from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ro
 from ema_sim.errors import ConfigError, UnknownNameError
 
 UNIT = re.compile(
-    r"_(deg|v|inlb|inlbs2|s|hz|in|in_s|dps|lbf|lbf_per_in|rad_s|dps_per_lb|per_kinlb|deg_per_kinlb|a|ohm)$"
+    r"_(deg|v|inlb|inlbs2|s|hz|in|in_s|dps|lbf|lbf_per_in|rad_s|dps_per_lb|per_kinlb|deg_per_kinlb|a|ohm"
+    r"|per_s|per_s2|a_per_in_s|v_per_a|v_s_per_rad|mh|uf|in_per_rev|lbf_s_per_in|ratio)$"
 )
 DIMENSIONLESS = {"channel", "surface", "zeta", "kb", "command_cal_v", "feedback_cal_deg"}
 

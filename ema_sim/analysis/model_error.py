@@ -74,6 +74,22 @@ def table6(channel: str = "left_wing") -> list[ErrorRow]:
     return model_errors("loac", TABLE6_CANDIDATES, TABLE6_MANEUVER, channel=channel, **TABLE6_OVERRIDES)
 
 
+FIGURE40_MANEUVER = "steps:amps_deg=0.5/1/2,lead_s=0.5,hold_s=1.0"
+"""Figure 40's input: small steps (0.5°, 1°, 2°), where section 4.2.6 judged HOAD2 against HOAC1."""
+FIGURE40_RATES_HZ: tuple[float, ...] = (10_000.0, 20_000.0, 50_000.0, 100_000.0)
+FIGURE40_OVERRIDES: dict[str, float] = {
+    "command_delay_s": 0.0, "feedback_delay_s": 0.0, "quantization_v": 0.0, "noise": 0.0,
+}
+"""HOAD2's flight/test elements (delay, quantization, noise) are not in HOAC1: left out, the comparison
+isolates the discretization, as table 6 does for the second-order family."""
+
+
+def figure40(channel: str = "left_wing", rates_hz: Sequence[float] = FIGURE40_RATES_HZ) -> list[ErrorRow]:
+    """Figure 40: HOAD2 at each rate against HOAC1, position compared at the 1 kHz DAU rate."""
+    return model_errors("hoac1", [("hoad2", r) for r in rates_hz], FIGURE40_MANEUVER, channel=channel,
+                        sample_hz=1000.0, **FIGURE40_OVERRIDES)
+
+
 def format_table(rows: Sequence[ErrorRow], reference: str) -> str:
     """A Markdown table like the report's table 6."""
     head = f"| model (against {reference.upper()}) | rate | mean abs error, deg | std of abs error, deg |"

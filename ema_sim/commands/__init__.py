@@ -8,6 +8,8 @@ COMMANDS: tuple[str, ...] = (
     "compare",
     "analyze",
     "identify",
+    "loes",
+    "acceptance",
     "bench",
     "listing",
 )

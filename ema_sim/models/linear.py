@@ -1,10 +1,16 @@
 """Linear models (section 3.4, 4.2.7): transfer functions built with python-control.
 
 A :class:`LinearModel` wraps a continuous state-space system with inputs (command deg, hinge moment
-in·lb) and outputs (LVDT position deg, surface deg), plus a pure delay on the command. In the time
-domain it steps the exact zero-order-hold discretization at ``rate_hz`` (10 kHz by default), exact
-whenever the inputs change on that grid; in the frequency domain :meth:`LinearModel.frequency_response`
-evaluates the continuous system and the delay exactly.
+in·lb) and outputs (LVDT position deg, surface deg), plus a pure delay on the command and optionally
+one more on the position output (the motion-to-feedback delay). In the time domain it steps the exact
+zero-order-hold discretization at ``rate_hz`` (10 kHz by default), exact whenever the inputs change on
+that grid; in the frequency domain :meth:`LinearModel.frequency_response` evaluates the continuous
+system and the delays exactly.
+
+* ``sloac``: LOAC's second order and delay (flight 1's linear model).
+* ``hoalm``: HOAD3 linearized with its nonlinear elements removed (4.2.7).
+* ``loes``: a second order plus delay fitted to HOAD3's sine-dwell frequency response (3.4); the
+  coefficients come from the channel's ``loes`` section, refitted by :mod:`ema_sim.analysis.loes`.
 """
 
 from __future__ import annotations
@@ -17,8 +23,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ema_sim.config import ChannelConfig, load_channel
+from ema_sim.errors import ConfigError, UnknownNameError
 from ema_sim.models import stages as st
 from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel, FloatArray
+from ema_sim.models.high_order import BOUNDS, HighOrderParams, linearize
 from ema_sim.models.second_order import SecondOrderParams
 
 
@@ -64,8 +72,65 @@ def run_lti(Ad, Bd, Cd, Dd, Crate, Drate, X, bp_t, bp_u, bp_h, delay_s, t0, dt, 
                 x[a] = xn[a]
 
 
+@nb.njit(cache=True)
+def run_lti_delayed(Ad, Bd, Cd, Dd, Crate, Drate, X, bp_t, bp_u, bp_h, source, delay, t0, dt, n_steps, sample_t, out):  # noqa: ANN001, ANN201
+    """:func:`run_lti` for inputs that are each the command or the load, each with its own delay.
+
+    Input ``j`` is the command (``source[j] = 0``) or the hinge moment (1) delayed by ``delay[j]``: the
+    stepping form of a model with an output delay.
+    """
+    k_samples = sample_t.shape[0]
+    nx = Ad.shape[0]
+    nu = source.shape[0]
+    xn = np.empty(nx)
+    uin = np.empty(nu)
+    idx = np.zeros(nu, dtype=np.int64)
+    for i in range(X.shape[0]):
+        x = X[i]
+        for j in range(nu):
+            idx[j] = st.zoh_index(bp_t, t0 - delay[j], 0)
+        js = 0
+        for k in range(n_steps + 1):
+            t = t0 + k * dt
+            for j in range(nu):
+                idx[j] = st.zoh_index(bp_t, t - delay[j], idx[j])
+                uin[j] = bp_u[i, idx[j]] if source[j] == 0 else bp_h[i, idx[j]]
+            while js < k_samples and (k == n_steps or sample_t[js] < t + dt - st.TIME_EPS_S):
+                row = out[i, js]
+                row[O_POS] = 0.0
+                row[O_SURF] = 0.0
+                row[O_RATE] = 0.0
+                for j in range(nu):
+                    row[O_POS] += Dd[0, j] * uin[j]
+                    row[O_SURF] += Dd[1, j] * uin[j]
+                    row[O_RATE] += Drate[j] * uin[j]
+                for a in range(nx):
+                    row[O_POS] += Cd[0, a] * x[a]
+                    row[O_SURF] += Cd[1, a] * x[a]
+                    row[O_RATE] += Crate[a] * x[a]
+                row[O_CUR] = np.nan
+                row[O_BUS] = np.nan
+                row[O_FLAGS] = 0.0
+                js += 1
+            if k == n_steps:
+                break
+            for a in range(nx):
+                acc = 0.0
+                for j in range(nu):
+                    acc += Bd[a, j] * uin[j]
+                for b in range(nx):
+                    acc += Ad[a, b] * x[b]
+                xn[a] = acc
+            for a in range(nx):
+                x[a] = xn[a]
+
+
 class LinearModel(ActuatorModel):
-    """A continuous LTI system (2 inputs, 2 outputs) with a command delay, stepped exactly."""
+    """A continuous LTI system (2 inputs, 2 outputs) with a command delay, stepped exactly.
+
+    ``position_delay_s`` delays the position output further (feedback transport); it is stepped as a
+    second copy of the system driven by inputs delayed that much more, so it stays exact.
+    """
 
     default_rate_hz = 10_000.0
     linear: ClassVar[bool] = True
@@ -78,22 +143,40 @@ class LinearModel(ActuatorModel):
         *,
         n: int = 1,
         rate_hz: float | None = None,
+        position_delay_s: float = 0.0,
     ) -> None:
         super().__init__(channel, n=n, rate_hz=rate_hz)
         if system.ninputs != 2 or system.noutputs != 2 or not system.isctime():
             raise ValueError("a linear actuator model is a continuous system with 2 inputs and 2 outputs")
-        if not delay_s >= 0.0:
-            raise ValueError("delay_s must not be negative")
+        if not (delay_s >= 0.0 and position_delay_s >= 0.0):
+            raise ValueError("delays must not be negative")
         self.system = system
         self.delay_s = float(delay_s)
+        self.position_delay_s = float(position_delay_s)
+        A, B, C, D = (np.asarray(m, dtype=float) for m in (system.A, system.B, system.C, system.D))
+        if self.position_delay_s > 0.0:
+            # Surface from copy 1 (inputs u(t − τ), hm(t)); position from copy 2, everything τ_p later.
+            nx = A.shape[0]
+            z = np.zeros((nx, nx))
+            zb = np.zeros((nx, 2))
+            A = np.block([[A, z], [z, A]])
+            B = np.block([[B, zb], [zb, B]])
+            C = np.block([[np.zeros((1, nx)), C[0:1]], [C[1:2], np.zeros((1, nx))]])
+            D = np.hstack([np.array([[0.0, 0.0], [D[1, 0], D[1, 1]]]), np.array([[D[0, 0], D[0, 1]], [0.0, 0.0]])])
+            self._source = np.array([0, 1, 0, 1], dtype=np.int64)
+            tau = self.delay_s + self.position_delay_s
+            self._delays = np.array([self.delay_s, 0.0, tau, self.position_delay_s])
+        else:
+            self._source = np.array([0, 1], dtype=np.int64)
+            self._delays = np.array([self.delay_s, 0.0])
+        self._A, self._B = A, B
         dt = 1.0 / self.rate_hz
-        disc = ct.c2d(system, dt, method="zoh")
+        disc = ct.c2d(ct.ss(A, B, C, D), dt, method="zoh")
         self._Ad = np.ascontiguousarray(disc.A, dtype=float)
         self._Bd = np.ascontiguousarray(disc.B, dtype=float)
         self._Cd = np.ascontiguousarray(disc.C, dtype=float)
         self._Dd = np.ascontiguousarray(disc.D, dtype=float)
         # Position rate: d/dt (C0·x + D0·u) = C0·A·x + C0·B·u for held inputs.
-        A, B, C = (np.asarray(m, dtype=float) for m in (system.A, system.B, system.C))
         self._Crate = np.ascontiguousarray(C[0] @ A)
         self._Drate = np.ascontiguousarray(C[0] @ B)
         self._X = np.zeros((self.n, A.shape[0]))
@@ -101,13 +184,11 @@ class LinearModel(ActuatorModel):
 
     @property
     def max_delay_s(self) -> float:  # noqa: D102
-        return self.delay_s
+        return self.delay_s + self.position_delay_s
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
-        A = np.asarray(self.system.A, dtype=float)
-        B = np.asarray(self.system.B, dtype=float)
-        u = np.stack([command_deg, hinge_moment_inlb])  # (2, n)
-        self._X[:] = np.linalg.solve(A, -B @ u).T  # steady state: A·x + B·u = 0
+        u = np.stack([command_deg if s == 0 else hinge_moment_inlb for s in self._source])  # (inputs, n)
+        self._X[:] = np.linalg.solve(self._A, -self._B @ u).T  # steady state: A·x + B·u = 0
         self._steps = 0
 
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
@@ -120,26 +201,43 @@ class LinearModel(ActuatorModel):
         t0 = self._steps * dt
         n_steps = max(int(np.floor((t_end - t0) / dt + 1e-6)), 0)
         out = np.empty((self.n, sample_t.size, N_OUT))
-        run_lti(
-            self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X,
-            bp_t, bp_u, bp_h, self.delay_s, t0, dt, n_steps, sample_t, out,
-        )
+        if self.position_delay_s > 0.0:
+            run_lti_delayed(
+                self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X,
+                bp_t, bp_u, bp_h, self._source, self._delays, t0, dt, n_steps, sample_t, out,
+            )
+        else:
+            run_lti(
+                self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X,
+                bp_t, bp_u, bp_h, self.delay_s, t0, dt, n_steps, sample_t, out,
+            )
         self._steps += n_steps
         return out
 
     def frequency_response(self, freq_hz: ArrayLike, output: int = 0) -> tuple[FloatArray, FloatArray]:
-        """Gain (dB) and phase (deg) from command to ``output`` (0 position, 1 surface), delay included."""
+        """Gain (dB) and phase (deg) from command to ``output`` (0 position, 1 surface), delays included."""
+        gain, phase = _db_deg(self.complex_response(freq_hz, output))
+        return gain, phase
+
+    def complex_response(self, freq_hz: ArrayLike, output: int = 0) -> np.ndarray:
+        """The complex response from the command to ``output``, delays included."""
         f = np.atleast_1d(np.asarray(freq_hz, dtype=float))
         w = 2.0 * np.pi * f
         resp = ct.frequency_response(self.system[output, 0], w)
-        h = np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * self.delay_s)
-        return 20.0 * np.log10(np.abs(h)), np.degrees(np.unwrap(np.angle(h)))
+        delay = self.delay_s + (self.position_delay_s if output == 0 else 0.0)
+        return np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * delay)
 
     def describe(self) -> dict[str, Any]:  # noqa: D102
         info = super().describe()
         info["delay_s"] = self.delay_s
+        if self.position_delay_s:
+            info["position_delay_s"] = self.position_delay_s
         info["states"] = int(self.system.nstates)
         return info
+
+
+def _db_deg(h: np.ndarray) -> tuple[FloatArray, FloatArray]:
+    return 20.0 * np.log10(np.abs(h)), np.degrees(np.unwrap(np.angle(h)))
 
 
 def second_order_system(wn_rad_s: float, zeta: float) -> ct.StateSpace:
@@ -172,3 +270,91 @@ class Sloac(LinearModel):
             second_order_system(self.params.wn_rad_s, self.params.zeta), self.params.delay_s, ch,
             n=n, rate_hz=rate_hz,
         )
+
+
+class Hoalm(LinearModel):
+    """HOALM: HOAD3 linearized about a load with its nonlinear elements removed (section 4.2.7).
+
+    ``load_inlb`` is the hinge moment it is linearized at (the report found it under-predicted the
+    wing gain at low load and the phase loss at every load); ``bound`` picks the compliance bound.
+    Steps at 10,000 Hz like the discrete model it comes from (table 5).
+    """
+
+    name = "hoalm"
+    title = "High-order actuator linear model (HOALM)"
+
+    def __init__(
+        self,
+        channel: str | ChannelConfig = "left_wing",
+        *,
+        n: int = 1,
+        rate_hz: float | None = None,
+        load_inlb: float = 0.0,
+        bound: str | float = "mean",
+        **overrides: float,
+    ) -> None:
+        ch = load_channel(channel) if isinstance(channel, str) else channel
+        self.params = HighOrderParams.from_channel(ch, "hoad3", **overrides)
+        self.load_inlb = float(load_inlb)
+        self.bound = BOUNDS[bound] if isinstance(bound, str) else float(bound)
+        self.linearized = linearize(self.params, self.load_inlb, bound=self.bound)
+        lin = self.linearized
+        system = ct.ss(lin.a, lin.b, lin.c, np.zeros((2, 2)), inputs=["command_deg", "hinge_moment_inlb"],
+                       outputs=["position_deg", "surface_deg"])
+        super().__init__(system, lin.command_delay_s, ch, n=n, rate_hz=rate_hz, position_delay_s=lin.feedback_delay_s)
+
+    def describe(self) -> dict[str, Any]:  # noqa: D102
+        info = super().describe()
+        info.update(load_inlb=self.load_inlb, bound=self.bound)
+        return info
+
+
+LOES_FIELDS = ("wn_rad_s", "zeta", "delay_s", "dc_gain_ratio")
+
+
+def loes_system(wn_rad_s: float, zeta: float, dc_gain_ratio: float) -> ct.StateSpace:
+    """``K·ωn²/(s² + 2ζωn·s + ωn²)`` from the command to both outputs; the hinge moment does not enter."""
+    g = ct.ss(ct.tf([dc_gain_ratio * wn_rad_s**2], [1.0, 2.0 * zeta * wn_rad_s, wn_rad_s**2]))
+    A = np.asarray(g.A, dtype=float)
+    B = np.hstack([np.asarray(g.B, dtype=float), np.zeros((A.shape[0], 1))])
+    C = np.vstack([np.asarray(g.C, dtype=float)] * 2)
+    return ct.ss(A, B, C, np.zeros((2, 2)), inputs=["command_deg", "hinge_moment_inlb"],
+                 outputs=["position_deg", "surface_deg"])
+
+
+class Loes(LinearModel):
+    """LOES: the low-order equivalent system of HOAD3, a second order plus delay (sections 3.4, 4.2.8).
+
+    The coefficients are the channel's ``loes`` section, written by the fit in
+    :mod:`ema_sim.analysis.loes` (``ema loes --write``), so building the model costs nothing. It is the
+    command-to-position equivalent: the surface output equals the position and the load does not enter.
+    """
+
+    name = "loes"
+    title = "Low-order equivalent system actuator model (LOES)"
+
+    def __init__(
+        self,
+        channel: str | ChannelConfig = "left_wing",
+        *,
+        n: int = 1,
+        rate_hz: float | None = None,
+        **overrides: float,
+    ) -> None:
+        ch = load_channel(channel) if isinstance(channel, str) else channel
+        sec = ch.section("loes")
+        values: dict[str, float] = {}
+        for key in LOES_FIELDS:
+            if key in overrides:
+                values[key] = float(overrides.pop(key))
+            elif key in sec:
+                values[key] = float(sec[key])
+            else:
+                raise ConfigError(f"{ch.channel}: loes is missing {key}")
+        if overrides:
+            raise UnknownNameError("LOES parameter", next(iter(overrides)), LOES_FIELDS)
+        if not (values["wn_rad_s"] > 0.0 and values["zeta"] > 0.0 and values["delay_s"] >= 0.0):
+            raise ConfigError(f"{ch.channel}: loes needs wn_rad_s > 0, zeta > 0 and delay_s >= 0")
+        self.coefficients = values
+        super().__init__(loes_system(values["wn_rad_s"], values["zeta"], values["dc_gain_ratio"]),
+                         values["delay_s"], ch, n=n, rate_hz=rate_hz)

@@ -1,0 +1,118 @@
+"""Reproducible measurement noise drawn inside numba kernels (HOAD2 and HOAD3, section 4.3).
+
+Each model instance owns its generator state (xorshift64*, seeded by splitmix64), so a run gives the
+same noise whether it is stepped frame by frame or run whole, and instances in a batch or in other
+models never share a stream. Noise is band-limited: a first-order (Ornstein–Uhlenbeck) process of a
+given rms and bandwidth, so its effect does not change with the model's step size. Normal draws
+use the ziggurat method, a few nanoseconds each, so a 10 kHz kernel can draw every step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ema_sim.models.stages import jit
+
+_U53 = 1.0 / 9007199254740992.0  # 2**-53
+
+
+@jit
+def splitmix64(seed: int) -> np.uint64:
+    """A well-mixed 64-bit word from an integer seed (never zero)."""
+    z = np.uint64(seed) + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    if z == np.uint64(0):
+        z = np.uint64(0x2545F4914F6CDD1D)
+    return z
+
+
+@jit
+def uniform(state: np.ndarray) -> float:
+    """A uniform draw in (0, 1] from xorshift64*; advances ``state[0]``."""
+    x = state[0]
+    x ^= x >> np.uint64(12)
+    x ^= x << np.uint64(25)
+    x ^= x >> np.uint64(27)
+    state[0] = x
+    r = x * np.uint64(0x2545F4914F6CDD1D)
+    return (float(r >> np.uint64(11)) + 1.0) * _U53
+
+
+def _ziggurat_tables(levels: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Marsaglia and Tsang's (2000) ziggurat for the standard normal: (k, w, f) for 128 layers."""
+    m1 = 2147483648.0
+    dn = 3.442619855899
+    tn = dn
+    vn = 9.91256303526217e-3
+    k = np.zeros(levels)
+    w = np.zeros(levels)
+    f = np.zeros(levels)
+    q = vn / math.exp(-0.5 * dn * dn)
+    k[0] = dn / q * m1
+    k[1] = 0.0
+    w[0] = q / m1
+    w[levels - 1] = dn / m1
+    f[0] = 1.0
+    f[levels - 1] = math.exp(-0.5 * dn * dn)
+    for i in range(levels - 2, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(vn / dn + math.exp(-0.5 * dn * dn)))
+        k[i + 1] = dn / tn * m1
+        tn = dn
+        f[i] = math.exp(-0.5 * dn * dn)
+        w[i] = dn / m1
+    return k, w, f
+
+
+_ZIG_K, _ZIG_W, _ZIG_F = _ziggurat_tables()
+_ZIG_R = 3.442619855899
+"""Where the ziggurat's base strip hands over to the exact tail."""
+
+
+@jit
+def _signed_draw(state: np.ndarray) -> tuple:
+    """A signed 32-bit integer and an independent 7-bit layer from one 64-bit draw."""
+    x = state[0]
+    x ^= x >> np.uint64(12)
+    x ^= x << np.uint64(25)
+    x ^= x >> np.uint64(27)
+    state[0] = x
+    r = x * np.uint64(0x2545F4914F6CDD1D)
+    hz = np.int64(r >> np.uint64(32))
+    if hz >= 2147483648:
+        hz -= 4294967296
+    return hz, np.int64(r & np.uint64(127))
+
+
+@jit
+def normal(state: np.ndarray) -> float:
+    """A standard normal draw by the ziggurat: one multiply on 98.8 % of draws, exact in the tails."""
+    hz, iz = _signed_draw(state)
+    while True:
+        if abs(hz) < _ZIG_K[iz]:
+            return hz * _ZIG_W[iz]
+        x = hz * _ZIG_W[iz]
+        if iz == 0:  # the tail beyond r, by Marsaglia's exponential method
+            while True:
+                x = -math.log(uniform(state)) / _ZIG_R
+                y = -math.log(uniform(state))
+                if y + y >= x * x:
+                    break
+            return _ZIG_R + x if hz > 0 else -_ZIG_R - x
+        if _ZIG_F[iz] + uniform(state) * (_ZIG_F[iz - 1] - _ZIG_F[iz]) < math.exp(-0.5 * x * x):
+            return x
+        hz, iz = _signed_draw(state)
+
+
+@jit
+def band_limited_step(value: float, decay: float, innovation: float, state: np.ndarray) -> float:
+    """One step of first-order noise: ``n ← a·n + σ·√(1 − a²)·w`` with ``a = decay``.
+
+    ``innovation = σ·√(1 − a²)`` (0 when the noise is off); the rms stays σ whatever the step.
+    """
+    if innovation == 0.0:
+        return 0.0
+    return decay * value + innovation * normal(state)
