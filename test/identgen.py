@@ -105,3 +105,29 @@ def make_record(
         source=f"identgen(seed={seed})",
         **cols,
     )
+
+
+def hoad3_record(*, seed: int = 0, duration_s: float = 30.0, surface_noise_deg: float = 0.002,
+                 load_amp_inlb: float = 600.0, channel: str = "left_wing") -> MeasuredData:
+    """The same test sequence run on HOAD3 (its own LVDT noise and 5 mV quantization), with an external
+    surface sensor's noise added: the 'real actuator' a second-order model is identified against."""
+    from ema_sim.models import create  # noqa: PLC0415 - only this generator needs the high-order family
+
+    rng = np.random.default_rng(seed)
+    frames = np.arange(round(duration_s / FRAME_S)) * FRAME_S
+    cmd = command_sequence(frames, duration_s)
+    hm = load_sequence(frames, load_amp_inlb)
+    model = create("hoad3", channel, seed=seed)
+    model.trim(cmd[0], hm[0])
+    t = np.arange(round(duration_s * 1000.0)) / 1000.0
+    rec = model.run(frames, cmd, hm, sample_times=t, end_s=float(t[-1]))
+    held = np.searchsorted(frames, t + 1e-9, side="right") - 1
+    return MeasuredData(
+        time_s=t,
+        command_deg=cmd[held],
+        position_deg=rec.position_deg[0],
+        surface_deg=rec.surface_deg[0] + rng.normal(0.0, surface_noise_deg, t.size),
+        hinge_moment_inlb=hm[held] + rng.normal(0.0, 0.1, t.size),
+        metadata={"channel": channel, "model": "hoad3", "generator": "test/identgen.py"},
+        source=f"hoad3(seed={seed})",
+    )

@@ -35,7 +35,7 @@ from ema_sim.models.second_order import SecondOrderParams
 
 TOP_K = 3
 MAX_EFFECTS = 8
-MIN_EXCESS_SHARE = 0.2
+MIN_EXCESS_SHARE = 0.1
 MIN_NOISE_SHARE = 0.05
 MAX_DELTA_BIC = -10.0
 MIN_PARTIAL_F = 20.0
@@ -174,11 +174,12 @@ PRE_QUANTIZER = ("kb", "offset_deg")
 
 
 def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] | list[str], *, flip: bool) -> Fit:
-    """:func:`fit`, except that with a quantizer on, Kb and offset are found by a batched grid search.
+    """:func:`fit`, except that with a quantizer on, Kb and offset are found by batched grid searches.
 
     The quantizer makes the cost piecewise flat in the parameters before it, so gradients cannot
-    move them: the smooth parameters are fitted with them held, then a grid over ±half a step of
-    offset and the matching slope picks them, then the smooth parameters are fitted again.
+    move them: the smooth parameters are fitted with them held, then a coordinate search (a grid of
+    11 over ±half a step, then one five times finer, for each) picks them, then the smooth
+    parameters are fitted again.
     """
     q = base.quantization_deg
     held = [f for f in free if f in PRE_QUANTIZER]
@@ -187,22 +188,19 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
     smooth = [f for f in free if f not in PRE_QUANTIZER]
     first = fit(problem, base, smooth, flip=flip)
     u_max = max(float(np.max(np.abs(problem.data.command_deg))), 1e-6)
-    offsets = [first.params.offset_deg]
-    slopes = [first.params.kb]
-    if "offset_deg" in held:
-        offsets = list(first.params.offset_deg + np.linspace(-0.5 * q, 0.5 * q, 21))
-    if "kb" in held:
-        slopes = list(first.params.kb + np.linspace(-0.5 * q / u_max, 0.5 * q / u_max, 11))
-    grid = [first.params.replace(offset_deg=o, kb=k) for o in offsets for k in slopes]
-    sims = problem.simulate(grid, [flip] * len(grid))
-    costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
-    best = grid[int(np.argmin(costs))]
-    final = fit(problem, best, smooth, flip=flip)
+    half = {"offset_deg": 0.5 * q, "kb": 0.5 * q / u_max}
+    params = first.params
+    for scale in (1.0, 0.2):
+        for name in held:
+            centre = getattr(params, name)
+            grid = [params.replace(**{name: centre + d}) for d in np.linspace(-1.0, 1.0, 11) * half[name] * scale]
+            sims = problem.simulate(grid, [flip] * len(grid))
+            costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
+            params = grid[int(np.argmin(costs))]
+    final = fit(problem, params, smooth, flip=flip)
     sigma = dict(final.sigma)
-    if "offset_deg" in held:
-        sigma["offset_deg"] = q / 40.0  # half the grid spacing: the resolution the search has
-    if "kb" in held:
-        sigma["kb"] = q / u_max / 20.0
+    for name in held:
+        sigma[name] = half[name] * 0.2 / 10.0  # the finest grid spacing: the resolution the search has
     return Fit(final.params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
 
 
