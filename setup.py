@@ -14,6 +14,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/ema_msgs_py", ["ema_msgs_py/README.md"]),
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -35,6 +36,11 @@ setup(
     entry_points={
         "console_scripts": [
             "ema = ema_sim.cli:main",
+            "emac = ema_sim.nodes.emac:main",
+            "testenv = ema_sim.nodes.testenv:main",
+            "maneuver = ema_sim.nodes.maneuver:main",
+            "simclock = ema_sim.nodes.clock:main",
+            "fmu_bridge = ema_sim.nodes.bridge:main",
         ],
     },
 )

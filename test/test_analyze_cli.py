@@ -99,7 +99,7 @@ def test_json_is_strict(csvs, tmp_path):
         (lambda p: p.write_text("time_s,command_deg,position_deg\n"
                                 + "\n".join(f"{i * 0.001},0,x" for i in range(200))),
          "line 2, column 'position_deg': not a number"),
-        (lambda _p: None, "no such file or directory"),
+        (lambda _p: None, "no such file"),
     ],
 )
 def test_malformed_data_is_one_line_and_status_2(tmp_path, capsys, make, message):

@@ -11,5 +11,6 @@ COMMANDS: tuple[str, ...] = (
     "loes",
     "acceptance",
     "bench",
+    "launch",
     "listing",
 )

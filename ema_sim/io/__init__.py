@@ -1,1 +1,38 @@
-"""Data in and out: the measured-data CSV contract (and, with the node suite, rosbag2)."""
+"""Data in and out: the measured-data CSV contract and rosbag2 (MCAP) bags of the node suite.
+
+:func:`load_data` is the one entry point of the offline tools: a CSV file or a bag directory (or its
+``.mcap`` file) becomes :class:`~ema_sim.io.csv.MeasuredData`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ema_sim.errors import DataError
+from ema_sim.io.csv import MeasuredData, read_csv
+
+
+def is_bag(path: str | Path) -> bool:
+    """A rosbag2 directory (metadata.yaml or an .mcap inside) or an .mcap file."""
+    p = Path(path)
+    if p.is_dir():
+        return (p / "metadata.yaml").is_file() or any(p.glob("*.mcap"))
+    return p.suffix == ".mcap"
+
+
+def load_data(path: str | Path, channel: str | None = None) -> MeasuredData:
+    """Measured data from a CSV or a bag; ``channel`` picks one channel of a bag (or checks a CSV's)."""
+    if is_bag(path):
+        from ema_sim.io.bag import read_bag  # noqa: PLC0415 - rosbags only when a bag is read
+
+        return read_bag(path, channel)
+    if Path(path).is_dir():
+        raise DataError(f"{path}: a directory that is not a rosbag2 bag (no metadata.yaml or .mcap file)")
+    data = read_csv(path)
+    declared = data.metadata.get("channel")
+    if channel is not None and declared is not None and declared != channel:
+        raise DataError(f"{path}: holds channel {declared!r}, not {channel!r}")
+    return data
+
+
+__all__ = ["MeasuredData", "is_bag", "load_data"]

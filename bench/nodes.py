@@ -1,0 +1,130 @@
+"""Speed of the ROS 2 node suite (issue 4): lockstep real-time factor, real-time latency, the executor.
+
+Parametrised by model: ``EMA_BENCH_MODEL`` (default ``loada``; ``hoad3`` once it is merged) and by
+duration: ``EMA_BENCH_REALTIME_S`` (default 600 s, the issue's ten minutes) and ``EMA_BENCH_LOCKSTEP_S``
+(default 30 s of simulated time). Each run is the whole suite as separate processes on a ROS domain
+of its own: five EMACs (one process each, or one EMAC box), the AIL test environment, the maneuver
+node recording the bag, and under lockstep the clock.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from ema_sim.benchmark import Benchmark, Result
+from ema_sim.suite import SuiteConfig, free_domain_id, run_suite
+
+MODEL = os.environ.get("EMA_BENCH_MODEL", "loada")
+REALTIME_S = float(os.environ.get("EMA_BENCH_REALTIME_S", "600"))
+LOCKSTEP_S = float(os.environ.get("EMA_BENCH_LOCKSTEP_S", "30"))
+SINE = "sine:freq_hz=2,amp_deg=1,cycles={c:d},lead_s=0"
+"""A long sine (not a 60 s-limited dynamic test): the actuator moves on every frame."""
+
+
+def _suite(lockstep: bool, box: bool, duration_s: float, rt: int = 0, offset: int = 0) -> dict:
+    with tempfile.TemporaryDirectory(prefix="ema_bench_") as tmp:
+        cfg = SuiteConfig(bag=Path(tmp) / "bag", model=MODEL, profile="ail",
+                          maneuver=SINE.format(c=round(2 * duration_s)), channels=["left_wing"],
+                          duration_s=duration_s, lockstep=lockstep, emac_box=box,
+                          domain_id=free_domain_id(os.getpid() + 31 * offset), rt_priority=rt)
+        return run_suite(cfg, timeout_s=duration_s * 20 + 120)
+
+
+def lockstep(box: bool) -> Result:
+    sums = _suite(True, box, LOCKSTEP_S, offset=1 + box)
+    clock = sums["simclock"]
+    rtf = clock["realtime_factor"]
+    cpu = sum(s.get("cpu_s", 0.0) for s in sums.values())
+    return Result(rtf, "× real time", rtf >= 10.0,
+                  f"{MODEL}, {'EMAC box' if box else 'one process per channel'}: {clock['sim_s']:g} s simulated "
+                  f"in {clock['wall_s']:.1f} s, {clock['stalls']} stalls; CPU {cpu:.1f} s over all nodes")
+
+
+def realtime(box: bool, rt: int) -> Result:
+    sums = _suite(False, box, REALTIME_S, rt=rt, offset=3 + box)
+    man = sums["maneuver"]
+    p99, missed = man["latency_p99_ms"], man["missed_frames"]
+    late = sum(s.get("late_frames", 0) for s in sums.values())
+    turn = max((s["turnaround_p99_ms"] for s in sums.values() if "turnaround_p99_ms" in s), default=float("nan"))
+    return Result(p99, "ms p99", p99 <= 2.0 and missed == 0,
+                  f"{MODEL}, {'EMAC box' if box else 'one process per channel'}, "
+                  f"{'SCHED_FIFO ' + str(rt) if rt else 'normal scheduling'}: {man['frames']} frames over "
+                  f"{REALTIME_S:g} s; p50 {man['latency_p50_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
+                  f"{missed} missed frames; {late} EMAC frames without a timely command; inside the EMAC node, "
+                  f"command received to feedback published p99 {turn:.2f} ms")
+
+
+PINGPONG = r'''
+import sys, time
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+role, kind, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+rclpy.init()
+node = Node("pp_" + role)
+if kind == "events":
+    from rclpy.experimental import EventsExecutor
+    ex = EventsExecutor()
+elif kind == "multi":
+    from rclpy.executors import MultiThreadedExecutor
+    ex = MultiThreadedExecutor()
+else:
+    from rclpy.executors import SingleThreadedExecutor
+    ex = SingleThreadedExecutor()
+ex.add_node(node)
+got = []
+if role == "echo":
+    pub = node.create_publisher(JointState, "pong", 100)
+    node.create_subscription(JointState, "ping", lambda m: (pub.publish(m), got.append(1)), 100)
+    end = time.time() + 600
+    while len(got) < n and time.time() < end:
+        ex.spin_once(timeout_sec=0.1)
+else:
+    pub = node.create_publisher(JointState, "ping", 100)
+    node.create_subscription(JointState, "pong", lambda m: got.append(time.perf_counter() - m.position[0]), 100)
+    while pub.get_subscription_count() == 0 or node.count_publishers("pong") == 0:
+        ex.spin_once(timeout_sec=0.05)
+    time.sleep(0.5)
+    for i in range(n):
+        k = len(got)
+        pub.publish(JointState(name=["x"], position=[time.perf_counter()]))
+        end = time.time() + 2
+        while len(got) == k and time.time() < end:
+            ex.spin_once(timeout_sec=0.5)
+    print(sorted(got)[len(got) // 2] * 1e6)
+'''
+
+
+def _roundtrip_us(kind: str, n: int = 1000) -> float:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(free_domain_id(os.getpid() + 7)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    echo = subprocess.Popen([sys.executable, "-c", PINGPONG, "echo", kind, str(n)], env=env)
+    try:
+        out = subprocess.run([sys.executable, "-c", PINGPONG, "ping", kind, str(n)], env=env, check=True,
+                             capture_output=True, text=True, timeout=600).stdout
+    finally:
+        echo.wait(timeout=30)
+    return float(out.strip().splitlines()[-1])
+
+
+def executor_choice() -> Result:
+    """Median cross-process round trip with each executor, spin_once loops as the nodes use them."""
+    counts = {"events": 1000, "single": 1000, "multi": 200}  # the multi-threaded one is too slow for more
+    rtt = {kind: statistics.median(_roundtrip_us(kind, n) for _ in range(2)) for kind, n in counts.items()}
+    best = min(rtt, key=rtt.get)  # type: ignore[arg-type]
+    detail = ", ".join(f"{k} {v:.0f} µs" for k, v in rtt.items())
+    return Result(rtt["events"], "µs RTT", best == "events", f"median round trip: {detail}")
+
+
+BENCHMARKS = [
+    Benchmark(f"nodes_lockstep_channels_{MODEL}", "≥ 10× real time", lambda: lockstep(box=False)),
+    Benchmark(f"nodes_lockstep_box_{MODEL}", "≥ 10× real time", lambda: lockstep(box=True)),
+    Benchmark(f"nodes_realtime_box_fifo_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime(box=True, rt=20)),
+    Benchmark(f"nodes_realtime_channels_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime(box=False, rt=0)),
+    Benchmark("nodes_executor_choice", "EventsExecutor fastest", executor_choice),
+]

@@ -1,0 +1,214 @@
+"""The topic contract of the node suite (pure Python: importable without ROS).
+
+Volts on the wire, as the real EMAC speaks (section 1.4: every command and feedback is scaled to
+±10 Vdc); degrees through each channel's third-order calibration curves (section 2.6). The FMU side
+and the EMAC side have distinct topics so the test environment can sit between them both ways:
+
+    FMU ──/ema/fmu/command──▶ testenv ──/ema/emac/command──▶ EMAC (model)
+    FMU ◀─/ema/fmu/feedback── testenv ◀─/ema/emac/feedback── EMAC
+    load rig / vehicle ──/ema/load/hinge_moment──▶ EMAC ──/ema/sensor/surface──▶ instruments
+
+Every per-frame signal is a ``sensor_msgs/JointState`` whose ``name`` lists channels (any subset, as
+ROS joint states do); the header stamp is the FMU frame the values belong to. An empty array means
+"not measured" (the JointState convention), e.g. ``effort`` on feedback from a model without a motor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cache
+
+from ema_sim.config import CHANNELS, load_channel
+
+FRAME_HZ = 200.0
+"""The FMU frame rate: feedback is published once per frame (table 5)."""
+FULL_SCALE_V = 10.0
+"""Every command and feedback is scaled to ±10 V (section 1.4)."""
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+CLOCK = "rosgraph_msgs/msg/Clock"
+STRING = "std_msgs/msg/String"
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+@dataclass(frozen=True)
+class QosSpec:
+    """A QoS profile as plain data (``rclpy`` and ``rosbags`` forms in :mod:`.ros` / :mod:`.typestore`)."""
+
+    reliability: str = "reliable"
+    durability: str = "volatile"
+    depth: int = 1000
+
+    def describe(self) -> str:
+        """E.g. ``reliable, volatile, keep last 1000``."""
+        return f"{self.reliability}, {self.durability}, keep last {self.depth}"
+
+
+FRAME_QOS = QosSpec("reliable", "volatile", 1000)
+"""Per-frame signals: reliable so lockstep never loses a frame; deep so a recorder may lag."""
+CLOCK_QOS = QosSpec("reliable", "transient_local", 100)
+"""``/clock`` from the lockstep clock: the latest frame reaches a late joiner (rclpy's best-effort,
+volatile TimeSource subscription is compatible). Nodes step every frame up to the clock's value, so
+only the latest matters."""
+CLOCK_SUB_QOS = QosSpec("reliable", "transient_local", 100)
+"""Our own ``/clock`` subscriptions (reliable, and late joiners get the latest frame)."""
+LATCHED_QOS = QosSpec("reliable", "transient_local", 10)
+"""Test metadata and readiness: late joiners get the last messages."""
+EVENT_QOS = QosSpec("reliable", "volatile", 10)
+"""Failure injection and diagnostics."""
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One topic of the contract."""
+
+    name: str
+    msgtype: str
+    qos: QosSpec
+    publisher: str
+    subscribers: str
+    fields: dict[str, str] = field(default_factory=dict)
+    """Message field → meaning and unit."""
+    per_frame: bool = True
+
+
+TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
+    TopicSpec("/ema/fmu/command", JOINT_STATE, FRAME_QOS, "FMU (maneuver, fmu_bridge, a flight computer)",
+              "testenv", {"position": "command, V (±10 V)"}),
+    TopicSpec("/ema/emac/command", JOINT_STATE, FRAME_QOS, "testenv", "emac",
+              {"position": "command at the EMAC input, V (±10 V)"}),
+    TopicSpec("/ema/emac/feedback", JOINT_STATE, FRAME_QOS, "emac", "testenv, simclock",
+              {"position": "LVDT position feedback, V (±10 V)",
+               "effort": "motor current feedback, A (empty: the model has no motor)"}),
+    TopicSpec("/ema/fmu/feedback", JOINT_STATE, FRAME_QOS, "testenv", "FMU",
+              {"position": "LVDT position feedback as the FMU reads it, V",
+               "effort": "motor current feedback, A (empty when unknown)"}),
+    TopicSpec("/ema/load/hinge_moment", JOINT_STATE, FRAME_QOS, "load rig or vehicle (maneuver, fmu)", "emac",
+              {"effort": "hinge moment, in·lb, positive aids positive deflection; held over the frame"}),
+    TopicSpec("/ema/sensor/surface", JOINT_STATE, FRAME_QOS, "emac", "instruments, recorder",
+              {"position": "true surface angle (external sensor: free play and compliance included), deg",
+               "velocity": "actuator rate, deg/s",
+               "effort": "hinge moment applied over the frame that ends at the stamp, in·lb"}),
+    TopicSpec("/ema/sensor/bus", JOINT_STATE, FRAME_QOS, "emac (models with a motor)", "instruments, recorder",
+              {"position": "150 V bus voltage seen by the channel, V"}),
+    TopicSpec("/ema/joint_commands", JOINT_STATE, FRAME_QOS, "ros2_control (topic_based_ros2_control)",
+              "fmu_bridge", {"position": "surface command, rad"}),
+    TopicSpec("/ema/joint_states", JOINT_STATE, FRAME_QOS, "fmu_bridge", "ros2_control",
+              {"position": "surface position from LVDT feedback through the feedback curve, rad",
+               "velocity": "its frame-to-frame rate, rad/s"}),
+    TopicSpec("/clock", CLOCK, CLOCK_QOS, "simclock (lockstep only)", "every node with use_sim_time",
+              {"clock": "simulation time, advanced one FMU frame at a time"}),
+    TopicSpec("/ema/test", STRING, LATCHED_QOS, "maneuver", "recorder",
+              {"data": "the test's parameters as JSON (also in the bag's metadata)"}, per_frame=False),
+    TopicSpec("/ema/ready", STRING, LATCHED_QOS, "every suite node", "simclock, maneuver",
+              {"data": "name of a node that is up and subscribed"}, per_frame=False),
+    TopicSpec("/diagnostics", DIAGNOSTIC_ARRAY, EVENT_QOS, "emac, testenv", "monitors",
+              {"status": "one status per channel: brake, failure, counters of rejected inputs"}, per_frame=False),
+)}
+
+
+def topic(name: str) -> TopicSpec:
+    """A contract topic by name."""
+    return TOPICS[name]
+
+
+FMU_COMMAND = "/ema/fmu/command"
+EMAC_COMMAND = "/ema/emac/command"
+EMAC_FEEDBACK = "/ema/emac/feedback"
+FMU_FEEDBACK = "/ema/fmu/feedback"
+HINGE_MOMENT = "/ema/load/hinge_moment"
+SURFACE = "/ema/sensor/surface"
+BUS = "/ema/sensor/bus"
+JOINT_COMMANDS = "/ema/joint_commands"
+JOINT_STATES = "/ema/joint_states"
+CLOCK_TOPIC = "/clock"
+TEST = "/ema/test"
+READY = "/ema/ready"
+DIAGNOSTICS = "/diagnostics"
+
+
+def failure_topic(channel: str) -> str:
+    """Run-time failure injection of one channel (``std_msgs/String``, a failure spec such as ``stuck``)."""
+    return f"/ema/emac/{channel}/failure"
+
+
+FAILURE_QOS = EVENT_QOS
+
+
+@dataclass(frozen=True)
+class Scaling:
+    """Degree↔volt conversions of one channel, fast on scalars (the FMU's calibration curves).
+
+    ``command``: surface degrees → command volts (third order); ``feedback``: LVDT volts → surface
+    degrees (third order). ``sign`` is −1 for the inverse relation of both wings and the left rudder
+    (section 4.4.1): there, a positive deflection is a negative voltage.
+    """
+
+    channel: str
+    command: tuple[float, float, float, float]
+    feedback: tuple[float, float, float, float]
+    full_scale_v: float = FULL_SCALE_V
+
+    @property
+    def sign(self) -> int:
+        """+1 direct, −1 inverse degrees-to-volts relation."""
+        return 1 if self.command[1] >= 0.0 else -1
+
+    def command_deg_to_v(self, deg: float) -> float:
+        """Volts the FMU sends for a surface command."""
+        return _cubic(self.command, deg)
+
+    def command_v_to_deg(self, volts: float) -> float:
+        """The surface command a command voltage stands for (inverse command curve)."""
+        return _inverse(self.command, volts)
+
+    def feedback_v_to_deg(self, volts: float) -> float:
+        """Surface degrees the FMU reads from LVDT volts."""
+        return _cubic(self.feedback, volts)
+
+    def feedback_deg_to_v(self, deg: float) -> float:
+        """LVDT volts that read back as ``deg`` (inverse feedback curve)."""
+        return _inverse(self.feedback, deg)
+
+    @property
+    def volts_per_deg(self) -> float:
+        """Magnitude of the feedback scale at zero, V per degree (≈ 0.235)."""
+        return 1.0 / abs(self.feedback[1])
+
+
+def _cubic(c: tuple[float, float, float, float], x: float) -> float:
+    return c[0] + x * (c[1] + x * (c[2] + x * c[3]))
+
+
+def _inverse(c: tuple[float, float, float, float], y: float) -> float:
+    x = (y - c[0]) / c[1]
+    for _ in range(8):
+        f = _cubic(c, x) - y
+        step = f / (c[1] + x * (2.0 * c[2] + 3.0 * c[3] * x))
+        x -= step
+        if abs(step) < 1e-13 * (1.0 + abs(x)):
+            break
+    return x
+
+
+@cache
+def scaling(channel: str) -> Scaling:
+    """The scaling of a channel from its ``config/<channel>.yaml``."""
+    cfg = load_channel(channel)
+    return scaling_of(cfg)
+
+
+def scaling_of(cfg: object) -> Scaling:
+    """The scaling of a :class:`~ema_sim.config.ChannelConfig` (e.g. one built from ROS parameters)."""
+    command = tuple(cfg.command_cal.coefficients())  # type: ignore[attr-defined]
+    feedback = tuple(cfg.feedback_cal.coefficients())  # type: ignore[attr-defined]
+    if not all(math.isfinite(v) for v in (*command, *feedback)):
+        raise ValueError("calibration coefficients must be finite")
+    return Scaling(cfg.channel, command, feedback, float(cfg.full_scale_v))  # type: ignore[attr-defined, arg-type]
+
+
+__all__ = [
+    "CHANNELS", "CLOCK_QOS", "FRAME_HZ", "FRAME_QOS", "FULL_SCALE_V", "LATCHED_QOS", "TOPICS", "QosSpec", "Scaling",
+    "TopicSpec", "failure_topic", "scaling", "scaling_of", "topic",
+]

@@ -1,0 +1,83 @@
+"""The contract's messages without a ROS install: a rosbags typestore (ROS 2 Jazzy definitions).
+
+Bags are written and read with these helpers; the definitions, and so the type hashes, are the
+Jazzy ``common_interfaces`` ones that rclpy publishes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import cache
+from typing import Any
+
+import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from ema_msgs_py.contract import CLOCK, JOINT_STATE, STRING, QosSpec
+
+
+@cache
+def typestore() -> Typestore:
+    """The ROS 2 Jazzy typestore (cached)."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _time(ns: int) -> Any:
+    t = typestore().types["builtin_interfaces/msg/Time"]
+    return t(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+
+
+def header(stamp_ns: int, frame_id: str = "") -> Any:
+    """A ``std_msgs/Header``."""
+    return typestore().types["std_msgs/msg/Header"](stamp=_time(stamp_ns), frame_id=frame_id)
+
+
+def joint_state(stamp_ns: int, names: Sequence[str], position: Sequence[float] = (),
+                velocity: Sequence[float] = (), effort: Sequence[float] = ()) -> Any:
+    """A ``sensor_msgs/JointState`` (empty arrays: not measured)."""
+    cls = typestore().types[JOINT_STATE]
+    return cls(header=header(stamp_ns), name=list(names), position=np.asarray(position, dtype=np.float64),
+               velocity=np.asarray(velocity, dtype=np.float64), effort=np.asarray(effort, dtype=np.float64))
+
+
+def clock(stamp_ns: int) -> Any:
+    """A ``rosgraph_msgs/Clock``."""
+    return typestore().types[CLOCK](clock=_time(stamp_ns))
+
+
+def string(text: str) -> Any:
+    """A ``std_msgs/String``."""
+    return typestore().types[STRING](data=text)
+
+
+def serialize(msg: Any) -> bytes:
+    """CDR bytes of a typestore message, as rclpy would publish them."""
+    return bytes(typestore().serialize_cdr(msg, msg.__msgtype__))
+
+
+def deserialize(raw: bytes | memoryview, msgtype: str) -> Any:
+    """A typestore message from CDR bytes."""
+    return typestore().deserialize_cdr(raw, msgtype)
+
+
+def stamp_ns(msg: Any) -> int:
+    """Header stamp of a message in nanoseconds."""
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def qos_profiles(spec: QosSpec) -> list[Qos]:
+    """The offered QoS of a contract topic, for a bag's metadata."""
+    zero = QosTime(sec=0, nsec=0)
+    return [Qos(
+        history=QosHistory.KEEP_LAST,
+        depth=spec.depth,
+        reliability=QosReliability.RELIABLE if spec.reliability == "reliable" else QosReliability.BEST_EFFORT,
+        durability=QosDurability.TRANSIENT_LOCAL if spec.durability == "transient_local" else QosDurability.VOLATILE,
+        deadline=zero,
+        lifespan=zero,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=zero,
+        avoid_ros_namespace_conventions=False,
+    )]

@@ -1,0 +1,121 @@
+"""``ema launch``: the node suite from one command (five EMACs, test environment, clock, maneuver)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from ema_sim.errors import EmaError
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
+    from ema_sim.config import CHANNELS  # noqa: PLC0415
+    from ema_sim.io.bag import bag_info  # noqa: PLC0415
+    from ema_sim.models import model_names  # noqa: PLC0415
+    from ema_sim.nodes.maneuver import default_bag  # noqa: PLC0415
+    from ema_sim.signals.plans import build_plan, channel_list  # noqa: PLC0415
+    from ema_sim.suite import Suite, SuiteConfig  # noqa: PLC0415
+
+    if args.model not in model_names():
+        from ema_sim.errors import UnknownNameError  # noqa: PLC0415
+
+        raise UnknownNameError("model", args.model, model_names())
+    if not (args.maneuver or args.test):
+        raise EmaError("give --maneuver SPEC or --test SPEC (ema maneuvers, ema tests)")
+    from ema_sim.environment import load_profile  # noqa: PLC0415
+
+    load_profile(args.profile, disable=args.disable)
+    driven = channel_list(args.channels or ["left_wing"])
+    plan = build_plan(args.test, maneuver=args.maneuver, load=args.load, channels=driven, duration_s=args.duration)
+    bag = Path(args.bag) if args.bag else default_bag(plan.test)
+    cfg = SuiteConfig(
+        bag=bag, model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver, load=args.load,
+        channels=driven, emac_channels=channel_list(args.emacs or list(CHANNELS)), duration_s=args.duration,
+        lockstep=args.lockstep, emac_box=args.emac_box, domain_id=args.domain_id, disable=args.disable,
+        rt_priority=args.rt_priority,
+    )
+    suite = Suite(cfg)
+    for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
+        signal.signal(signum, _interrupt)
+    mode = "lockstep" if args.lockstep else "real time"
+    print(f"ema launch: {plan.test} on {', '.join(plan.channels)} for {plan.duration_s:g} s, {args.model}, "
+          f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
+    try:
+        suite.start()
+        status = suite.wait(args.timeout)
+    except KeyboardInterrupt:
+        print("ema launch: interrupted; closing the bag", file=sys.stderr)
+        suite.stop()
+        _report(suite, bag, bag_info)
+        return 130
+    except BaseException:
+        suite.stop()
+        raise
+    suite.stop()
+    if status != 0:
+        raise EmaError(f"the maneuver node exited with status {status}; see {suite.log_dir / 'maneuver.log'}")
+    _report(suite, bag, bag_info)
+    return 0
+
+
+def _interrupt(signum: int, frame: Any) -> None:  # noqa: ARG001
+    raise KeyboardInterrupt
+
+
+def _report(suite: Any, bag: Path, bag_info: Any) -> None:
+    sums = suite.summaries()
+    if bag.exists():
+        info = bag_info(bag)
+        print(f"bag {bag}: {info.message_count} messages over {info.duration_s:.2f} s; "
+              f"channels {', '.join(info.channels) or 'none'}")
+    clock = sums.get("simclock")
+    if clock and clock.get("wall_s"):
+        print(f"lockstep: {clock['sim_s']:.2f} s simulated in {clock['wall_s']:.2f} s "
+              f"({clock['realtime_factor']:.2f}× real time, {clock['stalls']} stalls)")
+    man = sums.get("maneuver", {})
+    if "latency_p99_ms" in man:
+        print(f"real time: command-to-feedback latency p50 {man['latency_p50_ms']:.2f} ms, "
+              f"p99 {man['latency_p99_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
+              f"{man['missed_frames']} missed frames of {man['frames']}")
+
+
+def register(sub: Any) -> None:
+    """Add ``launch`` (and ``tests``, the list of section-2 tests) to the ``ema`` parser."""
+    p = sub.add_parser("launch", help="run the ROS 2 node suite: five EMACs, test environment, clock, maneuver",
+                       description="Bring up the EMAC channels, the test environment, (lockstep) the clock and "
+                                   "the maneuver node as separate processes, run one test, record the bag, stop.")
+    p.add_argument("--model", default="loada", help="model of every channel (ema models)")
+    p.add_argument("--profile", default="none", help="test environment: ail, flight or none")
+    p.add_argument("--maneuver", default=None, help="maneuver spec of the driven channels (ema maneuvers)")
+    p.add_argument("--test", default=None, help="section-2 test spec (ema tests), e.g. static_crosstalk")
+    p.add_argument("--load", default=None, help="hinge-moment spec of the driven channels")
+    p.add_argument("--channels", action="append", default=[], help="driven channels (default left_wing; all)")
+    p.add_argument("--emacs", action="append", default=[], help="channels that get an EMAC (default all five)")
+    p.add_argument("--duration", type=float, default=None, help="seconds (default: the test's length)")
+    p.add_argument("--lockstep", action="store_true", help="run on /clock, frame by frame, as fast as possible")
+    p.add_argument("--bag", default=None, help="bag directory to create (default bags/<test>_<time>)")
+    p.add_argument("--emac-box", action="store_true",
+                   help="one process for all EMAC channels (the real EMAC is one box); faster")
+    p.add_argument("--disable", action="append", default=[], help="switch a test-environment element off")
+    p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's, "
+                   "else one derived from the pid)")
+    p.add_argument("--rt-priority", type=int, default=0, help="SCHED_FIFO priority of every node (0: off)")
+    p.add_argument("--timeout", type=float, default=None, help="give up after this many wall seconds")
+    p.set_defaults(func=run)
+    t = sub.add_parser("tests", help="list the section-2 tests the maneuver node drives")
+    t.set_defaults(func=_tests)
+
+
+def _tests(args: argparse.Namespace) -> int:  # noqa: ARG001
+    from ema_sim.emac.failures import failure_help  # noqa: PLC0415
+    from ema_sim.signals.plans import test_help  # noqa: PLC0415
+
+    print("tests (--test name[:field=value,...]):")
+    print(test_help())
+    print("\nfailures (std_msgs/String on /ema/emac/<channel>/failure, or the emac.failure parameter):")
+    print(failure_help())
+    return 0

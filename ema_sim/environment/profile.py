@@ -1,0 +1,186 @@
+"""Test-environment profiles: what sits between the FMU and the EMACs in each direction (section 4.3).
+
+A profile is two paths of elements, in the order the signal meets them:
+
+command  (FMU → EMAC)  50 Hz lag (FMU software) → 5 mV quantization (FMU D/A) → transport delay → noise (harness)
+feedback (EMAC → FMU)  noise (harness) → transport delay → 5 mV quantization (FMU A/D) → 50 Hz lag (FMU software)
+
+Profiles are ROS 2 parameter files for the ``testenv`` node: ``config/flight.yaml``, ``config/ail.yaml``;
+``none`` is the built-in pass-through. Any element can be switched off with :meth:`Profile.without`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from ema_sim.config import config_dir, ros_parameters
+from ema_sim.environment.elements import FirstOrderLag, Noise, Quantizer, SignalPath, TransportDelay
+from ema_sim.errors import ConfigError, UnknownNameError
+
+ELEMENTS: tuple[str, ...] = ("lag", "quantization", "delay", "noise")
+"""Element names, for :meth:`Profile.without` (``"delay"``, or one path: ``"command.delay"``)."""
+PATHS: tuple[str, ...] = ("command", "feedback")
+BUILTIN = ("none",)
+_KEYS = {"lag": "lag_hz", "quantization": "quantization_v", "delay": "delay_s", "noise": "noise_rms_v"}
+
+
+@dataclass(frozen=True)
+class PathSpec:
+    """Parameters of one direction; a zero switches its element off."""
+
+    lag_hz: float = 0.0
+    quantization_v: float = 0.0
+    delay_s: float = 0.0
+    noise_rms_v: float = 0.0
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], origin: str) -> PathSpec:
+        """Validate a ``command:`` or ``feedback:`` mapping."""
+        known = {f.name for f in fields(cls)}
+        out: dict[str, float] = {}
+        for key, value in values.items():
+            if key not in known:
+                raise ConfigError(f"{origin}: unknown parameter {key!r} (known: {', '.join(sorted(known))})")
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                raise ConfigError(f"{origin}: {key} must be a number, got {value!r}") from None
+            if not (math.isfinite(number) and number >= 0.0):
+                raise ConfigError(f"{origin}: {key} must be a finite number ≥ 0, got {value!r}")
+            out[key] = number
+        return cls(**out)
+
+    def without(self, element: str) -> PathSpec:
+        """This path with ``element`` switched off."""
+        return replace(self, **{_KEYS[element]: 0.0})
+
+    def as_dict(self) -> dict[str, float]:
+        """Parameter name → value."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A named test environment: the command and the feedback path, and the noise seed."""
+
+    name: str = "none"
+    command: PathSpec = field(default_factory=PathSpec)
+    feedback: PathSpec = field(default_factory=PathSpec)
+    full_scale_v: float = 10.0
+    seed: int = 0
+    disabled: tuple[str, ...] = ()
+
+    @classmethod
+    def none(cls) -> Profile:
+        """Pass-through in both directions: the FMU talks to the EMACs directly."""
+        return cls()
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> Profile:
+        """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``)."""
+        try:
+            seed = int(params.get("seed", 0))
+            full_scale = float(params.get("full_scale_v", 10.0))
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"{origin}: {exc}") from None
+        paths = {}
+        for name in PATHS:
+            section = params.get(name, {})
+            if not isinstance(section, Mapping):
+                raise ConfigError(f"{origin}: {name} must be a mapping of element parameters")
+            paths[name] = PathSpec.from_mapping(section, f"{origin}: {name}")
+        return cls(name=str(params.get("profile", Path(origin).stem)), full_scale_v=full_scale, seed=seed, **paths)
+
+    def without(self, *elements: str) -> Profile:
+        """This profile with elements switched off: ``"noise"`` (both paths) or ``"feedback.noise"``."""
+        out = self
+        for item in elements:
+            path, _, element = item.rpartition(".")
+            if element not in ELEMENTS or (path and path not in PATHS):
+                known = [*ELEMENTS, *(f"{p}.{e}" for p in PATHS for e in ELEMENTS)]
+                raise UnknownNameError("environment element", item, known)
+            for name in [path] if path else PATHS:
+                out = replace(out, **{name: getattr(out, name).without(element)})
+            out = replace(out, disabled=(*out.disabled, item))
+        return out
+
+    def with_seed(self, seed: int) -> Profile:
+        """The same profile with another noise seed."""
+        return replace(self, seed=int(seed))
+
+    def command_path(self, frame_s: float, stream: int = 0, initial_v: float = 0.0) -> SignalPath:
+        """FMU → EMAC for one channel (``stream`` keeps each channel's noise independent)."""
+        spec = self.command
+        path = SignalPath([
+            FirstOrderLag(spec.lag_hz, frame_s),
+            Quantizer(spec.quantization_v, self.full_scale_v),
+            TransportDelay(spec.delay_s, frame_s),
+            Noise(spec.noise_rms_v, self.seed, (stream, 0)),
+        ])
+        path.reset(initial_v)
+        return path
+
+    def feedback_path(self, frame_s: float, stream: int = 0, initial_v: float = 0.0) -> SignalPath:
+        """EMAC → FMU for one channel."""
+        spec = self.feedback
+        path = SignalPath([
+            Noise(spec.noise_rms_v, self.seed, (stream, 1)),
+            TransportDelay(spec.delay_s, frame_s),
+            Quantizer(spec.quantization_v, self.full_scale_v),
+            FirstOrderLag(spec.lag_hz, frame_s),
+        ])
+        path.reset(initial_v)
+        return path
+
+    def current_delay(self, frame_s: float) -> TransportDelay:
+        """Motor current feedback rides the feedback harness: same transport delay, nothing else."""
+        return TransportDelay(self.feedback.delay_s, frame_s)
+
+    def describe(self) -> dict[str, str]:
+        """Human-readable summary for logs and bag metadata."""
+        return {
+            "profile": self.name,
+            "command_path": self.command_path(0.005).describe(),
+            "feedback_path": self.feedback_path(0.005).describe(),
+            "disabled": ",".join(self.disabled) or "none",
+            "seed": str(self.seed),
+        }
+
+
+def profile_names() -> list[str]:
+    """Built-in and configured profiles (``config/*.yaml`` whose node is ``testenv``)."""
+    names = list(BUILTIN)
+    for path in sorted(config_dir().glob("*.yaml")):
+        if _is_profile(path):
+            names.append(path.stem)
+    return names
+
+
+def _is_profile(path: Path) -> bool:
+    try:
+        import yaml  # noqa: PLC0415
+
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except Exception:
+        return False
+    return isinstance(doc, dict) and list(doc) == ["testenv"]
+
+
+def load_profile(name_or_path: str | Path, *, disable: Iterable[str] = ()) -> Profile:
+    """A profile by name (``none``, ``flight``, ``ail``) or from a parameter file path."""
+    text = str(name_or_path)
+    if text == "none":
+        profile = Profile.none()
+    else:
+        path = Path(text)
+        if not (path.suffix in (".yaml", ".yml") and path.is_file()):
+            path = config_dir() / f"{text}.yaml"
+            if not (path.is_file() and _is_profile(path)):
+                raise UnknownNameError("profile", text, profile_names())
+        profile = Profile.from_parameters(ros_parameters(path), str(path))
+    disable = [d for d in disable if d]
+    return profile.without(*disable) if disable else profile

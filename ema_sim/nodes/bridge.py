@@ -1,0 +1,147 @@
+"""``fmu_bridge``: the JointState pair of topic_based_ros2_control, so a ros2_control stack is the FMU.
+
+topic_based_ros2_control (``TopicBasedSystem``) publishes every joint's command in one JointState on
+its ``joint_commands_topic`` and reads the latest JointState on its ``joint_states_topic``, keeping
+only the last message it got in a read cycle, so every state message here carries all joints. Point
+its URDF parameters at ``/ema/joint_commands`` and ``/ema/joint_states``; joints are named after the
+channels (or ``--joint-prefix``), positions are surface angles in radians (REP 103).
+
+The bridge is the FMU's converters: it turns joint commands into command volts through each
+channel's command curve and holds them like a D/A, publishing ``/ema/fmu/command`` every frame (real
+time, or each ``/clock`` frame under lockstep) while a joint-command publisher exists: when the
+ros2_control stack goes away the commands stop and the EMACs' watchdogs brake the surfaces.
+Feedback volts become radians through the feedback curve; velocity is the frame-to-frame difference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from ema_msgs_py import contract as ct
+from ema_msgs_py.ros import qos, set_stamp, stamp_ns
+from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.signals.plans import channel_list
+
+NS = 1_000_000_000
+
+
+class BridgeNode(SuiteNode):
+    """The node (see the module docstring)."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        super().__init__("fmu_bridge")
+        self.channels = channel_list(args.channels or ["all"])
+        self.joint = {ch: f"{args.joint_prefix}{ch}" for ch in self.channels}
+        self.channel_of = {j: ch for ch, j in self.joint.items()}
+        self.scaling = {ch: ct.scaling(ch) for ch in self.channels}
+        self.frame_ns = round(NS / args.frame_hz)
+        self.lockstep = self.sim_time
+        self.held_v: dict[str, float] = {}
+        self.state: dict[str, tuple[int, float, float]] = {}
+        self.clock_ns: int | None = None
+        self.next_ns: int | None = None
+        self.next_wall = time.monotonic()
+        self.rejected = 0
+        self.frames = 0
+        fq = qos(ct.FRAME_QOS)
+        self.cmd_pub = self.create_publisher(JointState, ct.FMU_COMMAND, fq)
+        self.js_pub = self.create_publisher(JointState, ct.JOINT_STATES, fq)
+        self.create_subscription(JointState, ct.JOINT_COMMANDS, self._on_joint_commands, qos(ct.EVENT_QOS))
+        self.create_subscription(JointState, ct.FMU_FEEDBACK, self._on_feedback, fq)
+        if self.lockstep:
+            self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
+
+    def _on_joint_commands(self, msg: JointState) -> None:
+        try:
+            for i, name in enumerate(msg.name):
+                ch = self.channel_of.get(name)
+                if ch is None:
+                    continue
+                rad = float(msg.position[i]) if i < len(msg.position) else math.nan
+                if not math.isfinite(rad):
+                    self.rejected += 1
+                    self.throttled("bad", f"{name}: non-finite joint command ignored ({self.rejected} so far)")
+                    continue
+                self.held_v[ch] = self.scaling[ch].command_deg_to_v(math.degrees(rad))
+        except Exception as exc:  # a bad message never kills the node
+            self.throttled("drop", f"joint command dropped: {exc}")
+
+    def _on_feedback(self, msg: JointState) -> None:
+        try:
+            stamp = stamp_ns(msg)
+            for i, ch in enumerate(msg.name):
+                if ch not in self.scaling or i >= len(msg.position):
+                    continue
+                rad = math.radians(self.scaling[ch].feedback_v_to_deg(float(msg.position[i])))
+                last = self.state.get(ch)
+                rate = 0.0 if last is None or stamp <= last[0] else (rad - last[1]) / ((stamp - last[0]) / NS)
+                self.state[ch] = (stamp, rad, rate)
+            out = JointState()
+            set_stamp(out, stamp)
+            known = [ch for ch in self.channels if ch in self.state]
+            out.name = [self.joint[ch] for ch in known]
+            out.position = [self.state[ch][1] for ch in known]
+            out.velocity = [self.state[ch][2] for ch in known]
+            self.js_pub.publish(out)
+        except Exception as exc:
+            self.throttled("drop", f"feedback dropped: {exc}")
+
+    def _on_clock(self, msg: Clock) -> None:
+        self.clock_ns = msg.clock.sec * NS + msg.clock.nanosec
+
+    def _publish(self, stamp: int) -> None:
+        if not self.held_v or self.count_publishers(ct.JOINT_COMMANDS) == 0:
+            return
+        out = JointState()
+        set_stamp(out, stamp)
+        names = [ch for ch in self.channels if ch in self.held_v]
+        out.name = names
+        out.position = [self.held_v[ch] for ch in names]
+        self.cmd_pub.publish(out)
+        self.frames += 1
+
+    def poll(self) -> float:  # noqa: D102
+        if self.lockstep:
+            if self.clock_ns is None:
+                return 0.05
+            if self.next_ns is None:
+                self.next_ns = self.clock_ns
+            while self.next_ns <= self.clock_ns:
+                self._publish(self.next_ns)
+                self.next_ns += self.frame_ns
+            return 0.05
+        now = time.monotonic()
+        if now >= self.next_wall:
+            self._publish(self.get_clock().now().nanoseconds)
+            self.next_wall += self.frame_ns / NS
+            if now - self.next_wall > 1.0:
+                self.next_wall = now
+        return self.next_wall - now
+
+    def summary(self) -> dict[str, Any]:  # noqa: D102
+        return {"frames": self.frames, "rejected": self.rejected}
+
+
+def parser() -> argparse.ArgumentParser:
+    """Command-line arguments."""
+    p = argparse.ArgumentParser(prog="fmu_bridge", description="topic_based_ros2_control JointState pair ↔ the suite.")
+    p.add_argument("--channels", action="append", default=[], help="channels to bridge (default all)")
+    p.add_argument("--joint-prefix", default="", help="URDF joint name = prefix + channel")
+    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script ``fmu_bridge``."""
+    return run(BridgeNode, parser(), argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

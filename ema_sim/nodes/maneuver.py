@@ -1,0 +1,261 @@
+"""``maneuver``: drives a test of section 2 as the FMU and the load rig would, and records the bag.
+
+Publishes ``/ema/fmu/command`` (volts, through each channel's command curve, every channel every frame:
+the channels a test does not drive are held at 0°) and ``/ema/load/hinge_moment``, in real time from
+its own 200 Hz loop or one frame per ``/clock`` frame under lockstep; records every topic of the
+graph into a rosbag2 (MCAP) under ``bags/`` with the test's parameters in the bag's metadata. SIGINT
+or SIGTERM closes the bag: every message received so far is in it. In real time it measures, per
+frame, the time from publishing a command to receiving that frame's feedback back on the FMU side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from ema_msgs_py import contract as ct
+from ema_msgs_py.ros import qos, set_stamp
+from ema_sim import __version__
+from ema_sim.config import CHANNELS, load_channel
+from ema_sim.io.bag import BagWriter
+from ema_sim.nodes.common import SuiteNode, percentile_ms, run
+from ema_sim.nodes.recorder import Recorder
+from ema_sim.signals.plans import build_plan
+
+NS = 1_000_000_000
+
+
+def default_bag(test: str) -> Path:
+    """``bags/<test>_<UTC time>``."""
+    return Path("bags") / f"{test}_{dt.datetime.now(dt.UTC).strftime('%Y%m%d_%H%M%S')}"
+
+
+class ManeuverNode(SuiteNode):
+    """The node (see the module docstring)."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        super().__init__("maneuver", automatically_declare_parameters_from_overrides=True)
+        self.auto_ready = False  # ready when the test starts, after its recorder is matched
+        self.lockstep = self.sim_time
+        self.plan = build_plan(args.test, maneuver=args.maneuver, load=args.load,
+                               channels=args.channels or ["left_wing"], duration_s=args.duration)
+        self.frame_ns = round(NS / args.frame_hz)
+        self.frames = max(1, round(self.plan.duration_s * args.frame_hz))
+        self.wait_for = {n for item in args.wait_for for n in item.split(",") if n}
+        commanded = [c for item in (args.command_channels or ["all"]) for c in item.split(",") if c]
+        self.commanded = list(CHANNELS) if "all" in commanded else commanded
+        expect = [c for item in args.expect_feedback for c in item.split(",") if c]
+        self.expect = expect or list(self.plan.channels)
+        t = np.arange(self.frames) / args.frame_hz
+        self.volts = {ch: np.asarray(load_channel(ch).deg_to_v(self.plan.command_deg(ch, t)), dtype=float)
+                      for ch in self.commanded}
+        self.loads = {ch: self.plan.hinge_moment_inlb(ch, t) for ch in self.commanded}
+        meta = self.plan.metadata()
+        meta.update({
+            "model": args.model, "profile": args.profile, "clock": "lockstep" if self.lockstep else "realtime",
+            "frame_hz": f"{args.frame_hz:g}", "frames": str(self.frames), "commanded": ",".join(self.commanded),
+            "generator": f"ema_sim {__version__} maneuver node", "recorded_utc": dt.datetime.now(dt.UTC).isoformat(),
+        })
+        for ch in self.commanded:
+            cfg = load_channel(ch)
+            meta[f"calibration.{ch}"] = json.dumps({"command_cal_v": cfg.command_cal.coefficients(),
+                                                   "feedback_cal_deg": cfg.feedback_cal.coefficients()})
+        self.bag_path = Path(args.bag) if args.bag else default_bag(self.plan.test)
+        self.bag_path.parent.mkdir(parents=True, exist_ok=True)
+        self.writer = BagWriter(self.bag_path, meta)
+        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep)
+        self.recorder.hooks[ct.FMU_FEEDBACK] = self._on_fmu_feedback
+        fq = qos(ct.FRAME_QOS)
+        self.cmd_pub = self.create_publisher(JointState, ct.FMU_COMMAND, fq)
+        self.load_pub = self.create_publisher(JointState, ct.HINGE_MOMENT, fq)
+        self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
+        self.test_pub.publish(String(data=json.dumps(meta)))
+        self.ready: set[str] = set()
+        self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
+        self.clock_ns: int | None = None
+        if self.lockstep:
+            self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
+        self._cmd = JointState(name=list(self.commanded))
+        self._load = JointState(name=list(self.commanded))
+        self.phase = "waiting"
+        self.k = 0
+        self.start_wall = 0.0
+        self.start_ns = 0
+        self.pub_wall: list[float] = []
+        self.arrivals: dict[int, dict[str, float]] = {}
+        self.last_fb_stamp: dict[str, int] = {}
+        self.late_publish = 0
+        self.finish_deadline = 0.0
+        self.drain_until = 0.0
+        self.get_logger().info(f"test {self.plan.test} ({self.plan.title}) on {', '.join(self.plan.channels)}; "
+                               f"{self.plan.duration_s:g} s; bag {self.bag_path}")
+
+    # ----------------------------------------------------------------- callbacks
+    def _on_clock(self, msg: Clock) -> None:
+        ns = msg.clock.sec * NS + msg.clock.nanosec
+        self.clock_ns = ns if self.clock_ns is None else max(self.clock_ns, ns)
+
+    def _on_fmu_feedback(self, raw: bytes, log_time: int) -> None:
+        del log_time
+        msg = deserialize_message(raw, JointState)
+        stamp = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+        now = time.monotonic()
+        for name in msg.name:
+            if stamp > self.last_fb_stamp.get(name, -1):
+                self.last_fb_stamp[name] = stamp
+        if not self.lockstep and self.phase != "waiting":
+            k = (stamp - self.start_ns) // self.frame_ns - 1  # feedback of frame k is stamped at its end
+            if 0 <= k < len(self.pub_wall):
+                frame = self.arrivals.setdefault(k, {})
+                for name in msg.name:
+                    frame.setdefault(name, now)
+
+    # ----------------------------------------------------------------- the test
+    def _publish_frame(self, k: int, stamp: int) -> None:
+        set_stamp(self._cmd, stamp)
+        set_stamp(self._load, stamp)
+        self._cmd.position = [float(self.volts[ch][k]) for ch in self.commanded]
+        self._load.effort = [float(self.loads[ch][k]) for ch in self.commanded]
+        self.load_pub.publish(self._load)
+        self.cmd_pub.publish(self._cmd)
+
+    def poll(self) -> float:  # noqa: D102
+        now = time.monotonic()
+        if self.lockstep or self.phase != "running" or self._slack(now) > 0.003:
+            self.recorder.discover()  # a graph query: in real time only where a frame has room for it
+        if self.phase == "waiting":
+            return self._wait_ready(now)
+        if self.phase == "running":
+            return self._run_lockstep(now) if self.lockstep else self._run_realtime(now)
+        return self._finish_up(now)
+
+    def _wait_ready(self, now: float) -> float:
+        del now
+        if not (self.wait_for <= self.ready and self.matched()):
+            return 0.01
+        self.phase = "running"
+        self.get_logger().info("running")
+        self.announce_ready()
+        now = time.monotonic()
+        self.start_wall = now + 0.05
+        self.start_ns = self.get_clock().now().nanoseconds + 50_000_000
+        return 0.05
+
+    def _finish_up(self, now: float) -> float:
+        if self.phase == "finishing":
+            end = self.start_ns + self.frames * self.frame_ns
+            if all(self.last_fb_stamp.get(c, -1) >= end for c in self.expect) or now > self.finish_deadline:
+                self.phase = "draining"
+                self.drain_until = now + (0.25 if self.lockstep else 0.1)
+            return 0.005
+        # draining: take what is still queued (in real time the EMACs report on while braked: stop anyway)
+        if now >= self.drain_until:
+            self.done = True
+        return max(self.drain_until - now, 0.0)
+
+    def _slack(self, now: float) -> float:
+        return self.start_wall + self.k * self.frame_ns / NS - now
+
+    def _run_realtime(self, now: float) -> float:
+        due = self.start_wall + self.k * self.frame_ns / NS
+        if now < due:
+            return due - now
+        if now - due > self.frame_ns / NS:
+            self.late_publish += 1
+        self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns)
+        self.pub_wall.append(time.monotonic())
+        self.k += 1
+        if self.k >= self.frames:
+            self._finish(now, 1.0)
+            return 0.005
+        return self.start_wall + self.k * self.frame_ns / NS - time.monotonic()
+
+    def _run_lockstep(self, now: float) -> float:
+        if self.clock_ns is None:
+            return 0.01
+        if self.k == 0:
+            self.start_ns = 0
+        while self.k < self.frames and self.k * self.frame_ns <= self.clock_ns:
+            self._publish_frame(self.k, self.k * self.frame_ns)
+            self.k += 1
+        if self.k >= self.frames:
+            self._finish(now, 10.0)
+        return 0.01
+
+    def _finish(self, now: float, wait_s: float) -> None:
+        self.phase = "finishing"
+        self.finish_deadline = now + wait_s
+
+    # ----------------------------------------------------------------- results
+    def latency(self) -> dict[str, Any]:
+        """Command-to-feedback latency per frame (all expected channels back), real time only."""
+        lat, missed = [], 0
+        for k, sent in enumerate(self.pub_wall):
+            got = self.arrivals.get(k, {})
+            if not all(c in got for c in self.expect):
+                missed += 1
+                continue
+            value = max(got[c] for c in self.expect) - sent
+            lat.append(value)
+            if value > self.frame_ns / NS:
+                missed += 1
+        return {"frames": len(self.pub_wall), "answered": len(lat), "missed_frames": missed,
+                "late_publish": self.late_publish, "latency_p50_ms": percentile_ms(lat, 50),
+                "latency_p99_ms": percentile_ms(lat, 99), "latency_max_ms": percentile_ms(lat, 100)}
+
+    def summary(self) -> dict[str, Any]:  # noqa: D102
+        out: dict[str, Any] = {"bag": str(self.bag_path), "test": self.plan.test, "frames_commanded": self.k,
+                               "completed": self.phase in ("finishing", "draining") or self.done,
+                               **self.recorder.summary()}
+        if not self.lockstep:
+            out.update(self.latency())
+        return out
+
+    def close(self) -> None:  # noqa: D102
+        completed = self.k >= self.frames
+        self.writer.set_metadata("frames_commanded", str(self.k))
+        self.writer.set_metadata("completed", str(completed).lower())
+        if not self.lockstep and self.pub_wall:
+            for key, value in self.latency().items():
+                self.writer.set_metadata(f"realtime.{key}", f"{value:.4g}" if isinstance(value, float) else str(value))
+        self.writer.close()
+
+
+def parser() -> argparse.ArgumentParser:
+    """Command-line arguments."""
+    p = argparse.ArgumentParser(prog="maneuver", description="Drive a section-2 test and record the bag.")
+    p.add_argument("--test", default=None,
+                   help="test spec (ema tests lists them), e.g. static_crosstalk:observed=right_wing")
+    p.add_argument("--maneuver", default=None, help="maneuver spec for the driven channels (ema maneuvers)")
+    p.add_argument("--load", default=None, help="load spec for the driven channels")
+    p.add_argument("--channels", action="append", default=[], help="driven channels (comma-separated, or all)")
+    p.add_argument("--duration", type=float, default=None, help="seconds (default: the test's length)")
+    p.add_argument("--bag", default=None, help="bag directory to create (default bags/<test>_<time>)")
+    p.add_argument("--model", default="", help="model name, for the bag's metadata")
+    p.add_argument("--profile", default="", help="test-environment profile, for the bag's metadata")
+    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ)
+    p.add_argument("--command-channels", action="append", default=[], help="channels the FMU commands (default all)")
+    p.add_argument("--expect-feedback", action="append", default=[],
+                   help="channels whose feedback ends each frame (default: the driven ones)")
+    p.add_argument("--wait-for", action="append", default=[], help="node names to wait for on /ema/ready")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script ``maneuver``."""
+    return run(ManeuverNode, parser(), argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

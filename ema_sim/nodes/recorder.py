@@ -1,0 +1,98 @@
+"""Records every topic of the graph into a bag, as ``ros2 bag record -a`` would, raw (no re-serialisation).
+
+Contract topics are subscribed at once with their contract QoS; others are discovered every second
+and subscribed with their publishers' reliability. Under lockstep the log time of a stamped message is
+its stamp (a reproducible bag); in real time it is the receive time, as rosbag2 does.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from ema_msgs_py import contract as ct
+from ema_msgs_py import typestore as ts
+from ema_msgs_py.ros import message_class, qos
+from ema_sim.io.bag import BagWriter
+
+LEADING_STAMP = {"sensor_msgs/msg/JointState", "diagnostic_msgs/msg/DiagnosticArray", "rosgraph_msgs/msg/Clock"}
+"""Types whose serialization starts with a time stamp in the suite's time base (``/rosout`` stamps are
+always system time, so its messages are logged at their receive time)."""
+EXCLUDED = ("/parameter_events",)
+
+
+def leading_stamp_ns(raw: bytes) -> int | None:
+    """The stamp at the start of a CDR message (after the 4-byte encapsulation header)."""
+    if len(raw) < 12:
+        return None
+    fmt = "<iI" if raw[1] == 1 else ">iI"
+    sec, nsec = struct.unpack_from(fmt, raw, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+class Recorder:
+    """Raw subscriptions of a node feeding a :class:`~ema_sim.io.bag.BagWriter`."""
+
+    def __init__(self, node: Node, writer: BagWriter, *, lockstep: bool) -> None:
+        self.node = node
+        self.writer = writer
+        self.lockstep = lockstep
+        self.topics: dict[str, str] = {}
+        self.hooks: dict[str, Callable[[bytes, int], None]] = {}
+        self.last_message = time.monotonic()
+        self.errors = 0
+        self._next_discovery = 0.0
+        for name, spec in ct.TOPICS.items():
+            self._subscribe(name, spec.msgtype, qos(spec.qos if spec.qos.durability == "volatile"
+                                                   else ct.QosSpec(spec.qos.reliability, spec.qos.durability, 100)))
+
+    def _subscribe(self, topic: str, msgtype: str, profile: QoSProfile) -> None:
+        if topic in self.topics or topic in EXCLUDED or msgtype not in ts.typestore().types:
+            return
+        self.topics[topic] = msgtype
+        self.writer.add_topic(topic, msgtype, ct.TOPICS[topic].qos if topic in ct.TOPICS else None)
+        stamped = msgtype in LEADING_STAMP
+        self.node.create_subscription(message_class(msgtype), topic, self._callback(topic, msgtype, stamped),
+                                      profile, raw=True)
+
+    def _callback(self, topic: str, msgtype: str, stamped: bool) -> Callable[[bytes], None]:
+        def record(raw: bytes) -> None:
+            try:
+                stamp = leading_stamp_ns(raw) if stamped else None
+                log_time = stamp if (self.lockstep and stamp is not None) else self.node.get_clock().now().nanoseconds
+                self.writer.write(topic, msgtype, log_time, raw)
+                self.last_message = time.monotonic()
+                hook = self.hooks.get(topic)
+                if hook is not None:
+                    hook(raw, log_time)
+            except Exception as exc:  # never lose the node over one message
+                self.errors += 1
+                self.node.get_logger().error(f"recording {topic}: {exc}", throttle_duration_sec=1.0)
+        return record
+
+    def discover(self) -> None:
+        """Subscribe to topics that appeared since the last call (at most once a second)."""
+        now = time.monotonic()
+        if now < self._next_discovery:
+            return
+        self._next_discovery = now + 1.0
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.topics or topic in EXCLUDED or len(types) != 1:
+                continue
+            infos = self.node.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue
+            offered = infos[0].qos_profile
+            profile = QoSProfile(depth=1000, reliability=offered.reliability, durability=offered.durability)
+            if offered.reliability not in (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT):
+                profile.reliability = ReliabilityPolicy.BEST_EFFORT
+            self._subscribe(topic, types[0], profile)
+
+    def summary(self) -> dict[str, Any]:
+        """Messages recorded per topic."""
+        return {"messages": dict(self.writer.counts), "errors": self.errors}

@@ -1,0 +1,216 @@
+"""Bring the node suite up as separate processes, run one test, bring it down cleanly (no ``ros2 launch`` here).
+
+Order: the EMACs (one process per channel, or one EMAC box), the test environment, the maneuver node
+(which waits for them on ``/ema/ready`` and then records), and under lockstep the clock, which waits
+for all of them. The suite ends when the maneuver node has finished and closed its bag; the others
+then get SIGINT, and SIGKILL only if they do not stop within a few seconds. Each node's output goes to
+``<bag>.logs/<node>.log``; each prints a JSON summary line that :class:`Suite` collects.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from ema_sim.config import CHANNELS
+from ema_sim.errors import EmaError
+from ema_sim.signals.plans import build_plan
+
+SUMMARY_PREFIX = "EMA_SUMMARY "
+STOP_TIMEOUT_S = 8.0
+
+
+def free_domain_id(seed: int | None = None) -> int:
+    """A ROS domain id in 1–101 derived from the pid (so parallel runs on one machine do not meet)."""
+    return 1 + ((os.getpid() if seed is None else seed) % 101)
+
+
+@dataclass
+class SuiteConfig:
+    """One run of the suite."""
+
+    bag: Path
+    model: str = "loada"
+    profile: str = "none"
+    test: str | None = None
+    maneuver: str | None = None
+    load: str | None = None
+    channels: list[str] = field(default_factory=lambda: ["left_wing"])
+    """Driven channels."""
+    emac_channels: list[str] = field(default_factory=lambda: list(CHANNELS))
+    """Channels that get an EMAC node."""
+    duration_s: float | None = None
+    lockstep: bool = False
+    emac_box: bool = False
+    """One process for all EMAC channels (the real EMAC is one box) instead of one per channel."""
+    frame_hz: float = 200.0
+    domain_id: int | None = None
+    disable: list[str] = field(default_factory=list)
+    window: int = 1
+    rt_priority: int = 0
+    """SCHED_FIFO priority for every node (0: normal scheduling)."""
+    extra_emac_args: list[str] = field(default_factory=list)
+
+
+class Suite:
+    """The processes of one run."""
+
+    def __init__(self, cfg: SuiteConfig) -> None:
+        self.cfg = cfg
+        self.domain_id = cfg.domain_id if cfg.domain_id is not None else int(
+            os.environ.get("ROS_DOMAIN_ID") or free_domain_id())
+        self.log_dir = Path(f"{cfg.bag}.logs")
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._logs: dict[str, IO[bytes]] = {}
+        self.started = 0.0
+
+    # ----------------------------------------------------------------- processes
+    def _env(self) -> dict[str, str]:
+        env = dict(os.environ)
+        env["ROS_DOMAIN_ID"] = str(self.domain_id)
+        env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        env["PYTHONUNBUFFERED"] = "1"
+        env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+        return env
+
+    def _spawn(self, name: str, module: str, args: list[str]) -> None:
+        cmd = [sys.executable, "-m", f"ema_sim.nodes.{module}", *args, "--peers", ",".join(self.node_names())]
+        if self.cfg.lockstep and module != "clock":
+            cmd += ["--ros-args", "-p", "use_sim_time:=true"]
+        log = (self.log_dir / f"{name}.log").open("wb")
+        self._logs[name] = log
+        log.write((" ".join(cmd) + "\n").encode())
+        log.flush()
+        pre = None
+        if self.cfg.rt_priority > 0:
+            prio = self.cfg.rt_priority
+
+            def pre() -> None:
+                with contextlib.suppress(OSError):
+                    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+
+        self.procs[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env(),
+                                            start_new_session=True, preexec_fn=pre)  # noqa: PLW1509
+
+    def node_names(self) -> list[str]:
+        """Every node of the run."""
+        return [*self.emac_nodes(), "testenv", "maneuver", *(["simclock"] if self.cfg.lockstep else [])]
+
+    def emac_nodes(self) -> list[str]:
+        """Node names of the EMACs."""
+        return ["emac"] if self.cfg.emac_box else [f"emac_{c}" for c in self.cfg.emac_channels]
+
+    def start(self) -> None:
+        """Start every process (returns at once; the nodes find each other on their own)."""
+        cfg = self.cfg
+        plan = build_plan(cfg.test, maneuver=cfg.maneuver, load=cfg.load, channels=cfg.channels,
+                          duration_s=cfg.duration_s)  # a bad spec is one clear error before anything starts
+        self.duration_s = plan.duration_s
+        if cfg.bag.exists():
+            raise EmaError(f"{cfg.bag} exists already; give a new bag directory")
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.started = time.monotonic()
+        fh = ["--frame-hz", f"{cfg.frame_hz:g}"]
+        if cfg.emac_box:
+            self._spawn("emac", "emac", ["--model", cfg.model, "--channel", ",".join(cfg.emac_channels), *fh,
+                                         *cfg.extra_emac_args])
+        else:
+            for ch in cfg.emac_channels:
+                self._spawn(f"emac_{ch}", "emac", ["--model", cfg.model, "--channel", ch, *fh, *cfg.extra_emac_args])
+        env_args = ["--profile", cfg.profile, *fh]
+        for item in cfg.disable:
+            env_args += ["--disable", item]
+        self._spawn("testenv", "testenv", env_args)
+        wait_for = [*self.emac_nodes(), "testenv"]
+        man = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
+               "--wait-for", ",".join(wait_for), "--channels", ",".join(cfg.channels),
+               "--command-channels", ",".join(cfg.emac_channels),
+               "--expect-feedback", ",".join(c for c in cfg.channels if c in cfg.emac_channels)]
+        for flag, value in (("--test", cfg.test), ("--maneuver", cfg.maneuver), ("--load", cfg.load)):
+            if value:
+                man += [flag, value]
+        if cfg.duration_s is not None:
+            man += ["--duration", f"{cfg.duration_s:g}"]
+        self._spawn("maneuver", "maneuver", man)
+        if cfg.lockstep:
+            clk = ["--wait-for", ",".join([*wait_for, "maneuver"]), "--channels", ",".join(cfg.emac_channels),
+                   "--window", str(cfg.window), "--duration", f"{plan.duration_s:.9g}", *fh]
+            self._spawn("simclock", "clock", clk)
+
+    def wait(self, timeout_s: float | None = None) -> int:
+        """Wait for the maneuver node to finish (its bag closed); returns its exit status."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        man = self.procs["maneuver"]
+        while man.poll() is None:
+            for name, proc in self.procs.items():
+                if name != "maneuver" and proc.poll() not in (None, 0):
+                    self.stop()
+                    raise EmaError(f"node {name} exited with status {proc.returncode}; see {self.log_dir / name}.log")
+            if deadline is not None and time.monotonic() > deadline:
+                self.stop()
+                raise EmaError(f"the test did not finish within {timeout_s:g} s; see {self.log_dir}")
+            time.sleep(0.05)
+        return int(man.returncode)
+
+    def stop(self) -> dict[str, int | None]:
+        """SIGINT to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
+        order = ["simclock", "maneuver", *[n for n in self.procs if n not in ("simclock", "maneuver")]]
+        for name in order:
+            proc = self.procs.get(name)
+            if proc is not None and proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(proc.pid, signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for proc in self.procs.values():
+            try:
+                proc.wait(timeout=max(deadline - time.monotonic(), 0.1))
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(proc.pid, signal.SIGKILL)
+                proc.wait()
+        for log in self._logs.values():
+            log.close()
+        return {name: proc.returncode for name, proc in self.procs.items()}
+
+    def summaries(self) -> dict[str, dict[str, Any]]:
+        """The JSON summary each node printed when it stopped."""
+        out: dict[str, dict[str, Any]] = {}
+        for name in self.procs:
+            path = self.log_dir / f"{name}.log"
+            if not path.is_file():
+                continue
+            for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+                if line.startswith(SUMMARY_PREFIX):
+                    with contextlib.suppress(ValueError):
+                        out[name] = json.loads(line[len(SUMMARY_PREFIX):])
+        return out
+
+    def __enter__(self) -> Suite:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dict[str, Any]]:
+    """Start, wait for the test, stop; the nodes' summaries."""
+    suite = Suite(cfg)
+    try:
+        suite.start()
+        status = suite.wait(timeout_s)
+    except BaseException:
+        suite.stop()
+        raise
+    suite.stop()
+    if status != 0:
+        raise EmaError(f"the maneuver node exited with status {status}; see {suite.log_dir / 'maneuver.log'}")
+    return suite.summaries()
