@@ -17,6 +17,7 @@ from ema_sim.analysis.noise import input_independence, noise_floor, whiteness
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.stepwise import identify
+from ema_sim.io.bag import write_bag
 from ema_sim.io.csv import write_csv
 
 DURATION_S = 30.0
@@ -210,3 +211,24 @@ def test_across_fidelities_hoad3_data_declared_loada():
     # HOAD3's wing linkage (illustrative curves): about 0.5°/1000 in·lb total, LVDT filter 13.4 Hz.
     assert 0.3 < result.final.params.compliance_deg_per_kinlb < 0.7
     assert 8.0 < result.final.params.feedback_lag_hz < 16.0
+
+
+def test_from_a_suite_bag_hoad3_declared_loada(tmp_path, capsys):
+    """The same question asked of a rosbag2 bag in the node suite's format (200 Hz frames)."""
+    data = hoad3_record(seed=73, duration_s=DURATION_S)
+    frames = slice(0, None, 5)  # the FMU's 200 Hz frames
+    bag = write_bag(tmp_path / "hoad3_bag", {
+        "time_s": data.time_s[frames], "command_deg": data.command_deg[frames],
+        "position_deg": data.position_deg[frames], "surface_deg": data.surface_deg[frames],
+        "hinge_moment_inlb": data.hinge_moment_inlb[frames]}, {"model": "hoad3"}, channel="left_wing", frame_hz=200.0)
+    out = tmp_path / "bag.json"
+    assert main(["identify", str(bag), "--model", "loada", "--json", str(out), "-q"]) == 0
+    report = json.loads(out.read_text())
+    assert report["sample_hz"] == pytest.approx(200.0)
+    found = {(a["effect"], a["where"]) for a in report["added"]}
+    assert ("compliance", "surface") in found
+    assert ("lag_filter", "feedback") in found
+    before, after = report["baseline"]["rms_deg"], report["final"]["rms_deg"]
+    assert after["position_deg"] < 0.5 * before["position_deg"]
+    assert after["surface_deg"] < 0.8 * before["surface_deg"]
+    assert "loada" in capsys.readouterr().out

@@ -51,7 +51,10 @@ class Candidate:
     value: float
     flip: bool
     predicted_drop: float
+    """Weighted error it would remove if it entered linearly (all outputs)."""
     rho: float
+    score: float = 0.0
+    """The largest share of one output's error above its noise floor it would remove (ranking)."""
 
 
 @dataclass(frozen=True)
@@ -121,8 +124,23 @@ def _on_bound(value: float, free: Free) -> bool:
     return value <= free.low + 1e-6 * span or value >= free.high - 1e-6 * span
 
 
+def _blocks(problem: Problem, vector: np.ndarray) -> list[np.ndarray]:
+    """A stacked residual split back into its outputs."""
+    n = int(problem.mask.sum())
+    return [vector[k * n:(k + 1) * n] for k in range(len(problem.outputs))]
+
+
+def _excess(problem: Problem, residual: np.ndarray) -> list[float]:
+    """Each output's weighted error above its noise floor (at least 5 % of the noise, so never zero)."""
+    return [max(float(np.dot(b, b)) - b.size, MIN_NOISE_SHARE * b.size) for b in _blocks(problem, residual)]
+
+
 def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
-    """Every applicable effect's best probe, ranked by the error it would remove if it entered linearly."""
+    """Every applicable effect's best probe, ranked by what it would remove if it entered linearly.
+
+    The rank is the share of one output's error above its noise floor: an effect seen on one output
+    only (an LVDT filter) must not be drowned by a larger error on the other.
+    """
     effects = [e for e in EFFECTS if e.applies(ctx) and (e.field is None or e.field not in cur.free)]
     probes: list[tuple[Effect, float]] = [(e, v) for e in effects for v in e.probes(ctx)]
     if not probes:
@@ -138,6 +156,7 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     q = np.linalg.qr(jac, mode="reduced")[0] if jac.shape[1] else np.zeros((r.size, 0))
     r_perp = r - q @ (q.T @ r)
     r_norm = float(np.linalg.norm(r_perp))
+    excess = _excess(problem, r)
     best: dict[str, Candidate] = {}
     for (effect, value), sim in zip(probes, sims, strict=True):
         s = r - problem.weighted_residual(sim)  # the change the effect makes to the model
@@ -163,10 +182,13 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
             if beta <= 0.0:
                 continue
             start = value * min(max(beta, 0.3), 3.0)
-        cand = Candidate(effect, start, flip, rs * rs / ss, rs / (r_norm * math.sqrt(ss)))
-        if effect.key not in best or cand.predicted_drop > best[effect.key].predicted_drop:
+        step = beta * s_perp
+        shares = [float(2.0 * np.dot(rb, sb) - np.dot(sb, sb)) / e
+                  for rb, sb, e in zip(_blocks(problem, r_perp), _blocks(problem, step), excess, strict=True)]
+        cand = Candidate(effect, start, flip, rs * rs / ss, rs / (r_norm * math.sqrt(ss)), max(shares))
+        if effect.key not in best or cand.score > best[effect.key].score:
             best[effect.key] = cand
-    return sorted(best.values(), key=lambda c: -c.predicted_drop)
+    return sorted(best.values(), key=lambda c: -c.score)
 
 
 PRE_QUANTIZER = ("kb", "offset_deg")
@@ -245,9 +267,13 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
     p1 = len(new.free) + q
     delta_bic = n * math.log(rss1 / rss0) + q * math.log(n)
     partial_f = ((rss0 - rss1) / max(q, 1)) / (rss1 / max(n - p1, 1))
-    excess0 = rss0 / n - 1.0
-    drop = (rss0 - rss1) / n
-    excess_share = drop / excess0 if excess0 > 0 else 0.0
+    # The margin is judged per output: an effect that removes a clear share of one output's error
+    # above its noise floor counts even when the other output's error is larger.
+    before = _blocks(problem, cur.residual)
+    after = _blocks(problem, new.residual)
+    drops = [(float(np.dot(b, b)) - float(np.dot(a, a))) / b.size for b, a in zip(before, after, strict=True)]
+    excess_share = max(d * b.size / e for d, b, e in zip(drops, before, _excess(problem, cur.residual), strict=True))
+    drop = max(drops)
     value = None if effect.field is None else float(getattr(new.params, effect.field))
     sim_floor = max((sim_err[o] / problem.sigma_deg[o]) ** 2 for o in problem.outputs)
     reason = ""
@@ -279,11 +305,16 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
     before, after = _rms(problem, cur), _rms(problem, new)
     effect = cand.effect
     steps: list[Step] = []
-    drop_pct = 100.0 * (cur.rss - new.rss) / cur.rss
+    shares = {
+        o: 100.0 * (float(np.dot(b, b)) - float(np.dot(a, a))) / e
+        for o, b, a, e in zip(problem.outputs, _blocks(problem, cur.residual), _blocks(problem, new.residual),
+                              _excess(problem, cur.residual), strict=True)
+    }
+    cut = ", ".join(f"{o.split('_')[0]} −{v:.0f} %" for o, v in shares.items() if v >= 1.0) or "small"
     if new.flip != cur.flip:
         if effect.name == "hinge_moment_sign":
-            evidence = (f"{effect.signature} (partial ρ = {cand.rho:.2f}); reversing it cut the weighted error "
-                        f"variance by {drop_pct:.0f} %")
+            evidence = (f"{effect.signature} (partial ρ = {cand.rho:.2f}); reversing it cut the error above the "
+                        f"noise floor: {cut}")
             return [Step("hinge_moment_sign", "load", {}, {}, before, after, evidence)]
         evidence = (f"{effect.name.replace('_', ' ')} fits only with the hinge moment reversed "
                     f"(partial ρ = {-abs(cand.rho):.2f} with the declared sign): the load was applied backwards")
@@ -293,9 +324,9 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
     sigma = {effect.vocab: new.sigma[effect.field]} if effect.field in new.sigma else {}
     if effect.field == "hysteresis_h_lb_per_in":
         vocab["load_freq_hz"] = problem.load_freq_hz
+    where = f" on the {effect.where}" if effect.where in ("feedback", "position", "surface") else ""
     evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {effect.vocab} = {_fmt(value)}"
-                f"{' on the ' + effect.where if effect.where in ('feedback', 'position', 'surface') else ''}, "
-                f"weighted error variance −{drop_pct:.0f} %")
+                f"{where}; error above the noise floor: {cut}")
     steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence))
     return steps
 
