@@ -242,11 +242,11 @@ def test_non_finite_commands_are_held_and_counted_never_propagated(name, caplog)
 
 
 def test_unknown_model_and_parameter_names_list_the_known_ones():
-    with pytest.raises(UnknownNameError, match=r"known: .*loac, loada, loadf, .*sloac"):
+    with pytest.raises(UnknownNameError, match=r"known: .*loac, loada, loadf, .*second_order, sloac"):
         create("hoad9")
     with pytest.raises(UnknownNameError, match="second-order parameter 'wn_hz'"):
         create("loada", wn_hz=3.0)
-    assert {"loac", "loadf", "loada", "sloac"} <= set(model_names())
+    assert {"loac", "loadf", "loada", "sloac", "second_order"} <= set(model_names())
 
 
 @pytest.mark.parametrize("channel", ["left_wing", "right_wing", "left_rudder", "right_rudder"])

@@ -250,6 +250,43 @@ class ActuatorModel(ABC):
         ``end_s`` (default: the last sample) is where the model stops. ``progress`` gets the
         fraction done after each chunk of about a second of simulated time.
         """
+        bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
+        out = self._run_block(bp_t, u, hm, samples, end_s, progress)
+        held = np.clip(np.searchsorted(bp_t, samples + stages.TIME_EPS_S, side="right") - 1, 0, None)
+        return Record(
+            model=self.name,
+            channel=self.channel.channel,
+            time_s=samples,
+            command_deg=u[:, held],
+            hinge_moment_inlb=hm[:, held],
+            position_deg=out[:, :, O_POS],
+            surface_deg=out[:, :, O_SURF],
+            rate_dps=out[:, :, O_RATE],
+            current_a=out[:, :, O_CUR],
+            bus_v=out[:, :, O_BUS],
+            flags=out[:, :, O_FLAGS].astype(np.int64),
+        )
+
+    def run_outputs(
+        self,
+        time_s: ArrayLike,
+        command_deg: ArrayLike,
+        hinge_moment_inlb: ArrayLike | None = None,
+        *,
+        sample_times: ArrayLike | None = None,
+        end_s: float | None = None,
+    ) -> FloatArray:
+        """:meth:`run` without building a :class:`Record`: the raw ``(n, samples, N_OUT)`` block.
+
+        For callers that simulate many times and need only the outputs (identification).
+        """
+        bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
+        return self._run_block(bp_t, u, hm, samples, end_s, None)
+
+    def _validate_record(
+        self, time_s: ArrayLike, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike | None,
+        sample_times: ArrayLike | None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         bp_t = np.asarray(time_s, dtype=float).ravel()
         m = bp_t.shape[0]
         if m == 0:
@@ -270,6 +307,12 @@ class ActuatorModel(ABC):
         _check_finite(samples, "sample_times")
         if samples.size and (np.any(np.diff(samples) < 0.0) or samples[0] < self._t - stages.TIME_EPS_S):
             raise EmaError("sample_times must be ascending and not before the model time")
+        return bp_t, u, hm, samples
+
+    def _run_block(
+        self, bp_t: FloatArray, u: FloatArray, hm: FloatArray, samples: FloatArray, end_s: float | None,
+        progress: Callable[[float], None] | None,
+    ) -> FloatArray:
         t_end = float(samples[-1]) if end_s is None else float(end_s)
         if samples.size and samples[-1] > t_end + stages.TIME_EPS_S:
             raise EmaError("sample_times go past end_s")
@@ -293,20 +336,7 @@ class ActuatorModel(ABC):
             if last:
                 break
         self._keep_history(all_t, all_u, all_h)
-        held = np.clip(np.searchsorted(all_t, samples + stages.TIME_EPS_S, side="right") - 1, 0, None)
-        return Record(
-            model=self.name,
-            channel=self.channel.channel,
-            time_s=samples,
-            command_deg=all_u[:, held],
-            hinge_moment_inlb=all_h[:, held],
-            position_deg=out[:, :, O_POS],
-            surface_deg=out[:, :, O_SURF],
-            rate_dps=out[:, :, O_RATE],
-            current_a=out[:, :, O_CUR],
-            bus_v=out[:, :, O_BUS],
-            flags=out[:, :, O_FLAGS].astype(np.int64),
-        )
+        return out
 
     def describe(self) -> dict[str, Any]:
         """Name, title, rate and channel, for logs and bag metadata."""
