@@ -217,11 +217,16 @@ def test_step_is_run_one_frame_at_a_time_bit_for_bit(name, n, rich_inputs):
     t, cmd, hm = rich_inputs
     cmd, hm = cmd.copy(), hm.copy()
     cmd[300], hm[301] = math.nan, math.inf
-    a, b = create(name, n=n), create(name, n=n)
-    a.trim(cmd[0], hm[0])
-    b.trim(cmd[0], hm[0])
+    a, b, v = create(name, n=n), create(name, n=n), create(name, n=n)
+    for model in (a, b, v):
+        model.trim(cmd[0], hm[0])
     for k, (tk, c, h) in enumerate(zip(t, cmd, hm, strict=True)):
         s = a.step(c if n == 1 else np.full(n, c), h, FRAME_S)
+        if n == 1:  # the node layer's scalar path: the same frame as floats
+            values = v.step_values(float(c), float(h), FRAME_S)
+            assert all(isinstance(x, float) for x in values)
+            assert np.array_equal(values, [x[0] for x in (s.position_deg, s.surface_deg, s.rate_dps, s.current_a,
+                                                          s.bus_v, s.flags)], equal_nan=True), k
         held_c = c if math.isfinite(c) else cmd[k - 1]
         held_h = h if math.isfinite(h) else hm[k - 1]
         r = b.run([tk], [held_c], [held_h], sample_times=[tk + FRAME_S], end_s=tk + FRAME_S)

@@ -189,7 +189,7 @@ class Noise(Element):
     def step(self, x: Signal) -> Signal:  # noqa: D102
         if self.rms_v == 0.0:
             return x
-        if np.ndim(x) == 0:
+        if isinstance(x, float) or np.ndim(x) == 0:
             if self._next < len(self._drawn):
                 z = self._drawn[self._next]
                 self._next += 1

@@ -158,6 +158,8 @@ class ActuatorModel(ABC):
         """How many non-finite command or hinge-moment values :meth:`step` has held instead of using."""
         self._last_reject_log = -math.inf
         self._t = 0.0
+        self._sample_t = np.zeros(1)
+        """The one sample instant of a frame (reused: the kernels only read it)."""
         self._set_history(np.array([HISTORY_START_S]), np.zeros((self.n, 1)), np.zeros((self.n, 1)))
 
     # ----------------------------------------------------------------- family interface
@@ -221,31 +223,47 @@ class ActuatorModel(ABC):
         history is then trimmed by moving its start: the kernel sees exactly the breakpoints
         :meth:`run` would give it, so stepping frame by frame equals one run bit for bit.
         """
+        return self._sample(self._advance(command_deg, hinge_moment_inlb, frame_s))
+
+    def step_values(self, command_deg: float, hinge_moment_inlb: float = 0.0, frame_s: float = 0.005) -> list[float]:
+        """:meth:`step` of instance 0, its outputs as Python floats in :data:`OUTPUT_FIELDS` order.
+
+        The same frame as :meth:`step`, without building arrays for one instance: the per-frame path of
+        the node layer (flags come back as a float; ``int()`` them).
+        """
+        return self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
+
+    def _advance(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike, frame_s: float) -> FloatArray:
         if not (math.isfinite(frame_s) and frame_s > 0.0):
             raise ValueError(f"frame_s must be positive, got {frame_s!r}")
-        if self._h_hi == self._buf_t.shape[0]:
-            self._set_history(self._hist_t, self._hist_u, self._hist_h)  # compacts (and grows when needed)
         hi = self._h_hi
-        col_u = self._buf_u[:, hi]
-        col_h = self._buf_h[:, hi]
-        if self.n == 1 and isinstance(command_deg, float | int) and isinstance(hinge_moment_inlb, float | int):
-            col_u[0] = command_deg
-            col_h[0] = hinge_moment_inlb
+        if hi == self._buf_t.shape[0]:
+            self._set_history(self._hist_t, self._hist_u, self._hist_h)  # compacts (and grows when needed)
+            hi = self._h_hi
+        buf_u, buf_h = self._buf_u, self._buf_h
+        if self.n == 1 and type(command_deg) is float and type(hinge_moment_inlb) is float:
+            if math.isfinite(command_deg) and math.isfinite(hinge_moment_inlb):
+                buf_u[0, hi] = command_deg
+                buf_h[0, hi] = hinge_moment_inlb
+            else:
+                self._hold_bad(np.array([command_deg]), np.array([hinge_moment_inlb]), hi)
         else:
-            col_u[:] = _as_batch(command_deg, self.n, "command_deg")
-            col_h[:] = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
-        self._hold_bad(col_u, col_h, self._buf_u[:, hi - 1], self._buf_h[:, hi - 1])
+            self._hold_bad(_as_batch(command_deg, self.n, "command_deg"),
+                           _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb"), hi)
         t0 = self._t
         self._buf_t[hi] = t0
         self._h_hi = hi + 1
         t_end = t0 + frame_s
-        bp_u, bp_h = self._hist_u, self._hist_h
+        lo = self._h_lo
+        bp_u, bp_h = buf_u[:, lo:hi + 1], buf_h[:, lo:hi + 1]
         if self.n > 1:  # column slices of a batch are strided; the kernels take contiguous rows
             bp_u, bp_h = np.ascontiguousarray(bp_u), np.ascontiguousarray(bp_h)
-        out = self._integrate(self._hist_t, bp_u, bp_h, t_end, np.array([t_end]))
+        sample_t = self._sample_t
+        sample_t[0] = t_end
+        out = self._integrate(self._buf_t[lo:hi + 1], bp_u, bp_h, t_end, sample_t)
         self._t = t_end
         self._trim_history()
-        return self._sample(out[:, 0])
+        return out[:, 0]
 
     def run(
         self,
@@ -333,16 +351,15 @@ class ActuatorModel(ABC):
         }
 
     # ----------------------------------------------------------------- helpers
-    def _hold_bad(self, u: FloatArray, hm: FloatArray, last_u: FloatArray, last_h: FloatArray) -> None:
-        """Replace non-finite inputs (in place) by the last good ones; count and log them."""
-        if self.n == 1 and math.isfinite(u[0]) and math.isfinite(hm[0]):
-            return
+    def _hold_bad(self, u: FloatArray, hm: FloatArray, hi: int) -> None:
+        """Write the frame's inputs at ``hi``, non-finite ones replaced by the last good; count and log them."""
+        last_u, last_h = self._buf_u[:, hi - 1], self._buf_h[:, hi - 1]
         bad_u = ~np.isfinite(u)
         bad_h = ~np.isfinite(hm)
         if bad_u.any() or bad_h.any():
             self.rejected_inputs += int(bad_u.sum() + bad_h.sum())
-            u[bad_u] = last_u[bad_u]
-            hm[bad_h] = last_h[bad_h]
+            u = np.where(bad_u, last_u, u)
+            hm = np.where(bad_h, last_h, hm)
             now = time.monotonic()
             if now - self._last_reject_log >= 1.0:
                 self._last_reject_log = now
@@ -350,6 +367,8 @@ class ActuatorModel(ABC):
                     "%s/%s: non-finite input held at its last value (%d rejected so far)",
                     self.name, self.channel.channel, self.rejected_inputs,
                 )
+        self._buf_u[:, hi] = u
+        self._buf_h[:, hi] = hm
 
     # The input history: breakpoints still inside the longest delay, as views into preallocated
     # buffers (``step`` appends in place, trimming moves the start; compaction is rare).
@@ -381,8 +400,8 @@ class ActuatorModel(ABC):
     def _trim_history(self) -> None:
         """Drop the breakpoints no delay can reach any more (the latest one before the horizon stays)."""
         horizon = self._t - self.max_delay_s - 1e-6
-        buf, lo, hi = self._buf_t, self._h_lo, self._h_hi
-        while lo + 1 < hi and buf[lo + 1] <= horizon:  # a few breakpoints: faster than searchsorted
+        item, lo, hi = self._buf_t.item, self._h_lo, self._h_hi
+        while lo + 1 < hi and item(lo + 1) <= horizon:  # a few breakpoints: faster than searchsorted
             lo += 1
         self._h_lo = lo
 
