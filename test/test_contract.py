@@ -60,7 +60,7 @@ def test_typestore_messages_round_trip_without_ros():
 def test_console_scripts_are_the_node_names():
     text = (ROOT / "setup.py").read_text()
     for script, module in [("emac", "emac"), ("testenv", "testenv"), ("maneuver", "maneuver"),
-                           ("simclock", "clock"), ("fmu_bridge", "bridge")]:
+                           ("simclock", "clock"), ("fmu_bridge", "bridge"), ("ema_container", "container")]:
         assert f'"{script} = ema_sim.nodes.{module}:main"' in text
         assert (ROOT / "ema_sim" / "nodes" / f"{module}.py").is_file()
 
