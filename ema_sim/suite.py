@@ -1,10 +1,23 @@
-"""Bring the node suite up as separate processes, run one test, bring it down cleanly (no ``ros2 launch`` here).
+"""Bring the node suite up, run one test, bring it down cleanly (no ``ros2 launch`` here).
 
-Order: the EMACs (one process per channel, or one EMAC box), the test environment, the maneuver node
-(which waits for them on ``/ema/ready`` and then records), and under lockstep the clock, which waits
-for all of them. The suite ends when the maneuver node has finished and closed its bag; the others
-then get SIGINT, and SIGKILL only if they do not stop within a few seconds. Each node's output goes to
-``<bag>.logs/<node>.log``; each prints a JSON summary line that :class:`Suite` collects.
+The same nodes — the EMAC channels, the test environment, the maneuver node (FMU, load rig and
+recorder) and, under lockstep, the clock — hosted three ways (``layout``):
+
+* ``single`` (default): one process composes every node (:mod:`ema_sim.nodes.container`): per-frame
+  messages between them are handed over in-process and still published on the contract topics for
+  anyone outside. The only layout that meets the lockstep speed target on a 2-core machine.
+* ``container``: the EMACs, the test environment and the clock composed; the maneuver node in a process
+  of its own, talking to them over DDS as an external flight computer would.
+* ``processes``: one process per node.
+
+and the EMACs two ways (``emac``): ``box``, one EMAC node hosting the five channels as the real EMAC is
+one box (default), or ``channels``, one EMAC node per channel.
+
+The maneuver node waits for the others on ``/ema/ready`` and then records; under lockstep the clock
+waits for all of them. The suite ends when the maneuver node has finished and closed its bag; the
+others then get SIGINT, and SIGKILL only if they do not stop within a few seconds. Each process's
+output goes to ``<bag>.logs/<process>.log``; each node prints a JSON summary line that :class:`Suite`
+collects by node name.
 """
 
 from __future__ import annotations
@@ -12,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -26,6 +40,10 @@ from ema_sim.signals.plans import build_plan
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
 STOP_TIMEOUT_S = 8.0
+LAYOUTS = ("single", "container", "processes")
+DEFAULT_LAYOUT = "single"
+EMAC_HOSTING = ("box", "channels")
+DEFAULT_EMAC = "box"
 
 
 def free_domain_id(seed: int | None = None) -> int:
@@ -49,8 +67,12 @@ class SuiteConfig:
     """Channels that get an EMAC node."""
     duration_s: float | None = None
     lockstep: bool = False
-    emac_box: bool = False
-    """One process for all EMAC channels (the real EMAC is one box) instead of one per channel."""
+    emac_box: bool | None = None
+    """Shorthand: True for ``emac="box"``, False for ``emac="channels"``."""
+    layout: str = DEFAULT_LAYOUT
+    """``single``, ``container`` or ``processes`` (see the module docstring)."""
+    emac: str = DEFAULT_EMAC
+    """``box``: one EMAC node for every channel; ``channels``: one EMAC node per channel."""
     frame_hz: float = 200.0
     domain_id: int | None = None
     disable: list[str] = field(default_factory=list)
@@ -58,6 +80,17 @@ class SuiteConfig:
     rt_priority: int = 0
     """SCHED_FIFO priority for every node (0: normal scheduling)."""
     extra_emac_args: list[str] = field(default_factory=list)
+    measure_busy: bool = False
+    """Composed layouts: account the container thread's time to each node (``busy_s`` in the summaries)."""
+
+    def __post_init__(self) -> None:
+        if self.emac_box is not None:
+            self.emac = "box" if self.emac_box else "channels"
+        if self.layout not in LAYOUTS:
+            raise EmaError(f"unknown layout {self.layout!r}; layouts: {', '.join(LAYOUTS)}")
+        if self.emac not in EMAC_HOSTING:
+            raise EmaError(f"unknown EMAC hosting {self.emac!r}; give {' or '.join(EMAC_HOSTING)}")
+        self.emac_box = self.emac == "box"
 
 
 class Suite:
@@ -81,9 +114,9 @@ class Suite:
         env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
         return env
 
-    def _spawn(self, name: str, module: str, args: list[str]) -> None:
+    def _spawn(self, name: str, module: str, args: list[str], *, sim_time: bool | None = None) -> None:
         cmd = [sys.executable, "-m", f"ema_sim.nodes.{module}", *args, "--peers", ",".join(self.node_names())]
-        if self.cfg.lockstep and module != "clock":
+        if self.cfg.lockstep and (module != "clock" if sim_time is None else sim_time):
             cmd += ["--ros-args", "-p", "use_sim_time:=true"]
         log = (self.log_dir / f"{name}.log").open("wb")
         self._logs[name] = log
@@ -100,13 +133,43 @@ class Suite:
         self.procs[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env(),
                                             start_new_session=True, preexec_fn=pre)  # noqa: PLW1509
 
+    @property
+    def fmu_process(self) -> str:
+        """The process whose end is the end of the test: the maneuver node's (it closes the bag)."""
+        return "suite" if self.cfg.layout == "single" else "maneuver"
+
     def node_names(self) -> list[str]:
-        """Every node of the run."""
+        """Every node of the run (the container's own node aside: it only carries the others' messages)."""
         return [*self.emac_nodes(), "testenv", "maneuver", *(["simclock"] if self.cfg.lockstep else [])]
 
     def emac_nodes(self) -> list[str]:
         """Node names of the EMACs."""
         return ["emac"] if self.cfg.emac_box else [f"emac_{c}" for c in self.cfg.emac_channels]
+
+    def node_args(self, duration_s: float) -> dict[str, list[str]]:
+        """Command-line arguments of each node (``emac``, ``testenv``, ``maneuver``, ``simclock``)."""
+        cfg = self.cfg
+        fh = ["--frame-hz", f"{cfg.frame_hz:g}"]
+        env_args = ["--profile", cfg.profile, *fh]
+        for item in cfg.disable:
+            env_args += ["--disable", item]
+        wait_for = [*self.emac_nodes(), "testenv"]
+        man = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
+               "--wait-for", ",".join(wait_for), "--channels", ",".join(cfg.channels),
+               "--command-channels", ",".join(cfg.emac_channels),
+               "--expect-feedback", ",".join(c for c in cfg.channels if c in cfg.emac_channels)]
+        for flag, value in (("--test", cfg.test), ("--maneuver", cfg.maneuver), ("--load", cfg.load)):
+            if value:
+                man += [flag, value]
+        if cfg.duration_s is not None:
+            man += ["--duration", f"{cfg.duration_s:g}"]
+        return {
+            "emac": ["--model", cfg.model, *fh, *cfg.extra_emac_args],
+            "testenv": env_args,
+            "maneuver": man,
+            "simclock": ["--wait-for", ",".join([*wait_for, "maneuver"]), "--channels", ",".join(cfg.emac_channels),
+                         "--window", str(cfg.window), "--duration", f"{duration_s:.9g}", *fh],
+        }
 
     def start(self) -> None:
         """Start every process (returns at once; the nodes find each other on their own)."""
@@ -118,40 +181,36 @@ class Suite:
             raise EmaError(f"{cfg.bag} exists already; give a new bag directory")
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.started = time.monotonic()
-        fh = ["--frame-hz", f"{cfg.frame_hz:g}"]
-        if cfg.emac_box:
-            self._spawn("emac", "emac", ["--model", cfg.model, "--channel", ",".join(cfg.emac_channels), *fh,
-                                         *cfg.extra_emac_args])
+        args = self.node_args(plan.duration_s)
+        if cfg.layout == "processes":
+            if cfg.emac_box:
+                self._spawn("emac", "emac", ["--channel", ",".join(cfg.emac_channels), *args["emac"]])
+            else:
+                for ch in cfg.emac_channels:
+                    self._spawn(f"emac_{ch}", "emac", ["--channel", ch, *args["emac"]])
+            self._spawn("testenv", "testenv", args["testenv"])
+            self._spawn("maneuver", "maneuver", args["maneuver"])
+            if cfg.lockstep:
+                self._spawn("simclock", "clock", args["simclock"])
+            return
+        host = ["--channels", ",".join(cfg.emac_channels), "--emac-args", shlex.join(args["emac"]),
+                "--testenv-args", shlex.join(args["testenv"])]
+        host += ["--emac-box"] if cfg.emac_box else []
+        host += ["--measure-busy"] if cfg.measure_busy else []
+        host += ["--clock-args", shlex.join(args["simclock"])] if cfg.lockstep else []
+        if cfg.layout == "single":
+            self._spawn("suite", "container", [*host, "--maneuver-args", shlex.join(args["maneuver"])], sim_time=True)
         else:
-            for ch in cfg.emac_channels:
-                self._spawn(f"emac_{ch}", "emac", ["--model", cfg.model, "--channel", ch, *fh, *cfg.extra_emac_args])
-        env_args = ["--profile", cfg.profile, *fh]
-        for item in cfg.disable:
-            env_args += ["--disable", item]
-        self._spawn("testenv", "testenv", env_args)
-        wait_for = [*self.emac_nodes(), "testenv"]
-        man = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
-               "--wait-for", ",".join(wait_for), "--channels", ",".join(cfg.channels),
-               "--command-channels", ",".join(cfg.emac_channels),
-               "--expect-feedback", ",".join(c for c in cfg.channels if c in cfg.emac_channels)]
-        for flag, value in (("--test", cfg.test), ("--maneuver", cfg.maneuver), ("--load", cfg.load)):
-            if value:
-                man += [flag, value]
-        if cfg.duration_s is not None:
-            man += ["--duration", f"{cfg.duration_s:g}"]
-        self._spawn("maneuver", "maneuver", man)
-        if cfg.lockstep:
-            clk = ["--wait-for", ",".join([*wait_for, "maneuver"]), "--channels", ",".join(cfg.emac_channels),
-                   "--window", str(cfg.window), "--duration", f"{plan.duration_s:.9g}", *fh]
-            self._spawn("simclock", "clock", clk)
+            self._spawn("container", "container", host, sim_time=True)
+            self._spawn("maneuver", "maneuver", args["maneuver"])
 
     def wait(self, timeout_s: float | None = None) -> int:
         """Wait for the maneuver node to finish (its bag closed); returns its exit status."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        man = self.procs["maneuver"]
+        man = self.procs[self.fmu_process]
         while man.poll() is None:
             for name, proc in self.procs.items():
-                if name != "maneuver" and proc.poll() not in (None, 0):
+                if name != self.fmu_process and proc.poll() not in (None, 0):
                     self.stop()
                     raise EmaError(f"node {name} exited with status {proc.returncode}; see {self.log_dir / name}.log")
             if deadline is not None and time.monotonic() > deadline:
@@ -162,7 +221,8 @@ class Suite:
 
     def stop(self) -> dict[str, int | None]:
         """SIGINT to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
-        order = ["simclock", "maneuver", *[n for n in self.procs if n not in ("simclock", "maneuver")]]
+        first = ("simclock", "maneuver", "suite", "container")
+        order = [*first, *[n for n in self.procs if n not in first]]
         for name in order:
             proc = self.procs.get(name)
             if proc is not None and proc.poll() is None:
@@ -181,7 +241,7 @@ class Suite:
         return {name: proc.returncode for name, proc in self.procs.items()}
 
     def summaries(self) -> dict[str, dict[str, Any]]:
-        """The JSON summary each node printed when it stopped."""
+        """The JSON summary each node printed when it stopped, by node name."""
         out: dict[str, dict[str, Any]] = {}
         for name in self.procs:
             path = self.log_dir / f"{name}.log"
@@ -190,7 +250,8 @@ class Suite:
             for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
                 if line.startswith(SUMMARY_PREFIX):
                     with contextlib.suppress(ValueError):
-                        out[name] = json.loads(line[len(SUMMARY_PREFIX):])
+                        summary = json.loads(line[len(SUMMARY_PREFIX):])
+                        out[str(summary.get("node", name))] = {**summary, "process": name}
         return out
 
     def __enter__(self) -> Suite:
@@ -212,5 +273,6 @@ def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dic
         raise
     suite.stop()
     if status != 0:
-        raise EmaError(f"the maneuver node exited with status {status}; see {suite.log_dir / 'maneuver.log'}")
+        raise EmaError(f"the maneuver node exited with status {status}; see "
+                       f"{suite.log_dir / (suite.fmu_process + '.log')}")
     return suite.summaries()

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ema_sim.errors import EmaError
+from ema_sim.suite import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = SuiteConfig(
         bag=bag, model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver, load=args.load,
         channels=driven, emac_channels=channel_list(args.emacs or list(CHANNELS)), duration_s=args.duration,
-        lockstep=args.lockstep, emac_box=args.emac_box, domain_id=args.domain_id, disable=args.disable,
-        rt_priority=args.rt_priority,
+        lockstep=args.lockstep, layout=args.layout, emac="box" if args.emac_box else args.emac,
+        domain_id=args.domain_id, disable=args.disable, rt_priority=args.rt_priority, window=args.window,
     )
     suite = Suite(cfg)
     for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
@@ -57,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     suite.stop()
     if status != 0:
-        raise EmaError(f"the maneuver node exited with status {status}; see {suite.log_dir / 'maneuver.log'}")
+        raise EmaError(f"the maneuver node exited with status {status}; see "
+                       f"{suite.log_dir / (suite.fmu_process + '.log')}")
     _report(suite, bag, bag_info)
     return 0
 
@@ -86,8 +88,8 @@ def _report(suite: Any, bag: Path, bag_info: Any) -> None:
 def register(sub: Any) -> None:
     """Add ``launch`` (and ``tests``, the list of section-2 tests) to the ``ema`` parser."""
     p = sub.add_parser("launch", help="run the ROS 2 node suite: five EMACs, test environment, clock, maneuver",
-                       description="Bring up the EMAC channels, the test environment, (lockstep) the clock and "
-                                   "the maneuver node as separate processes, run one test, record the bag, stop.")
+                       description="Bring up the five EMAC channels, the test environment, (lockstep) the clock "
+                                   "and the maneuver node, run one test, record the bag, stop.")
     p.add_argument("--model", default="loada", help="model of every channel (ema models)")
     p.add_argument("--profile", default="none", help="test environment: ail, flight or none")
     p.add_argument("--maneuver", default=None, help="maneuver spec of the driven channels (ema maneuvers)")
@@ -98,8 +100,16 @@ def register(sub: Any) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the test's length)")
     p.add_argument("--lockstep", action="store_true", help="run on /clock, frame by frame, as fast as possible")
     p.add_argument("--bag", default=None, help="bag directory to create (default bags/<test>_<time>)")
-    p.add_argument("--emac-box", action="store_true",
-                   help="one process for all EMAC channels (the real EMAC is one box); faster")
+    p.add_argument("--layout", choices=LAYOUTS, default=DEFAULT_LAYOUT,
+                   help="single (default): every node composed in one process; container: EMACs, test "
+                        "environment and clock composed, the maneuver in its own process; processes: one process "
+                        "per node")
+    p.add_argument("--emac", choices=EMAC_HOSTING, default=DEFAULT_EMAC,
+                   help="box (default): one EMAC node hosting the five channels, as the real EMAC is one box; "
+                        "channels: one EMAC node per channel")
+    p.add_argument("--emac-box", action="store_true", help="shorthand for --emac box")
+    p.add_argument("--window", type=int, default=1,
+                   help="lockstep: frames the clock may run ahead of the slowest EMAC (1: strictly frame by frame)")
     p.add_argument("--disable", action="append", default=[], help="switch a test-environment element off")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's, "
                    "else one derived from the pid)")

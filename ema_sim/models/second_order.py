@@ -544,12 +544,13 @@ class SecondOrderModel(ActuatorModel):
         for prm in self.params:
             prm.validate()
         self._P = np.stack([prm.vector() for prm in self.params])
+        self._max_delay_s = float(self._P[:, P_DELAY].max())
         self._X = np.zeros((self.n, N_STATE))
         self.trim()
 
     @property
     def max_delay_s(self) -> float:  # noqa: D102
-        return float(self._P[:, P_DELAY].max())
+        return self._max_delay_s
 
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
         """Invert stages 2 and 5 (quantization is left to land within half a step)."""
