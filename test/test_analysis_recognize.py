@@ -8,6 +8,8 @@ from analysis_data import measured
 
 from ema_sim.analysis import series
 from ema_sim.analysis.recognize import recognize
+from ema_sim.io.csv import MeasuredData
+from ema_sim.signals import parse_maneuver
 
 CASES = [
     ("sweep:f0_hz=0.2,f1_hz=18,amp_deg=1,sweep_s=60", None, ["sweep"]),
@@ -82,3 +84,24 @@ def test_holds_survive_noise_spikes_and_edges_need_real_jumps():
     assert e.index == 500
     assert e.jump == pytest.approx(1.0, abs=0.01)
     assert series.edges(0.01 * x, 0.001) == []  # below 0.05°: not a step
+
+
+def test_a_slow_sine_under_a_noisy_command_is_not_a_hold():
+    """Per-sample changes below the hold tolerance still add up: a 0.3 Hz, 1° sine at 200 Hz with
+    0.013° of command noise (the AIL environment's, on the EMAC side) moves 0.01° per sample."""
+    t = np.arange(0, 20, 0.005)
+    u = np.sin(2 * np.pi * 0.3 * t) + np.random.default_rng(2).normal(0, 0.013, t.size)
+    assert series.holds(u, 60) == []
+
+
+def test_a_slow_sweep_cut_short_by_the_signal_takes_the_spec_window():
+    spec = "sweep:f0_hz=0.2,f1_hz=18,amp_deg=1,bias_deg=0,sweep_s=58,log=True,lead_s=1"
+    man = parse_maneuver(spec)
+    t = np.arange(0, 59, 0.005)
+    rng = np.random.default_rng(3)
+    u = man.command_deg(t) + rng.normal(0, 0.013, t.size)
+    u = 0.0213 * np.round(u / 0.0213)  # 5 mV quantization in degrees
+    data = MeasuredData(time_s=t, command_deg=u, position_deg=u, metadata={"maneuver": spec})
+    (seg,) = recognize(data).of("sweep")
+    assert t[seg.start] == pytest.approx(1.0, abs=0.01)
+    assert t[seg.stop - 1] == pytest.approx(59.0, abs=0.01)

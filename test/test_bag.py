@@ -134,3 +134,50 @@ def test_calibration_recorded_in_the_bag_is_the_one_used(bag):
     cal = json.loads(info.metadata["calibration.right_rudder"])
     volts = np.polynomial.polynomial.polyval(cols["command_deg"], cal["command_cal_v"])
     assert data.command_v == pytest.approx(volts, abs=1e-12)
+
+
+def test_the_lean_mcap_writer_makes_the_bag_rosbags_writer_makes(tmp_path):
+    """Several chunks, several topics, out-of-order log times: both readers see rosbags' own bag."""
+    from mcap.reader import make_reader  # noqa: PLC0415
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer  # noqa: PLC0415
+
+    from ema_msgs_py import contract as ct  # noqa: PLC0415
+    from ema_msgs_py import typestore as ts  # noqa: PLC0415
+    from ema_sim.io.bag import BagWriter  # noqa: PLC0415
+
+    topics = [ct.FMU_COMMAND, ct.EMAC_FEEDBACK, ct.SURFACE]
+    rng = np.random.default_rng(5)
+    rows = []
+    for k in range(6000):  # ≈ 0.8 MB: four chunks of 256 KiB
+        topic = topics[k % 3]
+        stamp = k * 1_000_000 + int(rng.integers(-3, 3)) * 1_000_000
+        raw = ts.serialize(ts.joint_state(stamp, ["left_wing", "right_wing"], rng.normal(size=2), [], [1.0, 2.0]))
+        rows.append((topic, stamp, raw))
+    ours = BagWriter(tmp_path / "ours", {"test": "steps"})
+    theirs = Writer(tmp_path / "theirs", version=9, storage_plugin=StoragePlugin.MCAP)
+    theirs.open()
+    conns = {t: theirs.add_connection(t, ct.JOINT_STATE, typestore=ts.typestore(),
+                                      offered_qos_profiles=ts.qos_profiles(ct.FRAME_QOS)) for t in topics}
+    theirs.set_custom_data("test", "steps")
+    for topic, stamp, raw in rows:
+        ours.write(topic, ct.JOINT_STATE, stamp, raw)
+        theirs.write(conns[topic], stamp, raw)
+    ours.close()
+    theirs.close()
+
+    def content(path):
+        with Reader(path) as reader:
+            msgs = sorted((c.topic, t, bytes(r)) for c, t, r in reader.messages())
+            meta = (reader.duration, reader.start_time, reader.message_count,
+                    {c.topic: c.msgcount for c in reader.connections},
+                    (path / "metadata.yaml").read_text().count("test: steps"))
+        with next(path.glob("*.mcap")).open("rb") as fh:  # the summary and the chunk and message indexes
+            mcap = make_reader(fh)
+            indexed = sorted((ch.topic, m.log_time, bytes(m.data)) for _, ch, m in mcap.iter_messages())
+            chunks = len(mcap.get_summary().chunk_indexes)
+        return msgs, meta, indexed, chunks
+
+    mine, want = content(tmp_path / "ours"), content(tmp_path / "theirs")
+    assert mine[:3] == want[:3]
+    assert mine[0] == sorted(rows)
+    assert mine[3] >= 4

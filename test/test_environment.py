@@ -81,6 +81,25 @@ def test_elements_step_arrays_of_channels_like_scalars():
         assert np.allclose(out[:, j], run(scalar, x[:, j]), atol=1e-15)
 
 
+def test_noise_is_its_generators_stream_in_order_whatever_the_block_it_draws():
+    """Draws are made a block at a time for speed: scalars and arrays still take the stream in order."""
+    noise = Noise(0.003, seed=43, stream=(2, 0))
+    got = [noise.step(0.0) for _ in range(1500)]
+    got += list(noise.step(np.zeros(700)))
+    got += [noise.step(0.0) for _ in range(10)]
+    want = 0.003 * np.random.default_rng([43, 2, 0]).standard_normal(2210)
+    assert np.array_equal(np.asarray(got), want)
+
+
+def test_quantizer_rounds_scalars_like_arrays_and_saturates():
+    q = Quantizer(0.005, full_scale_v=10.0)
+    x = np.random.default_rng(3).uniform(-10.1, 10.1, 5000)
+    assert np.array_equal([q.step(float(v)) for v in x], q.step(x))
+    assert q.step(12.0) == 10.0
+    assert q.step(-12.0) == -10.0
+    assert math.isnan(q.step(math.nan))
+
+
 def test_profiles_reproduce_the_reported_loop_delays():
     model_delay = load_channel("left_wing").section("second_order")["delay_s"]
     ail, flight = load_profile("ail"), load_profile("flight")

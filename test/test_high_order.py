@@ -194,6 +194,27 @@ def test_hoad_command_and_feedback_are_quantized_at_5_mv_through_the_calibration
     assert np.max(np.abs(x_in[0] * DEG_PER_IN - [0.0123, 0.3, -7.7])) <= 0.5 * 0.005 * 4.3
 
 
+@pytest.mark.parametrize("channel", ["left_wing", "right_rudder"])
+@pytest.mark.parametrize("kwargs", [{}, {"quantization_v": 0.0}, {"noise": False},
+                                    {"noise": False, "quantization_v": 0.0}])
+def test_command_path_kernel_is_the_calibration_curves_to_the_last_bit(channel, kwargs):
+    """Stage 2 is compiled for speed; it must stay the Cubic curve, its 8 Newton steps and its slope exactly."""
+    model = create("hoad3", channel, **kwargs)
+    cal = load_channel(channel).command_cal
+    u = np.random.default_rng(4).uniform(-32.0, 32.0, (1, 20_000))
+    dpi, quant = model.params[0].deg_per_in, model.params[0].quantization_v
+    if quant > 0.0 or model.noise:
+        volts = cal(u)
+        volts = quant * np.floor(volts / quant + 0.5) if quant > 0.0 else volts
+        deg = cal.inverse(volts) if quant > 0.0 else u
+        want = deg / dpi, 1.0 / (cal.slope(deg) * dpi)
+    else:
+        want = u / dpi, np.zeros_like(u)
+    x_in, slope = model._command_in(u)
+    assert np.array_equal(x_in, want[0])
+    assert np.array_equal(slope, want[1])
+
+
 def test_hoad_noise_is_seeded_reproducible_switchable_and_at_its_measured_level():
     t = frames(2.0)
     cmd = np.ones_like(t)

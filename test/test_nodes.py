@@ -35,14 +35,28 @@ def domain(offset):
 
 
 # --------------------------------------------------------------------------- lockstep, AIL profile
+AIL_RUN = {"model": "loada", "profile": "ail", "maneuver": "steps:amps_deg=1/5,lead_s=0.2,hold_s=0.5",
+           "load": "sine:amp_inlb=300,freq_hz=1", "channels": ["left_wing"], "lockstep": True}
+
+
 @pytest.fixture(scope="module")
 def lockstep_ail(tmp_path_factory):
+    """One process per node, one EMAC node per channel."""
     bag = tmp_path_factory.mktemp("suite") / "ail"
-    cfg = SuiteConfig(bag=bag, model="loada", profile="ail", maneuver="steps:amps_deg=1/5,lead_s=0.2,hold_s=0.5",
-                      load="sine:amp_inlb=300,freq_hz=1", channels=["left_wing"], lockstep=True,
-                      domain_id=domain(1))
+    cfg = SuiteConfig(bag=bag, layout="processes", emac="channels", domain_id=domain(1), **AIL_RUN)
     summaries = run_suite(cfg, timeout_s=240)
     return bag, summaries
+
+
+@pytest.fixture(scope="module", params=[("single", "box"), ("container", "channels")])
+def lockstep_composed(request, tmp_path_factory):
+    """The composed layouts: everything in one process with the EMAC box (the default), and the EMAC
+    channel nodes, test environment and clock in one process with the maneuver node in another."""
+    layout, emac = request.param
+    bag = tmp_path_factory.mktemp("suite") / f"ail_{layout}"
+    cfg = SuiteConfig(bag=bag, layout=layout, emac=emac, domain_id=domain(6 + len(layout)), **AIL_RUN)
+    summaries = run_suite(cfg, timeout_s=240)
+    return bag, summaries, layout, emac
 
 
 def test_lockstep_records_every_frame_of_every_channel_exactly_once(lockstep_ail):
@@ -108,11 +122,44 @@ def test_crosstalk_shows_on_the_right_wing_feedback_while_the_left_wing_slews(lo
         assert jumps(other) < 0.003  # nominal: only the actuator's smooth response to the command noise
 
 
+def test_composed_layouts_record_the_same_bag_as_one_process_per_node(lockstep_ail, lockstep_composed):
+    """In-process hand-over changes nothing a frame carries: every value of every channel, both sides."""
+    bag, _, layout, emac = lockstep_composed
+    reference, _ = lockstep_ail
+    frames = 440
+    info = bag_info(bag)
+    assert info.complete
+    assert info.channels == list(CHANNELS)
+    for topic, per_channel in (("/ema/emac/feedback", frames + 1), ("/ema/sensor/surface", frames + 1),
+                               ("/ema/fmu/feedback", frames + 1), ("/ema/emac/command", frames)):
+        names = [n for m in _messages(bag, topic) for n in m.name]
+        assert sorted(names) == sorted(list(CHANNELS) * per_channel), (layout, topic)  # each channel once a frame
+    for ch in CHANNELS:
+        for side in ("emac", "fmu"):
+            got, want = read_bag(bag, ch, side=side), read_bag(reference, ch, side=side)
+            assert np.array_equal(got.time_s, want.time_s)
+            assert np.array_equal(got.command_v, want.command_v), (layout, emac, ch, side)
+            assert np.array_equal(got.position_v, want.position_v), (layout, emac, ch, side)
+            assert np.array_equal(got.surface_deg, want.surface_deg), (layout, emac, ch, side)
+    assert read_bag(bag).metadata["clock"] == "lockstep"
+
+
+def _messages(bag, topic):
+    from rosbags.rosbag2 import Reader  # noqa: PLC0415
+
+    from ema_msgs_py import typestore as ts  # noqa: PLC0415
+
+    with Reader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [ts.deserialize(raw, "sensor_msgs/msg/JointState") for _, _, raw in reader.messages(connections=conns)]
+
+
 # --------------------------------------------------------------------------- real time
-def test_real_time_run_measures_command_to_feedback_latency(tmp_path):
+@pytest.mark.parametrize("layout", ["single", "container"])
+def test_real_time_run_measures_command_to_feedback_latency(tmp_path, layout):
     bag = tmp_path / "rt"
     cfg = SuiteConfig(bag=bag, model="loada", profile="flight", maneuver="steps:amps_deg=20,lead_s=0.2,hold_s=0.5",
-                      channels=["left_wing"], emac_box=True, domain_id=domain(2))
+                      channels=["left_wing"], emac_box=True, layout=layout, domain_id=domain(2 + 11 * len(layout)))
     summaries = run_suite(cfg, timeout_s=120)
     man = summaries["maneuver"]
     assert man["frames_commanded"] == man["frames"] == 240
@@ -129,16 +176,16 @@ def test_real_time_run_measures_command_to_feedback_latency(tmp_path):
 # --------------------------------------------------------------------------- SIGTERM keeps the bag
 def test_sigterm_mid_run_leaves_a_readable_bag(tmp_path):
     bag = tmp_path / "cut"
-    suite = Suite(SuiteConfig(bag=bag, maneuver="ramp:rate_dps=0.5,peak_deg=10", lockstep=True, emac_box=True,
+    suite = Suite(SuiteConfig(bag=bag, maneuver="ramp:rate_dps=0.05,peak_deg=5", lockstep=True, emac_box=True,
                               domain_id=domain(3)))
     suite.start()
     try:
-        log = suite.log_dir / "maneuver.log"
+        log = suite.log_dir / f"{suite.fmu_process}.log"
         deadline = time.monotonic() + 60
         while "running" not in log.read_text() and time.monotonic() < deadline:
             time.sleep(0.1)
         time.sleep(3.0)
-        man = suite.procs["maneuver"]
+        man = suite.procs[suite.fmu_process]
         os.kill(man.pid, signal.SIGTERM)
         assert man.wait(timeout=20) == 0
     finally:
@@ -154,10 +201,10 @@ def test_sigterm_mid_run_leaves_a_readable_bag(tmp_path):
 def test_ema_launch_stops_cleanly_on_sigterm_and_leaves_a_complete_bag(tmp_path):
     bag = tmp_path / "launch"
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain(5)))
-    cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "ramp:rate_dps=0.5,peak_deg=10",
+    cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "ramp:rate_dps=0.05,peak_deg=5",
            "--lockstep", "--emac-box", "--bag", str(bag)]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    log = tmp_path / "launch.logs" / "maneuver.log"
+    log = tmp_path / "launch.logs" / "suite.log"  # the default layout: every node in one process
     deadline = time.monotonic() + 60
     while not (log.is_file() and "running" in log.read_text()) and time.monotonic() < deadline:
         time.sleep(0.1)

@@ -208,6 +208,34 @@ def test_frame_stepping_equals_one_run(name, rich_inputs):
     assert np.max(np.abs(stepped - ran)) < 1e-9
 
 
+@pytest.mark.parametrize(("name", "n"), [("loada", 1), ("loadf", 1), ("loada", 3), ("hoad3", 1), ("hoad3", 2)])
+def test_step_is_run_one_frame_at_a_time_bit_for_bit(name, n, rich_inputs):
+    """``step`` writes its breakpoint into the kept history in place; ``run`` concatenates: same inputs, same bits.
+
+    1,200 frames wrap the history buffers several times; NaN inputs are held at their last value by both.
+    """
+    t, cmd, hm = rich_inputs
+    cmd, hm = cmd.copy(), hm.copy()
+    cmd[300], hm[301] = math.nan, math.inf
+    a, b, v = create(name, n=n), create(name, n=n), create(name, n=n)
+    for model in (a, b, v):
+        model.trim(cmd[0], hm[0])
+    for k, (tk, c, h) in enumerate(zip(t, cmd, hm, strict=True)):
+        s = a.step(c if n == 1 else np.full(n, c), h, FRAME_S)
+        if n == 1:  # the node layer's scalar path: the same frame as floats
+            values = v.step_values(float(c), float(h), FRAME_S)
+            assert all(isinstance(x, float) for x in values)
+            assert np.array_equal(values, [x[0] for x in (s.position_deg, s.surface_deg, s.rate_dps, s.current_a,
+                                                          s.bus_v, s.flags)], equal_nan=True), k
+        held_c = c if math.isfinite(c) else cmd[k - 1]
+        held_h = h if math.isfinite(h) else hm[k - 1]
+        r = b.run([tk], [held_c], [held_h], sample_times=[tk + FRAME_S], end_s=tk + FRAME_S)
+        assert np.array_equal(s.position_deg, r.position_deg[:, 0]), k
+        assert np.array_equal(s.surface_deg, r.surface_deg[:, 0]), k
+    assert a.rejected_inputs == 2 * n
+    assert a.time_s == pytest.approx(b.time_s, abs=1e-9)
+
+
 def test_batch_instances_are_independent_and_equal_single_runs(rich_inputs):
     t, cmd, hm = rich_inputs
     base = SecondOrderParams.from_channel(load_channel("left_wing"))
@@ -242,11 +270,11 @@ def test_non_finite_commands_are_held_and_counted_never_propagated(name, caplog)
 
 
 def test_unknown_model_and_parameter_names_list_the_known_ones():
-    with pytest.raises(UnknownNameError, match=r"known: .*loac, loada, loadf, .*sloac"):
+    with pytest.raises(UnknownNameError, match=r"known: .*loac, loada, loadf, .*second_order, sloac"):
         create("hoad9")
     with pytest.raises(UnknownNameError, match="second-order parameter 'wn_hz'"):
         create("loada", wn_hz=3.0)
-    assert {"loac", "loadf", "loada", "sloac"} <= set(model_names())
+    assert {"loac", "loadf", "loada", "sloac", "second_order"} <= set(model_names())
 
 
 @pytest.mark.parametrize("channel", ["left_wing", "right_wing", "left_rudder", "right_rudder"])

@@ -27,7 +27,7 @@ from ema_sim.ail.vehicle import Vehicle, VehicleState
 from ema_sim.config import CHANNELS, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.models import create
-from ema_sim.models.base import ActuatorModel
+from ema_sim.models.base import O_POS, ActuatorModel
 
 FEEDBACK, SURFACE, EMAC_COMMAND = "feedback", "surface", "emac_command"
 """Names of the inputs a frame may need (:attr:`Fmu.needs`)."""
@@ -109,7 +109,7 @@ class Fmu:
                     raise EmaError("open loop: the frame needs the previous frame's EMAC-side command")
                 for ch, model in self.sim.items():
                     deg = self.scalings[ch].command_v_to_deg(float(inputs.emac_command_v[ch]))
-                    self._sim_seen[ch] = float(model.step(deg, self._sim_load[ch], self.frame_s).position_deg[0])
+                    self._sim_seen[ch] = model.step_values(float(deg), float(self._sim_load[ch]), self.frame_s)[O_POS]
             return dict(self._sim_seen)
         if self.setup.aero_input == "feedback":
             return {ch: self.scalings[ch].feedback_v_to_deg(float(inputs.feedback_v[ch])) for ch in self.channels}

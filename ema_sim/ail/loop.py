@@ -10,7 +10,7 @@ same order and with the same objects, so both give the same numbers for the same
 4. every :class:`~ema_sim.emac.EmacChannel` (the node's channel logic around the registry model) steps
    one frame, in channel order, with the EMAC box's crosstalk meter, giving the feedback at *(k+1)T*.
 
-Environment elements are switched off by name (:data:`ELEMENTS`): the test environment's ``delay``,
+Environment elements are switched off by name (:mod:`ema_sim.models.switches`): the test environment's ``delay``,
 ``lag``, ``quantization``, ``noise`` (or one path's, ``command.delay``...), and in the actuator model
 ``dead_band`` (the PWM dead band); ``quantization`` and ``noise`` also switch off the model's own 5 mV
 stage and measured noise (HOAD2/HOAD3; LOADA's 0.020° D/A stage), which stand for the same converters
@@ -21,29 +21,24 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ema_msgs_py.contract import scaling
-from ema_sim.ail.fmu import FrameInputs, Fmu
+from ema_sim.ail.fmu import Fmu, FrameInputs
 from ema_sim.ail.params import AilConfig, Setup, load_ail_config
 from ema_sim.ail.vehicle import STATES
 from ema_sim.config import CHANNELS, config_dir, load_channel, ros_parameters
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings
-from ema_sim.environment import ELEMENTS as ENV_ELEMENTS
 from ema_sim.environment import Profile, SignalPath, load_profile
-from ema_sim.environment.profile import PATHS
 from ema_sim.errors import EmaError, UnknownNameError
-from ema_sim.models import create, model_class, model_names
+from ema_sim.models import create, model_names
+from ema_sim.models.switches import element_names, environment_elements, model_overrides
 
 FloatArray = NDArray[np.float64]
-MODEL_ELEMENTS: tuple[str, ...] = ("dead_band",)
-ELEMENTS: tuple[str, ...] = (*ENV_ELEMENTS, *MODEL_ELEMENTS)
-"""What ``--disable`` switches off (see the module docstring)."""
 SIGNALS: tuple[str, ...] = (
     "fmu_command_v", "fmu_command_deg", "command_v", "command_deg", "position_v", "position_deg", "surface_deg",
     "rate_dps", "current_a", "bus_v", "hinge_moment_inlb", "aero_hinge_moment_inlb", "fmu_position_v",
@@ -53,44 +48,6 @@ SIGNALS: tuple[str, ...] = (
 and degrees through the feedback curve, crosstalk included), true surface, rate, motor current and bus,
 the applied and the aerodynamic hinge moments, the FMU-side feedback, and the deflections the simulated
 aerodynamics used."""
-
-
-def disabled_names(items: Iterable[str]) -> tuple[str, ...]:
-    """Validate ``--disable`` items (comma-separated allowed)."""
-    out: list[str] = []
-    known = [*ELEMENTS, *(f"{p}.{e}" for p in PATHS for e in ENV_ELEMENTS)]
-    for item in items:
-        for name in (s.strip() for s in item.split(",")):
-            if not name:
-                continue
-            if name not in known:
-                raise UnknownNameError("element", name, known)
-            out.append(name)
-    return tuple(out)
-
-
-def model_overrides(model: str, disabled: Iterable[str]) -> dict[str, Any]:
-    """Keyword arguments that switch the model's own elements off (one clear error where it has none)."""
-    from ema_sim.models.high_order import HighOrderModel  # noqa: PLC0415
-    from ema_sim.models.second_order import SecondOrderModel  # noqa: PLC0415
-
-    names = set(disabled)
-    cls = model_class(model)
-    high = issubclass(cls, HighOrderModel)
-    discrete_high = high and not cls.continuous
-    out: dict[str, Any] = {}
-    if "dead_band" in names:
-        if not high:
-            raise EmaError(f"{model} has no PWM dead band (only the high-order models have one)")
-        out["pwm_dead_band_v"] = 0.0
-    if "quantization" in names:
-        if discrete_high:
-            out["quantization_v"] = 0.0
-        elif issubclass(cls, SecondOrderModel):
-            out["quantization_deg"] = 0.0
-    if "noise" in names and discrete_high:
-        out["noise"] = False
-    return out
 
 
 def emac_settings() -> tuple[EmacSettings, dict[str, float]]:
@@ -139,7 +96,8 @@ class AilRun:
 
     def csv_columns(self, channel: str = "left_wing") -> dict[str, FloatArray]:
         """Data-contract columns of ``channel`` (the EMAC side, as a rig's DAU records it), then every channel's
-        signals as ``<channel>.<signal>`` and the vehicle states (columns the contract reader ignores)."""
+        signals as ``<channel>.<signal>`` and the vehicle states (columns the contract reader ignores).
+        """
         if channel not in self.signals:
             raise UnknownNameError("channel", channel, self.signals)
         main = self.signals[channel]
@@ -157,7 +115,7 @@ class AilRun:
 
 
 def _profile(options: AilOptions) -> Profile:
-    env = [d for d in options.disable if d not in MODEL_ELEMENTS]
+    env = environment_elements(options.disable)
     profile = load_profile(options.profile, disable=env)
     return profile.with_seed(options.seed) if options.seed is not None else profile
 
@@ -168,7 +126,7 @@ def run_ail(options: AilOptions, progress: Callable[[float], None] | None = None
         raise UnknownNameError("model", options.model, model_names())
     if not (math.isfinite(options.duration_s) and options.duration_s > 0.0):
         raise EmaError(f"duration must be a positive number of seconds, got {options.duration_s!r}")
-    disabled = disabled_names(options.disable)
+    disabled = element_names(options.disable)
     cfg = options.config or load_ail_config()
     setup = options.setup or cfg.setup(options.profile)
     profile = _profile(AilOptions(**{**options.__dict__, "disable": disabled}))

@@ -8,8 +8,9 @@ in degrees and seconds: ``[Δα, q, Δθ, p, φ]``::
 
 with the elevon ``δe = (δ_left + δ_right)/2`` (``Δδe = δe − trim``) and the aileron
 ``δa = (δ_left − δ_right)/2``. The surfaces are zero-order held over each frame and the state is
-advanced with the exact discretization of that hold (matrix exponential), so the FMU's 200 Hz frame
-adds no integration error. Pure numpy: the offline harness and the ``fmu`` node run the same arithmetic.
+advanced with the exact discretization of that hold (python-control's ``c2d``, zero-order hold), so the
+FMU's 200 Hz frame adds no integration error. The offline harness and the ``fmu`` node run the same
+arithmetic.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import expm
 
 from ema_sim.ail.params import VehicleParams
 
@@ -57,12 +57,11 @@ def matrices(p: VehicleParams) -> tuple[FloatArray, FloatArray]:
 
 def discretize(a: FloatArray, b: FloatArray, frame_s: float) -> tuple[FloatArray, FloatArray]:
     """Exact zero-order-hold discretization: ``x⁺ = Ad·x + Bd·u``."""
+    import control  # noqa: PLC0415 - heavy; only when a vehicle is built
+
     n, m = b.shape
-    big = np.zeros((n + m, n + m))
-    big[:n, :n] = a * frame_s
-    big[:n, n:] = b * frame_s
-    e = expm(big)
-    return e[:n, :n].copy(), e[:n, n:].copy()
+    sysd = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, m))), frame_s, method="zoh")
+    return np.asarray(sysd.A, dtype=float), np.asarray(sysd.B, dtype=float)
 
 
 @dataclass

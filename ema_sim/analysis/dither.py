@@ -86,8 +86,8 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: boo
     ``fold_periods`` folds windows of that many periods and keeps the median one (module docstring).
     """
     fs = 1.0 / float(np.median(np.diff(t)))
-    span = float(t[-1] - t[0])
-    if span < 4.0 / BAND_HZ[0]:
+    span = float(t[-1] - t[0]) + 1.0 / fs  # the record's length: n samples of 1/fs each
+    if span < 4.0 / BAND_HZ[0] - 1e-9:
         return None
     yd = y - np.polyval(np.polyfit(t - t[0], y, 1), t - t[0])
     if np.ptp(yd) < MIN_PP_DEG:

@@ -53,6 +53,10 @@ MANEUVER_KINDS = {
     "static_threshold": "static_threshold", "dynamic_threshold": "dynamic_threshold", "hold": "hold",
 }
 LOAD_KINDS = {"steps": "load_steps", "reversal": "load_reversal", "sine": "load_sine"}
+COMPATIBLE = {("broadband", "schroeder"), ("broadband", "sweep"), ("sine", "triangle"), ("triangle", "sine"),
+              ("steps", "square"), ("square", "steps"), ("steps", "regen"), ("square", "regen"),
+              ("load_reversal", "load_steps"), ("load_steps", "load_reversal")}
+"""(signal reading, metadata kind) pairs a signal can mistake for each other."""
 
 
 @dataclass(frozen=True)
@@ -276,10 +280,40 @@ def recognize(data: MeasuredData) -> Recognition:
             kind, why, hs = _classify_held(t, data.hinge_moment_inlb, h.start, h.stop)
             segments.append(Segment(kind, h.start, h.stop, f"signal: {why}", {"command_deg": h.value}, holds=hs))
     segments.sort(key=lambda s: s.start)
+    segments = _metadata_window(segments, t, maneuver)
     segments = _reconcile(segments, maneuver, load, notes)
     if not segments:
         notes.append("no section-2 test recognised in the signals")
     return Recognition(segments, maneuver, load, notes)
+
+
+def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver | None) -> list[Segment]:
+    """Widen a moving test the signals cut short to the window its spec gives (lead-in, length).
+
+    The signals alone can cut a slow sweep short (its first cycles sit almost still between samples
+    under a noisy, quantized command). When the signal found the spec's kind (or a compatible one)
+    inside the spec's window but short of it, the segment takes the whole window.
+    A contradicted reading is left alone for the reconciliation to report.
+    """
+    if maneuver is None or not hasattr(maneuver, "lead_s"):
+        return segments
+    kind = MANEUVER_KINDS.get(maneuver.kind, maneuver.kind)
+    if kind not in MOVING_KINDS:
+        return segments
+    start_s, stop_s = float(maneuver.lead_s), float(maneuver.duration_s)  # type: ignore[attr-defined]
+    a = int(np.searchsorted(t, t[0] + start_s, side="left"))
+    b = min(int(np.searchsorted(t, t[0] + stop_s, side="right")), t.size)
+    if b - a < 2 or t[b - 1] - t[a] < MIN_MOVING_S:
+        return segments
+    inside = [seg for seg in segments if seg.kind in MOVING_KINDS and seg.start < b and seg.stop > a]
+    agreeing = [seg for seg in inside if seg.kind == kind or (seg.kind, kind) in COMPATIBLE]
+    covered = sum(min(seg.stop, b) - max(seg.start, a) for seg in agreeing)
+    if not agreeing or len(agreeing) < len(inside) or covered >= 0.99 * (b - a):
+        return segments
+    seen = ", ".join(f"{seg.kind} {t[seg.start]:.3g}–{t[seg.stop - 1]:.3g} s" for seg in agreeing)
+    window = Segment(agreeing[0].kind, a, b, f"signal: {seen}; widened to the metadata's {maneuver.kind} window "
+                     f"{start_s:g}–{stop_s:g} s", agreeing[0].params)
+    return sorted([seg for seg in segments if seg not in inside] + [window], key=lambda seg: seg.start)
 
 
 def _expected(maneuver: Maneuver | None) -> list[str]:
@@ -340,9 +374,6 @@ def _reconcile(segments: list[Segment], maneuver: Maneuver | None, load: Load | 
 def _agree(s: Segment, want: str, evidence: str) -> tuple[str, str]:
     if s.kind == want:
         return want, f"{evidence}; metadata agrees ({want})"
-    compatible = {("broadband", "schroeder"), ("broadband", "sweep"), ("sine", "triangle"), ("triangle", "sine"),
-                  ("steps", "square"), ("square", "steps"), ("steps", "regen"), ("square", "regen"),
-                  ("load_reversal", "load_steps"), ("load_steps", "load_reversal")}
-    if (s.kind, want) in compatible:
+    if (s.kind, want) in COMPATIBLE:
         return want, f"{evidence}; metadata says {want}"
     return s.kind, f"{evidence}; metadata says {want}, the signal disagrees, kept {s.kind}"

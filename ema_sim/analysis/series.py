@@ -106,6 +106,16 @@ def hold_tolerance(x: FloatArray) -> float:
     return max(1e-6 * scale, 5.0 * noise)
 
 
+HOLD_BAND = 3.0
+"""A hold's spread stays within this many hold tolerances (noise alone spans about 1.2)."""
+
+
+def _spread(x: FloatArray) -> float:
+    """1st to 99th percentile: the range of a stretch, blind to an isolated spike."""
+    lo, hi = np.percentile(x, [1.0, 99.0])
+    return float(hi - lo)
+
+
 def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hold]:
     """Runs of at least ``min_samples`` samples whose consecutive changes are within ``tol``."""
     if x.size < 2:
@@ -128,7 +138,9 @@ def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hol
     out = []
     for s, e in zip(first.tolist(), last.tolist(), strict=True):
         stop = e + 1
-        if stop - s >= min_samples:
+        # Small steps can still add up: a slow sine sampled fast moves less than the tolerance per
+        # sample. A hold stays inside a band of a few tolerances around its level.
+        if stop - s >= min_samples and _spread(x[s:stop]) <= HOLD_BAND * tol:
             out.append(Hold(int(s), int(stop), float(np.median(x[s:stop]))))
     return out
 

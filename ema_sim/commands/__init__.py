@@ -7,6 +7,7 @@ COMMANDS: tuple[str, ...] = (
     "simulate",
     "compare",
     "analyze",
+    "identify",
     "loes",
     "acceptance",
     "bench",

@@ -10,8 +10,14 @@ from typing import Any
 MEASURED_STATES = (("q_dps", "pitch rate"), ("p_dps", "roll rate"), ("alpha_deg", "angle of attack"))
 
 
+FIGURE_CASES = ("ail", "ail_open_loop", "flight", "no_dead_band", "loada")
+"""The study's figure: the finding, its controls, and the pre-flight-1 model."""
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run the loop, print the dither per surface, write what was asked for."""
+    """Run the loop (or the study), print the dither per surface, write what was asked for."""
+    if args.study:
+        return _study(args)
     from ema_sim.ail.loop import AilOptions, run_ail  # noqa: PLC0415 - keep `ema --help` fast
     from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure, vehicle_cycle  # noqa: PLC0415
     from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
@@ -72,6 +78,47 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _study(args: argparse.Namespace) -> int:
+    """Section 4.3's table: every case over several seeds (``ema_sim.ail.study``)."""
+    from ema_sim.ail import study  # noqa: PLC0415
+    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
+    from ema_sim.errors import EmaError  # noqa: PLC0415
+
+    try:
+        seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
+    except ValueError:
+        raise EmaError(f"--seeds takes comma-separated integers, got {args.seeds!r}") from None
+    if not seeds:
+        raise EmaError("--seeds needs at least one seed")
+    cases = study.select([c for item in args.cases for c in item.split(",") if c])
+    cfg = load_ail_config(args.vehicle_config)
+    print(f"ema ail --study: {len(cases)} cases × seeds {', '.join(map(str, seeds))}, {args.duration:g} s each, "
+          f"measured after {cfg.settle_s:g} s on both wings; default model {args.model}", flush=True)
+    print(study.table_header(), flush=True)
+    results = study.run_study(cases, model=args.model, seeds=seeds, duration_s=args.duration, config=cfg,
+                              keep_runs=FIGURE_CASES if args.plot else (),
+                              progress=lambda row: print(row, flush=True))
+    wall = sum(r.wall_s for r in results)
+    print(f"{sum(len(r.wings) // 2 for r in results)} runs in {wall:.1f} s of loop time")
+    if args.markdown:
+        Path(args.markdown).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.markdown).write_text(study.table(results) + "\n", encoding="utf-8")
+        print(f"wrote {args.markdown}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        doc = {"seeds": seeds, "duration_s": args.duration, "settle_s": cfg.settle_s,
+               "cases": [r.as_dict() for r in results]}
+        Path(args.json).write_text(json.dumps(doc, indent=2), encoding="utf-8")
+        print(f"wrote {args.json}")
+    if args.plot:
+        from ema_sim.ail.plot import plot_dither  # noqa: PLC0415
+
+        shown = [(f"{r.case.name} ({r.model})", r.runs[0]) for r in results if r.runs]
+        if shown:
+            print(f"wrote {plot_dither(shown, args.plot, channel=args.channel, settle_s=cfg.settle_s)}")
+    return 0
+
+
 def register(sub: Any) -> None:
     """Add ``ail`` to the ``ema`` parser."""
     p = sub.add_parser("ail", help="aircraft-in-the-loop: vehicle, autopilot and actuators, offline; the dither",
@@ -102,4 +149,14 @@ def register(sub: Any) -> None:
     p.add_argument("--csv", type=Path, default=None, help="write the run as a data-contract CSV")
     p.add_argument("--json", type=Path, default=None, help="write the measurement as JSON")
     p.add_argument("--plot", type=Path, default=None, help="write the dither figure (PNG)")
+    p.add_argument("--study", action="store_true",
+                   help="section 4.3's table instead of one run: configurations, elements switched off one at a "
+                        "time, every model (--cases, --seeds; --markdown, --json, --plot)")
+    p.add_argument("--cases", action="append", default=[],
+                   help="with --study: the cases to run, comma-separated (default all: ail, ail_open_loop, flight, "
+                        "no_delay, no_lag, no_quantization, no_noise, no_dead_band, bungee, hoad2, hoac1, loada, "
+                        "loadf, loac)")
+    p.add_argument("--seeds", default="43,44,45", help="with --study: noise seeds, comma-separated (default 43,44,45)")
+    p.add_argument("--markdown", type=Path, default=None, help="with --study: write the table (Markdown)")
     p.set_defaults(func=run)
+

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ema_sim.errors import EmaError
+from ema_sim.suite import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,8 +32,11 @@ def run(args: argparse.Namespace) -> int:
     if not (args.maneuver or args.test or args.fmu):
         raise EmaError("give --maneuver SPEC, --test SPEC (ema maneuvers, ema tests) or --fmu (aircraft in the loop)")
     from ema_sim.environment import load_profile  # noqa: PLC0415
+    from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
 
-    load_profile(args.profile, disable=args.disable)
+    disable = list(element_names(args.disable))
+    model_overrides(args.model, disable)  # dead_band on a model without one: one error before starting
+    load_profile(args.profile, disable=environment_elements(disable))
     driven = channel_list(args.channels or ["left_wing"])
     if args.fmu:
         from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
@@ -43,23 +47,23 @@ def run(args: argparse.Namespace) -> int:
         test, bag = "ail", Path(args.bag) if args.bag else fmu_bag(args.profile)
         fmu_args = [*(["--open-loop"] if args.open_loop else []),
                     *(["--bungee", f"{args.bungee:g}"] if args.bungee is not None else [])]
+        what = "every channel, with the vehicle and autopilot in the loop"
     else:
         plan = build_plan(args.test, maneuver=args.maneuver, load=args.load, channels=driven,
                           duration_s=args.duration)
-        duration, test, fmu_args = plan.duration_s, plan.test, []
+        duration, test, fmu_args, what = plan.duration_s, plan.test, [], ", ".join(plan.channels)
         bag = Path(args.bag) if args.bag else default_bag(plan.test)
     cfg = SuiteConfig(
         bag=bag, model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver, load=args.load,
-        channels=driven, emac_channels=channel_list(args.emacs or list(CHANNELS)),
-        duration_s=duration if args.fmu else args.duration, lockstep=args.lockstep, emac_box=args.emac_box,
-        domain_id=args.domain_id, disable=args.disable, rt_priority=args.rt_priority, fmu=args.fmu,
-        fmu_args=fmu_args, seed=args.seed,
+        channels=driven, emac_channels=list(CHANNELS) if args.fmu else channel_list(args.emacs or list(CHANNELS)),
+        duration_s=duration if args.fmu else args.duration, lockstep=args.lockstep, layout=args.layout,
+        emac="box" if args.emac_box else args.emac, domain_id=args.domain_id, disable=disable,
+        rt_priority=args.rt_priority, window=args.window, fmu=args.fmu, fmu_args=fmu_args, seed=args.seed,
     )
     suite = Suite(cfg)
     for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
         signal.signal(signum, _interrupt)
     mode = "lockstep" if args.lockstep else "real time"
-    what = "every channel, vehicle and autopilot in the loop" if args.fmu else ", ".join(driven)
     print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, "
           f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
     try:
@@ -75,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     suite.stop()
     if status != 0:
-        raise EmaError(f"the {suite.driver} node exited with status {status}; "
-                       f"see {suite.log_dir / (suite.driver + '.log')}")
+        raise EmaError(f"the {suite.driver} node exited with status {status}; see "
+                       f"{suite.log_dir / (suite.fmu_process + '.log')}")
     _report(suite, bag, bag_info)
     if args.fmu:
         _report_dither(bag)
@@ -97,7 +101,7 @@ def _report(suite: Any, bag: Path, bag_info: Any) -> None:
     if clock and clock.get("wall_s"):
         print(f"lockstep: {clock['sim_s']:.2f} s simulated in {clock['wall_s']:.2f} s "
               f"({clock['realtime_factor']:.2f}× real time, {clock['stalls']} stalls)")
-    man = sums.get("maneuver", {})
+    man = sums.get(suite.driver, {})
     if "latency_p99_ms" in man:
         print(f"real time: command-to-feedback latency p50 {man['latency_p50_ms']:.2f} ms, "
               f"p99 {man['latency_p99_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
@@ -124,8 +128,8 @@ def _report_dither(bag: Path) -> None:
 def register(sub: Any) -> None:
     """Add ``launch`` (and ``tests``, the list of section-2 tests) to the ``ema`` parser."""
     p = sub.add_parser("launch", help="run the ROS 2 node suite: five EMACs, test environment, clock, maneuver",
-                       description="Bring up the EMAC channels, the test environment, (lockstep) the clock and "
-                                   "the maneuver node as separate processes, run one test, record the bag, stop.")
+                       description="Bring up the five EMAC channels, the test environment, (lockstep) the clock "
+                                   "and the maneuver node, run one test, record the bag, stop.")
     p.add_argument("--model", default="loada", help="model of every channel (ema models)")
     p.add_argument("--profile", default="none", help="test environment: ail, flight or none")
     p.add_argument("--maneuver", default=None, help="maneuver spec of the driven channels (ema maneuvers)")
@@ -136,9 +140,19 @@ def register(sub: Any) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the test's length)")
     p.add_argument("--lockstep", action="store_true", help="run on /clock, frame by frame, as fast as possible")
     p.add_argument("--bag", default=None, help="bag directory to create (default bags/<test>_<time>)")
-    p.add_argument("--emac-box", action="store_true",
-                   help="one process for all EMAC channels (the real EMAC is one box); faster")
-    p.add_argument("--disable", action="append", default=[], help="switch a test-environment element off")
+    p.add_argument("--layout", choices=LAYOUTS, default=DEFAULT_LAYOUT,
+                   help="single (default): every node composed in one process; container: EMACs, test "
+                        "environment and clock composed, the maneuver in its own process; processes: one process "
+                        "per node")
+    p.add_argument("--emac", choices=EMAC_HOSTING, default=DEFAULT_EMAC,
+                   help="box (default): one EMAC node hosting the five channels, as the real EMAC is one box; "
+                        "channels: one EMAC node per channel")
+    p.add_argument("--emac-box", action="store_true", help="shorthand for --emac box")
+    p.add_argument("--window", type=int, default=1,
+                   help="lockstep: frames the clock may run ahead of the slowest EMAC (1: strictly frame by frame)")
+    p.add_argument("--disable", action="append", default=[],
+                   help="switch an element off: the test environment's delay, lag, quantization, noise (or one "
+                        "path's, command.delay...) and the model's dead_band")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's, "
                    "else one derived from the pid)")
     p.add_argument("--rt-priority", type=int, default=0, help="SCHED_FIFO priority of every node (0: off)")

@@ -20,7 +20,7 @@ import enum
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 from ema_msgs_py.contract import Scaling, scaling_of
 from ema_sim.emac.crosstalk import Crosstalk
@@ -84,9 +84,8 @@ class EmacSettings:
         return 1.0 / self.frame_hz
 
 
-@dataclass(frozen=True)
-class Feedback:
-    """What one frame of one channel produced."""
+class Feedback(NamedTuple):
+    """What one frame of one channel produced (immutable; a named tuple, cheap to make every frame)."""
 
     position_v: float
     """LVDT position feedback to the FMU, V (crosstalk included)."""
@@ -210,7 +209,7 @@ class EmacChannel:
             command_deg = self._command_deg()
             if isinstance(self.failure, Stall):
                 hm += self._stall_load(command_deg)
-            fb = self._feedback(self.model.step(command_deg, hm, self.frame_s), hm, braked=False, held=False)
+            fb = self._frame_feedback(self.model.step_values(command_deg, hm, self.frame_s), hm)
         if braked:
             self.counters["braked_frames"] += 1
         noise = self.crosstalk.step(activity)
@@ -248,6 +247,11 @@ class EmacChannel:
         current = 0.0 if (self.model.has_current and not powered) else fb.current_a
         return _replace(fb, braked=braked, flags=flags, current_a=current)
 
+    def _frame_feedback(self, v: list[float], hm: float) -> Feedback:
+        """A stepped frame's outputs (``ActuatorModel.step_values``: position, surface, rate, current, bus, flags)."""
+        pos = v[0]
+        return Feedback(self.scaling.feedback_deg_to_v(pos), v[3], pos, v[1], v[2], hm, v[4], int(v[5]), False, False)
+
     def _feedback(self, s: Sample, hm: float, *, braked: bool, held: bool) -> Feedback:
         pos = float(s.position_deg[0])
         return Feedback(
@@ -278,6 +282,4 @@ class EmacChannel:
 
 
 def _replace(fb: Feedback, **changes: Any) -> Feedback:
-    values = {f.name: getattr(fb, f.name) for f in fields(fb)}
-    values.update(changes)
-    return Feedback(**values)
+    return fb._replace(**changes)

@@ -140,12 +140,19 @@ class Quantizer(Element):
     def step(self, x: Signal) -> Signal:  # noqa: D102
         if self.step_v == 0.0:
             return x
+        if type(x) is float and math.isfinite(x):  # one channel: the same arithmetic without numpy
+            q = self.step_v * math.floor(x / self.step_v + 0.5)
+            return min(max(q, -self.full_scale_v), self.full_scale_v)
         q = self.step_v * np.floor(np.asarray(x) / self.step_v + 0.5)
         q = np.clip(q, -self.full_scale_v, self.full_scale_v)
         return float(q) if np.ndim(q) == 0 else q
 
     def describe(self) -> str:  # noqa: D102
         return f"quantization {self.step_v * 1e3:g} mV"
+
+
+NOISE_BLOCK = 1024
+"""Normals a :class:`Noise` element draws at a time (one generator call per block, not per frame)."""
 
 
 class Noise(Element):
@@ -158,6 +165,9 @@ class Noise(Element):
             raise ValueError(f"rms_v must be a non-negative number, got {rms_v!r}")
         self.rms_v = float(rms_v)
         self._rng = np.random.default_rng([int(seed), *map(int, stream)])
+        self._drawn: list[float] = []
+        """Normals drawn ahead, in stream order (the generator gives the same sequence in any block size)."""
+        self._next = 0
 
     @property
     def active(self) -> bool:  # noqa: D102
@@ -166,12 +176,27 @@ class Noise(Element):
     def reset(self, x: Signal) -> None:  # noqa: D102
         del x
 
+    def _normals(self, k: int) -> list[float]:
+        """The next ``k`` standard normals of this element's stream."""
+        if self._next + k > len(self._drawn):
+            rest = self._drawn[self._next:]
+            self._drawn = rest + self._rng.standard_normal(max(NOISE_BLOCK, k)).tolist()
+            self._next = 0
+        out = self._drawn[self._next:self._next + k]
+        self._next += k
+        return out
+
     def step(self, x: Signal) -> Signal:  # noqa: D102
         if self.rms_v == 0.0:
             return x
-        if np.ndim(x) == 0:
-            return float(x) + self.rms_v * float(self._rng.standard_normal())
-        return x + self.rms_v * self._rng.standard_normal(np.shape(x))
+        if isinstance(x, float) or np.ndim(x) == 0:
+            if self._next < len(self._drawn):
+                z = self._drawn[self._next]
+                self._next += 1
+            else:
+                z = self._normals(1)[0]
+            return float(x) + self.rms_v * z
+        return x + self.rms_v * np.reshape(self._normals(int(np.size(x))), np.shape(x))
 
     def describe(self) -> str:  # noqa: D102
         return f"noise {self.rms_v * 1e3:g} mV rms"

@@ -41,6 +41,8 @@ O_POS, O_SURF, O_RATE, O_CUR, O_BUS, O_FLAGS = range(N_OUT)
 
 HISTORY_START_S = -1e9
 """Time stamp of the trim breakpoint: the held input the model has seen 'forever'."""
+HISTORY_CAPACITY = 256
+"""Breakpoints the input-history buffers hold before :meth:`ActuatorModel.step` compacts them."""
 
 
 class Flags(enum.IntFlag):
@@ -156,9 +158,9 @@ class ActuatorModel(ABC):
         """How many non-finite command or hinge-moment values :meth:`step` has held instead of using."""
         self._last_reject_log = -math.inf
         self._t = 0.0
-        self._hist_t = np.array([HISTORY_START_S])
-        self._hist_u = np.zeros((self.n, 1))
-        self._hist_h = np.zeros((self.n, 1))
+        self._sample_t = np.zeros(1)
+        """The one sample instant of a frame (reused: the kernels only read it)."""
+        self._set_history(np.array([HISTORY_START_S]), np.zeros((self.n, 1)), np.zeros((self.n, 1)))
 
     # ----------------------------------------------------------------- family interface
     @property
@@ -210,28 +212,58 @@ class ActuatorModel(ABC):
         if not (np.all(np.isfinite(u)) and np.all(np.isfinite(hm))):
             raise EmaError("trim needs finite command, position and hinge moment")
         self._t = 0.0
-        self._hist_t = np.array([HISTORY_START_S])
-        self._hist_u = u[:, None].copy()
-        self._hist_h = hm[:, None].copy()
+        self._set_history(np.array([HISTORY_START_S]), u[:, None], hm[:, None])
         self._trim_states(u, hm)
         return self._sample(self._integrate(self._hist_t, self._hist_u, self._hist_h, 0.0, np.zeros(1))[:, 0])
 
     def step(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike = 0.0, frame_s: float = 0.005) -> Sample:
-        """Advance one frame with the command and load held over it; outputs at the frame's end."""
+        """Advance one frame with the command and load held over it; outputs at the frame's end.
+
+        The frame's breakpoint is written in place after the kept history (no copy of it), and the
+        history is then trimmed by moving its start: the kernel sees exactly the breakpoints
+        :meth:`run` would give it, so stepping frame by frame equals one run bit for bit.
+        """
+        return self._sample(self._advance(command_deg, hinge_moment_inlb, frame_s))
+
+    def step_values(self, command_deg: float, hinge_moment_inlb: float = 0.0, frame_s: float = 0.005) -> list[float]:
+        """:meth:`step` of instance 0, its outputs as Python floats in :data:`OUTPUT_FIELDS` order.
+
+        The same frame as :meth:`step`, without building arrays for one instance: the per-frame path of
+        the node layer (flags come back as a float; ``int()`` them).
+        """
+        return self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
+
+    def _advance(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike, frame_s: float) -> FloatArray:
         if not (math.isfinite(frame_s) and frame_s > 0.0):
             raise ValueError(f"frame_s must be positive, got {frame_s!r}")
-        u = _as_batch(command_deg, self.n, "command_deg")
-        hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
-        u, hm = self._hold_bad(u, hm)
+        hi = self._h_hi
+        if hi == self._buf_t.shape[0]:
+            self._set_history(self._hist_t, self._hist_u, self._hist_h)  # compacts (and grows when needed)
+            hi = self._h_hi
+        buf_u, buf_h = self._buf_u, self._buf_h
+        if self.n == 1 and type(command_deg) is float and type(hinge_moment_inlb) is float:
+            if math.isfinite(command_deg) and math.isfinite(hinge_moment_inlb):
+                buf_u[0, hi] = command_deg
+                buf_h[0, hi] = hinge_moment_inlb
+            else:
+                self._hold_bad(np.array([command_deg]), np.array([hinge_moment_inlb]), hi)
+        else:
+            self._hold_bad(_as_batch(command_deg, self.n, "command_deg"),
+                           _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb"), hi)
         t0 = self._t
-        bp_t = np.append(self._hist_t, t0)
-        bp_u = np.concatenate([self._hist_u, u[:, None]], axis=1)
-        bp_h = np.concatenate([self._hist_h, hm[:, None]], axis=1)
+        self._buf_t[hi] = t0
+        self._h_hi = hi + 1
         t_end = t0 + frame_s
-        out = self._integrate(bp_t, bp_u, bp_h, t_end, np.array([t_end]))
+        lo = self._h_lo
+        bp_u, bp_h = buf_u[:, lo:hi + 1], buf_h[:, lo:hi + 1]
+        if self.n > 1:  # column slices of a batch are strided; the kernels take contiguous rows
+            bp_u, bp_h = np.ascontiguousarray(bp_u), np.ascontiguousarray(bp_h)
+        sample_t = self._sample_t
+        sample_t[0] = t_end
+        out = self._integrate(self._buf_t[lo:hi + 1], bp_u, bp_h, t_end, sample_t)
         self._t = t_end
-        self._keep_history(bp_t, bp_u, bp_h)
-        return self._sample(out[:, 0])
+        self._trim_history()
+        return out[:, 0]
 
     def run(
         self,
@@ -250,6 +282,43 @@ class ActuatorModel(ABC):
         ``end_s`` (default: the last sample) is where the model stops. ``progress`` gets the
         fraction done after each chunk of about a second of simulated time.
         """
+        bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
+        out = self._run_block(bp_t, u, hm, samples, end_s, progress)
+        held = np.clip(np.searchsorted(bp_t, samples + stages.TIME_EPS_S, side="right") - 1, 0, None)
+        return Record(
+            model=self.name,
+            channel=self.channel.channel,
+            time_s=samples,
+            command_deg=u[:, held],
+            hinge_moment_inlb=hm[:, held],
+            position_deg=out[:, :, O_POS],
+            surface_deg=out[:, :, O_SURF],
+            rate_dps=out[:, :, O_RATE],
+            current_a=out[:, :, O_CUR],
+            bus_v=out[:, :, O_BUS],
+            flags=out[:, :, O_FLAGS].astype(np.int64),
+        )
+
+    def run_outputs(
+        self,
+        time_s: ArrayLike,
+        command_deg: ArrayLike,
+        hinge_moment_inlb: ArrayLike | None = None,
+        *,
+        sample_times: ArrayLike | None = None,
+        end_s: float | None = None,
+    ) -> FloatArray:
+        """:meth:`run` without building a :class:`Record`: the raw ``(n, samples, N_OUT)`` block.
+
+        For callers that simulate many times and need only the outputs (identification).
+        """
+        bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
+        return self._run_block(bp_t, u, hm, samples, end_s, None)
+
+    def _validate_record(
+        self, time_s: ArrayLike, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike | None,
+        sample_times: ArrayLike | None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         bp_t = np.asarray(time_s, dtype=float).ravel()
         m = bp_t.shape[0]
         if m == 0:
@@ -270,6 +339,12 @@ class ActuatorModel(ABC):
         _check_finite(samples, "sample_times")
         if samples.size and (np.any(np.diff(samples) < 0.0) or samples[0] < self._t - stages.TIME_EPS_S):
             raise EmaError("sample_times must be ascending and not before the model time")
+        return bp_t, u, hm, samples
+
+    def _run_block(
+        self, bp_t: FloatArray, u: FloatArray, hm: FloatArray, samples: FloatArray, end_s: float | None,
+        progress: Callable[[float], None] | None,
+    ) -> FloatArray:
         t_end = float(samples[-1]) if end_s is None else float(end_s)
         if samples.size and samples[-1] > t_end + stages.TIME_EPS_S:
             raise EmaError("sample_times go past end_s")
@@ -293,20 +368,7 @@ class ActuatorModel(ABC):
             if last:
                 break
         self._keep_history(all_t, all_u, all_h)
-        held = np.clip(np.searchsorted(all_t, samples + stages.TIME_EPS_S, side="right") - 1, 0, None)
-        return Record(
-            model=self.name,
-            channel=self.channel.channel,
-            time_s=samples,
-            command_deg=all_u[:, held],
-            hinge_moment_inlb=all_h[:, held],
-            position_deg=out[:, :, O_POS],
-            surface_deg=out[:, :, O_SURF],
-            rate_dps=out[:, :, O_RATE],
-            current_a=out[:, :, O_CUR],
-            bus_v=out[:, :, O_BUS],
-            flags=out[:, :, O_FLAGS].astype(np.int64),
-        )
+        return out
 
     def describe(self) -> dict[str, Any]:
         """Name, title, rate and channel, for logs and bag metadata."""
@@ -319,13 +381,15 @@ class ActuatorModel(ABC):
         }
 
     # ----------------------------------------------------------------- helpers
-    def _hold_bad(self, u: FloatArray, hm: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _hold_bad(self, u: FloatArray, hm: FloatArray, hi: int) -> None:
+        """Write the frame's inputs at ``hi``, non-finite ones replaced by the last good; count and log them."""
+        last_u, last_h = self._buf_u[:, hi - 1], self._buf_h[:, hi - 1]
         bad_u = ~np.isfinite(u)
         bad_h = ~np.isfinite(hm)
         if bad_u.any() or bad_h.any():
             self.rejected_inputs += int(bad_u.sum() + bad_h.sum())
-            u = np.where(bad_u, self._hist_u[:, -1], u)
-            hm = np.where(bad_h, self._hist_h[:, -1], hm)
+            u = np.where(bad_u, last_u, u)
+            hm = np.where(bad_h, last_h, hm)
             now = time.monotonic()
             if now - self._last_reject_log >= 1.0:
                 self._last_reject_log = now
@@ -333,23 +397,59 @@ class ActuatorModel(ABC):
                     "%s/%s: non-finite input held at its last value (%d rejected so far)",
                     self.name, self.channel.channel, self.rejected_inputs,
                 )
-        return u, hm
+        self._buf_u[:, hi] = u
+        self._buf_h[:, hi] = hm
+
+    # The input history: breakpoints still inside the longest delay, as views into preallocated
+    # buffers (``step`` appends in place, trimming moves the start; compaction is rare).
+    @property
+    def _hist_t(self) -> FloatArray:
+        return self._buf_t[self._h_lo:self._h_hi]
+
+    @property
+    def _hist_u(self) -> FloatArray:
+        return self._buf_u[:, self._h_lo:self._h_hi]
+
+    @property
+    def _hist_h(self) -> FloatArray:
+        return self._buf_h[:, self._h_lo:self._h_hi]
+
+    def _set_history(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray) -> None:
+        """Copy breakpoints into fresh buffers with room for many frames after them."""
+        m = bp_t.shape[0]
+        cap = max(HISTORY_CAPACITY, 2 * m)
+        buf_t = np.empty(cap)
+        buf_u = np.empty((self.n, cap))
+        buf_h = np.empty((self.n, cap))
+        buf_t[:m] = bp_t
+        buf_u[:, :m] = bp_u
+        buf_h[:, :m] = bp_h
+        self._buf_t, self._buf_u, self._buf_h = buf_t, buf_u, buf_h
+        self._h_lo, self._h_hi = 0, m
+
+    def _trim_history(self) -> None:
+        """Drop the breakpoints no delay can reach any more (the latest one before the horizon stays)."""
+        horizon = self._t - self.max_delay_s - 1e-6
+        item, lo, hi = self._buf_t.item, self._h_lo, self._h_hi
+        while lo + 1 < hi and item(lo + 1) <= horizon:  # a few breakpoints: faster than searchsorted
+            lo += 1
+        self._h_lo = lo
 
     def _keep_history(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray) -> None:
+        """Keep the breakpoints of a whole record that delays can still reach (after :meth:`run`)."""
         horizon = self._t - self.max_delay_s - 1e-6
         first = max(int(np.searchsorted(bp_t, horizon, side="right")) - 1, 0)
-        self._hist_t = bp_t[first:].copy()
-        self._hist_u = bp_u[:, first:].copy()
-        self._hist_h = bp_h[:, first:].copy()
+        self._set_history(bp_t[first:], bp_u[:, first:], bp_h[:, first:])
 
     def _sample(self, block: FloatArray) -> Sample:
+        """Outputs of one instant; ``block`` is fresh from ``_integrate``, so its columns are not copied."""
         return Sample(
             time_s=self._t,
-            position_deg=block[:, O_POS].copy(),
-            surface_deg=block[:, O_SURF].copy(),
-            rate_dps=block[:, O_RATE].copy(),
-            current_a=block[:, O_CUR].copy(),
-            bus_v=block[:, O_BUS].copy(),
+            position_deg=block[:, O_POS],
+            surface_deg=block[:, O_SURF],
+            rate_dps=block[:, O_RATE],
+            current_a=block[:, O_CUR],
+            bus_v=block[:, O_BUS],
             flags=block[:, O_FLAGS].astype(np.int64),
         )
 

@@ -444,6 +444,41 @@ def _cubic_inverse(c0, c1, c2, c3, y):  # noqa: ANN001, ANN202
 
 
 @nb.njit(cache=True)
+def command_in(P, c0, c1, c2, c3, bp_u, x_out, slope_out):  # noqa: ANN001, ANN201
+    """Stage 2 on every breakpoint of every instance: degrees → volts (command curve) → 5 mV → degrees → in.
+
+    ``slope_out`` gets the inches per volt at the quantized command (for the command noise); with
+    neither quantization nor command noise the command passes straight through and the slope is 0.
+    The operations are those of :class:`~ema_sim.calibration.Cubic` in the same order (``__call__``,
+    8 Newton steps of ``inverse``, ``slope``), so the result is the same to the last bit.
+    """
+    quant_any = False
+    noise_any = False
+    for i in range(P.shape[0]):
+        quant_any = quant_any or P[i, K_QUANT] > 0.0
+        noise_any = noise_any or P[i, K_NCMD] > 0.0
+    for i in range(P.shape[0]):
+        dpi = P[i, K_DPI]
+        quant = P[i, K_QUANT]
+        for j in range(bp_u.shape[1]):
+            u = bp_u[i, j]
+            if not quant_any and not noise_any:
+                x_out[i, j] = u / dpi
+                slope_out[i, j] = 0.0
+                continue
+            deg = u
+            if quant > 0.0:
+                volts = c0 + u * (c1 + u * (c2 + u * c3))
+                y = quant * math.floor(volts / quant + 0.5)
+                deg = (y - c0) / c1
+                for _ in range(8):
+                    f = (c0 + deg * (c1 + deg * (c2 + deg * c3))) - y
+                    deg = deg - f / (c1 + deg * (2.0 * c2 + 3.0 * c3 * deg))
+            x_out[i, j] = deg / dpi
+            slope_out[i, j] = 1.0 / ((c1 + deg * (2.0 * c2 + 3.0 * c3 * deg)) * dpi)
+
+
+@nb.njit(cache=True)
 def _feedback_deg(p, lf_in, s, x, rng):  # noqa: ANN001, ANN202
     """Stages 16–17 at a sample instant ``s``: LVDT degrees → volts (+ noise) → 5 mV → degrees."""
     deg = lf_in * p[K_DPI]
@@ -1118,6 +1153,7 @@ class HighOrderModel(ActuatorModel):
                               feedback_cal=(fb.c0, fb.c1, fb.c2, fb.c3))
             for prm, b in zip(self.params, self.bounds, strict=True)
         ])
+        self._max_delay_s = float(self._P[:, K_CMD_DELAY].max())
         self._power = np.ones(self.n)
         self.trim()
 
@@ -1141,21 +1177,17 @@ class HighOrderModel(ActuatorModel):
     # ------------------------------------------------------------------ command path
     def _command_in(self, bp_u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Stage 2 on every breakpoint: command degrees → (quantized command in inches, inches per volt)."""
-        dpi = self._P[:, K_DPI][:, None]
-        quant = self._P[:, K_QUANT][:, None]
-        if not np.any(quant > 0.0) and not np.any(self._P[:, K_NCMD] > 0.0):
-            return bp_u / dpi, np.zeros_like(bp_u)
+        bp_u = np.ascontiguousarray(bp_u, dtype=float)
+        x_in = np.empty_like(bp_u)
+        slope = np.empty_like(bp_u)
         cal = self.channel.command_cal
-        volts = cal(bp_u)
-        volts = np.where(quant > 0.0, quant * np.floor(volts / np.where(quant > 0.0, quant, 1.0) + 0.5), volts)
-        deg = np.where(quant > 0.0, cal.inverse(volts), bp_u)
-        slope = 1.0 / (cal.slope(deg) * dpi)
-        return deg / dpi, slope
+        command_in(self._P, cal.c0, cal.c1, cal.c2, cal.c3, bp_u, x_in, slope)
+        return x_in, slope
 
     # ------------------------------------------------------------------ base interface
     @property
     def max_delay_s(self) -> float:  # noqa: D102
-        return float(self._P[:, K_CMD_DELAY].max())
+        return self._max_delay_s
 
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
         """The command whose equilibrium LVDT reading is ``position_deg`` under the load."""

@@ -18,6 +18,7 @@ _MODELS: dict[str, str] = {
     "sloac": "ema_sim.models.linear:Sloac",
     "hoalm": "ema_sim.models.linear:Hoalm",
     "loes": "ema_sim.models.linear:Loes",
+    "second_order": "ema_sim.models.second_order:SecondOrder",
 }
 """Registry name → ``module:class`` (imported on first use, so listing names stays cheap)."""
 

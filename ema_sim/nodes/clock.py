@@ -13,14 +13,13 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from builtin_interfaces.msg import Time
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos, stamp_ns
+from ema_msgs_py.cdr import JointFrame
+from ema_msgs_py.ros import qos
 from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.ports import Ports
 
 NS = 1_000_000_000
 
@@ -28,8 +27,9 @@ NS = 1_000_000_000
 class ClockNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
         super().__init__("simclock")
+        self.ports = ports(self)
         self.auto_ready = False
         self.frame_ns = round(NS / args.frame_hz)
         self.last_frame = round(args.duration * args.frame_hz) if args.duration > 0 else None
@@ -44,24 +44,22 @@ class ClockNode(SuiteNode):
         self.started_wall: float | None = None
         self.waiting_since = time.monotonic()
         self.stalls = 0
-        self.pub = self.create_publisher(Clock, ct.CLOCK_TOPIC, qos(ct.CLOCK_QOS))
+        self.pub = self.ports.clock_publisher()
         self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
-        self.create_subscription(JointState, ct.EMAC_FEEDBACK, self._on_feedback, qos(ct.FRAME_QOS))
+        self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback,
+                                      lambda text: self.throttled("bad", f"feedback message ignored: {text}"))
         self.get_logger().info(f"lockstep at {args.frame_hz:g} Hz, waiting for {sorted(self.wait_for) or 'nobody'}")
 
-    def _on_feedback(self, msg: JointState) -> None:
-        try:
-            ns = stamp_ns(msg)
-            for name in msg.name:
-                if ns > self.reported.get(name, -1):
-                    self.reported[name] = ns
-        except Exception as exc:
-            self.throttled("bad", f"feedback message ignored: {exc}")
+    def _on_feedback(self, msg: JointFrame) -> None:
+        ns = msg.stamp_ns
+        for name in msg.name:
+            if ns > self.reported.get(name, -1):
+                self.reported[name] = ns
 
     def _tick(self) -> None:
         self.k += 1
         ns = self.k * self.frame_ns
-        self.pub.publish(Clock(clock=Time(sec=ns // NS, nanosec=ns % NS)))
+        self.pub.publish(ns)
         self.waiting_since = time.monotonic()
 
     def poll(self) -> float:  # noqa: D102
@@ -70,6 +68,7 @@ class ClockNode(SuiteNode):
             if not (self.wait_for <= self.ready and self.matched()):
                 return 0.01
             self.started_wall = now
+            self.mark_running()
             self._tick()
             return 0.0
         if self.last_frame is not None and self.k >= self.last_frame:

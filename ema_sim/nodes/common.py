@@ -55,6 +55,13 @@ class SuiteNode(Node):
         self._ready_pub = self.create_publisher(String, ct.READY, qos(ct.LATCHED_QOS))
         self._ready_sent = False
         self._matched_since: float | None = None
+        self.running_cpu_s: float | None = None
+        """Process CPU when this node's first frame came (start-up excluded from the run's CPU)."""
+
+    def mark_running(self) -> None:
+        """The first frame of the test: note the process CPU so far."""
+        if self.running_cpu_s is None:
+            self.running_cpu_s = time.process_time()
 
     @property
     def sim_time(self) -> bool:
@@ -85,9 +92,11 @@ class SuiteNode(Node):
         """
         now = time.monotonic()
         ok = self.peers <= set(self.get_node_names())
-        if ok:
-            ok = all(p.get_subscription_count() >= self.count_subscribers(p.topic_name) for p in self.publishers) \
-                and all(s.get_publisher_count() >= self.count_publishers(s.topic_name) for s in self.subscriptions)
+        ports = getattr(self, "ports", None)
+        for node in ports.endpoint_nodes() if ports is not None else [self]:
+            ok = ok and all(p.get_subscription_count() >= self.count_subscribers(p.topic_name)
+                            for p in node.publishers) \
+                and all(s.get_publisher_count() >= self.count_publishers(s.topic_name) for s in node.subscriptions)
         if not ok:
             self._matched_since = None
             return False
@@ -115,10 +124,25 @@ def ros_args(argv: Sequence[str] | None) -> list[str]:
 
 def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.ArgumentParser,
         argv: Sequence[str] | None = None) -> int:
-    """Parse arguments, start rclpy, loop until stopped, close cleanly; returns the exit status.
+    """One node in its process: parse arguments, start rclpy, loop until stopped, close cleanly.
 
     SIGINT and SIGTERM end the loop; the node's ``close`` then runs (a recorder closes its bag, so every
     message it received is readable). A user error is one line on stderr and status 2.
+    """
+    return run_nodes(lambda args: ([factory(args)], None), parser, argv)
+
+
+MAX_ROUNDS = 50
+"""Polling rounds of composed nodes between two looks at the middleware (in-process work first)."""
+
+
+def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any]], parser: argparse.ArgumentParser,
+              argv: Sequence[str] | None = None) -> int:
+    """Several nodes in one process (:mod:`ema_sim.nodes.container`), or one: the loop of :func:`run`.
+
+    ``factory`` returns the nodes and the container's bus (None for a lone node). The nodes are polled
+    in order, again while something was handed over in-process, then the executor waits for the next
+    message from outside, at most until the earliest deadline a node asked for.
     """
     full = ros_args(argv)
     parser.add_argument("--peers", action="append", default=[],
@@ -132,42 +156,75 @@ def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.Arg
     rclpy.init(args=full, signal_handler_options=SignalHandlerOptions.NO)
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    node: SuiteNode | None = None
+    nodes: list[SuiteNode] = []
+    bus: Any = None
     status = 0
     try:
-        node = factory(args)
-        node.peers = {n for item in args.peers for n in item.split(",") if n} - {node.get_name()}
+        nodes, bus = factory(args)
+        peers = {n for item in args.peers for n in item.split(",") if n}
+        for node in nodes:
+            node.peers = peers - {node.get_name()}
         executor = make_executor()
-        executor.add_node(node)
+        for node in nodes:
+            executor.add_node(node)
         # Per-frame objects die by reference counting; keep the collector's full passes (whose pauses
         # grow with the heap, e.g. a long recording's index) out of the frame loop.
         gc.collect()
         gc.freeze()
         gc.set_threshold(50_000, 50, 1_000)
-        while stop["signal"] is None and not node.done:
-            if not node._ready_sent:
-                node.check_ready()
-            timeout = node.poll()
-            if node.done:
-                break
-            executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
-
+        _loop(nodes, bus, executor, stop)
     except EmaError as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         status = 2
     except KeyboardInterrupt:
         status = 130
     finally:
-        if node is not None:
-            try:
-                node.close()
-                print(SUMMARY_PREFIX + json.dumps({"node": node.get_name(), "cpu_s": round(time.process_time(), 3),
-                                                   **node.summary()}), flush=True)
-            finally:
-                node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        _finish(nodes, bus)
     return status
+
+
+def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any]) -> None:
+    while stop["signal"] is None and not any(n.done for n in nodes):
+        for node in nodes:
+            if not node._ready_sent:
+                node.check_ready()
+        timeout = MAX_SPIN_S
+        for _ in range(MAX_ROUNDS):
+            if bus is not None:
+                bus.progress = False
+            timeout = min(node.poll() for node in nodes)
+            if bus is None or not bus.progress:
+                break
+        if bus is not None:
+            bus.release()
+        if any(n.done for n in nodes):
+            break
+        executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
+
+
+def _finish(nodes: list[SuiteNode], bus: Any) -> None:
+    """Each node's last words and its summary line.
+
+    ``cpu_s``: the process's CPU; ``cpu_run_s``: since the first frame of the test (start-up left out);
+    a composed node's ``busy_s``: the container thread's time on its behalf (see the container).
+    """
+    busy = getattr(getattr(bus, "meter", None), "seconds", {})
+    marks = [n.running_cpu_s for n in nodes if n.running_cpu_s is not None]
+    for node in nodes:
+        try:
+            node.close()
+            name = node.get_name()
+            cpu = time.process_time()
+            usage: dict[str, Any] = {"cpu_s": round(cpu, 3)}
+            if marks:
+                usage["cpu_run_s"] = round(cpu - min(marks), 3)
+            if name in busy:
+                usage = {"busy_s": round(busy[name], 3)}
+            print(SUMMARY_PREFIX + json.dumps({"node": name, **usage, **node.summary()}), flush=True)
+        finally:
+            node.destroy_node()
+    if rclpy.ok():
+        rclpy.shutdown()
 
 
 def percentile_ms(values: Sequence[float], q: float) -> float:

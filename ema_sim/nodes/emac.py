@@ -27,18 +27,19 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos, set_stamp, stamp_ns
+from ema_msgs_py.cdr import JointFrame
+from ema_msgs_py.ros import qos
 from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
+from ema_sim.models.switches import element_names, model_overrides
 from ema_sim.nodes.common import SuiteNode, percentile_ms, run
 from ema_sim.nodes.params import merged, overrides
+from ema_sim.nodes.ports import Ports
 from ema_sim.signals.plans import channel_list
 
 NS = 1_000_000_000
@@ -74,10 +75,11 @@ class Stream:
 class EmacNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
         channels = channel_list(args.channel or ["left_wing"])
         name = f"emac_{channels[0]}" if len(channels) == 1 else "emac"
         super().__init__(name, automatically_declare_parameters_from_overrides=True)
+        self.ports = ports(self)
         if args.model not in model_names():
             raise UnknownNameError("model", args.model, model_names())
         self.channels = channels
@@ -102,6 +104,9 @@ class EmacNode(SuiteNode):
         self.commands = Stream()
         self.loads = Stream()
         self.source_fb = Stream()
+        self._stream_list = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
+        self._diagnostics_every = round(self.settings.frame_hz)
+        self._frames_to_diagnostics = self._diagnostics_every
         self.last_good_ns: dict[str, int | None] = dict.fromkeys(channels)
         self.last_good_wall: dict[str, float | None] = dict.fromkeys(channels)
         self.clock_ns: int | None = None
@@ -128,62 +133,62 @@ class EmacNode(SuiteNode):
                 if own:
                     cfg = parse_channel(merged(ros_parameters(config_dir() / f"{ch}.yaml"), own), f"{name} parameters")
             kwargs: dict[str, Any] = {"rate_hz": args.rate} if args.rate else {}
+            kwargs.update(model_overrides(args.model, element_names(args.disable)))
             model = create(args.model, cfg, **kwargs)
             pp_v = float(crosstalk.get(f"{ch}_pp_v", 0.0))
             units[ch] = EmacChannel(model, self.settings, crosstalk_noise_pp_v=pp_v, stream=CHANNELS.index(ch))
         return units
 
     def _make_topics(self) -> None:
-        fq = qos(ct.FRAME_QOS)
-        self.fb_pub = self.create_publisher(JointState, ct.EMAC_FEEDBACK, fq)
-        self.surface_pub = self.create_publisher(JointState, ct.SURFACE, fq)
-        self.bus_pub = self.create_publisher(JointState, ct.BUS, fq) if self.has_current else None
+        ports = self.ports
+        self.fb_pub = ports.frame_publisher(ct.EMAC_FEEDBACK)
+        self.surface_pub = ports.frame_publisher(ct.SURFACE)
+        self.bus_pub = ports.frame_publisher(ct.BUS) if self.has_current else None
         self.diag_pub = self.create_publisher(DiagnosticArray, ct.DIAGNOSTICS, qos(ct.EVENT_QOS))
-        self.create_subscription(JointState, ct.EMAC_COMMAND, self._on_command, fq)
-        self.create_subscription(JointState, ct.HINGE_MOMENT, self._on_load, fq)
+        ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad)
+        ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad)
         for ch in self.channels:
             self.create_subscription(String, ct.failure_topic(ch), lambda m, ch=ch: self._on_failure(ch, m.data),
                                      qos(ct.FAILURE_QOS))
         if self.sources:
-            self.create_subscription(JointState, ct.EMAC_FEEDBACK, self._on_source, fq)
+            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad)
         if self.lockstep:
-            self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
+            ports.clock_subscription(self._on_clock)
         self.add_on_set_parameters_callback(self._on_parameters)
-        self._fb_msg = JointState(name=list(self.channels))
-        self._surf_msg = JointState(name=list(self.channels))
-        self._bus_msg = JointState(name=list(self.channels))
 
     # ----------------------------------------------------------------- callbacks (never raise)
-    def _on_command(self, msg: JointState) -> None:
+    def _on_command(self, msg: JointFrame) -> None:
         try:
-            values = self._pick(msg, "position", "command")
+            values = self._pick(msg, msg.position, "position", "command")
             if values:
-                stamp = stamp_ns(msg)
+                stamp = msg.stamp_ns
                 if not stamp and not self.lockstep:  # an unstamped command in real time: now
                     stamp = self.get_clock().now().nanoseconds
                 self.commands.push(stamp, (values, time.monotonic()))
+                self.mark_running()
         except Exception as exc:  # a bad message never kills the node
             self._bad(f"command message dropped: {exc}")
 
-    def _on_load(self, msg: JointState) -> None:
+    def _on_load(self, msg: JointFrame) -> None:
         try:
-            values = self._pick(msg, "effort", "hinge moment")
+            values = self._pick(msg, msg.effort, "effort", "hinge moment")
             if values:
-                self.loads.push(stamp_ns(msg), values)
+                self.loads.push(msg.stamp_ns, values)
         except Exception as exc:
             self._bad(f"hinge-moment message dropped: {exc}")
 
-    def _on_source(self, msg: JointState) -> None:
+    def _on_source(self, msg: JointFrame) -> None:
         try:
-            for i, name in enumerate(msg.name):
-                if name in self.sources and i < len(msg.position):
-                    self.source_fb.push(stamp_ns(msg), (name, float(msg.position[i])))
+            pos = msg.position
+            seen = [(name, float(pos[i])) for i, name in enumerate(msg.name) if name in self.sources and i < len(pos)]
+            if seen:
+                self.source_fb.push(msg.stamp_ns, seen)
         except Exception as exc:
             self._bad(f"feedback message dropped: {exc}")
 
-    def _on_clock(self, msg: Clock) -> None:
-        ns = msg.clock.sec * NS + msg.clock.nanosec
-        self.clock_ns = ns if self.clock_ns is None else max(self.clock_ns, ns)
+    def _on_clock(self, ns: int) -> None:
+        if self.clock_ns is None or ns > self.clock_ns:
+            self.clock_ns = ns
 
     def _on_failure(self, channel: str, text: str) -> None:
         try:
@@ -206,9 +211,8 @@ class EmacNode(SuiteNode):
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
-    def _pick(self, msg: JointState, field: str, what: str) -> dict[str, float]:
-        """This node's channels out of a JointState (missing values are rejected and counted)."""
-        array = getattr(msg, field)
+    def _pick(self, msg: JointFrame, array: list[float], field: str, what: str) -> dict[str, float]:
+        """This node's channels out of a frame (missing values are rejected and counted)."""
         out: dict[str, float] = {}
         for i, name in enumerate(msg.name):
             if name in self.units:
@@ -256,13 +260,12 @@ class EmacNode(SuiteNode):
         if self.loads.queue:
             self._apply_loads(self.loads.take_until(1 << 62))
         if self.source_fb.queue:
-            for _, (name, v) in self.source_fb.take_until(1 << 62):
-                self.meter.observe(name, v, self.slew_v_per_s[name])
+            self._observe_sources(self.source_fb.take_until(1 << 62))
         stepped = False
         while self.commands.queue:
             stamp, item = self.commands.queue.popleft()
             self._apply_commands([(stamp, item)])
-            self._step_all(stamp, lambda ch: self._age_wall(ch, now))
+            self._step_all(stamp, {ch: self._age_wall(ch, now) for ch in self.units})
             self.turnaround.append(time.monotonic() - item[1])  # command received → feedback published
             stepped = True
         if stepped:
@@ -274,7 +277,7 @@ class EmacNode(SuiteNode):
                    for c in self.units):
                 self.late_frames += 1
             start = self.model_ns if self.model_ns is not None else self.get_clock().now().nanoseconds
-            self._step_all(start, lambda ch: self._age_wall(ch, now))
+            self._step_all(start, {ch: self._age_wall(ch, now) for ch in self.units})
             self.last_step_wall = now if now - due > self.frame_s else due
             due = self.last_step_wall + 1.5 * self.frame_s
         return due - now
@@ -289,27 +292,33 @@ class EmacNode(SuiteNode):
         if self.model_ns is None:  # first tick: report the trimmed state at the start time
             self.model_ns = self.clock_ns
             self._publish(self.model_ns, {ch: u.last for ch, u in self.units.items()})
+        streams = self._stream_list
         while self.clock_ns >= self.model_ns + self.frame_ns:
             t = self.model_ns
-            pending = [s for s in self._streams() if not s.reached(t) and not s.gave_up]
-            for s in self._streams():
-                if s not in pending:
+            pending = [s for s in streams if (s.last_stamp is None or s.last_stamp < t) and not s.gave_up]
+            if pending:
+                for s in streams:
+                    if s not in pending:
+                        s.waiting_since = None
+                if not self._wait(pending, t):
+                    return 0.002
+            else:
+                for s in streams:
                     s.waiting_since = None
-            if pending and not self._wait(pending, t):
-                return 0.002
-            self._apply_commands(self.commands.take_until(t))
-            self._apply_loads(self.loads.take_until(t))
-            for _, (name, v) in self.source_fb.take_until(t):
-                self.meter.observe(name, v, self.slew_v_per_s[name])
-            self._step_all(t, lambda ch, t=t: None if self.last_good_ns[ch] is None
-                           else (t - self.last_good_ns[ch]) / NS)
+            if self.commands.queue:
+                self._apply_commands(self.commands.take_until(t))
+            if self.loads.queue:
+                self._apply_loads(self.loads.take_until(t))
+            if self.source_fb.queue:
+                self._observe_sources(self.source_fb.take_until(t))
+            last_good = self.last_good_ns
+            self._step_all(t, {ch: None if last_good[ch] is None else (t - last_good[ch]) / NS for ch in self.units})
         return 0.05
 
-    def _streams(self) -> list[Stream]:
-        out = [self.commands, self.loads]
-        if self.sources:
-            out.append(self.source_fb)
-        return out
+    def _observe_sources(self, items: list[tuple[int, list[tuple[str, float]]]]) -> None:
+        for _, seen in items:
+            for name, v in seen:
+                self.meter.observe(name, v, self.slew_v_per_s[name])
 
     def _wait(self, pending: list[Stream], t: int) -> bool:
         """True when the frame may go ahead without the pending inputs (their publishers are gone or late)."""
@@ -318,7 +327,7 @@ class EmacNode(SuiteNode):
                   id(self.source_fb): ct.EMAC_FEEDBACK}
         go = True
         for s in pending:
-            publishers = self.count_publishers(topics[id(s)]) - (1 if s is self.source_fb else 0)
+            publishers = self.ports.publishers(topics[id(s)]) - (1 if s is self.source_fb else 0)
             if publishers <= 0:
                 continue
             if s.waiting_since is None:
@@ -335,37 +344,41 @@ class EmacNode(SuiteNode):
                 s.waiting_since = None
         return go
 
-    def _step_all(self, start_ns: int, age: Any) -> None:
+    def _step_all(self, start_ns: int, ages: dict[str, float | None]) -> None:
+        """One frame of every hosted channel; ``ages``: how old each channel's last good command is."""
         out: dict[str, Feedback] = {}
+        meter = self.meter
         for ch, unit in self.units.items():
-            was = (unit.last.braked, unit.failure.kind)
-            out[ch] = unit.step(age(ch), self.meter.activity_except(ch))
-            if (out[ch].braked, unit.failure.kind) != was:
+            was = (unit.last.braked, unit.failure)
+            fb = out[ch] = unit.step(ages[ch], meter.activity_except(ch) if self.sources or self.coupled else 0.0)
+            if fb.braked is not was[0] or unit.failure is not was[1]:
                 self._publish_diagnostics()
         self.model_ns = start_ns + self.frame_ns
-        if self.coupled:  # an EMAC box: its channels are each other's crosstalk sources
+        if self.coupled and len(self.units) > 1:  # an EMAC box: its channels are each other's crosstalk sources
             for ch, fb in out.items():
-                self.meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
+                meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
         self._publish(self.model_ns, out)
-        if (self.model_ns // self.frame_ns) % round(self.settings.frame_hz) == 0:
+        self._frames_to_diagnostics -= 1
+        if self._frames_to_diagnostics <= 0:  # once a second of model time
+            self._frames_to_diagnostics = self._diagnostics_every
             self._publish_diagnostics()
 
     def _publish(self, stamp: int, out: dict[str, Feedback]) -> None:
-        fb, surf = self._fb_msg, self._surf_msg
-        set_stamp(fb, stamp)
-        set_stamp(surf, stamp)
-        fbs = [out[c] for c in self.channels]
-        fb.position = [f.position_v for f in fbs]
-        fb.effort = [f.current_a for f in fbs] if self.has_current else []
-        surf.position = [f.surface_deg for f in fbs]
-        surf.velocity = [f.rate_dps for f in fbs]
-        surf.effort = [f.hinge_moment_inlb for f in fbs]
-        self.fb_pub.publish(fb)
-        self.surface_pub.publish(surf)
-        if self.bus_pub is not None:
-            set_stamp(self._bus_msg, stamp)
-            self._bus_msg.position = [f.bus_v for f in fbs]
-            self.bus_pub.publish(self._bus_msg)
+        names = self.channels
+        if len(names) == 1:
+            f = out[names[0]]
+            self.fb_pub.publish(JointFrame(stamp, names, [f.position_v], [], [f.current_a] if self.has_current else []))
+            self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg], [f.rate_dps], [f.hinge_moment_inlb]))
+            if self.bus_pub is not None:
+                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v]))
+        else:
+            fbs = [out[c] for c in names]
+            self.fb_pub.publish(JointFrame(stamp, names, [f.position_v for f in fbs],
+                                           [], [f.current_a for f in fbs] if self.has_current else []))
+            self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg for f in fbs],
+                                                [f.rate_dps for f in fbs], [f.hinge_moment_inlb for f in fbs]))
+            if self.bus_pub is not None:
+                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v for f in fbs]))
         self.published += 1
 
     def _publish_diagnostics(self) -> None:
@@ -408,6 +421,9 @@ def parser() -> argparse.ArgumentParser:
                    help="channel (repeatable, comma-separated, or 'all' for an EMAC box of five)")
     p.add_argument("--rate", type=float, default=None, help="integration rate of a discrete model, Hz")
     p.add_argument("--frame-hz", type=float, default=None, help="FMU frame rate (default from config/emac.yaml)")
+    p.add_argument("--disable", action="append", default=[],
+                   help="switch the model's own elements off: dead_band (the PWM's), quantization, noise "
+                        "(others, the test environment's, are accepted and left to it)")
     return p
 
 

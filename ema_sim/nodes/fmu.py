@@ -25,15 +25,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from rclpy.serialization import deserialize_message
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos, set_stamp, stamp_ns
+from ema_msgs_py.ros import qos
 from ema_sim import __version__
-from ema_sim.ail.fmu import EMAC_COMMAND, FEEDBACK, SURFACE, FrameInputs, Fmu
+from ema_sim.ail.fmu import EMAC_COMMAND, FEEDBACK, SURFACE, Fmu, FrameInputs
 from ema_sim.ail.params import config_path, load_ail_config
 from ema_sim.ail.vehicle import STATES
 from ema_sim.config import CHANNELS, load_channel
@@ -41,6 +39,7 @@ from ema_sim.errors import EmaError
 from ema_sim.io.bag import BagWriter
 from ema_sim.nodes.common import SuiteNode, run
 from ema_sim.nodes.params import overrides
+from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
 
 NS = 1_000_000_000
@@ -56,8 +55,9 @@ def default_bag(profile: str) -> Path:
 class FmuNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
         super().__init__("fmu", automatically_declare_parameters_from_overrides=True)
+        self.ports = ports(self)
         self.auto_ready = False  # ready when the run starts, after its recorder is matched
         self.lockstep = self.sim_time
         cfg = load_ail_config(args.vehicle_config, overrides(self))
@@ -90,25 +90,21 @@ class FmuNode(SuiteNode):
         self.bag_path = Path(args.bag) if args.bag else default_bag(args.profile)
         self.bag_path.parent.mkdir(parents=True, exist_ok=True)
         self.writer = BagWriter(self.bag_path, meta)
-        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep)
-        for kind, topic in INPUT_TOPICS.items():
-            self.recorder.hooks[topic] = lambda raw, log_time, kind=kind: self._on_input(kind, raw)
-        fq = qos(ct.FRAME_QOS)
-        self.cmd_pub = self.create_publisher(JointState, ct.FMU_COMMAND, fq)
-        self.load_pub = self.create_publisher(JointState, ct.HINGE_MOMENT, fq)
-        self.vehicle_pub = self.create_publisher(JointState, ct.VEHICLE, fq)
+        hooks = {topic: (lambda raw, _log_time, kind=kind: self._on_input(kind, raw))
+                 for kind, topic in INPUT_TOPICS.items()}
+        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
+                                 own=(ct.FMU_COMMAND, ct.HINGE_MOMENT, ct.VEHICLE), hooks=hooks,
+                                 on_clock=self._on_clock)
+        self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
+        self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
+        self.vehicle_pub = self.ports.frame_publisher(ct.VEHICLE)
         self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
         self.test_pub.publish(String(data=json.dumps(meta)))
         self.ready: set[str] = set()
         self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
         self.clock_ns: int | None = None
-        if self.lockstep:
-            self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
         self.inputs: dict[str, dict[int, dict[str, float]]] = {kind: {} for kind in INPUT_TOPICS}
         self.latest: dict[str, dict[str, float]] = {kind: {} for kind in INPUT_TOPICS}
-        self._cmd = JointState(name=list(CHANNELS))
-        self._load = JointState(name=list(CHANNELS))
-        self._vehicle = JointState(name=list(STATES))
         self.phase = "waiting"
         self.k = 0
         self.start_wall = 0.0
@@ -121,14 +117,17 @@ class FmuNode(SuiteNode):
                                f"{self.frames} frames; bag {self.bag_path}")
 
     # ----------------------------------------------------------------- callbacks (never raise)
-    def _on_clock(self, msg: Clock) -> None:
-        ns = msg.clock.sec * NS + msg.clock.nanosec
+    def _on_clock(self, ns: int) -> None:
         self.clock_ns = ns if self.clock_ns is None else max(self.clock_ns, ns)
 
     def _on_input(self, kind: str, raw: bytes) -> None:
-        msg = deserialize_message(raw, JointState)
+        try:
+            msg = cdr.decode(raw)
+        except ValueError as exc:  # never lose the node over one message
+            self.throttled(f"bad {kind}", f"{INPUT_TOPICS[kind]}: {exc}")
+            return
         values = getattr(msg, INPUT_FIELDS[kind])
-        frame = self.inputs[kind].setdefault(stamp_ns(msg), {}) if self.lockstep else {}
+        frame = self.inputs[kind].setdefault(msg.stamp_ns, {}) if self.lockstep else {}
         for i, name in enumerate(msg.name):
             if name in CHANNELS and i < len(values):
                 frame[name] = float(values[i])
@@ -154,14 +153,15 @@ class FmuNode(SuiteNode):
 
     def _publish_frame(self, k: int, stamp: int, inputs: FrameInputs) -> None:
         out = self.fmu.frame(inputs)
-        for msg in (self._cmd, self._load, self._vehicle):
-            set_stamp(msg, stamp)
-        self._cmd.position = [out.command_v[ch] for ch in CHANNELS]
-        self._load.effort = [out.hinge_moment_inlb[ch] for ch in CHANNELS]
-        self._vehicle.position = list(out.vehicle.values())
-        self.load_pub.publish(self._load)
-        self.cmd_pub.publish(self._cmd)
-        self.vehicle_pub.publish(self._vehicle)
+        names = list(CHANNELS)
+        load = cdr.JointFrame(stamp, names, [], [], [float(out.hinge_moment_inlb[ch]) for ch in CHANNELS])
+        cmd = cdr.JointFrame(stamp, names, [float(out.command_v[ch]) for ch in CHANNELS])
+        vehicle = cdr.JointFrame(stamp, list(STATES), [float(v) for v in out.vehicle.values()])
+        self.load_pub.publish(load)
+        self.cmd_pub.publish(cmd)
+        self.vehicle_pub.publish(vehicle)
+        for topic, frame in ((ct.HINGE_MOMENT, load), (ct.FMU_COMMAND, cmd), (ct.VEHICLE, vehicle)):
+            self.recorder.record_own(topic, cdr.encode(frame), stamp)
         oldest = (k - 2) * self.frame_ns
         for table in self.inputs.values():
             for s in [s for s in table if s < oldest]:
@@ -180,6 +180,7 @@ class FmuNode(SuiteNode):
         if not (self.wait_for <= self.ready and self.matched()):
             return 0.01
         self.phase = "running"
+        self.mark_running()
         self.get_logger().info("running")
         self.announce_ready()
         self.start_wall = time.monotonic() + 0.05

@@ -19,17 +19,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rclpy.serialization import deserialize_message
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos, set_stamp
+from ema_msgs_py.ros import qos
 from ema_sim import __version__
 from ema_sim.config import CHANNELS, load_channel
 from ema_sim.io.bag import BagWriter
 from ema_sim.nodes.common import SuiteNode, percentile_ms, run
+from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.signals.plans import build_plan
 
@@ -44,8 +43,9 @@ def default_bag(test: str) -> Path:
 class ManeuverNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
         super().__init__("maneuver", automatically_declare_parameters_from_overrides=True)
+        self.ports = ports(self)
         self.auto_ready = False  # ready when the test starts, after its recorder is matched
         self.lockstep = self.sim_time
         self.plan = build_plan(args.test, maneuver=args.maneuver, load=args.load,
@@ -74,20 +74,17 @@ class ManeuverNode(SuiteNode):
         self.bag_path = Path(args.bag) if args.bag else default_bag(self.plan.test)
         self.bag_path.parent.mkdir(parents=True, exist_ok=True)
         self.writer = BagWriter(self.bag_path, meta)
-        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep)
-        self.recorder.hooks[ct.FMU_FEEDBACK] = self._on_fmu_feedback
-        fq = qos(ct.FRAME_QOS)
-        self.cmd_pub = self.create_publisher(JointState, ct.FMU_COMMAND, fq)
-        self.load_pub = self.create_publisher(JointState, ct.HINGE_MOMENT, fq)
+        self.clock_ns: int | None = None
+        own = (ct.FMU_COMMAND, ct.HINGE_MOMENT)
+        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports, own=own,
+                                 hooks={ct.FMU_FEEDBACK: self._on_fmu_feedback}, on_clock=self._on_clock)
+        self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
+        self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
         self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
         self.test_pub.publish(String(data=json.dumps(meta)))
         self.ready: set[str] = set()
         self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
-        self.clock_ns: int | None = None
-        if self.lockstep:
-            self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
-        self._cmd = JointState(name=list(self.commanded))
-        self._load = JointState(name=list(self.commanded))
+        self._names = list(self.commanded)
         self.phase = "waiting"
         self.k = 0
         self.start_wall = 0.0
@@ -102,14 +99,14 @@ class ManeuverNode(SuiteNode):
                                f"{self.plan.duration_s:g} s; bag {self.bag_path}")
 
     # ----------------------------------------------------------------- callbacks
-    def _on_clock(self, msg: Clock) -> None:
-        ns = msg.clock.sec * NS + msg.clock.nanosec
-        self.clock_ns = ns if self.clock_ns is None else max(self.clock_ns, ns)
+    def _on_clock(self, ns: int) -> None:
+        if self.clock_ns is None or ns > self.clock_ns:
+            self.clock_ns = ns
 
     def _on_fmu_feedback(self, raw: bytes, log_time: int) -> None:
         del log_time
-        msg = deserialize_message(raw, JointState)
-        stamp = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+        msg = cdr.decode(raw)
+        stamp = msg.stamp_ns
         now = time.monotonic()
         for name in msg.name:
             if stamp > self.last_fb_stamp.get(name, -1):
@@ -122,13 +119,16 @@ class ManeuverNode(SuiteNode):
                     frame.setdefault(name, now)
 
     # ----------------------------------------------------------------- the test
-    def _publish_frame(self, k: int, stamp: int) -> None:
-        set_stamp(self._cmd, stamp)
-        set_stamp(self._load, stamp)
-        self._cmd.position = [float(self.volts[ch][k]) for ch in self.commanded]
-        self._load.effort = [float(self.loads[ch][k]) for ch in self.commanded]
-        self.load_pub.publish(self._load)
-        self.cmd_pub.publish(self._cmd)
+    def _publish_frame(self, k: int, stamp: int) -> float:
+        """Frame ``k``'s load, then its command; returns when the command's publish began (monotonic)."""
+        load = cdr.JointFrame(stamp, self._names, [], [], [float(self.loads[ch][k]) for ch in self._names])
+        cmd = cdr.JointFrame(stamp, self._names, [float(self.volts[ch][k]) for ch in self._names])
+        self.load_pub.publish(load)
+        sent = time.monotonic()
+        self.cmd_pub.publish(cmd)
+        self.recorder.record_own(ct.HINGE_MOMENT, cdr.encode(load), stamp)
+        self.recorder.record_own(ct.FMU_COMMAND, cdr.encode(cmd), stamp)
+        return sent
 
     def poll(self) -> float:  # noqa: D102
         now = time.monotonic()
@@ -145,6 +145,7 @@ class ManeuverNode(SuiteNode):
         if not (self.wait_for <= self.ready and self.matched()):
             return 0.01
         self.phase = "running"
+        self.mark_running()
         self.get_logger().info("running")
         self.announce_ready()
         now = time.monotonic()
@@ -173,8 +174,7 @@ class ManeuverNode(SuiteNode):
             return due - now
         if now - due > self.frame_ns / NS:
             self.late_publish += 1
-        self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns)
-        self.pub_wall.append(time.monotonic())
+        self.pub_wall.append(self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns))
         self.k += 1
         if self.k >= self.frames:
             self._finish(now, 1.0)

@@ -1,20 +1,22 @@
 """Records every topic of the graph into a bag, as ``ros2 bag record -a`` would, raw (no re-serialisation).
 
 Contract topics are subscribed at once with their contract QoS; others are discovered every second
-and subscribed with their publishers' reliability. Under lockstep the log time of a stamped message is
-its stamp (a reproducible bag); in real time it is the receive time, as rosbag2 does.
+and subscribed with their publishers' reliability. Messages are written as the CDR bytes they arrived
+in, straight into the bag; in a container, frames from composed nodes are serialized once, for the bag.
+The node's own publications are written as it publishes them. Under lockstep the log time of a stamped
+message is its stamp (a reproducible bag); in real time it is the receive time, as rosbag2 does.
 """
 
 from __future__ import annotations
 
-import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
 from ema_msgs_py.ros import message_class, qos
@@ -28,43 +30,73 @@ EXCLUDED = ("/parameter_events",)
 
 def leading_stamp_ns(raw: bytes) -> int | None:
     """The stamp at the start of a CDR message (after the 4-byte encapsulation header)."""
-    if len(raw) < 12:
-        return None
-    fmt = "<iI" if raw[1] == 1 else ">iI"
-    sec, nsec = struct.unpack_from(fmt, raw, 4)
-    return sec * 1_000_000_000 + nsec
+    return cdr.stamp_ns(raw)
 
 
 class Recorder:
     """Raw subscriptions of a node feeding a :class:`~ema_sim.io.bag.BagWriter`."""
 
-    def __init__(self, node: Node, writer: BagWriter, *, lockstep: bool) -> None:
+    def __init__(self, node: Node, writer: BagWriter, *, lockstep: bool, ports: Any, own: Iterable[str] = (),
+                 hooks: dict[str, Callable[[bytes, int], None]] | None = None,
+                 on_clock: Callable[[int], None] | None = None) -> None:
         self.node = node
         self.writer = writer
         self.lockstep = lockstep
         self.topics: dict[str, str] = {}
-        self.hooks: dict[str, Callable[[bytes, int], None]] = {}
+        self.hooks: dict[str, Callable[[bytes, int], None]] = dict(hooks or {})
+        """Called with (raw, log time) after a topic's message is written (the node's own use of it)."""
+        self.on_clock = on_clock
         self.last_message = time.monotonic()
         self.errors = 0
         self._next_discovery = 0.0
+        self._now_ns = (lambda: node.get_clock().now().nanoseconds) if lockstep else time.time_ns
+        for topic in own:  # the node's own publications: written as it publishes them, not taken back
+            self._add(topic, ct.TOPICS[topic].msgtype)
         for name, spec in ct.TOPICS.items():
-            self._subscribe(name, spec.msgtype, qos(spec.qos if spec.qos.durability == "volatile"
-                                                   else ct.QosSpec(spec.qos.reliability, spec.qos.durability, 100)))
+            if name in self.topics:
+                continue
+            if name == ct.CLOCK_TOPIC:
+                self._add(name, spec.msgtype)
+                ports.clock_subscription(self._record_clock)
+            elif spec.per_frame:
+                self._add(name, spec.msgtype)
+                ports.raw_subscription(name, self._callback(name, spec.msgtype, True))
+            else:
+                self._subscribe(name, spec.msgtype, qos(spec.qos if spec.qos.durability == "volatile"
+                                                       else ct.QosSpec(spec.qos.reliability, spec.qos.durability,
+                                                                       100)))
+
+    def _add(self, topic: str, msgtype: str) -> None:
+        self.topics[topic] = msgtype
+        self.writer.add_topic(topic, msgtype, ct.TOPICS[topic].qos if topic in ct.TOPICS else None)
+
+    def _record_clock(self, ns: int) -> None:
+        try:
+            self.writer.write(ct.CLOCK_TOPIC, ct.CLOCK, ns if self.lockstep else self._now_ns(), cdr.encode_clock(ns))
+            self.last_message = time.monotonic()
+            if self.on_clock is not None:
+                self.on_clock(ns)
+        except Exception as exc:  # never lose the node over one message
+            self.errors += 1
+            self.node.get_logger().error(f"recording {ct.CLOCK_TOPIC}: {exc}", throttle_duration_sec=1.0)
 
     def _subscribe(self, topic: str, msgtype: str, profile: QoSProfile) -> None:
         if topic in self.topics or topic in EXCLUDED or msgtype not in ts.typestore().types:
             return
-        self.topics[topic] = msgtype
-        self.writer.add_topic(topic, msgtype, ct.TOPICS[topic].qos if topic in ct.TOPICS else None)
+        self._add(topic, msgtype)
         stamped = msgtype in LEADING_STAMP
         self.node.create_subscription(message_class(msgtype), topic, self._callback(topic, msgtype, stamped),
                                       profile, raw=True)
 
+    def record_own(self, topic: str, raw: bytes, stamp_ns: int) -> None:
+        """One of the node's own publications (stamped ``stamp_ns``), with the log time a take would give it."""
+        self.writer.write(topic, self.topics[topic], stamp_ns if self.lockstep else self._now_ns(), raw)
+
     def _callback(self, topic: str, msgtype: str, stamped: bool) -> Callable[[bytes], None]:
         def record(raw: bytes) -> None:
             try:
-                stamp = leading_stamp_ns(raw) if stamped else None
-                log_time = stamp if (self.lockstep and stamp is not None) else self.node.get_clock().now().nanoseconds
+                stamp = leading_stamp_ns(raw) if stamped and self.lockstep else None
+                log_time = stamp if stamp is not None else self._now_ns()
                 self.writer.write(topic, msgtype, log_time, raw)
                 self.last_message = time.monotonic()
                 hook = self.hooks.get(topic)

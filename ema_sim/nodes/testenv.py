@@ -15,21 +15,21 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from sensor_msgs.msg import JointState
-
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos
+from ema_msgs_py.cdr import JointFrame
 from ema_sim.environment import Profile, SignalPath, TransportDelay, load_profile
 from ema_sim.environment.profile import PATHS
 from ema_sim.nodes.common import SuiteNode, run
 from ema_sim.nodes.params import merged, overrides
+from ema_sim.nodes.ports import Ports
 
 
 class TestEnvNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
         super().__init__("testenv", automatically_declare_parameters_from_overrides=True)
+        self.ports = ports(self)
         profile = load_profile(args.profile)
         own = overrides(self)
         if any(k in own for k in (*PATHS, "seed", "full_scale_v")):
@@ -46,11 +46,10 @@ class TestEnvNode(SuiteNode):
         self.cur_delays: dict[str, TransportDelay] = {}
         self.frames = {"command": 0, "feedback": 0}
         self.passed_bad = 0
-        fq = qos(ct.FRAME_QOS)
-        self.cmd_pub = self.create_publisher(JointState, ct.EMAC_COMMAND, fq)
-        self.fb_pub = self.create_publisher(JointState, ct.FMU_FEEDBACK, fq)
-        self.create_subscription(JointState, ct.FMU_COMMAND, self._on_command, fq)
-        self.create_subscription(JointState, ct.EMAC_FEEDBACK, self._on_feedback, fq)
+        self.cmd_pub = self.ports.frame_publisher(ct.EMAC_COMMAND)
+        self.fb_pub = self.ports.frame_publisher(ct.FMU_FEEDBACK)
+        self.ports.frame_subscription(ct.FMU_COMMAND, self._on_command, self._bad_message)
+        self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback, self._bad_message)
         d = self.profile.describe()
         self.get_logger().info(f"profile {d['profile']}: command {d['command_path']}; feedback {d['feedback_path']}")
 
@@ -68,37 +67,39 @@ class TestEnvNode(SuiteNode):
             return value
         return float(path.step(value))
 
-    def _on_command(self, msg: JointState) -> None:
+    def _bad_message(self, text: str) -> None:
+        self.throttled("drop", f"message dropped: {text}")
+
+    def _on_command(self, msg: JointFrame) -> None:
         try:
-            out = JointState(header=msg.header, name=list(msg.name))
+            pos = msg.position
             values = []
             for i, name in enumerate(msg.name):
-                v = float(msg.position[i]) if i < len(msg.position) else math.nan
+                v = float(pos[i]) if i < len(pos) else math.nan
                 values.append(self._through(self._path(self.cmd_paths, name, self.profile.command_path, v), v))
-            out.position = values
-            self.cmd_pub.publish(out)
             self.frames["command"] += 1
+            self.mark_running()
+            self.cmd_pub.publish(JointFrame(msg.stamp_ns, msg.name, values, frame_id=msg.frame_id))
         except Exception as exc:  # a bad message never kills the node
             self.throttled("drop", f"command message dropped: {exc}")
 
-    def _on_feedback(self, msg: JointState) -> None:
+    def _on_feedback(self, msg: JointFrame) -> None:
         try:
-            out = JointState(header=msg.header, name=list(msg.name))
             pos, cur = [], []
+            position, effort = msg.position, msg.effort
+            with_current = len(effort) == len(msg.name)
             for i, name in enumerate(msg.name):
-                v = float(msg.position[i]) if i < len(msg.position) else math.nan
+                v = float(position[i]) if i < len(position) else math.nan
                 pos.append(self._through(self._path(self.fb_paths, name, self.profile.feedback_path, v), v))
-                if len(msg.effort) == len(msg.name):
-                    a = float(msg.effort[i])
+                if with_current:
+                    a = float(effort[i])
                     delay = self.cur_delays.get(name)
                     if delay is None:
                         delay = self.cur_delays[name] = self.profile.current_delay(self.frame_s)
                         delay.reset(a if math.isfinite(a) else 0.0)
                     cur.append(float(delay.step(a)) if math.isfinite(a) else a)
-            out.position = pos
-            out.effort = cur
-            self.fb_pub.publish(out)
             self.frames["feedback"] += 1
+            self.fb_pub.publish(JointFrame(msg.stamp_ns, msg.name, pos, [], cur, msg.frame_id))
         except Exception as exc:
             self.throttled("drop", f"feedback message dropped: {exc}")
 

@@ -1,0 +1,68 @@
+"""``ema identify``: fit a declared model to measured data, find what it lacks, add it, report."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from ema_sim.commands.common import parse_overrides
+
+
+def load_measured(path: Path, channel: str | None) -> Any:
+    """A measured record from a data-contract CSV, or from a rosbag2 when the bag reader is installed."""
+    from ema_sim import io as ema_io  # noqa: PLC0415
+    from ema_sim.errors import DataError  # noqa: PLC0415
+    from ema_sim.io.csv import read_csv  # noqa: PLC0415
+
+    loader = getattr(ema_io, "load_data", None)
+    if loader is not None:
+        return loader(path, channel=channel)
+    if path.is_dir() or path.suffix == ".mcap":
+        raise DataError(f"{path}: reading rosbag2 needs ema_sim.io.bag (the node suite)")
+    return read_csv(path)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Identify and print the summary; write JSON and the report when asked."""
+    from ema_sim.config import CHANNELS, load_channel  # noqa: PLC0415
+    from ema_sim.identify.report import summary, to_json, write_json, write_report  # noqa: PLC0415
+    from ema_sim.identify.stepwise import identify  # noqa: PLC0415
+
+    data = load_measured(args.data, args.channel)
+    channel = args.channel or data.metadata.get("channel", "")
+    if channel not in CHANNELS:
+        channel = "left_wing"
+    say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
+    result = identify(data, load_channel(channel), args.model, parse_overrides(args.overrides),
+                      max_effects=args.max_effects, log=say)
+    report = to_json(result, str(args.data))
+    print(summary(report))
+    if args.json:
+        write_json(report, args.json)
+    if args.report:
+        path = write_report(result, report, args.report)
+        print(f"report: {path}")
+    return 0
+
+
+def register(sub: Any) -> None:
+    """Add ``identify`` to the ``ema`` parser."""
+    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415
+
+    p = sub.add_parser(
+        "identify", help="fit a model to measured data and add the effects it lacks",
+        description="Output-error fit of a declared model, then stepwise addition of the vocabulary effects "
+                    "(data contract) that pay for themselves; reports the error before and after.",
+    )
+    p.add_argument("data", type=Path, help="a data-contract CSV or a rosbag2 directory")
+    p.add_argument("--model", default="second_order", choices=DECLARED, help="declared starting model")
+    p.add_argument("--channel", default=None, help="channel (default: the data's metadata, else left_wing)")
+    p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
+                   help="declare a stage of the starting model, e.g. --set compliance_deg_per_kinlb=0.2")
+    p.add_argument("--max-effects", type=int, default=8, help="most effects to add (8)")
+    p.add_argument("--json", type=Path, default=None, help="write the report JSON here")
+    p.add_argument("--report", type=Path, default=None, help="write report.md and plots in this directory")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run)

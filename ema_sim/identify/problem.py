@@ -1,0 +1,143 @@
+"""A measured record set up for output-error fitting: inputs as breakpoints, outputs, noise weights.
+
+The model is simulated with the *measured* command and hinge moment and compared with the measured
+LVDT position and/or surface angle; each output's residual is divided by its own noise floor so
+outputs with different sensors weigh the same and a perfect model leaves unit variance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import savgol_filter
+
+from ema_sim.analysis.noise import noise_floor
+from ema_sim.config import ChannelConfig
+from ema_sim.errors import DataError
+from ema_sim.io.csv import MeasuredData
+from ema_sim.models.base import O_POS, O_RATE, O_SURF
+from ema_sim.models.second_order import SecondOrder, SecondOrderParams
+
+FloatArray = NDArray[np.float64]
+OUTPUT_COLUMN = {"position_deg": O_POS, "surface_deg": O_SURF}
+SETTLE_S = 0.3
+"""Samples before this (from the start) are not fitted: the record may not start in equilibrium."""
+MIN_NOISE_DEG = 1e-3
+"""Floor on a noise estimate: no sensor of table A3 is better (laser tracker ±0.0014°), and a
+noise-free (simulated) output must not outweigh a measured one a thousandfold."""
+
+
+@dataclass
+class Problem:
+    """Everything the fits need from one record, and the batched simulator that compares against it."""
+
+    data: MeasuredData
+    channel: ChannelConfig
+    step_s: float = 1e-3
+    settle_s: float = SETTLE_S
+    outputs: list[str] = field(init=False)
+    time_s: FloatArray = field(init=False)
+    sigma_deg: dict[str, float] = field(init=False)
+    simulations: int = field(init=False, default=0)
+
+    def __post_init__(self) -> None:
+        d = self.data
+        self.outputs = d.outputs
+        if not self.outputs:
+            raise DataError(f"{d.source or 'data'}: needs a position_deg or surface_deg column to identify")
+        self.time_s = d.time_s - d.time_s[0]
+        if self.time_s[-1] < 2.0 * self.settle_s:
+            raise DataError(f"{d.source or 'data'}: {self.time_s[-1]:.2f} s of data is too short to identify")
+        self.sigma_deg = {o: max(noise_floor(d.column(o)), MIN_NOISE_DEG) for o in self.outputs}
+        cmd = d.command_deg
+        hm = d.hinge_moment
+        keep = np.ones(cmd.size, dtype=bool)
+        keep[1:] = (np.diff(cmd) != 0.0) | (np.diff(hm) != 0.0)
+        self._bp_t = self.time_s[keep]
+        self._bp_u = cmd[keep]
+        self._bp_h = hm[keep]
+        self.mask = self.time_s >= self.settle_s
+
+    # ---------------------------------------------------------------- facts about the record
+    @property
+    def n_fit(self) -> int:
+        """Number of residual entries a fit sees (samples × outputs)."""
+        return int(self.mask.sum()) * len(self.outputs)
+
+    @property
+    def sample_hz(self) -> float:
+        """Median sample rate."""
+        return float(1.0 / np.median(np.diff(self.time_s)))
+
+    @property
+    def hinge_moment(self) -> FloatArray:
+        """The measured hinge moment (zeros when the record has none)."""
+        return self.data.hinge_moment
+
+    @cached_property
+    def load_span_inlb(self) -> float:
+        """Robust peak-to-peak of the hinge moment (1st to 99th percentile)."""
+        hm = self.hinge_moment
+        return float(np.percentile(hm, 99) - np.percentile(hm, 1))
+
+    @cached_property
+    def load_reverses(self) -> bool:
+        """True when the hinge moment takes both signs by more than its noise."""
+        hm = self.hinge_moment
+        return bool(np.percentile(hm, 99) > 5.0 and np.percentile(hm, 1) < -5.0)
+
+    @cached_property
+    def measured_rate_dps(self) -> float:
+        """Fastest the measured output moves (99.9th percentile of a smoothed derivative)."""
+        output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
+        window = max(round(0.015 * self.sample_hz) | 1, 5)
+        rate = savgol_filter(self.data.column(output), window, 2, deriv=1, delta=1.0 / self.sample_hz)
+        return float(np.percentile(np.abs(rate), 99.9))
+
+    @cached_property
+    def load_freq_hz(self) -> float:
+        """Dominant frequency of the hinge moment (what hysteretic damping's h/ω is evaluated at)."""
+        hm = self.hinge_moment - np.mean(self.hinge_moment)
+        if not np.any(hm):
+            return 0.1
+        spec = np.abs(np.fft.rfft(hm * np.hanning(hm.size)))
+        freqs = np.fft.rfftfreq(hm.size, 1.0 / self.sample_hz)
+        spec[0] = 0.0
+        return float(max(freqs[int(np.argmax(spec))], 1.0 / self.time_s[-1]))
+
+    # ---------------------------------------------------------------- simulation
+    def simulate(self, params: Sequence[SecondOrderParams], flips: Sequence[bool] | None = None) -> FloatArray:
+        """Outputs ``(n, samples, 3)`` — position, surface, rate — of each parameter set on this record.
+
+        ``flips[i]`` runs instance ``i`` with the hinge moment reversed (the hinge_moment_sign effect).
+        """
+        n = len(params)
+        flips = [False] * n if flips is None else list(flips)
+        sign = np.where(np.asarray(flips, dtype=bool), -1.0, 1.0)[:, None]
+        model = SecondOrder(self.channel, params=list(params), step_s=self.step_s)
+        h = sign * self._bp_h[None, :]
+        model.trim(np.full(n, self._bp_u[0]), h[:, 0])
+        out = model.run_outputs(self._bp_t, np.broadcast_to(self._bp_u, (n, self._bp_u.size)), h,
+                                sample_times=self.time_s, end_s=float(self.time_s[-1]))
+        self.simulations += n
+        return out[:, :, [O_POS, O_SURF, O_RATE]]
+
+    def weighted_residual(self, sim: FloatArray) -> FloatArray:
+        """Stacked ``(measured − model)/σ`` over the fitted samples of every output, for one simulation."""
+        parts = [
+            (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.sigma_deg[o]
+            for o in self.outputs
+        ]
+        return np.concatenate(parts)
+
+    def errors_deg(self, sim: FloatArray) -> dict[str, FloatArray]:
+        """Measured − model per output, in degrees, over the fitted samples."""
+        return {o: self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]] for o in self.outputs}
+
+    def max_rate_dps(self, sim: FloatArray) -> float:
+        """Largest surface rate the model reaches on this record."""
+        return float(np.max(np.abs(sim[:, O_RATE])))

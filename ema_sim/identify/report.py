@@ -1,0 +1,250 @@
+"""What ``ema identify`` says: the contract's JSON, a Markdown report and residual plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ema_sim.analysis.noise import input_independence, whiteness
+from ema_sim.identify.effects import EFFECTS, FREE
+from ema_sim.identify.fit import Fit
+from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
+from ema_sim.identify.stepwise import Identification
+from ema_sim.models import create
+
+_VOCAB = {e.field: e for e in EFFECTS if e.field is not None}
+
+
+def _round(x: float, digits: int = 6) -> float:
+    if not math.isfinite(x):
+        return x
+    return float(f"{x:.{digits}g}")
+
+
+def _names(result: Identification, fit: Fit) -> dict[str, str]:
+    """Model parameter → reported name: the declared model's own names, the vocabulary's for added effects."""
+    own = set(result.baseline.free)
+    names: dict[str, str] = {}
+    used: set[str] = set()
+    for f in fit.free:
+        if f in own or f not in _VOCAB:
+            name = f
+        else:
+            effect = _VOCAB[f]
+            name = effect.vocab or f
+            if name in used:
+                name = f"{effect.where}_{name}"
+        names[f] = name
+        used.add(name)
+    return names
+
+
+def _params(result: Identification, fit: Fit) -> dict[str, float]:
+    names = _names(result, fit)
+    out = {names[f]: _round(float(getattr(fit.params, f))) for f in fit.free}
+    if fit.params.hysteresis_h_lb_per_in > 0.0 and "hysteresis_h_lb_per_in" in fit.free:
+        out["load_freq_hz"] = _round(fit.params.hysteresis_freq_hz)
+    return out
+
+
+def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
+    errors = problem.errors_deg(fit.sim)
+    rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in errors.items()}
+    return {
+        "rms_deg": {o: _round(v) for o, v in rms.items()},
+        "max_abs_deg": {o: _round(float(np.max(np.abs(e)))) for o, e in errors.items()},
+        "nrmse": {o: _round(rms[o] / float(np.std(problem.data.column(o)[problem.mask]))) for o in errors},
+        "rms_over_noise": {o: _round(rms[o] / problem.sigma_deg[o], 4) for o in errors},
+        "whiteness": {o: whiteness(e, lags=50).as_dict() for o, e in errors.items()},
+        "independence": {
+            o: {"command_deg": input_independence(e, problem.data.command_deg[problem.mask]).as_dict(),
+                "hinge_moment_inlb": input_independence(e, problem.hinge_moment[problem.mask]).as_dict()}
+            for o, e in errors.items()
+        },
+    }
+
+
+def implementation_error(result: Identification) -> dict[str, float] | None:
+    """How far the declared discrete implementation (LOADA at 800 Hz...) strays from its own equations.
+
+    Identification fits the equations with an accurate simulator; this is the extra error the user's
+    own implementation adds on the same record, reported apart so it is never mistaken for an effect.
+    """
+    if result.model not in ("loada", "loadf"):
+        return None
+    problem = result.problem
+    final = result.final
+    model = create(result.model, problem.channel, params=final.params)
+    sign = -1.0 if final.flip else 1.0
+    d = problem.data
+    model.trim(d.command_deg[0], sign * d.hinge_moment[0])
+    out = model.run_outputs(problem.time_s, d.command_deg, sign * d.hinge_moment, sample_times=problem.time_s,
+                            end_s=float(problem.time_s[-1]))[0]
+    return {
+        o: _round(float(np.sqrt(np.mean((out[problem.mask, OUTPUT_COLUMN[o]] - final.sim[problem.mask, i]) ** 2))))
+        for i, o in ((0, "position_deg"), (1, "surface_deg")) if o in problem.outputs
+    }
+
+
+def to_json(result: Identification, data_name: str) -> dict[str, Any]:
+    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts)."""
+    p = result.problem
+    base = result.baseline
+    final = result.final
+    names = _names(result, final)
+    report: dict[str, Any] = {
+        "data": data_name,
+        "outputs": p.outputs,
+        "noise_deg": {o: _round(v) for o, v in p.sigma_deg.items()},
+        "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base)},
+        "added": [
+            {
+                "effect": s.effect,
+                "params": {k: _round(v) for k, v in s.params.items()},
+                "uncertainty": {k: _round(v, 3) for k, v in s.sigma.items()},
+                "rms_deg_before": {k: _round(v) for k, v in s.rms_deg_before.items()},
+                "rms_deg_after": {k: _round(v) for k, v in s.rms_deg_after.items()},
+                "evidence": s.evidence,
+                "where": s.where,
+            }
+            for s in result.steps
+        ],
+        "final": {
+            "params": _params(result, final),
+            "uncertainty": {names[f]: _round(v, 3) for f, v in final.sigma.items()},
+            "hinge_moment_reversed": final.flip,
+            **_stats(p, final),
+        },
+        "rejected": [
+            {"effect": v.effect, "where": v.where, "value": None if v.value is None else _round(v.value),
+             "reason": v.reason}
+            for v in result.verdicts if not v.accepted
+        ],
+        "channel": p.channel.channel,
+        "samples": int(p.time_s.size),
+        "sample_hz": _round(p.sample_hz),
+        "simulator_error_deg": {o: _round(v, 3) for o, v in result.simulator_error_deg.items()},
+        "simulations": p.simulations,
+        "elapsed_s": round(result.elapsed_s, 2),
+    }
+    impl = implementation_error(result)
+    if impl is not None:
+        report["declared_implementation_error_deg"] = impl
+    return report
+
+
+def write_json(report: dict[str, Any], path: str | Path) -> None:
+    """Write the report as indented JSON."""
+    Path(path).write_text(json.dumps(report, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+
+
+def summary(report: dict[str, Any]) -> str:
+    """A few lines for the terminal."""
+    lines = [f"{report['data']}: {report['samples']} samples at {report['sample_hz']:g} Hz, "
+             f"noise {', '.join(f'{o} {v:.4g}°' for o, v in report['noise_deg'].items())}"]
+    b = report["baseline"]
+    lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'])}")
+    for a in report["added"]:
+        lines.append(f"  + {a['effect']} {_fmt_params(a['params'])}: rms {_fmt_rms(a['rms_deg_before'])} → "
+                     f"{_fmt_rms(a['rms_deg_after'])}")
+        lines.append(f"      {a['evidence']}")
+    if not report["added"]:
+        lines.append("  nothing added: no effect paid for itself")
+    f = report["final"]
+    lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'])} "
+                 f"({', '.join(f'{v:.2f}× noise' for v in f['rms_over_noise'].values())})")
+    return "\n".join(lines)
+
+
+def _fmt_params(params: dict[str, float]) -> str:
+    return ", ".join(f"{k} {v:.4g}" for k, v in params.items()) or "(none)"
+
+
+def _fmt_rms(rms: dict[str, float]) -> str:
+    return ", ".join(f"{k.split('_')[0]} {v:.4g}°" for k, v in rms.items())
+
+
+def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:  # noqa: PLR0915
+    """Markdown report with plots of the residual before and after, under ``directory``."""
+    import matplotlib as mpl  # noqa: PLC0415 - plotting only when asked
+
+    mpl.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    p = result.problem
+    t = p.time_s[p.mask]
+    rows = 2 * len(p.outputs) + 1
+    fig, axes = plt.subplots(rows, 1, figsize=(11, 2.4 * rows), sharex=True)
+    for k, o in enumerate(p.outputs):
+        col = OUTPUT_COLUMN[o]
+        meas = p.data.column(o)[p.mask]
+        s = p.sigma_deg[o]
+        for ax, fit, label in ((axes[2 * k], result.baseline, f"before ({report['baseline']['model']})"),
+                               (axes[2 * k + 1], result.final, "after")):
+            ax.plot(t, meas - fit.sim[p.mask, col], lw=0.5, color="tab:blue" if fit is result.baseline else "tab:green",
+                    label=label)
+            ax.axhspan(-2 * s, 2 * s, color="0.85", zorder=0, label="±2σ noise")
+            ax.set_ylabel(f"{o.split('_')[0]} residual, deg")
+            ax.legend(loc="upper right", fontsize=8)
+            ax.grid(alpha=0.3)
+    axes[-1].plot(t, p.data.command_deg[p.mask], lw=0.7, label="command_deg")
+    ax2 = axes[-1].twinx()
+    ax2.plot(t, p.hinge_moment[p.mask], lw=0.5, color="tab:red", label="hinge moment")
+    ax2.set_ylabel("hinge moment, in·lb")
+    axes[-1].set_ylabel("command, deg")
+    axes[-1].set_xlabel("time, s")
+    fig.suptitle("Residual (measured − model) before and after identification")
+    fig.tight_layout()
+    fig.savefig(out / "residual.png", dpi=110)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(len(p.outputs), 1, figsize=(11, 3.2 * len(p.outputs)), sharex=True, squeeze=False)
+    for ax, o in zip(axes[:, 0], p.outputs, strict=True):
+        col = OUTPUT_COLUMN[o]
+        ax.plot(p.time_s, p.data.column(o), lw=0.6, label="measured")
+        ax.plot(p.time_s, result.final.sim[:, col], lw=0.6, ls="--", label="identified model")
+        ax.set_ylabel(f"{o}")
+        ax.legend(loc="upper right", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time, s")
+    fig.tight_layout()
+    fig.savefig(out / "fit.png", dpi=110)
+    plt.close(fig)
+
+    md = ["# Identification report", "", "```", summary(report), "```", "",
+          "## Error before and after", "", "| | output | rms, deg | max abs, deg | NRMSE | rms / noise | white |",
+          "| --- | --- | --- | --- | --- | --- | --- |"]
+    for label, key in (("baseline", "baseline"), ("final", "final")):
+        block = report[key]
+        for o in p.outputs:
+            md.append(f"| {label} | {o} | {block['rms_deg'][o]:.4g} | {block['max_abs_deg'][o]:.4g} | "
+                      f"{block['nrmse'][o]:.4g} | {block['rms_over_noise'][o]:.3g} | "
+                      f"{'yes' if block['whiteness'][o]['white'] else 'no'} |")
+    md += ["", "## Effects added", ""]
+    if report["added"]:
+        md += ["| effect | parameters | ±1σ | evidence |", "| --- | --- | --- | --- |"]
+        for a in report["added"]:
+            md.append(f"| {a['effect']} | {_fmt_params(a['params'])} | {_fmt_params(a['uncertainty'])} | "
+                      f"{a['evidence']} |")
+    else:
+        md.append("None: no candidate paid for itself.")
+    md += ["", "## Final parameters", "", "| parameter | value | ±1σ |", "| --- | --- | --- |"]
+    unc = report["final"]["uncertainty"]
+    for k, v in report["final"]["params"].items():
+        md.append(f"| {k} | {v:.6g} | {unc.get(k, float('nan')):.3g} |")
+    if report["rejected"]:
+        md += ["", "## Candidates fitted and rejected", "", "| effect | where | value | why |",
+               "| --- | --- | --- | --- |"]
+        md += [f"| {r['effect']} | {r['where']} | {r['value']} | {r['reason']} |" for r in report["rejected"]]
+    md += ["", "![residual](residual.png)", "", "![fit](fit.png)", ""]
+    (out / "report.md").write_text("\n".join(md), encoding="utf-8")
+    return out / "report.md"
+
+
+__all__ = ["FREE", "summary", "to_json", "write_json", "write_report"]

@@ -1,0 +1,379 @@
+"""Close the loop: fit the declared model, then add the effects it lacks while they pay for themselves.
+
+Each round screens every applicable effect by its signature in the residual — the partial
+correlation of the residual with the change the effect makes, after the current model's own
+parameter sensitivities are projected out, as stepwise regression does — then fits the most
+promising few properly (all parameters together) and accepts the best one only when
+
+* the information criteria agree (ΔBIC ≤ −10 and partial F ≥ 20), *and*
+* it removes at least a fifth of the error variance left above the noise floor, *and* at least
+  5 % of the noise variance (with 10⁵ samples the criteria alone would take sub-sample timing shifts
+  and integration error for effects), *and* far more than the simulator's own error, *and*
+* its fitted value means something physical (a delay of at least one sample, a rate limit that
+  binds, a positive compliance...).
+
+The loop stops when nothing passes or nothing is left above the noise floor.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ema_sim.config import ChannelConfig
+from ema_sim.identify.declared import declared
+from ema_sim.identify.effects import EFFECTS, FREE, Context, Effect, Free
+from ema_sim.identify.fit import Fit, fit
+from ema_sim.identify.problem import Problem
+from ema_sim.identify.quantization import step_candidates
+from ema_sim.io.csv import MeasuredData
+from ema_sim.models.second_order import SecondOrderParams
+
+TOP_K = 3
+MAX_EFFECTS = 8
+MIN_EXCESS_SHARE = 0.1
+MIN_NOISE_SHARE = 0.05
+MAX_DELTA_BIC = -10.0
+MIN_PARTIAL_F = 20.0
+DONE_EXCESS = 0.02
+"""Stop when the weighted error variance is within 2 % of the noise floor."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """An effect at a starting value, with what screening saw of it."""
+
+    effect: Effect
+    value: float
+    flip: bool
+    predicted_drop: float
+    """Weighted error it would remove if it entered linearly (all outputs)."""
+    rho: float
+    score: float = 0.0
+    """The largest share of one output's error above its noise floor it would remove (ranking)."""
+
+
+@dataclass(frozen=True)
+class Step:
+    """One accepted effect and the error before and after it."""
+
+    effect: str
+    where: str
+    params: dict[str, float]
+    sigma: dict[str, float]
+    rms_deg_before: dict[str, float]
+    rms_deg_after: dict[str, float]
+    evidence: str
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A candidate that was fitted, and whether (and why not) it was accepted."""
+
+    effect: str
+    where: str
+    value: float | None
+    accepted: bool
+    reason: str
+    delta_bic: float
+    partial_f: float
+    excess_share: float
+    noise_share: float
+
+
+@dataclass
+class Identification:
+    """The outcome: the declared fit, the effects added, the final fit, and every verdict on the way."""
+
+    problem: Problem
+    model: str
+    baseline: Fit
+    final: Fit
+    steps: list[Step] = field(default_factory=list)
+    verdicts: list[Verdict] = field(default_factory=list)
+    simulator_error_deg: dict[str, float] = field(default_factory=dict)
+    elapsed_s: float = 0.0
+
+
+def _rms(problem: Problem, f: Fit) -> dict[str, float]:
+    return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(f.sim).items()}
+
+
+def simulator_error(problem: Problem, params: SecondOrderParams, flip: bool) -> dict[str, float]:
+    """RMS change of each output when the simulator's step is halved: its own accuracy on this record."""
+    coarse = problem.simulate([params], [flip])[0]
+    step = problem.step_s
+    problem.step_s = step / 2.0
+    try:
+        fine = problem.simulate([params], [flip])[0]
+    finally:
+        problem.step_s = step
+    out = {}
+    for o in problem.outputs:
+        col = 0 if o == "position_deg" else 1
+        out[o] = float(np.sqrt(np.mean((coarse[problem.mask, col] - fine[problem.mask, col]) ** 2)))
+    return out
+
+
+def _on_bound(value: float, free: Free) -> bool:
+    span = free.high - free.low
+    return value <= free.low + 1e-6 * span or value >= free.high - 1e-6 * span
+
+
+def _blocks(problem: Problem, vector: np.ndarray) -> list[np.ndarray]:
+    """A stacked residual split back into its outputs."""
+    n = int(problem.mask.sum())
+    return [vector[k * n:(k + 1) * n] for k in range(len(problem.outputs))]
+
+
+def _excess(problem: Problem, residual: np.ndarray) -> list[float]:
+    """Each output's weighted error above its noise floor (at least 5 % of the noise, so never zero)."""
+    return [max(float(np.dot(b, b)) - b.size, MIN_NOISE_SHARE * b.size) for b in _blocks(problem, residual)]
+
+
+def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
+    """Every applicable effect's best probe, ranked by what it would remove if it entered linearly.
+
+    The rank is the share of one output's error above its noise floor: an effect seen on one output
+    only (an LVDT filter) must not be drowned by a larger error on the other.
+    """
+    effects = [e for e in EFFECTS if e.applies(ctx) and (e.field is None or e.field not in cur.free)]
+    probes: list[tuple[Effect, float]] = [(e, v) for e in effects for v in e.probes(ctx)]
+    if not probes:
+        return []
+    params = [e.apply(cur.params, v, ctx) for e, v in probes]
+    flips = [cur.flip != (e.name == "hinge_moment_sign") for e, _ in probes]
+    sims = problem.simulate(params, flips)
+    r = cur.residual
+    # Project out what the model's own parameters can still explain; one pinned on a bound cannot
+    # move that way (a compliance held at zero by a reversed load), so its column stays in.
+    movable = [j for j, name in enumerate(cur.jac_free) if not _on_bound(getattr(cur.params, name), FREE[name])]
+    jac = cur.jacobian[:, movable]
+    q = np.linalg.qr(jac, mode="reduced")[0] if jac.shape[1] else np.zeros((r.size, 0))
+    r_perp = r - q @ (q.T @ r)
+    r_norm = float(np.linalg.norm(r_perp))
+    excess = _excess(problem, r)
+    best: dict[str, Candidate] = {}
+    for (effect, value), sim in zip(probes, sims, strict=True):
+        s = r - problem.weighted_residual(sim)  # the change the effect makes to the model
+        s_perp = s - q @ (q.T @ s)
+        ss = float(np.dot(s_perp, s_perp))
+        if ss <= 1e-12 or r_norm == 0.0:
+            continue
+        rs = float(np.dot(r_perp, s_perp))
+        beta = rs / ss
+        flip = cur.flip
+        if effect.name == "hinge_moment_sign":
+            flip = not cur.flip
+            if beta <= 0.0:
+                continue
+            start = 0.0
+        elif effect.load_effect and beta < 0.0:
+            flip = not cur.flip  # the load would have to act backwards: try it with the sign reversed
+            start = abs(beta) * value
+        elif effect.field in ("kb", "offset_deg", "delay_s"):
+            base = getattr(cur.params, effect.field)
+            start = base + beta * (value - base)
+        else:
+            if beta <= 0.0:
+                continue
+            start = value * min(max(beta, 0.3), 3.0)
+        step = beta * s_perp
+        shares = [float(2.0 * np.dot(rb, sb) - np.dot(sb, sb)) / e
+                  for rb, sb, e in zip(_blocks(problem, r_perp), _blocks(problem, step), excess, strict=True)]
+        cand = Candidate(effect, start, flip, rs * rs / ss, rs / (r_norm * math.sqrt(ss)), max(shares))
+        if effect.key not in best or cand.score > best[effect.key].score:
+            best[effect.key] = cand
+    return sorted(best.values(), key=lambda c: -c.score)
+
+
+PRE_QUANTIZER = ("kb", "offset_deg")
+"""Parameters acting before the quantizer: the cost is piecewise flat in them once a step is on."""
+
+
+def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] | list[str], *, flip: bool) -> Fit:
+    """:func:`fit`, except that with a quantizer on, Kb and offset are found by batched grid searches.
+
+    The quantizer makes the cost piecewise flat in the parameters before it, so gradients cannot
+    move them: the smooth parameters are fitted with them held, then a coordinate search (a grid of
+    11 over ±half a step, then one five times finer, for each) picks them, then the smooth
+    parameters are fitted again.
+    """
+    q = base.quantization_deg
+    held = [f for f in free if f in PRE_QUANTIZER]
+    if q <= 0.0 or not held:
+        return fit(problem, base, free, flip=flip)
+    smooth = [f for f in free if f not in PRE_QUANTIZER]
+    first = fit(problem, base, smooth, flip=flip)
+    u_max = max(float(np.max(np.abs(problem.data.command_deg))), 1e-6)
+    half = {"offset_deg": 0.5 * q, "kb": 0.5 * q / u_max}
+    params = first.params
+    for scale in (1.0, 0.2):
+        for name in held:
+            centre = getattr(params, name)
+            grid = [params.replace(**{name: centre + d}) for d in np.linspace(-1.0, 1.0, 11) * half[name] * scale]
+            sims = problem.simulate(grid, [flip] * len(grid))
+            costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
+            params = grid[int(np.argmin(costs))]
+    final = fit(problem, params, smooth, flip=flip)
+    sigma = dict(final.sigma)
+    for name in held:
+        sigma[name] = half[name] * 0.2 / 10.0  # the finest grid spacing: the resolution the search has
+    return Fit(final.params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
+
+
+def _fit_candidate(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit:
+    """Fit the current model plus the candidate, every parameter together."""
+    effect = cand.effect
+    if effect.field is None:
+        return fit_model(problem, effect.apply(cur.params, 0.0, ctx), cur.free, flip=cand.flip)
+    free_f = FREE.get(effect.field)
+    start = cand.value
+    if free_f is not None:
+        start = min(max(start, free_f.low), free_f.high)
+    base = effect.apply(cur.params, start, ctx)
+    if not effect.discrete:
+        return fit_model(problem, base, (*cur.free, effect.field), flip=cand.flip)
+    # A quantizer's step: the linear search's (step, offset) candidates, each checked with the full
+    # simulation on a fine local grid (one batch), then the continuous parameters refitted with it.
+    grid = [
+        effect.apply(cur.params, q * (1.0 + d), ctx).replace(offset_deg=cur.params.offset_deg + shift)
+        for q, shift in ctx.quantization_steps for d in np.linspace(-3e-4, 3e-4, 7)
+    ]
+    sims = problem.simulate(grid, [cand.flip] * len(grid))
+    costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(s) for s in sims)]
+    start = grid[int(np.argmin(costs))]
+    free = tuple(cur.free) if start.offset_deg == cur.params.offset_deg else (*cur.free, "offset_deg")
+    free = tuple(dict.fromkeys(free))
+    new = fit_model(problem, start, free, flip=cand.flip)
+    # The step and the command map settle together: search the step again around the refit model.
+    steps = new.params.quantization_deg * (1.0 + np.linspace(-2e-3, 2e-3, 41))
+    sims = problem.simulate([new.params.replace(quantization_deg=g) for g in steps], [cand.flip] * steps.size)
+    costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
+    best = new.params.replace(quantization_deg=float(steps[int(np.argmin(costs))]))
+    return fit_model(problem, best, new.free, flip=cand.flip)
+
+
+def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
+           sim_err: dict[str, float]) -> Verdict:
+    effect = cand.effect
+    n = problem.n_fit
+    q = 0 if effect.field is None else 1
+    rss0, rss1 = cur.rss, new.rss
+    p1 = len(new.free) + q
+    delta_bic = n * math.log(rss1 / rss0) + q * math.log(n)
+    partial_f = ((rss0 - rss1) / max(q, 1)) / (rss1 / max(n - p1, 1))
+    # The margin is judged per output: an effect that removes a clear share of one output's error
+    # above its noise floor counts even when the other output's error is larger.
+    before = _blocks(problem, cur.residual)
+    after = _blocks(problem, new.residual)
+    drops = [(float(np.dot(b, b)) - float(np.dot(a, a))) / b.size for b, a in zip(before, after, strict=True)]
+    excess_share = max(d * b.size / e for d, b, e in zip(drops, before, _excess(problem, cur.residual), strict=True))
+    drop = max(drops)
+    value = None if effect.field is None else float(getattr(new.params, effect.field))
+    sim_floor = max((sim_err[o] / problem.sigma_deg[o]) ** 2 for o in problem.outputs)
+    reason = ""
+    if delta_bic > MAX_DELTA_BIC or partial_f < MIN_PARTIAL_F:
+        reason = f"does not pay for itself (ΔBIC {delta_bic:.1f}, partial F {partial_f:.1f})"
+    elif excess_share < MIN_EXCESS_SHARE:
+        reason = f"removes only {100 * excess_share:.1f} % of the error above the noise floor"
+    elif drop < MIN_NOISE_SHARE:
+        reason = f"changes the error by {100 * drop:.2f} % of the noise variance, below what sampling can tell"
+    elif drop < 100.0 * sim_floor:
+        reason = "within a hundred times the simulator's own error"
+    elif value is not None:
+        bound = FREE.get(effect.field)
+        why = effect.check(value, ctx)
+        if why:
+            reason = why
+        elif bound is not None and (value >= bound.high * (1 - 1e-3) or (bound.low > 0 and value <= bound.low * 1.001)):
+            reason = f"fitted value {value:.4g} sits on the bound of its physical range"
+    return Verdict(effect.name, effect.where, value, not reason, reason or "accepted", delta_bic, partial_f,
+                   excess_share, drop)
+
+
+def _fmt(value: float) -> str:
+    return f"{value:.4g}"
+
+
+def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step]:
+    """The report lines for an accepted candidate (a reversed load sign is a line of its own)."""
+    before, after = _rms(problem, cur), _rms(problem, new)
+    effect = cand.effect
+    steps: list[Step] = []
+    shares = {
+        o: 100.0 * (float(np.dot(b, b)) - float(np.dot(a, a))) / e
+        for o, b, a, e in zip(problem.outputs, _blocks(problem, cur.residual), _blocks(problem, new.residual),
+                              _excess(problem, cur.residual), strict=True)
+    }
+    cut = ", ".join(f"{o.split('_')[0]} −{v:.0f} %" for o, v in shares.items() if v >= 1.0) or "small"
+    if new.flip != cur.flip:
+        if effect.name == "hinge_moment_sign":
+            evidence = (f"{effect.signature} (partial ρ = {cand.rho:.2f}); reversing it cut the error above the "
+                        f"noise floor: {cut}")
+            return [Step("hinge_moment_sign", "load", {}, {}, before, after, evidence)]
+        evidence = (f"{effect.name.replace('_', ' ')} fits only with the hinge moment reversed "
+                    f"(partial ρ = {-abs(cand.rho):.2f} with the declared sign): the load was applied backwards")
+        steps.append(Step("hinge_moment_sign", "load", {}, {}, before, before, evidence))
+    value = float(getattr(new.params, effect.field))
+    vocab = {effect.vocab: value}
+    sigma = {effect.vocab: new.sigma[effect.field]} if effect.field in new.sigma else {}
+    if effect.field == "hysteresis_h_lb_per_in":
+        vocab["load_freq_hz"] = problem.load_freq_hz
+    where = f" on the {effect.where}" if effect.where in ("feedback", "position", "surface") else ""
+    evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {effect.vocab} = {_fmt(value)}"
+                f"{where}; error above the noise floor: {cut}")
+    steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence))
+    return steps
+
+
+def identify(
+    data: MeasuredData,
+    channel: ChannelConfig,
+    model: str = "second_order",
+    overrides: dict[str, float] | None = None,
+    *,
+    max_effects: int = MAX_EFFECTS,
+    log: Callable[[str], None] | None = None,
+) -> Identification:
+    """Fit ``model`` to ``data``, then add the vocabulary effects it lacks while they pay for themselves."""
+    t0 = time.perf_counter()
+    say = log or (lambda _msg: None)
+    problem = Problem(data, channel)
+    base, free = declared(model, channel, overrides or {})
+    cur = fit_model(problem, base, free, flip=False)
+    baseline = cur
+    say(f"baseline {model}: rms {_rms(problem, cur)}")
+    result = Identification(problem, model, baseline, cur)
+    result.simulator_error_deg = simulator_error(problem, cur.params, cur.flip)
+    for _ in range(max_effects):
+        if cur.rss / problem.n_fit - 1.0 <= DONE_EXCESS:
+            break
+        steps = (step_candidates(problem, cur.params, cur.sim)
+                 if cur.params.quantization_deg == 0.0 and "quantization_deg" not in cur.free else [])
+        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base, steps)
+        ranked = _screen(problem, cur, ctx)
+        best: tuple[Fit, Candidate] | None = None
+        for k, cand in enumerate(ranked[:TOP_K]):
+            new = _fit_candidate(problem, cur, cand, ctx)
+            verdict = _judge(problem, cur, new, cand, ctx, result.simulator_error_deg)
+            result.verdicts.append(verdict)
+            say(f"  {cand.effect.key}: {verdict.reason}")
+            if verdict.accepted and (best is None or new.rss < best[0].rss):
+                best = (new, cand)
+            # Stop fitting when the best so far already removed more than the rest could, even linearly.
+            rest = ranked[k + 1].predicted_drop if k + 1 < len(ranked) else 0.0
+            if best is not None and cur.rss - best[0].rss > 2.0 * rest:
+                break
+        if best is None:
+            break
+        new, cand = best
+        result.steps.extend(_entries(problem, cur, new, cand))
+        cur = new
+    result.final = cur
+    result.elapsed_s = time.perf_counter() - t0
+    return result
