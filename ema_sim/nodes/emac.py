@@ -72,6 +72,33 @@ class Stream:
         return out
 
 
+class SourceStream(Stream):
+    """The other channels' feedback (crosstalk sources): a frame is there when every source has sent it.
+
+    Which sources exist is learnt from the suite's ``--peers`` (``emac_<channel>`` nodes): a frame waits
+    for each of them, so the crosstalk a channel sees does not depend on which source's message came
+    first. Without peers (a node run on its own) any source's message counts, as it cannot know better.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.expected: frozenset[str] = frozenset()
+        self._latest: dict[str, int] = {}
+
+    def push_from(self, stamp: int, item: list[tuple[str, float]]) -> None:
+        """A message arrived carrying these sources' values."""
+        for name, _ in item:
+            if stamp > self._latest.get(name, -1):
+                self._latest[name] = stamp
+        self.queue.append((stamp, item))
+        self.gave_up = False
+        if self.expected:
+            latest = [self._latest.get(name) for name in self.expected]
+            self.last_stamp = None if any(x is None for x in latest) else min(latest)  # type: ignore[type-var]
+        else:
+            self.last_stamp = stamp if self.last_stamp is None else max(self.last_stamp, stamp)
+
+
 class EmacNode(SuiteNode):
     """The node (see the module docstring)."""
 
@@ -103,7 +130,7 @@ class EmacNode(SuiteNode):
         # streams
         self.commands = Stream()
         self.loads = Stream()
-        self.source_fb = Stream()
+        self.source_fb = SourceStream()
         self._stream_list = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
         self._diagnostics_every = round(self.settings.frame_hz)
         self._frames_to_diagnostics = self._diagnostics_every
@@ -182,7 +209,7 @@ class EmacNode(SuiteNode):
             pos = msg.position
             seen = [(name, float(pos[i])) for i, name in enumerate(msg.name) if name in self.sources and i < len(pos)]
             if seen:
-                self.source_fb.push(msg.stamp_ns, seen)
+                self.source_fb.push_from(msg.stamp_ns, seen)
         except Exception as exc:
             self._bad(f"feedback message dropped: {exc}")
 
@@ -286,12 +313,20 @@ class EmacNode(SuiteNode):
         last = self.last_good_wall[ch]
         return None if last is None else max(now - last, 0.0)
 
+    def _learn_sources(self) -> None:
+        """The crosstalk sources that exist: the peers' EMAC channel nodes (see :class:`SourceStream`)."""
+        if self.sources and not self.source_fb.expected and self.peers:
+            self.source_fb.expected = frozenset(c for c in self.sources if f"emac_{c}" in self.peers)
+
     def _poll_lockstep(self) -> float:
         if self.clock_ns is None:
             return 0.05
+        self._learn_sources()
         if self.model_ns is None:  # first tick: report the trimmed state at the start time
             self.model_ns = self.clock_ns
-            self._publish(self.model_ns, {ch: u.last for ch, u in self.units.items()})
+            trimmed = {ch: u.last for ch, u in self.units.items()}
+            self._observe_own(trimmed)  # as a channel node observes it from the others' first message
+            self._publish(self.model_ns, trimmed)
         streams = self._stream_list
         while self.clock_ns >= self.model_ns + self.frame_ns:
             t = self.model_ns
@@ -354,14 +389,18 @@ class EmacNode(SuiteNode):
             if fb.braked is not was[0] or unit.failure is not was[1]:
                 self._publish_diagnostics()
         self.model_ns = start_ns + self.frame_ns
-        if self.coupled and len(self.units) > 1:  # an EMAC box: its channels are each other's crosstalk sources
-            for ch, fb in out.items():
-                meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
+        self._observe_own(out)
         self._publish(self.model_ns, out)
         self._frames_to_diagnostics -= 1
         if self._frames_to_diagnostics <= 0:  # once a second of model time
             self._frames_to_diagnostics = self._diagnostics_every
             self._publish_diagnostics()
+
+    def _observe_own(self, out: dict[str, Feedback]) -> None:
+        """An EMAC box: its channels are each other's crosstalk sources."""
+        if self.coupled and len(self.units) > 1:
+            for ch, fb in out.items():
+                self.meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
 
     def _publish(self, stamp: int, out: dict[str, Feedback]) -> None:
         names = self.channels
