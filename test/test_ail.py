@@ -5,6 +5,7 @@ import os
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
 from ema_sim.ail.autopilot import Autopilot
 from ema_sim.ail.bag import run_from_bag
@@ -14,6 +15,7 @@ from ema_sim.ail.params import WINGS, load_ail_config
 from ema_sim.ail.vehicle import Vehicle, discretize, matrices
 from ema_sim.cli import main as ema
 from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.io.csv import read_csv
 from ema_sim.suite import SuiteConfig, free_domain_id, run_suite
 
 CFG = load_ail_config()
@@ -40,8 +42,6 @@ def test_zero_order_hold_discretization_matches_integrating_a_held_input():
     ad, bd = discretize(a, b, 0.005)
     x0 = np.array([0.3, -2.0, 0.1, 5.0, -0.4])
     u = np.array([0.7, -0.2])
-    from scipy.integrate import solve_ivp
-
     sol = solve_ivp(lambda _t, x: a @ x + b @ u, (0.0, 0.005), x0, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(ad @ x0 + bd @ u, sol.y[:, -1], atol=1e-9)
 
@@ -56,7 +56,8 @@ def test_at_trim_the_autopilot_commands_the_trim_and_the_vehicle_stays_put():
     assert cmd.left_deg == pytest.approx(CFG.autopilot.trim_elevon_deg, abs=1e-12)
     assert cmd.right_deg == pytest.approx(CFG.autopilot.trim_elevon_deg, abs=1e-12)
     assert s.alpha_deg == pytest.approx(CFG.vehicle.trim_alpha_deg, abs=1e-12)
-    assert abs(s.q_dps) < 1e-12 and abs(s.p_dps) < 1e-12
+    assert abs(s.q_dps) < 1e-12
+    assert abs(s.p_dps) < 1e-12
 
 
 def test_a_pitch_disturbance_is_held_out_by_the_autopilot_with_ideal_actuators():
@@ -129,22 +130,22 @@ def test_ema_ail_writes_a_contract_csv_and_json(tmp_path, capsys):
     assert ema(["ail", "--profile", "ail", "--duration", "8", "--csv", str(out), "--json", str(js)]) == 0
     text = capsys.readouterr().out
     assert "left_wing     dither:" in text
-    from ema_sim.io.csv import read_csv
-
     data = read_csv(out)
-    assert data.time_s.size == 1600 and data.position_deg is not None
+    assert data.time_s.size == 1600
+    assert data.position_deg is not None
     doc = json.loads(js.read_text())
     assert doc["surfaces"]["left_wing"]["dither"] is True
     assert doc["surfaces"]["cowl_door"]["dither"] is False
 
 
-def test_ema_ail_study_runs_named_cases(tmp_path, capsys):
+def test_ema_ail_study_runs_named_cases(tmp_path):
     md = tmp_path / "study.md"
     assert ema(["ail", "--study", "--cases", "ail,no_dead_band", "--seeds", "43", "--duration", "10",
                 "--markdown", str(md)]) == 0
     rows = md.read_text().splitlines()
     assert len(rows) == 4
-    assert "| **yes** |" in rows[2] and "| no |" in rows[3]
+    assert "| **yes** |" in rows[2]
+    assert "| no |" in rows[3]
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -23,6 +23,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,8 +74,6 @@ class AilOptions:
     """Override of the profile's vehicle setup (``setup.<profile>`` of the parameter file)."""
     sim_model: str | None = None
     """Open loop: the simulation's model actuator (default the file's ``open_loop.sim_model``)."""
-    emac_box: bool = True
-    """Crosstalk metering as one EMAC box (the lockstep suite with ``--emac-box``); False: one node per channel."""
     config: AilConfig | None = None
 
 
@@ -95,8 +94,10 @@ class AilRun:
         return self.signals[ch]
 
     def csv_columns(self, channel: str = "left_wing") -> dict[str, FloatArray]:
-        """Data-contract columns of ``channel`` (the EMAC side, as a rig's DAU records it), then every channel's
-        signals as ``<channel>.<signal>`` and the vehicle states (columns the contract reader ignores).
+        """Data-contract columns of ``channel`` (the EMAC side, as a rig's DAU records it), and more.
+
+        Then every channel's signals as ``<channel>.<signal>`` and the vehicle states (columns the contract
+        reader ignores).
         """
         if channel not in self.signals:
             raise UnknownNameError("channel", channel, self.signals)
@@ -120,6 +121,80 @@ def _profile(options: AilOptions) -> Profile:
     return profile.with_seed(options.seed) if options.seed is not None else profile
 
 
+class _Loop:
+    """The EMACs and the test environment of one run, stepped frame by frame (the module docstring's order)."""
+
+    def __init__(self, options: AilOptions, cfg: AilConfig, profile: Profile, overrides: dict[str, Any]) -> None:
+        self.frame_s = 1.0 / cfg.frame_hz
+        settings, crosstalk = emac_settings()
+        if abs(settings.frame_hz - cfg.frame_hz) > 1e-9:
+            raise EmaError(f"the FMU frame ({cfg.frame_hz:g} Hz) differs from the EMAC's ({settings.frame_hz:g} Hz)")
+        self.units = {ch: EmacChannel(create(options.model, load_channel(ch), **overrides), settings,
+                                      crosstalk_noise_pp_v=crosstalk[ch], stream=CHANNELS.index(ch))
+                      for ch in CHANNELS}
+        self.coupled = any(u.crosstalk.active for u in self.units.values())
+        self.slew = {ch: load_channel(ch).slew_rate_dps * scaling(ch).volts_per_deg for ch in CHANNELS}
+        self.meter = ActivityMeter(self.frame_s)
+        self.profile = profile
+        self.fb_paths: dict[str, SignalPath] = {}
+        self.cmd_paths: dict[str, SignalPath] = {}
+        self.feedback = {ch: u.last for ch, u in self.units.items()}
+        self._observe()  # the EMAC box and the channel nodes both observe the trimmed state first
+
+    def _observe(self) -> None:
+        if self.coupled:
+            for ch, fb in self.feedback.items():
+                self.meter.observe(ch, fb.position_v, self.slew[ch])
+
+    def fmu_feedback(self) -> dict[str, float]:
+        """Step 1: the EMACs' feedback through each channel's feedback path."""
+        out = {}
+        for ch in CHANNELS:
+            v = self.feedback[ch].position_v
+            if ch not in self.fb_paths:
+                self.fb_paths[ch] = self.profile.feedback_path(self.frame_s, CHANNELS.index(ch), v)
+            out[ch] = float(self.fb_paths[ch].step(v))
+        return out
+
+    def command(self, command_v: dict[str, float], load_inlb: dict[str, float]) -> dict[str, float]:
+        """Step 3: the commands through the command paths into the EMACs, with the frame's loads."""
+        emac_cmd = {}
+        for ch in CHANNELS:
+            v = command_v[ch]
+            if ch not in self.cmd_paths:
+                self.cmd_paths[ch] = self.profile.command_path(self.frame_s, CHANNELS.index(ch), v)
+            emac_cmd[ch] = float(self.cmd_paths[ch].step(v))
+            self.units[ch].set_command(emac_cmd[ch])
+            self.units[ch].set_load(load_inlb[ch])
+        return emac_cmd
+
+    def step(self) -> None:
+        """Step 4: every EMAC channel one frame, in channel order, with the box's crosstalk meter."""
+        self.feedback = {ch: self.units[ch].step(0.0, self.meter.activity_except(ch)) for ch in CHANNELS}
+        self._observe()
+
+
+def _record(rec: dict[str, dict[str, FloatArray]], k: int, loop: _Loop, out: Any, fmu_fb: dict[str, float],
+            emac_cmd: dict[str, float]) -> None:
+    for ch in CHANNELS:
+        r, fb, sc = rec[ch], loop.feedback[ch], scaling(ch)
+        r["fmu_command_v"][k] = out.command_v[ch]
+        r["fmu_command_deg"][k] = out.command_deg[ch]
+        r["command_v"][k] = emac_cmd[ch]
+        r["command_deg"][k] = sc.command_v_to_deg(emac_cmd[ch])
+        r["position_v"][k] = fb.position_v
+        r["position_deg"][k] = sc.feedback_v_to_deg(fb.position_v)
+        r["surface_deg"][k] = fb.surface_deg
+        r["rate_dps"][k] = fb.rate_dps
+        r["current_a"][k] = fb.current_a
+        r["bus_v"][k] = fb.bus_v
+        r["hinge_moment_inlb"][k] = out.hinge_moment_inlb[ch]
+        r["aero_hinge_moment_inlb"][k] = out.aero_hinge_moment_inlb[ch]
+        r["fmu_position_v"][k] = fmu_fb[ch]
+        r["fmu_position_deg"][k] = sc.feedback_v_to_deg(fmu_fb[ch])
+        r["seen_deg"][k] = out.seen_deg[ch]
+
+
 def run_ail(options: AilOptions, progress: Callable[[float], None] | None = None) -> AilRun:
     """Run the loop (see the module docstring); ``progress`` gets the fraction done about once a second."""
     if options.model not in model_names():
@@ -130,81 +205,38 @@ def run_ail(options: AilOptions, progress: Callable[[float], None] | None = None
     cfg = options.config or load_ail_config()
     setup = options.setup or cfg.setup(options.profile)
     profile = _profile(AilOptions(**{**options.__dict__, "disable": disabled}))
-    frame_s = 1.0 / cfg.frame_hz
-    settings, crosstalk = emac_settings()
-    if abs(settings.frame_hz - cfg.frame_hz) > 1e-9:
-        raise EmaError(f"the FMU frame ({cfg.frame_hz:g} Hz) differs from the EMAC's ({settings.frame_hz:g} Hz)")
     overrides = model_overrides(options.model, disabled)
-    units = {ch: EmacChannel(create(options.model, load_channel(ch), **overrides), settings,
-                             crosstalk_noise_pp_v=crosstalk[ch], stream=CHANNELS.index(ch)) for ch in CHANNELS}
-    coupled = any(u.crosstalk.active for u in units.values())
-    slew = {ch: load_channel(ch).slew_rate_dps * scaling(ch).volts_per_deg for ch in CHANNELS}
-    meter = ActivityMeter(frame_s)
+    loop = _Loop(options, cfg, profile, overrides)
     fmu = Fmu(cfg, setup, open_loop=options.open_loop, sim_model=options.sim_model)
     n = max(1, round(options.duration_s * cfg.frame_hz))
     rec = {ch: {name: np.empty(n) for name in SIGNALS} for ch in CHANNELS}
     veh = {name: np.empty(n) for name in STATES}
-    fb_paths: dict[str, SignalPath] = {}
-    cmd_paths: dict[str, SignalPath] = {}
-    feedback = {ch: u.last for ch, u in units.items()}
-    if coupled and not options.emac_box:  # one node per channel observes the others' trimmed state first
-        for ch, fb in feedback.items():
-            meter.observe(ch, fb.position_v, slew[ch])
     emac_cmd: dict[str, float] | None = None
     started = time.perf_counter()
     next_report = started + 1.0
     for k in range(n):
-        fmu_fb = {}
-        for ch in CHANNELS:
-            v = feedback[ch].position_v
-            if ch not in fb_paths:
-                fb_paths[ch] = profile.feedback_path(frame_s, CHANNELS.index(ch), v)
-            fmu_fb[ch] = float(fb_paths[ch].step(v))
-        out = fmu.frame(FrameInputs(fmu_fb, {ch: feedback[ch].surface_deg for ch in CHANNELS}, emac_cmd))
-        emac_cmd = {}
-        for ch in CHANNELS:
-            v = out.command_v[ch]
-            if ch not in cmd_paths:
-                cmd_paths[ch] = profile.command_path(frame_s, CHANNELS.index(ch), v)
-            emac_cmd[ch] = float(cmd_paths[ch].step(v))
-            units[ch].set_command(emac_cmd[ch])
-            units[ch].set_load(out.hinge_moment_inlb[ch])
-        for ch in CHANNELS:
-            r, fb, sc = rec[ch], feedback[ch], scaling(ch)
-            r["fmu_command_v"][k] = out.command_v[ch]
-            r["fmu_command_deg"][k] = out.command_deg[ch]
-            r["command_v"][k] = emac_cmd[ch]
-            r["command_deg"][k] = sc.command_v_to_deg(emac_cmd[ch])
-            r["position_v"][k] = fb.position_v
-            r["position_deg"][k] = sc.feedback_v_to_deg(fb.position_v)
-            r["surface_deg"][k] = fb.surface_deg
-            r["rate_dps"][k] = fb.rate_dps
-            r["current_a"][k] = fb.current_a
-            r["bus_v"][k] = fb.bus_v
-            r["hinge_moment_inlb"][k] = out.hinge_moment_inlb[ch]
-            r["aero_hinge_moment_inlb"][k] = out.aero_hinge_moment_inlb[ch]
-            r["fmu_position_v"][k] = fmu_fb[ch]
-            r["fmu_position_deg"][k] = sc.feedback_v_to_deg(fmu_fb[ch])
-            r["seen_deg"][k] = out.seen_deg[ch]
+        fmu_fb = loop.fmu_feedback()
+        out = fmu.frame(FrameInputs(fmu_fb, {ch: loop.feedback[ch].surface_deg for ch in CHANNELS}, emac_cmd))
+        emac_cmd = loop.command(out.command_v, out.hinge_moment_inlb)
+        _record(rec, k, loop, out, fmu_fb, emac_cmd)
         for name, value in zip(STATES, out.vehicle.values(), strict=True):
             veh[name][k] = value
-        feedback = {ch: units[ch].step(0.0, meter.activity_except(ch)) for ch in CHANNELS}
-        if coupled:
-            for ch, fb in feedback.items():
-                meter.observe(ch, fb.position_v, slew[ch])
+        loop.step()
         if progress is not None and time.perf_counter() >= next_report:
             next_report += 1.0
             progress((k + 1) / n)
     wall = time.perf_counter() - started
     if progress is not None:
         progress(1.0)
+    frame_s = loop.frame_s
     meta = {
         "test": "ail", "profile": options.profile, "model": options.model,
         "mode": "open loop" if options.open_loop else "closed loop",
         "sim_model": fmu.sim_model if options.open_loop else "",
         "disabled": ",".join(disabled) or "none", "seed": str(profile.seed), "duration_s": f"{n * frame_s:g}",
         "frame_hz": f"{cfg.frame_hz:g}", "setup": setup.describe(), "vehicle_config": cfg.source,
-        "command_path": profile.command_path(frame_s).describe(), "feedback_path": profile.feedback_path(frame_s).describe(),
+        "command_path": profile.command_path(frame_s).describe(),
+        "feedback_path": profile.feedback_path(frame_s).describe(),
         "model_overrides": ",".join(f"{k}={v}" for k, v in overrides.items()) or "none",
     }
     return AilRun(np.arange(n) * frame_s, rec, veh, meta, wall)

@@ -70,7 +70,8 @@ class SurfaceDither:
             return "not measured: the trimmed stretch is shorter than 4 s"
         if self.result.reason:
             return f"none: {self.result.reason}"
-        core = f"{self.freq_hz:.2f} Hz, {self.peak_to_peak_deg:.3f}° peak to peak, {self.peak_db:.0f} dB above the floor"
+        core = (f"{self.freq_hz:.2f} Hz, {self.peak_to_peak_deg:.3f}° peak to peak, "
+                f"{self.peak_db:.0f} dB above the floor")
         return f"dither: {core}" if self.dither else f"none (largest peak: {core})"
 
     def as_dict(self) -> dict[str, Any]:

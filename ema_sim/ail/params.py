@@ -198,7 +198,8 @@ class AilConfig:
                 held[ch] = float(value)
             except (TypeError, ValueError):
                 raise ConfigError(f"{origin}: held_deg.{ch} must be a number") from None
-        setups = {name: Setup.from_mapping(values, f"{origin}: setup.{name}") for name, values in section("setup").items()}
+        setups = {name: Setup.from_mapping(values, f"{origin}: setup.{name}")
+                  for name, values in section("setup").items()}
         return cls(
             frame_hz=frame_hz,
             vehicle=VehicleParams.from_mapping(section("vehicle"), f"{origin}: vehicle"),

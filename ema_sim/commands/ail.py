@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
         raise EmaError(f"--duration must leave at least 4 s of trimmed flight after the {settle:g} s settle")
     options = AilOptions(profile=args.profile, model=args.model, open_loop=args.open_loop, duration_s=args.duration,
                          seed=args.seed, disable=tuple(args.disable), setup=setup, sim_model=args.sim_model,
-                         emac_box=not args.one_node_per_channel, config=cfg)
+                         config=cfg)
     bar = ProgressBar(f"ail {args.profile} {args.model}")
     try:
         result = run_ail(options, progress=bar)
@@ -142,8 +142,6 @@ def register(sub: Any) -> None:
     p.add_argument("--surface-load", choices=("aerodynamic", "bungee"), default=None,
                    help="what loads the real surfaces (default: the profile's setup)")
     p.add_argument("--sim-model", default=None, help="open loop: the simulation's model actuator (default loada)")
-    p.add_argument("--one-node-per-channel", action="store_true",
-                   help="meter crosstalk as one EMAC node per channel does (default: as one EMAC box)")
     p.add_argument("--vehicle-config", default=None, help="parameter file (default config/ail_vehicle.yaml)")
     p.add_argument("--channel", default="left_wing", help="the CSV's data-contract channel (default left_wing)")
     p.add_argument("--csv", type=Path, default=None, help="write the run as a data-contract CSV")

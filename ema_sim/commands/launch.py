@@ -12,14 +12,15 @@ from ema_sim.errors import EmaError
 from ema_sim.suite import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 
-def run(args: argparse.Namespace) -> int:
-    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
+def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
+    """The run's :class:`~ema_sim.suite.SuiteConfig`, what it is, on what, for how long (one error if bad)."""
     from ema_sim.config import CHANNELS  # noqa: PLC0415
-    from ema_sim.io.bag import bag_info  # noqa: PLC0415
+    from ema_sim.environment import load_profile  # noqa: PLC0415
     from ema_sim.models import model_names  # noqa: PLC0415
+    from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
     from ema_sim.nodes.maneuver import default_bag  # noqa: PLC0415
     from ema_sim.signals.plans import build_plan, channel_list  # noqa: PLC0415
-    from ema_sim.suite import Suite, SuiteConfig  # noqa: PLC0415
+    from ema_sim.suite import SuiteConfig  # noqa: PLC0415
 
     if args.model not in model_names():
         from ema_sim.errors import UnknownNameError  # noqa: PLC0415
@@ -31,9 +32,6 @@ def run(args: argparse.Namespace) -> int:
         raise EmaError("--fmu drives the suite with the vehicle and autopilot: no --maneuver or --test with it")
     if not (args.maneuver or args.test or args.fmu):
         raise EmaError("give --maneuver SPEC, --test SPEC (ema maneuvers, ema tests) or --fmu (aircraft in the loop)")
-    from ema_sim.environment import load_profile  # noqa: PLC0415
-    from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
-
     disable = list(element_names(args.disable))
     model_overrides(args.model, disable)  # dead_band on a model without one: one error before starting
     load_profile(args.profile, disable=environment_elements(disable))
@@ -60,6 +58,16 @@ def run(args: argparse.Namespace) -> int:
         emac="box" if args.emac_box else args.emac, domain_id=args.domain_id, disable=disable,
         rt_priority=args.rt_priority, window=args.window, fmu=args.fmu, fmu_args=fmu_args, seed=args.seed,
     )
+    return cfg, test, what, duration
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
+    from ema_sim.io.bag import bag_info  # noqa: PLC0415
+    from ema_sim.suite import Suite  # noqa: PLC0415
+
+    cfg, test, what, duration = _config(args)
+    bag = cfg.bag
     suite = Suite(cfg)
     for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
         signal.signal(signum, _interrupt)

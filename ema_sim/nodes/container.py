@@ -393,7 +393,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--maneuver-args", default=None,
                    help="compose the maneuver node (FMU, load rig, recorder) with these arguments")
     p.add_argument("--fmu-args", default=None,
-                   help="compose the fmu node (aircraft in the loop: vehicle, autopilot, recorder) with these arguments")
+                   help="compose the fmu node (aircraft in the loop: vehicle, autopilot, recorder) with these "
+                        "arguments")
     p.add_argument("--clock-args", default=None, help="compose the lockstep clock with these arguments")
     return p
 
