@@ -41,6 +41,7 @@ setup(
             "maneuver = ema_sim.nodes.maneuver:main",
             "simclock = ema_sim.nodes.clock:main",
             "fmu_bridge = ema_sim.nodes.bridge:main",
+            "fmu = ema_sim.nodes.fmu:main",
             "ema_container = ema_sim.nodes.container:main",
         ],
     },

@@ -1,10 +1,11 @@
 """Speed of the ROS 2 node suite (issue 4): lockstep real-time factor, real-time latency, the executor.
 
-Parametrised by model: ``EMA_BENCH_MODEL`` (default ``loada``; ``hoad3`` once it is merged) and by
-duration: ``EMA_BENCH_REALTIME_S`` (default 600 s, the issue's ten minutes) and ``EMA_BENCH_LOCKSTEP_S``
-(default 30 s of simulated time). Each run is the whole suite as separate processes on a ROS domain
-of its own: five EMACs (one process each, or one EMAC box), the AIL test environment, the maneuver
-node recording the bag, and under lockstep the clock.
+Parametrised by model: ``EMA_BENCH_MODEL`` (default ``hoad3``, the issue's) and by duration:
+``EMA_BENCH_REALTIME_S`` (default 600 s, the issue's ten minutes) and ``EMA_BENCH_LOCKSTEP_S`` (default
+30 s of simulated time). Each run is the whole suite on a ROS domain of its own: five EMAC channels,
+the AIL test environment, the maneuver node recording the bag, and under lockstep the clock, hosted
+as ``ema launch`` hosts them by default (``single``: one process, the EMAC box) and, for comparison,
+one process per node with one EMAC node per channel (``processes``).
 """
 
 from __future__ import annotations
@@ -19,40 +20,50 @@ from pathlib import Path
 from ema_sim.benchmark import Benchmark, Result
 from ema_sim.suite import SuiteConfig, free_domain_id, run_suite
 
-MODEL = os.environ.get("EMA_BENCH_MODEL", "loada")
+MODEL = os.environ.get("EMA_BENCH_MODEL", "hoad3")
 REALTIME_S = float(os.environ.get("EMA_BENCH_REALTIME_S", "600"))
 LOCKSTEP_S = float(os.environ.get("EMA_BENCH_LOCKSTEP_S", "30"))
 SINE = "sine:freq_hz=2,amp_deg=1,cycles={c:d},lead_s=0"
 """A long sine (not a 60 s-limited dynamic test): the actuator moves on every frame."""
 
 
-def _suite(lockstep: bool, box: bool, duration_s: float, rt: int = 0, offset: int = 0) -> dict:
+HOSTING = {"single": ("single", "box"), "processes": ("processes", "channels")}
+"""Benchmark label → (layout, EMAC hosting)."""
+
+
+def _describe(hosting: str) -> str:
+    return ("one process, EMAC box" if hosting == "single"
+            else "one process per node, one EMAC node per channel")
+
+
+def _suite(lockstep: bool, hosting: str, duration_s: float, rt: int = 0, offset: int = 0) -> dict:
+    layout, emac = HOSTING[hosting]
     with tempfile.TemporaryDirectory(prefix="ema_bench_") as tmp:
         cfg = SuiteConfig(bag=Path(tmp) / "bag", model=MODEL, profile="ail",
                           maneuver=SINE.format(c=round(2 * duration_s)), channels=["left_wing"],
-                          duration_s=duration_s, lockstep=lockstep, emac_box=box,
+                          duration_s=duration_s, lockstep=lockstep, layout=layout, emac=emac,
                           domain_id=free_domain_id(os.getpid() + 31 * offset), rt_priority=rt)
         return run_suite(cfg, timeout_s=duration_s * 20 + 120)
 
 
-def lockstep(box: bool) -> Result:
-    sums = _suite(True, box, LOCKSTEP_S, offset=1 + box)
+def lockstep(hosting: str) -> Result:
+    sums = _suite(True, hosting, LOCKSTEP_S, offset=1 + len(hosting))
     clock = sums["simclock"]
     rtf = clock["realtime_factor"]
-    cpu = sum(s.get("cpu_s", 0.0) for s in sums.values())
+    cpu = sum(s.get("cpu_s", 0.0) for s in {s.get("process", k): s for k, s in sums.items()}.values())
     return Result(rtf, "× real time", rtf >= 10.0,
-                  f"{MODEL}, {'EMAC box' if box else 'one process per channel'}: {clock['sim_s']:g} s simulated "
-                  f"in {clock['wall_s']:.1f} s, {clock['stalls']} stalls; CPU {cpu:.1f} s over all nodes")
+                  f"{MODEL}, {_describe(hosting)}: {clock['sim_s']:g} s simulated "
+                  f"in {clock['wall_s']:.1f} s, {clock['stalls']} stalls; CPU {cpu:.1f} s over all processes")
 
 
-def realtime(box: bool, rt: int) -> Result:
-    sums = _suite(False, box, REALTIME_S, rt=rt, offset=3 + box)
+def realtime(hosting: str, rt: int) -> Result:
+    sums = _suite(False, hosting, REALTIME_S, rt=rt, offset=3 + len(hosting))
     man = sums["maneuver"]
     p99, missed = man["latency_p99_ms"], man["missed_frames"]
     late = sum(s.get("late_frames", 0) for s in sums.values())
     turn = max((s["turnaround_p99_ms"] for s in sums.values() if "turnaround_p99_ms" in s), default=float("nan"))
     return Result(p99, "ms p99", p99 <= 2.0 and missed == 0,
-                  f"{MODEL}, {'EMAC box' if box else 'one process per channel'}, "
+                  f"{MODEL}, {_describe(hosting)}, "
                   f"{'SCHED_FIFO ' + str(rt) if rt else 'normal scheduling'}: {man['frames']} frames over "
                   f"{REALTIME_S:g} s; p50 {man['latency_p50_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
                   f"{missed} missed frames; {late} EMAC frames without a timely command; inside the EMAC node, "
@@ -122,9 +133,10 @@ def executor_choice() -> Result:
 
 
 BENCHMARKS = [
-    Benchmark(f"nodes_lockstep_channels_{MODEL}", "≥ 10× real time", lambda: lockstep(box=False)),
-    Benchmark(f"nodes_lockstep_box_{MODEL}", "≥ 10× real time", lambda: lockstep(box=True)),
-    Benchmark(f"nodes_realtime_box_fifo_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime(box=True, rt=20)),
-    Benchmark(f"nodes_realtime_channels_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime(box=False, rt=0)),
+    Benchmark(f"nodes_lockstep_single_{MODEL}", "≥ 10× real time", lambda: lockstep("single")),
+    Benchmark(f"nodes_lockstep_processes_{MODEL}", "≥ 10× real time", lambda: lockstep("processes")),
+    Benchmark(f"nodes_realtime_single_fifo_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime("single", rt=20)),
+    Benchmark(f"nodes_realtime_single_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime("single", rt=0)),
+    Benchmark(f"nodes_realtime_processes_{MODEL}", "p99 ≤ 2 ms, 0 missed", lambda: realtime("processes", rt=0)),
     Benchmark("nodes_executor_choice", "EventsExecutor fastest", executor_choice),
 ]

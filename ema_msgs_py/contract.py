@@ -74,7 +74,7 @@ class TopicSpec:
 
 
 TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
-    TopicSpec("/ema/fmu/command", JOINT_STATE, FRAME_QOS, "FMU (maneuver, fmu_bridge, a flight computer)",
+    TopicSpec("/ema/fmu/command", JOINT_STATE, FRAME_QOS, "FMU (maneuver, fmu, fmu_bridge, a flight computer)",
               "testenv", {"position": "command, V (±10 V)"}),
     TopicSpec("/ema/emac/command", JOINT_STATE, FRAME_QOS, "testenv", "emac",
               {"position": "command at the EMAC input, V (±10 V)"}),
@@ -92,6 +92,9 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
                "effort": "hinge moment applied over the frame that ends at the stamp, in·lb"}),
     TopicSpec("/ema/sensor/bus", JOINT_STATE, FRAME_QOS, "emac (models with a motor)", "instruments, recorder",
               {"position": "150 V bus voltage seen by the channel, V"}),
+    TopicSpec("/ema/fmu/vehicle", JOINT_STATE, FRAME_QOS, "fmu (aircraft-in-the-loop vehicle simulation)",
+              "recorder, monitors", {"name": "state names: alpha_deg, q_dps, theta_deg, p_dps, phi_deg",
+                                     "position": "vehicle state at the frame, deg and deg/s"}),
     TopicSpec("/ema/joint_commands", JOINT_STATE, FRAME_QOS, "ros2_control (topic_based_ros2_control)",
               "fmu_bridge", {"position": "surface command, rad"}),
     TopicSpec("/ema/joint_states", JOINT_STATE, FRAME_QOS, "fmu_bridge", "ros2_control",
@@ -99,9 +102,9 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
                "velocity": "its frame-to-frame rate, rad/s"}),
     TopicSpec("/clock", CLOCK, CLOCK_QOS, "simclock (lockstep only)", "every node with use_sim_time",
               {"clock": "simulation time, advanced one FMU frame at a time"}),
-    TopicSpec("/ema/test", STRING, LATCHED_QOS, "maneuver", "recorder",
+    TopicSpec("/ema/test", STRING, LATCHED_QOS, "maneuver, fmu", "recorder",
               {"data": "the test's parameters as JSON (also in the bag's metadata)"}, per_frame=False),
-    TopicSpec("/ema/ready", STRING, LATCHED_QOS, "every suite node", "simclock, maneuver",
+    TopicSpec("/ema/ready", STRING, LATCHED_QOS, "every suite node", "simclock, maneuver, fmu",
               {"data": "name of a node that is up and subscribed"}, per_frame=False),
     TopicSpec("/diagnostics", DIAGNOSTIC_ARRAY, EVENT_QOS, "emac, testenv", "monitors",
               {"status": "one status per channel: brake, failure, counters of rejected inputs"}, per_frame=False),
@@ -119,6 +122,7 @@ EMAC_FEEDBACK = "/ema/emac/feedback"
 FMU_FEEDBACK = "/ema/fmu/feedback"
 HINGE_MOMENT = "/ema/load/hinge_moment"
 SURFACE = "/ema/sensor/surface"
+VEHICLE = "/ema/fmu/vehicle"
 BUS = "/ema/sensor/bus"
 JOINT_COMMANDS = "/ema/joint_commands"
 JOINT_STATES = "/ema/joint_states"

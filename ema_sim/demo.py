@@ -1,11 +1,12 @@
 """``make demo``: the main job end to end, on a fresh machine.
 
-1. ``ema launch``: the node suite — five EMAC channels, the AIL test environment, the lockstep clock
-   and the maneuver node recording rosbag2 (MCAP) — through the report's sine sweep and step set
-   (section 2.7), with the best model on this branch: ``hoad3``, or ``loada`` while it is absent (said
-   so, not silently).
-2. A summary of each bag: messages per topic, duration, how the left wing tracked its command.
-3. The offline analysis of each bag (``ema analyze``) when the package has it.
+1. ``ema launch``: the node suite — five HOAD3 EMAC channels, the AIL test environment, the lockstep
+   clock and the maneuver node recording rosbag2 (MCAP) — through the report's sine sweep and step set
+   (section 2.7); a summary of each bag and its offline analysis (``ema analyze``).
+2. Close the loop: ``ema identify`` fits LOADA to the HOAD3 step-set bag, finds what it lacks, adds it
+   and reports the error before and after.
+3. Aircraft in the loop (sections 2.10, 4.3): ``ema launch --fmu`` flies the vehicle and autopilot
+   through the same suite, closed-loop AIL against flight: the AIL dither, and none in flight.
 4. Table 6, reproduced offline.
 """
 
@@ -20,28 +21,17 @@ import numpy as np
 
 from ema_sim.analysis.model_error import format_table, table6
 from ema_sim.cli import main as ema
-from ema_sim.commands import COMMANDS
 from ema_sim.io.bag import bag_info, read_bag
-from ema_sim.models import model_names
 
 BAGS = Path("bags")
 OUT = Path("out/demo")
-PREFERRED = ("hoad3", "loada")
+MODEL = "hoad3"
 RUNS = {
     "sweep": ["--maneuver", "sweep:f0_hz=0.2,f1_hz=18,amp_deg=1,sweep_s=58,lead_s=1"],
     "steps": ["--test", "steps"],
 }
-
-
-def best_model() -> str:
-    """``hoad3`` when it is registered, else the best second-order model, with a note."""
-    for name in PREFERRED:
-        if name in model_names():
-            if name != PREFERRED[0]:
-                print(f"note: {PREFERRED[0]} is not in this build (models: {', '.join(model_names())}); "
-                      f"the demo runs {name} instead")
-            return name
-    return model_names()[0]
+AIL_RUNS = {"ail": [], "flight": []}
+AIL_DURATION_S = "16"
 
 
 def summarize(bag: Path) -> None:
@@ -62,29 +52,41 @@ def summarize(bag: Path) -> None:
           f"{lags[int(np.argmax(corr))] * frame_ms:.0f} ms (best correlation) on its way to the EMAC")
 
 
+def _step(title: str) -> None:
+    print(f"\n=== {title}", flush=True)
+
+
 def main() -> int:
-    """Run the suite twice, summarize, analyse when possible, print table 6."""
-    model = best_model()
+    """The four parts of the module docstring; stops at the first that fails."""
     stamp = datetime.now(UTC).strftime("%Y%m%d_%H%M%S")
-    bags = []
+    started = time.monotonic()
+    bags: dict[str, Path] = {}
+    _step(f"1. the node suite ({MODEL}, AIL environment, lockstep): sweep and step set")
     for label, args in RUNS.items():
-        bag = BAGS / f"demo_{model}_{label}_{stamp}"
+        bag = BAGS / f"demo_{MODEL}_{label}_{stamp}"
         t0 = time.monotonic()
-        rc = ema(["launch", "--model", model, "--profile", "ail", *args, "--lockstep", "--emac-box",
-                  "--bag", str(bag)])
-        if rc != 0:
-            return rc
+        if ema(["launch", "--model", MODEL, "--profile", "ail", *args, "--lockstep", "--bag", str(bag)]) != 0:
+            return 1
         print(f"({label}: {time.monotonic() - t0:.1f} s wall, start-up included)")
-        bags.append(bag)
-    for bag in bags:
+        bags[label] = bag
+    for bag in bags.values():
         summarize(bag)
-    if "analyze" in COMMANDS:
-        for bag in bags:
-            ema(["analyze", str(bag), "--report", str(OUT / bag.name)])
-    else:
-        print("\nthe offline analysis (ema analyze) is not in this build; the bags above are ready for it")
-    print("\nTable 6 (our reproduction, offline; input: the step set 1°, 20°, 0.5°):")
+    for bag in bags.values():
+        if ema(["analyze", str(bag), "--report", str(OUT / bag.name)]) != 0:
+            return 1
+    _step(f"2. close the loop: LOADA fitted to the {MODEL} step-set bag, what it lacks added")
+    if ema(["identify", str(bags["steps"]), "--model", "loada", "--quiet",
+            "--report", str(OUT / f"identify_{stamp}")]) != 0:
+        return 1
+    _step(f"3. aircraft in the loop ({MODEL}): closed-loop AIL, then flight")
+    for profile, extra in AIL_RUNS.items():
+        bag = BAGS / f"demo_fmu_{profile}_{stamp}"
+        if ema(["launch", "--fmu", "--model", MODEL, "--profile", profile, "--duration", AIL_DURATION_S,
+                "--lockstep", "--bag", str(bag), *extra]) != 0:
+            return 1
+    _step("4. table 6 (our reproduction, offline; input: the step set 1°, 20°, 0.5°)")
     print(format_table(table6(), "loac"))
+    print(f"\ndemo done in {time.monotonic() - started:.0f} s; bags in {BAGS}/, reports in {OUT}/")
     return 0
 
 

@@ -36,6 +36,7 @@ from typing import IO, Any
 
 from ema_sim.config import CHANNELS
 from ema_sim.errors import EmaError
+from ema_sim.models.switches import element_names, environment_elements
 from ema_sim.signals.plans import build_plan
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
@@ -82,12 +83,19 @@ class SuiteConfig:
     extra_emac_args: list[str] = field(default_factory=list)
     measure_busy: bool = False
     """Composed layouts: account the container thread's time to each node (``busy_s`` in the summaries)."""
+    fmu: bool = False
+    """Aircraft in the loop: the ``fmu`` node (vehicle and autopilot) drives the suite instead of the maneuver."""
+    fmu_args: list[str] = field(default_factory=list)
+    """Extra ``fmu`` arguments (``--open-loop``, ``--bungee 100``...)."""
+    seed: int | None = None
+    """The test environment's noise seed (default: the profile's)."""
 
     def __post_init__(self) -> None:
         if self.emac_box is not None:
             self.emac = "box" if self.emac_box else "channels"
         if self.layout not in LAYOUTS:
             raise EmaError(f"unknown layout {self.layout!r}; layouts: {', '.join(LAYOUTS)}")
+        self.disable = list(element_names(self.disable))  # one clear error before anything starts
         if self.emac not in EMAC_HOSTING:
             raise EmaError(f"unknown EMAC hosting {self.emac!r}; give {' or '.join(EMAC_HOSTING)}")
         self.emac_box = self.emac == "box"
@@ -134,13 +142,18 @@ class Suite:
                                             start_new_session=True, preexec_fn=pre)  # noqa: PLW1509
 
     @property
+    def driver(self) -> str:
+        """The node that drives the test and records the bag: ``maneuver``, or ``fmu`` in the loop."""
+        return "fmu" if self.cfg.fmu else "maneuver"
+
+    @property
     def fmu_process(self) -> str:
-        """The process whose end is the end of the test: the maneuver node's (it closes the bag)."""
-        return "suite" if self.cfg.layout == "single" else "maneuver"
+        """The process whose end is the end of the test: the driver's (it closes the bag)."""
+        return "suite" if self.cfg.layout == "single" else self.driver
 
     def node_names(self) -> list[str]:
         """Every node of the run (the container's own node aside: it only carries the others' messages)."""
-        return [*self.emac_nodes(), "testenv", "maneuver", *(["simclock"] if self.cfg.lockstep else [])]
+        return [*self.emac_nodes(), "testenv", self.driver, *(["simclock"] if self.cfg.lockstep else [])]
 
     def emac_nodes(self) -> list[str]:
         """Node names of the EMACs."""
@@ -151,8 +164,10 @@ class Suite:
         cfg = self.cfg
         fh = ["--frame-hz", f"{cfg.frame_hz:g}"]
         env_args = ["--profile", cfg.profile, *fh]
-        for item in cfg.disable:
+        for item in environment_elements(cfg.disable):
             env_args += ["--disable", item]
+        if cfg.seed is not None:
+            env_args += ["--seed", str(cfg.seed)]
         wait_for = [*self.emac_nodes(), "testenv"]
         man = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
                "--wait-for", ",".join(wait_for), "--channels", ",".join(cfg.channels),
@@ -163,25 +178,39 @@ class Suite:
                 man += [flag, value]
         if cfg.duration_s is not None:
             man += ["--duration", f"{cfg.duration_s:g}"]
+        fmu = ["--bag", str(cfg.bag), "--model", cfg.model, "--profile", cfg.profile, *fh,
+               "--wait-for", ",".join(wait_for), "--duration", f"{duration_s:g}", *cfg.fmu_args]
+        if cfg.seed is not None:
+            fmu += ["--seed", str(cfg.seed)]
+        for item in cfg.disable:
+            fmu += ["--disable", item]
         return {
-            "emac": ["--model", cfg.model, *fh, *cfg.extra_emac_args],
+            "emac": ["--model", cfg.model, *fh, *(a for name in cfg.disable for a in ("--disable", name)),
+                     *cfg.extra_emac_args],
             "testenv": env_args,
             "maneuver": man,
-            "simclock": ["--wait-for", ",".join([*wait_for, "maneuver"]), "--channels", ",".join(cfg.emac_channels),
+            "fmu": fmu,
+            "simclock": ["--wait-for", ",".join([*wait_for, self.driver]), "--channels", ",".join(cfg.emac_channels),
                          "--window", str(cfg.window), "--duration", f"{duration_s:.9g}", *fh],
         }
 
     def start(self) -> None:
         """Start every process (returns at once; the nodes find each other on their own)."""
         cfg = self.cfg
-        plan = build_plan(cfg.test, maneuver=cfg.maneuver, load=cfg.load, channels=cfg.channels,
-                          duration_s=cfg.duration_s)  # a bad spec is one clear error before anything starts
-        self.duration_s = plan.duration_s
+        if cfg.fmu:
+            if cfg.duration_s is None or not cfg.duration_s > 0.0:
+                raise EmaError("the aircraft-in-the-loop run needs a positive duration")
+            self.duration_s = cfg.duration_s
+        else:
+            plan = build_plan(cfg.test, maneuver=cfg.maneuver, load=cfg.load, channels=cfg.channels,
+                              duration_s=cfg.duration_s)  # a bad spec is one clear error before anything starts
+            self.duration_s = plan.duration_s
         if cfg.bag.exists():
             raise EmaError(f"{cfg.bag} exists already; give a new bag directory")
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.started = time.monotonic()
-        args = self.node_args(plan.duration_s)
+        args = self.node_args(self.duration_s)
+        driver = self.driver
         if cfg.layout == "processes":
             if cfg.emac_box:
                 self._spawn("emac", "emac", ["--channel", ",".join(cfg.emac_channels), *args["emac"]])
@@ -189,7 +218,7 @@ class Suite:
                 for ch in cfg.emac_channels:
                     self._spawn(f"emac_{ch}", "emac", ["--channel", ch, *args["emac"]])
             self._spawn("testenv", "testenv", args["testenv"])
-            self._spawn("maneuver", "maneuver", args["maneuver"])
+            self._spawn(driver, driver, args[driver])
             if cfg.lockstep:
                 self._spawn("simclock", "clock", args["simclock"])
             return
@@ -199,10 +228,10 @@ class Suite:
         host += ["--measure-busy"] if cfg.measure_busy else []
         host += ["--clock-args", shlex.join(args["simclock"])] if cfg.lockstep else []
         if cfg.layout == "single":
-            self._spawn("suite", "container", [*host, "--maneuver-args", shlex.join(args["maneuver"])], sim_time=True)
+            self._spawn("suite", "container", [*host, f"--{driver}-args", shlex.join(args[driver])], sim_time=True)
         else:
             self._spawn("container", "container", host, sim_time=True)
-            self._spawn("maneuver", "maneuver", args["maneuver"])
+            self._spawn(driver, driver, args[driver])
 
     def wait(self, timeout_s: float | None = None) -> int:
         """Wait for the maneuver node to finish (its bag closed); returns its exit status."""
@@ -221,7 +250,7 @@ class Suite:
 
     def stop(self) -> dict[str, int | None]:
         """SIGINT to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
-        first = ("simclock", "maneuver", "suite", "container")
+        first = ("simclock", "maneuver", "fmu", "suite", "container")
         order = [*first, *[n for n in self.procs if n not in first]]
         for name in order:
             proc = self.procs.get(name)

@@ -394,8 +394,12 @@ def test_the_executor_is_the_events_executor_and_its_spin_loop_delivers_and_time
 @pytest.mark.parametrize(("args", "message"), [
     (["--model", "hoad9", "--maneuver", "step"], "unknown model 'hoad9'"),
     (["--maneuver", "step", "--profile", "lab"], "unknown profile 'lab'"),
-    (["--model", "loada"], "give --maneuver SPEC or --test SPEC"),
+    (["--model", "loada"], "give --maneuver SPEC, --test SPEC"),
     (["--maneuver", "sweep"], "limits dynamic tests to 60 s"),
+    (["--fmu", "--maneuver", "step"], "no --maneuver or --test with it"),
+    (["--maneuver", "step", "--open-loop"], "add --fmu"),
+    (["--fmu", "--disable", "flux"], "unknown element 'flux'"),
+    (["--fmu", "--model", "loada", "--disable", "dead_band"], "loada has no PWM dead band"),
 ])
 def test_launch_bad_input_is_one_line_and_status_2(tmp_path, capsys, args, message):
     assert ema(["launch", *args, "--bag", str(tmp_path / "b")]) == 2

@@ -6,6 +6,9 @@ overlap) is searched between 1 and 50 Hz for a peak standing at least 15 dB abov
 spectral level (the noise floor); its frequency is refined by least squares, and the peak-to-peak
 size is read from the synchronous average of the output folded at that period (64 phase bins), which
 keeps the limit cycle's own waveform (PWM dither is not a sine) while averaging the sensor noise out.
+A cycle whose frequency wanders (noise kicks a loop's limit cycle about) averages itself down over a
+long stretch; ``fold_periods`` then folds consecutive windows of that many periods and takes the
+median window, the size one reads off a strip chart.
 """
 
 from __future__ import annotations
@@ -66,11 +69,25 @@ class DitherResult:
                 f"{self.peak_hz:.3g} Hz (needs {DETECT_DB:g} dB)")
 
 
-def detect_dither(t: FloatArray, y: FloatArray, *, output: str) -> DitherResult | None:
-    """Search a held stretch for a limit cycle (None when shorter than 4 periods of the lowest frequency searched)."""
+def _fold(t: FloatArray, yd: FloatArray, freq_hz: float) -> FloatArray:
+    """Synchronous average of ``yd`` over ``PHASE_BINS`` phase bins of period ``1/freq_hz``."""
+    phase = np.mod((t - t[0]) * freq_hz, 1.0)
+    bins = np.minimum((phase * PHASE_BINS).astype(int), PHASE_BINS - 1)
+    counts = np.bincount(bins, minlength=PHASE_BINS)
+    return np.bincount(bins, weights=yd, minlength=PHASE_BINS) / np.maximum(counts, 1)
+
+
+def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: bool = False,
+                  fold_periods: int | None = None) -> DitherResult | None:
+    """Search a held stretch for a limit cycle (None when shorter than 4 periods of the lowest frequency searched).
+
+    ``fold_always`` also measures the largest peak that falls short of the detection level (frequency,
+    synchronous peak to peak, fundamental), so a report can say how small it is; ``detected`` stays False.
+    ``fold_periods`` folds windows of that many periods and keeps the median one (module docstring).
+    """
     fs = 1.0 / float(np.median(np.diff(t)))
-    span = float(t[-1] - t[0])
-    if span < 4.0 / BAND_HZ[0]:
+    span = float(t[-1] - t[0]) + 1.0 / fs  # the record's length: n samples of 1/fs each
+    if span < 4.0 / BAND_HZ[0] - 1e-9:
         return None
     yd = y - np.polyval(np.polyfit(t - t[0], y, 1), t - t[0])
     if np.ptp(yd) < MIN_PP_DEG:
@@ -86,13 +103,16 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str) -> DitherResult 
     floor = float(np.median(pb[mask])) if mask.any() else float(np.median(pb))
     ratio_db = float(10.0 * np.log10(pb[i] / floor)) if floor > 0 else float("inf")
     detected = ratio_db >= DETECT_DB
-    if not detected:
+    if not (detected or fold_always):
         return DitherResult(output, float(t[0]), float(t[-1]), False, float(fb[i]), ratio_db, None, None, None, None)
     sine = fit_sine(t, yd, float(fb[i]))
     assert sine is not None
-    phase = np.mod((t - t[0]) * sine.freq_hz, 1.0)
-    bins = np.minimum((phase * PHASE_BINS).astype(int), PHASE_BINS - 1)
-    counts = np.bincount(bins, minlength=PHASE_BINS)
-    wave = np.bincount(bins, weights=yd, minlength=PHASE_BINS) / np.maximum(counts, 1)
-    return DitherResult(output, float(t[0]), float(t[-1]), True, float(fb[i]), ratio_db, sine.freq_hz,
+    wave = _fold(t, yd, sine.freq_hz)
+    if fold_periods is not None:
+        window = fold_periods / sine.freq_hz
+        starts = np.arange(t[0], t[-1] - window + 0.5 / fs, window)
+        if starts.size:
+            waves = [_fold(t[sel], yd[sel], sine.freq_hz) for sel in ((t >= a) & (t < a + window) for a in starts)]
+            wave = waves[int(np.argsort([np.ptp(w) for w in waves])[len(waves) // 2])]
+    return DitherResult(output, float(t[0]), float(t[-1]), detected, float(fb[i]), ratio_db, sine.freq_hz,
                         float(np.ptp(wave)), sine.amplitude, wave)

@@ -12,5 +12,6 @@ COMMANDS: tuple[str, ...] = (
     "acceptance",
     "bench",
     "launch",
+    "ail",
     "listing",
 )

@@ -1,4 +1,4 @@
-"""``ema launch``: the node suite from one command (five EMACs, test environment, clock, maneuver)."""
+"""``ema launch``: the node suite from one command (five EMACs, test environment, clock, maneuver or fmu)."""
 
 from __future__ import annotations
 
@@ -12,38 +12,67 @@ from ema_sim.errors import EmaError
 from ema_sim.suite import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 
-def run(args: argparse.Namespace) -> int:
-    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
+def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
+    """The run's :class:`~ema_sim.suite.SuiteConfig`, what it is, on what, for how long (one error if bad)."""
     from ema_sim.config import CHANNELS  # noqa: PLC0415
-    from ema_sim.io.bag import bag_info  # noqa: PLC0415
+    from ema_sim.environment import load_profile  # noqa: PLC0415
     from ema_sim.models import model_names  # noqa: PLC0415
+    from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
     from ema_sim.nodes.maneuver import default_bag  # noqa: PLC0415
     from ema_sim.signals.plans import build_plan, channel_list  # noqa: PLC0415
-    from ema_sim.suite import Suite, SuiteConfig  # noqa: PLC0415
+    from ema_sim.suite import SuiteConfig  # noqa: PLC0415
 
     if args.model not in model_names():
         from ema_sim.errors import UnknownNameError  # noqa: PLC0415
 
         raise UnknownNameError("model", args.model, model_names())
-    if not (args.maneuver or args.test):
-        raise EmaError("give --maneuver SPEC or --test SPEC (ema maneuvers, ema tests)")
-    from ema_sim.environment import load_profile  # noqa: PLC0415
-
-    load_profile(args.profile, disable=args.disable)
+    if (args.open_loop or args.bungee is not None) and not args.fmu:
+        raise EmaError("--open-loop and --bungee belong to the aircraft-in-the-loop run: add --fmu")
+    if args.fmu and (args.maneuver or args.test):
+        raise EmaError("--fmu drives the suite with the vehicle and autopilot: no --maneuver or --test with it")
+    if not (args.maneuver or args.test or args.fmu):
+        raise EmaError("give --maneuver SPEC, --test SPEC (ema maneuvers, ema tests) or --fmu (aircraft in the loop)")
+    disable = list(element_names(args.disable))
+    model_overrides(args.model, disable)  # dead_band on a model without one: one error before starting
+    load_profile(args.profile, disable=environment_elements(disable))
     driven = channel_list(args.channels or ["left_wing"])
-    plan = build_plan(args.test, maneuver=args.maneuver, load=args.load, channels=driven, duration_s=args.duration)
-    bag = Path(args.bag) if args.bag else default_bag(plan.test)
+    if args.fmu:
+        from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
+        from ema_sim.nodes.fmu import default_bag as fmu_bag  # noqa: PLC0415
+
+        load_ail_config().setup(args.profile, bungee_inlb=args.bungee)  # a bad setup is one error before starting
+        duration = 24.0 if args.duration is None else args.duration
+        test, bag = "ail", Path(args.bag) if args.bag else fmu_bag(args.profile)
+        fmu_args = [*(["--open-loop"] if args.open_loop else []),
+                    *(["--bungee", f"{args.bungee:g}"] if args.bungee is not None else [])]
+        what = "every channel, with the vehicle and autopilot in the loop"
+    else:
+        plan = build_plan(args.test, maneuver=args.maneuver, load=args.load, channels=driven,
+                          duration_s=args.duration)
+        duration, test, fmu_args, what = plan.duration_s, plan.test, [], ", ".join(plan.channels)
+        bag = Path(args.bag) if args.bag else default_bag(plan.test)
     cfg = SuiteConfig(
         bag=bag, model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver, load=args.load,
-        channels=driven, emac_channels=channel_list(args.emacs or list(CHANNELS)), duration_s=args.duration,
-        lockstep=args.lockstep, layout=args.layout, emac="box" if args.emac_box else args.emac,
-        domain_id=args.domain_id, disable=args.disable, rt_priority=args.rt_priority, window=args.window,
+        channels=driven, emac_channels=list(CHANNELS) if args.fmu else channel_list(args.emacs or list(CHANNELS)),
+        duration_s=duration if args.fmu else args.duration, lockstep=args.lockstep, layout=args.layout,
+        emac="box" if args.emac_box else args.emac, domain_id=args.domain_id, disable=disable,
+        rt_priority=args.rt_priority, window=args.window, fmu=args.fmu, fmu_args=fmu_args, seed=args.seed,
     )
+    return cfg, test, what, duration
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
+    from ema_sim.io.bag import bag_info  # noqa: PLC0415
+    from ema_sim.suite import Suite  # noqa: PLC0415
+
+    cfg, test, what, duration = _config(args)
+    bag = cfg.bag
     suite = Suite(cfg)
     for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
         signal.signal(signum, _interrupt)
     mode = "lockstep" if args.lockstep else "real time"
-    print(f"ema launch: {plan.test} on {', '.join(plan.channels)} for {plan.duration_s:g} s, {args.model}, "
+    print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, "
           f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
     try:
         suite.start()
@@ -58,9 +87,11 @@ def run(args: argparse.Namespace) -> int:
         raise
     suite.stop()
     if status != 0:
-        raise EmaError(f"the maneuver node exited with status {status}; see "
+        raise EmaError(f"the {suite.driver} node exited with status {status}; see "
                        f"{suite.log_dir / (suite.fmu_process + '.log')}")
     _report(suite, bag, bag_info)
+    if args.fmu:
+        _report_dither(bag)
     return 0
 
 
@@ -78,11 +109,28 @@ def _report(suite: Any, bag: Path, bag_info: Any) -> None:
     if clock and clock.get("wall_s"):
         print(f"lockstep: {clock['sim_s']:.2f} s simulated in {clock['wall_s']:.2f} s "
               f"({clock['realtime_factor']:.2f}× real time, {clock['stalls']} stalls)")
-    man = sums.get("maneuver", {})
+    man = sums.get(suite.driver, {})
     if "latency_p99_ms" in man:
         print(f"real time: command-to-feedback latency p50 {man['latency_p50_ms']:.2f} ms, "
               f"p99 {man['latency_p99_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
               f"{man['missed_frames']} missed frames of {man['frames']}")
+
+
+def _report_dither(bag: Path) -> None:
+    """Each surface's limit cycle in the recorded run, as ``ema ail`` prints it."""
+    from ema_sim.ail.bag import run_from_bag  # noqa: PLC0415
+    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure  # noqa: PLC0415
+    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
+
+    run = run_from_bag(bag)
+    settle = load_ail_config().settle_s
+    if run.time_s[-1] < settle + 4.0:
+        print(f"dither: not measured (needs {settle + 4.0:g} s of run; the bag has {run.time_s[-1]:.2f} s)")
+        return
+    print(f"LVDT position after {settle:g} s (dither: a peak ≥ 15 dB above the floor and ≥ {DITHER_MIN_PP_DEG:g}° "
+          "peak to peak):")
+    for ch, d in measure(run, settle).items():
+        print(f"  {ch:13s} {d.statement}")
 
 
 def register(sub: Any) -> None:
@@ -110,11 +158,19 @@ def register(sub: Any) -> None:
     p.add_argument("--emac-box", action="store_true", help="shorthand for --emac box")
     p.add_argument("--window", type=int, default=1,
                    help="lockstep: frames the clock may run ahead of the slowest EMAC (1: strictly frame by frame)")
-    p.add_argument("--disable", action="append", default=[], help="switch a test-environment element off")
+    p.add_argument("--disable", action="append", default=[],
+                   help="switch an element off: the test environment's delay, lag, quantization, noise (or one "
+                        "path's, command.delay...) and the model's dead_band")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's, "
                    "else one derived from the pid)")
     p.add_argument("--rt-priority", type=int, default=0, help="SCHED_FIFO priority of every node (0: off)")
     p.add_argument("--timeout", type=float, default=None, help="give up after this many wall seconds")
+    p.add_argument("--fmu", action="store_true",
+                   help="aircraft in the loop: the fmu node (vehicle, autopilot, hinge moments) drives the suite "
+                        "instead of a maneuver (config/ail_vehicle.yaml; default 24 s)")
+    p.add_argument("--open-loop", action="store_true", help="with --fmu: open-loop AIL (a model actuator flies)")
+    p.add_argument("--bungee", type=float, default=None, metavar="INLB", help="with --fmu: bungee on the wings")
+    p.add_argument("--seed", type=int, default=None, help="test-environment noise seed (default: the profile's)")
     p.set_defaults(func=run)
     t = sub.add_parser("tests", help="list the section-2 tests the maneuver node drives")
     t.set_defaults(func=_tests)

@@ -539,6 +539,19 @@ def _optional_columns(src: _Source, channel: str, stamps: list[int], fb_topic: s
     return cols
 
 
+def read_joint_topic(path: str | Path, topic: str, field_name: str = "position") -> dict[str, dict[int, float]]:
+    """Every name of a ``JointState`` topic → {stamp_ns: value of ``field_name``} (e.g. ``/ema/fmu/vehicle``)."""
+    src = _open(path)
+    if topic not in src.topics:
+        raise DataError(f"{src.path}: no topic {topic} (topics: {', '.join(sorted(src.topics)) or 'none'})")
+    if src.topics[topic] != ct.JOINT_STATE:
+        raise DataError(f"{src.path}: {topic} is {src.topics[topic]}, not {ct.JOINT_STATE}")
+    names: set[str] = set()
+    for _, _, raw in src.messages({topic}):
+        names.update(ts.deserialize(raw, ct.JOINT_STATE).name)
+    return {name: _joint_series(src, topic, name, field_name) for name in sorted(names)}
+
+
 def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac") -> MeasuredData:
     """One channel of a suite bag as data-contract columns, in degrees.
 

@@ -34,6 +34,7 @@ from ema_msgs_py.cdr import JointFrame, decode, encode
 from ema_msgs_py.ros import qos
 from ema_sim.nodes import clock as clock_node
 from ema_sim.nodes import emac as emac_node
+from ema_sim.nodes import fmu as fmu_node
 from ema_sim.nodes import maneuver as maneuver_node
 from ema_sim.nodes import testenv as testenv_node
 from ema_sim.nodes.common import SuiteNode, run_nodes
@@ -358,6 +359,8 @@ def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
     if args.maneuver_args is not None:
         man_args = maneuver_node.parser().parse_args(args.maneuver_args)
         nodes.append(maneuver_node.ManeuverNode(man_args, ports=bus.ports))
+    if args.fmu_args is not None:
+        nodes.append(fmu_node.FmuNode(fmu_node.parser().parse_args(args.fmu_args), ports=bus.ports))
     if args.clock_args is not None:
         clock_args = clock_node.parser().parse_args(args.clock_args)
         nodes.append(clock_node.ClockNode(clock_args, ports=bus.ports))
@@ -371,7 +374,7 @@ def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
         node.poll = meter.wrap(node.get_name(), node.poll)  # type: ignore[method-assign]
     host.meter = meter
     # Polled in the order a frame flows (clock, FMU, environment, EMACs): one round does a whole frame.
-    rank = {"simclock": 0, "maneuver": 1, "testenv": 2}
+    rank = {"simclock": 0, "maneuver": 1, "fmu": 1, "testenv": 2}
     nodes[1:] = sorted(nodes[1:], key=lambda n: rank.get(n.get_name(), 3))
     return nodes, bus
 
@@ -389,6 +392,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--testenv-args", default="", help="arguments for the test-environment node, e.g. '--profile ail'")
     p.add_argument("--maneuver-args", default=None,
                    help="compose the maneuver node (FMU, load rig, recorder) with these arguments")
+    p.add_argument("--fmu-args", default=None,
+                   help="compose the fmu node (aircraft in the loop: vehicle, autopilot, recorder) with these "
+                        "arguments")
     p.add_argument("--clock-args", default=None, help="compose the lockstep clock with these arguments")
     return p
 
@@ -399,6 +405,7 @@ def _split(args: argparse.Namespace) -> argparse.Namespace:
     args.testenv_args = shlex.split(args.testenv_args)
     args.clock_args = None if args.clock_args is None else shlex.split(args.clock_args)
     args.maneuver_args = None if args.maneuver_args is None else shlex.split(args.maneuver_args)
+    args.fmu_args = None if args.fmu_args is None else shlex.split(args.fmu_args)
     return args
 
 

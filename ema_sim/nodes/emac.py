@@ -36,6 +36,7 @@ from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ro
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
+from ema_sim.models.switches import element_names, model_overrides
 from ema_sim.nodes.common import SuiteNode, percentile_ms, run
 from ema_sim.nodes.params import merged, overrides
 from ema_sim.nodes.ports import Ports
@@ -159,6 +160,7 @@ class EmacNode(SuiteNode):
                 if own:
                     cfg = parse_channel(merged(ros_parameters(config_dir() / f"{ch}.yaml"), own), f"{name} parameters")
             kwargs: dict[str, Any] = {"rate_hz": args.rate} if args.rate else {}
+            kwargs.update(model_overrides(args.model, element_names(args.disable)))
             model = create(args.model, cfg, **kwargs)
             pp_v = float(crosstalk.get(f"{ch}_pp_v", 0.0))
             units[ch] = EmacChannel(model, self.settings, crosstalk_noise_pp_v=pp_v, stream=CHANNELS.index(ch))
@@ -458,6 +460,9 @@ def parser() -> argparse.ArgumentParser:
                    help="channel (repeatable, comma-separated, or 'all' for an EMAC box of five)")
     p.add_argument("--rate", type=float, default=None, help="integration rate of a discrete model, Hz")
     p.add_argument("--frame-hz", type=float, default=None, help="FMU frame rate (default from config/emac.yaml)")
+    p.add_argument("--disable", action="append", default=[],
+                   help="switch the model's own elements off: dead_band (the PWM's), quantization, noise "
+                        "(others, the test environment's, are accepted and left to it)")
     return p
 
 
