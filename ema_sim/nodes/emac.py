@@ -65,10 +65,22 @@ class Stream:
         return self.last_stamp is not None and self.last_stamp >= t_ns
 
     def take_until(self, t_ns: int) -> list[tuple[int, Any]]:
-        """(stamp, item) stamped at or before ``t_ns``, in arrival order."""
-        out = []
-        while self.queue and self.queue[0][0] <= t_ns:
-            out.append(self.queue.popleft())
+        """(stamp, item) stamped at or before ``t_ns``, in arrival order.
+
+        Every such item, not only those before the first later one: messages of different publishers
+        (the crosstalk sources) may arrive out of stamp order, and a later frame's message from one
+        must not hold back this frame's from another.
+        """
+        queue = self.queue
+        if not queue:
+            return []
+        out = [item for item in queue if item[0] <= t_ns]
+        if len(out) == len(queue):  # the usual case: everything queued is due
+            queue.clear()
+        elif out:
+            kept = [item for item in queue if item[0] > t_ns]
+            queue.clear()
+            queue.extend(kept)
         return out
 
 
