@@ -174,6 +174,8 @@ class EmacNode(SuiteNode):
             kwargs: dict[str, Any] = {"rate_hz": args.rate} if args.rate else {}
             kwargs.update(model_overrides(args.model, element_names(args.disable)))
             model = create(args.model, cfg, **kwargs)
+            if not units:  # compiled code loads on first use: take that hit now, not in the first frame
+                create(args.model, cfg, **kwargs).step_values(0.0, 0.0, self.frame_s)
             pp_v = float(crosstalk.get(f"{ch}_pp_v", 0.0))
             units[ch] = EmacChannel(model, self.settings, crosstalk_noise_pp_v=pp_v, stream=CHANNELS.index(ch))
         return units
