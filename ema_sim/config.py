@@ -117,18 +117,22 @@ def ros_parameters(path: Path) -> dict[str, Any]:
     return entry["ros__parameters"]
 
 
+def finite_parameter(params: Mapping[str, Any], key: str, origin: str) -> float:
+    """``params[key]`` as a finite float, or one :class:`ConfigError` that names the file and the key."""
+    if key not in params:
+        raise ConfigError(f"{origin}: missing parameter {key!r}")
+    try:
+        value = float(params[key])
+    except (TypeError, ValueError):
+        raise ConfigError(f"{origin}: parameter {key!r} must be a number, got {params[key]!r}") from None
+    if not math.isfinite(value):
+        raise ConfigError(f"{origin}: parameter {key!r} must be finite")
+    return value
+
+
 def parse_channel(params: Mapping[str, Any], origin: str = "<params>") -> ChannelConfig:
     """Validate a channel's parameter mapping into a :class:`ChannelConfig`."""
-    values: dict[str, Any] = {}
-    for key in _SCALARS:
-        if key not in params:
-            raise ConfigError(f"{origin}: missing parameter {key!r}")
-        try:
-            values[key] = float(params[key])
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"{origin}: parameter {key!r} must be a number, got {params[key]!r}") from exc
-        if not math.isfinite(values[key]):
-            raise ConfigError(f"{origin}: parameter {key!r} must be finite")
+    values: dict[str, Any] = {key: finite_parameter(params, key, origin) for key in _SCALARS}
     try:
         command_cal = Cubic.from_list(params["command_cal_v"])
         feedback_cal = Cubic.from_list(params["feedback_cal_deg"])

@@ -283,6 +283,19 @@ class Suite:
                         out[str(summary.get("node", name))] = {**summary, "process": name}
         return out
 
+    def run(self, timeout_s: float | None = None) -> None:
+        """Start, wait for the test, stop (also when interrupted); one error when the driver failed."""
+        try:
+            self.start()
+            status = self.wait(timeout_s)
+        except BaseException:
+            self.stop()
+            raise
+        self.stop()
+        if status != 0:
+            raise EmaError(f"the {self.driver} node exited with status {status}; see "
+                           f"{self.log_dir / (self.fmu_process + '.log')}")
+
     def __enter__(self) -> Suite:
         self.start()
         return self
@@ -294,14 +307,5 @@ class Suite:
 def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dict[str, Any]]:
     """Start, wait for the test, stop; the nodes' summaries."""
     suite = Suite(cfg)
-    try:
-        suite.start()
-        status = suite.wait(timeout_s)
-    except BaseException:
-        suite.stop()
-        raise
-    suite.stop()
-    if status != 0:
-        raise EmaError(f"the maneuver node exited with status {status}; see "
-                       f"{suite.log_dir / (suite.fmu_process + '.log')}")
+    suite.run(timeout_s)
     return suite.summaries()

@@ -14,7 +14,7 @@ from ema_sim.config import load_channel
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import Loac, SecondOrderParams
 
-EFFECT_FIELDS = {
+EFFECT_FIELDS = {  # vocabulary effect -> the model field its parameter lands in
     "time_delay": "delay_s",
     "lag_filter": "command_lag_hz",
     "lag_filter/feedback": "feedback_lag_hz",

@@ -11,6 +11,7 @@ import json
 
 import numpy as np
 import pytest
+from identgen import EFFECT_FIELDS as FIELD
 from identgen import hoad3_record, make_record
 
 from ema_sim.analysis.noise import input_independence, noise_floor, whiteness
@@ -22,20 +23,6 @@ from ema_sim.io.csv import write_csv
 
 DURATION_S = 30.0
 NOISE = (0.003, 0.002)
-# vocabulary effect -> the model field its parameter lands in
-FIELD = {
-    "time_delay": "delay_s",
-    "lag_filter": "command_lag_hz",
-    "lag_filter/feedback": "feedback_lag_hz",
-    "command_gain": "kb",
-    "command_bias": "offset_deg",
-    "quantization": "quantization_deg",
-    "rate_limit": "rate_limit_dps",
-    "static_threshold": "threshold_deg",
-    "free_play": "free_play_deg",
-    "compliance": "compliance_deg_per_kinlb",
-    "hysteretic_damping": "hysteresis_h_lb_per_in",
-}
 WING = load_channel("left_wing")
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from ema_sim.config import CHANNELS, config_dir, load_channel, ros_parameters
+from ema_sim.config import CHANNELS, config_dir, finite_parameter, load_channel, ros_parameters
 from ema_sim.errors import ConfigError, UnknownNameError
 
 CONFIG_NAME = "ail_vehicle.yaml"
@@ -30,17 +30,7 @@ def _numbers(cls: type, values: Mapping[str, Any], origin: str) -> dict[str, flo
     unknown = sorted(set(values) - set(names))
     if unknown:
         raise ConfigError(f"{origin}: unknown parameter {unknown[0]!r} (known: {', '.join(names)})")
-    out: dict[str, float] = {}
-    for name in names:
-        if name not in values:
-            raise ConfigError(f"{origin}: missing parameter {name!r}")
-        try:
-            out[name] = float(values[name])
-        except (TypeError, ValueError):
-            raise ConfigError(f"{origin}: {name} must be a number, got {values[name]!r}") from None
-        if not math.isfinite(out[name]):
-            raise ConfigError(f"{origin}: {name} must be finite")
-    return out
+    return {name: finite_parameter(values, name, origin) for name in names}
 
 
 @dataclass(frozen=True)

@@ -109,6 +109,11 @@ def _table(head: list[str], rows: list[list[str]]) -> list[str]:
     return [*out, ""]
 
 
+def _notes(notes: list[str]) -> list[str]:
+    """A result's notes as a bullet list and a blank line (nothing when there are none)."""
+    return [*(f"- {n}" for n in notes), ""] if notes else []
+
+
 def _img(plots: dict[str, str], key: str, alt: str) -> list[str]:
     return [f"![{alt}]({plots[key]})", ""] if key in plots else []
 
@@ -207,7 +212,7 @@ def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]: 
                           _f(None if tm.motion_to_feedback_s is None else 1e3 * tm.motion_to_feedback_s, ".2f", " ms"),
                           _f(None if tm.total_s is None else 1e3 * tm.total_s, ".2f", " ms"), str(len(tm.edges)),
                           tm.motion_signal]])
-        lines += [f"- {n}" for n in tm.notes] + ([""] if tm.notes else [])
+        lines += _notes(tm.notes)
         lines += _img(plots, f"r{i}_timing", "timing")
 
     for c in ra.calibration:
@@ -226,7 +231,7 @@ def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]: 
                       ""]
         lines += [f"Four-corner bounds at ±{max(abs(c.nominal_deg)):.0f}°: {c.bounds_deg[0][-1]:+.4f}° to "
                   f"{c.bounds_deg[1][-1]:+.4f}°.", ""]
-        lines += [f"- {n}" for n in c.notes] + ([""] if c.notes else [])
+        lines += _notes(c.notes)
         lines += _img(plots, f"r{i}_command_error", "command error")
 
     for s in ra.static_threshold:
@@ -235,13 +240,13 @@ def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]: 
                   f"({_f(_times(s.onset_deg, s.volts_per_deg), '.4f', ' V')}); "
                   f"follows from {_f(s.follow_deg, '.4f', '°')} amplitude; gain above threshold {_f(s.gain, '.3f')} "
                   f"(on {s.output}).", ""]
-        lines += [f"- {n}" for n in s.notes] + ([""] if s.notes else [])
+        lines += _notes(s.notes)
         lines += _img(plots, f"r{i}_static_threshold", "static threshold")
     for s in ra.dynamic_threshold:
         lines += [f"### Dynamic threshold (section 2.1.2), {s.freq_hz:g} Hz", "",
                   f"Motion onset {_f(s.onset_deg, '.4f', '°')} amplitude; follows from "
                   f"{_f(s.follow_deg, '.4f', '°')} (on {s.output}).", ""]
-        lines += [f"- {n}" for n in s.notes] + ([""] if s.notes else [])
+        lines += _notes(s.notes)
         lines += _img(plots, f"r{i}_dynamic_threshold", "dynamic threshold")
 
     for c in ra.crosstalk:
@@ -274,7 +279,7 @@ def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]: 
         lines += [f"Share of the compliance outside the servo loop: {_f(_times(c.share_outside, 100), '.1f', ' %')} "
                   f"(slopes), {_f(_times(c.share_outside_span, 100), '.1f', ' %')} "
                   "(span, free play included); the report: > 81 % (wings, vehicle 2), 77 % (vehicle 3).", ""]
-        lines += [f"- {n}" for n in c.notes] + ([""] if c.notes else [])
+        lines += _notes(c.notes)
         lines += _img(plots, f"r{i}_compliance", "compliance")
     for h in ra.hysteresis:
         lines += ["### Hysteretic damping (section 3.2.2)", "",
@@ -284,13 +289,13 @@ def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]: 
                   f"{h.peak_in:.5f} in, **h = A/(π·Pk²) = {h.h_lb_per_in:,.2f} lb/in**. The report's rw13: "
                   f"{RW13_AREA_INLB} in·lb and {RW13_PEAK_IN} in give "
                   f"{hysteretic_damping_constant(RW13_AREA_INLB, RW13_PEAK_IN):,.2f} lb/in.", ""]
-        lines += [f"- {n}" for n in h.notes] + ([""] if h.notes else [])
+        lines += _notes(h.notes)
         lines += _img(plots, f"r{i}_hysteresis", "hysteresis loop")
     for fp in ra.free_play:
         lines += ["### Free play (section 2.4)", "",
                   f"{fp.width_deg:.4f}° ± {fp.spread_deg:.2g}° over {len(fp.reversals)} reversal(s) ({fp.method}); "
                   "the report: 0.171-0.179° (vehicle 1), ≈ 0.200° (vehicles 2, 3).", ""]
-        lines += [f"- {n}" for n in fp.notes] + ([""] if fp.notes else [])
+        lines += _notes(fp.notes)
         lines += _img(plots, f"r{i}_free_play", "free play")
     if ra.regeneration:
         g = ra.regeneration

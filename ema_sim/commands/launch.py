@@ -75,20 +75,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, "
           f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
     try:
-        suite.start()
-        status = suite.wait(args.timeout)
-    except KeyboardInterrupt:
+        suite.run(args.timeout)
+    except KeyboardInterrupt:  # the suite is stopped: the bag is closed
         print("ema launch: interrupted; closing the bag", file=sys.stderr)
-        suite.stop()
         _report(suite, bag, bag_info)
         return 130
-    except BaseException:
-        suite.stop()
-        raise
-    suite.stop()
-    if status != 0:
-        raise EmaError(f"the {suite.driver} node exited with status {status}; see "
-                       f"{suite.log_dir / (suite.fmu_process + '.log')}")
     _report(suite, bag, bag_info)
     if args.fmu:
         _report_dither(bag)

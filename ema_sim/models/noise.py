@@ -31,14 +31,20 @@ def splitmix64(seed: int) -> np.uint64:
 
 
 @jit
-def uniform(state: np.ndarray) -> float:
-    """A uniform draw in (0, 1] from xorshift64*; advances ``state[0]``."""
+def next_u64(state: np.ndarray) -> np.uint64:
+    """The next 64-bit output of xorshift64*; advances ``state[0]``."""
     x = state[0]
     x ^= x >> np.uint64(12)
     x ^= x << np.uint64(25)
     x ^= x >> np.uint64(27)
     state[0] = x
-    r = x * np.uint64(0x2545F4914F6CDD1D)
+    return x * np.uint64(0x2545F4914F6CDD1D)
+
+
+@jit
+def uniform(state: np.ndarray) -> float:
+    """A uniform draw in (0, 1] from xorshift64*; advances ``state[0]``."""
+    r = next_u64(state)
     return (float(r >> np.uint64(11)) + 1.0) * _U53
 
 
@@ -75,12 +81,7 @@ _ZIG_R = 3.442619855899
 @jit
 def _signed_draw(state: np.ndarray) -> tuple:
     """A signed 32-bit integer and an independent 7-bit layer from one 64-bit draw."""
-    x = state[0]
-    x ^= x >> np.uint64(12)
-    x ^= x << np.uint64(25)
-    x ^= x >> np.uint64(27)
-    state[0] = x
-    r = x * np.uint64(0x2545F4914F6CDD1D)
+    r = next_u64(state)
     hz = np.int64(r >> np.uint64(32))
     if hz >= 2147483648:
         hz -= 4294967296

@@ -201,6 +201,19 @@ def _servo_accel(p, u_in, x, v, hm):  # noqa: ANN001, ANN202
 
 
 @nb.njit(cache=True)
+def _next_event(t_end, bp_t, m, jd, delay_s, jh, sample_t, js, k_samples):  # noqa: ANN001, ANN202
+    """Where an integration step must stop: the next delayed command, hinge moment or sample instant."""
+    t_next = t_end
+    if jd + 1 < m:
+        t_next = min(t_next, bp_t[jd + 1] + delay_s)
+    if jh + 1 < m:
+        t_next = min(t_next, bp_t[jh + 1])
+    if js < k_samples:
+        t_next = min(t_next, sample_t[js])
+    return t_next
+
+
+@nb.njit(cache=True)
 def _lvdt(p, x_pos, hm):  # noqa: ANN001, ANN202
     """Stage 10: what the LVDT reads, the servo position plus the compliance it does not remove."""
     return x_pos + st.compliance_deflection(hm, p[P_LVDT_COMPL])
@@ -366,13 +379,7 @@ def run_continuous(P, X, MODE, H, bp_t, bp_u, bp_h, t0, t_end, sample_t, rtol, a
                 js += 1
             if t >= t_end - st.TIME_EPS_S:
                 break
-            t_next = t_end
-            if jd + 1 < m:
-                t_next = min(t_next, bp_t[jd + 1] + p[P_DELAY])
-            if jh + 1 < m:
-                t_next = min(t_next, bp_t[jh + 1])
-            if js < k_samples:
-                t_next = min(t_next, sample_t[js])
+            t_next = _next_event(t_end, bp_t, m, jd, p[P_DELAY], jh, sample_t, js, k_samples)
             u[0] = _command_path(p, bp_u[i, jd])
             u[1] = bp_h[i, jh]
             if t_next > t + st.TIME_EPS_S:
@@ -455,7 +462,7 @@ SWITCH_TOL_S = 1e-10
 
 
 @nb.njit(cache=True, parallel=True)
-def run_rk4(P, X, bp_t, bp_u, bp_h, t0, t_end, h_max, sample_t, out):  # noqa: ANN001, ANN201, PLR0912, PLR0915
+def run_rk4(P, X, bp_t, bp_u, bp_h, t0, t_end, h_max, sample_t, out):  # noqa: ANN001, ANN201, PLR0915
     """Second-order kernel for identification: RK4 that never steps across an event.
 
     Steps are at most ``h_max`` and never straddle an input breakpoint (delayed or not), a sample, or
@@ -489,13 +496,7 @@ def run_rk4(P, X, bp_t, bp_u, bp_h, t0, t_end, h_max, sample_t, out):  # noqa: A
                 js += 1
             if t >= t_end - st.TIME_EPS_S:
                 break
-            t_next = t_end
-            if jd + 1 < m:
-                t_next = min(t_next, bp_t[jd + 1] + p[P_DELAY])
-            if jh + 1 < m:
-                t_next = min(t_next, bp_t[jh + 1])
-            if js < k_samples:
-                t_next = min(t_next, sample_t[js])
+            t_next = _next_event(t_end, bp_t, m, jd, p[P_DELAY], jh, sample_t, js, k_samples)
             u[0] = _command_path(p, bp_u[i, jd])
             u[1] = bp_h[i, jh]
             while t_next - t > st.TIME_EPS_S:

@@ -18,41 +18,36 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from std_msgs.msg import String
-
 from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos
 from ema_sim import __version__
 from ema_sim.ail.fmu import EMAC_COMMAND, FEEDBACK, SURFACE, Fmu, FrameInputs
 from ema_sim.ail.params import config_path, load_ail_config
 from ema_sim.ail.vehicle import STATES
-from ema_sim.config import CHANNELS, load_channel
+from ema_sim.config import CHANNELS
 from ema_sim.errors import EmaError
-from ema_sim.io.bag import BagWriter
-from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.common import run
+from ema_sim.nodes.driver import NS, DriverNode, calibration_metadata, stamped_bag
 from ema_sim.nodes.params import overrides
 from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
 
-NS = 1_000_000_000
 INPUT_TOPICS = {FEEDBACK: ct.FMU_FEEDBACK, SURFACE: ct.SURFACE, EMAC_COMMAND: ct.EMAC_COMMAND}
 INPUT_FIELDS = {FEEDBACK: "position", SURFACE: "position", EMAC_COMMAND: "position"}
 
 
 def default_bag(profile: str) -> Path:
     """``bags/ail_<profile>_<UTC time>``."""
-    return Path("bags") / f"ail_{profile}_{dt.datetime.now(dt.UTC).strftime('%Y%m%d_%H%M%S')}"
+    return stamped_bag(f"ail_{profile}")
 
 
-class FmuNode(SuiteNode):
+class FmuNode(DriverNode):
     """The node (see the module docstring)."""
 
     def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
@@ -70,7 +65,6 @@ class FmuNode(SuiteNode):
         if not (math.isfinite(args.duration) and args.duration > 0.0):
             raise EmaError(f"--duration must be a positive number of seconds, got {args.duration!r}")
         self.frames = max(1, round(args.duration * cfg.frame_hz))
-        self.wait_for = {n for item in args.wait_for for n in item.split(",") if n}
         self.wait_s = float(args.lockstep_wait)
         meta = {
             "test": "ail", "section": "2.10, 4.3", "title": "aircraft in the loop: attitude hold in trimmed flight",
@@ -84,13 +78,8 @@ class FmuNode(SuiteNode):
             "frame_hz": f"{cfg.frame_hz:g}", "frames": str(self.frames), "commanded": ",".join(CHANNELS),
             "generator": f"ema_sim {__version__} fmu node", "recorded_utc": dt.datetime.now(dt.UTC).isoformat(),
         }
-        for ch in CHANNELS:
-            c = load_channel(ch)
-            meta[f"calibration.{ch}"] = json.dumps({"command_cal_v": c.command_cal.coefficients(),
-                                                   "feedback_cal_deg": c.feedback_cal.coefficients()})
-        self.bag_path = Path(args.bag) if args.bag else default_bag(args.profile)
-        self.bag_path.parent.mkdir(parents=True, exist_ok=True)
-        self.writer = BagWriter(self.bag_path, meta)
+        meta.update(calibration_metadata(CHANNELS))
+        self._open_run(Path(args.bag) if args.bag else default_bag(args.profile), meta, args.wait_for)
         hooks = {topic: (lambda raw, _log_time, kind=kind: self._on_input(kind, raw))
                  for kind, topic in INPUT_TOPICS.items()}
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
@@ -99,21 +88,11 @@ class FmuNode(SuiteNode):
         self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
         self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
         self.vehicle_pub = self.ports.frame_publisher(ct.VEHICLE)
-        self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
-        self.test_pub.publish(String(data=json.dumps(meta)))
-        self.ready: set[str] = set()
-        self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
         self.clock_ns: int | None = None
         self.inputs: dict[str, dict[int, dict[str, float]]] = {kind: {} for kind in INPUT_TOPICS}
         self.latest: dict[str, dict[str, float]] = {kind: {} for kind in INPUT_TOPICS}
-        self.phase = "waiting"
-        self.k = 0
-        self.start_wall = 0.0
         self.waiting_since: float | None = None
         self.waits_given_up = 0
-        self.late_publish = 0
-        self.finish_deadline = 0.0
-        self.drain_until = 0.0
         self.get_logger().info(f"aircraft in the loop, profile {args.profile}, {meta['mode']}: {setup.describe()}; "
                                f"{self.frames} frames; bag {self.bag_path}")
 
@@ -177,16 +156,6 @@ class FmuNode(SuiteNode):
             return self._run_lockstep(now) if self.lockstep else self._run_realtime(now)
         return self._finish_up(now)
 
-    def _wait_ready(self) -> float:
-        if not (self.wait_for <= self.ready and self.matched()):
-            return 0.01
-        self.phase = "running"
-        self.mark_running()
-        self.get_logger().info("running")
-        self.announce_ready()
-        self.start_wall = time.monotonic() + 0.05
-        return 0.05
-
     def _run_lockstep(self, now: float) -> float:
         if self.clock_ns is None:
             return 0.01
@@ -203,8 +172,7 @@ class FmuNode(SuiteNode):
             self._publish_frame(self.k, self.k * self.frame_ns, self._frame_inputs(self.k, newest=False))
             self.k += 1
         if self.k >= self.frames:
-            self.phase = "finishing"
-            self.finish_deadline = now + 10.0
+            self._finish(now, 10.0)
         return 0.01
 
     def _run_realtime(self, now: float) -> float:
@@ -216,22 +184,13 @@ class FmuNode(SuiteNode):
         self._publish_frame(self.k, self.get_clock().now().nanoseconds, self._frame_inputs(self.k, newest=True))
         self.k += 1
         if self.k >= self.frames:
-            self.phase = "finishing"
-            self.finish_deadline = now + 1.0
+            self._finish(now, 1.0)
             return 0.005
         return max(self.start_wall + self.k * self.frame_ns / NS - time.monotonic(), 0.0)
 
-    def _finish_up(self, now: float) -> float:
-        if self.phase == "finishing":
-            end = self.frames * self.frame_ns
-            last = max(self.inputs[FEEDBACK], default=-1)
-            if (self.lockstep and last >= end) or not self.lockstep or now > self.finish_deadline:
-                self.phase = "draining"
-                self.drain_until = now + (0.25 if self.lockstep else 0.1)
-            return 0.005
-        if now >= self.drain_until:
-            self.done = True
-        return max(self.drain_until - now, 0.0)
+    def _answered(self) -> bool:
+        """Lockstep: the feedback of the last frame is in; real time: the newest is what there is."""
+        return not self.lockstep or max(self.inputs[FEEDBACK], default=-1) >= self.frames * self.frame_ns
 
     # ----------------------------------------------------------------- results
     def summary(self) -> dict[str, Any]:  # noqa: D102
@@ -240,9 +199,7 @@ class FmuNode(SuiteNode):
                 "late_publish": self.late_publish, **self.recorder.summary()}
 
     def close(self) -> None:  # noqa: D102
-        self.writer.set_metadata("frames_commanded", str(self.k))
-        self.writer.set_metadata("completed", str(self.k >= self.frames).lower())
-        self.writer.close()
+        self._close_bag(self.frames)
 
 
 def parser() -> argparse.ArgumentParser:

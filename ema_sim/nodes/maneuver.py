@@ -12,35 +12,30 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from std_msgs.msg import String
 
 from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
-from ema_msgs_py.ros import qos
 from ema_sim import __version__
 from ema_sim.config import CHANNELS, load_channel
-from ema_sim.io.bag import BagWriter
-from ema_sim.nodes.common import SuiteNode, percentile_ms, run
+from ema_sim.nodes.common import percentile_ms, run
+from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, stamped_bag
 from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.signals.plans import build_plan
 
-NS = 1_000_000_000
-
 
 def default_bag(test: str) -> Path:
     """``bags/<test>_<UTC time>``."""
-    return Path("bags") / f"{test}_{dt.datetime.now(dt.UTC).strftime('%Y%m%d_%H%M%S')}"
+    return stamped_bag(test)
 
 
-class ManeuverNode(SuiteNode):
+class ManeuverNode(DriverNode):
     """The node (see the module docstring)."""
 
     def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
@@ -52,7 +47,6 @@ class ManeuverNode(SuiteNode):
                                channels=args.channels or ["left_wing"], duration_s=args.duration)
         self.frame_ns = round(NS / args.frame_hz)
         self.frames = max(1, round(self.plan.duration_s * args.frame_hz))
-        self.wait_for = {n for item in args.wait_for for n in item.split(",") if n}
         commanded = [c for item in (args.command_channels or ["all"]) for c in item.split(",") if c]
         self.commanded = list(CHANNELS) if "all" in commanded else commanded
         expect = [c for item in args.expect_feedback for c in item.split(",") if c]
@@ -67,34 +61,19 @@ class ManeuverNode(SuiteNode):
             "frame_hz": f"{args.frame_hz:g}", "frames": str(self.frames), "commanded": ",".join(self.commanded),
             "generator": f"ema_sim {__version__} maneuver node", "recorded_utc": dt.datetime.now(dt.UTC).isoformat(),
         })
-        for ch in self.commanded:
-            cfg = load_channel(ch)
-            meta[f"calibration.{ch}"] = json.dumps({"command_cal_v": cfg.command_cal.coefficients(),
-                                                   "feedback_cal_deg": cfg.feedback_cal.coefficients()})
-        self.bag_path = Path(args.bag) if args.bag else default_bag(self.plan.test)
-        self.bag_path.parent.mkdir(parents=True, exist_ok=True)
-        self.writer = BagWriter(self.bag_path, meta)
+        meta.update(calibration_metadata(self.commanded))
+        self._open_run(Path(args.bag) if args.bag else default_bag(self.plan.test), meta, args.wait_for)
         self.clock_ns: int | None = None
         own = (ct.FMU_COMMAND, ct.HINGE_MOMENT)
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports, own=own,
                                  hooks={ct.FMU_FEEDBACK: self._on_fmu_feedback}, on_clock=self._on_clock)
         self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
         self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
-        self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
-        self.test_pub.publish(String(data=json.dumps(meta)))
-        self.ready: set[str] = set()
-        self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
         self._names = list(self.commanded)
-        self.phase = "waiting"
-        self.k = 0
-        self.start_wall = 0.0
         self.start_ns = 0
         self.pub_wall: list[float] = []
         self.arrivals: dict[int, dict[str, float]] = {}
         self.last_fb_stamp: dict[str, int] = {}
-        self.late_publish = 0
-        self.finish_deadline = 0.0
-        self.drain_until = 0.0
         self.get_logger().info(f"test {self.plan.test} ({self.plan.title}) on {', '.join(self.plan.channels)}; "
                                f"{self.plan.duration_s:g} s; bag {self.bag_path}")
 
@@ -135,35 +114,17 @@ class ManeuverNode(SuiteNode):
         if self.lockstep or self.phase != "running" or self._slack(now) > 0.003:
             self.recorder.discover()  # a graph query: in real time only where a frame has room for it
         if self.phase == "waiting":
-            return self._wait_ready(now)
+            return self._wait_ready()
         if self.phase == "running":
             return self._run_lockstep(now) if self.lockstep else self._run_realtime(now)
         return self._finish_up(now)
 
-    def _wait_ready(self, now: float) -> float:
-        del now
-        if not (self.wait_for <= self.ready and self.matched()):
-            return 0.01
-        self.phase = "running"
-        self.mark_running()
-        self.get_logger().info("running")
-        self.announce_ready()
-        now = time.monotonic()
-        self.start_wall = now + 0.05
-        self.start_ns = self.get_clock().now().nanoseconds + 50_000_000
-        return 0.05
+    def _started(self) -> None:
+        self.start_ns = self.get_clock().now().nanoseconds + round(START_DELAY_S * NS)
 
-    def _finish_up(self, now: float) -> float:
-        if self.phase == "finishing":
-            end = self.start_ns + self.frames * self.frame_ns
-            if all(self.last_fb_stamp.get(c, -1) >= end for c in self.expect) or now > self.finish_deadline:
-                self.phase = "draining"
-                self.drain_until = now + (0.25 if self.lockstep else 0.1)
-            return 0.005
-        # draining: take what is still queued (in real time the EMACs report on while braked: stop anyway)
-        if now >= self.drain_until:
-            self.done = True
-        return max(self.drain_until - now, 0.0)
+    def _answered(self) -> bool:
+        end = self.start_ns + self.frames * self.frame_ns
+        return all(self.last_fb_stamp.get(c, -1) >= end for c in self.expect)
 
     def _slack(self, now: float) -> float:
         return self.start_wall + self.k * self.frame_ns / NS - now
@@ -193,10 +154,6 @@ class ManeuverNode(SuiteNode):
             self._finish(now, 10.0)
         return 0.01
 
-    def _finish(self, now: float, wait_s: float) -> None:
-        self.phase = "finishing"
-        self.finish_deadline = now + wait_s
-
     # ----------------------------------------------------------------- results
     def latency(self) -> dict[str, Any]:
         """Command-to-feedback latency per frame (all expected channels back), real time only."""
@@ -223,13 +180,11 @@ class ManeuverNode(SuiteNode):
         return out
 
     def close(self) -> None:  # noqa: D102
-        completed = self.k >= self.frames
-        self.writer.set_metadata("frames_commanded", str(self.k))
-        self.writer.set_metadata("completed", str(completed).lower())
+        extra = {}
         if not self.lockstep and self.pub_wall:
-            for key, value in self.latency().items():
-                self.writer.set_metadata(f"realtime.{key}", f"{value:.4g}" if isinstance(value, float) else str(value))
-        self.writer.close()
+            extra = {f"realtime.{key}": f"{value:.4g}" if isinstance(value, float) else str(value)
+                     for key, value in self.latency().items()}
+        self._close_bag(self.frames, extra)
 
 
 def parser() -> argparse.ArgumentParser:

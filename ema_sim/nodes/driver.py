@@ -1,0 +1,109 @@
+"""What the two nodes that drive a run share: the maneuver node and the ``fmu`` (aircraft in the loop).
+
+Each records the bag it names (``bags/<stem>_<UTC time>`` by default, the channels' calibration in its
+metadata) and goes through the same phases: *waiting* for the suite on ``/ema/ready`` and for its
+recorder to be matched; *running* its frames; *finishing*, until the last frame's feedback is back or a
+deadline passes; *draining* what is still queued; done. Only what differs is left to each node: its
+frames, and when its last frame counts as answered.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from std_msgs.msg import String
+
+from ema_msgs_py import contract as ct
+from ema_msgs_py.ros import qos
+from ema_sim.config import load_channel
+from ema_sim.io.bag import BagWriter
+from ema_sim.nodes.common import SuiteNode
+
+NS = 1_000_000_000
+START_DELAY_S = 0.05
+"""From the suite being ready to the first frame (real time)."""
+
+
+def stamped_bag(stem: str) -> Path:
+    """``bags/<stem>_<UTC time>``."""
+    return Path("bags") / f"{stem}_{dt.datetime.now(dt.UTC).strftime('%Y%m%d_%H%M%S')}"
+
+
+def calibration_metadata(channels: Iterable[str]) -> dict[str, str]:
+    """Each channel's command and feedback curves, as the bag reader converts volts with them."""
+    out = {}
+    for ch in channels:
+        cfg = load_channel(ch)
+        out[f"calibration.{ch}"] = json.dumps({"command_cal_v": cfg.command_cal.coefficients(),
+                                               "feedback_cal_deg": cfg.feedback_cal.coefficients()})
+    return out
+
+
+class DriverNode(SuiteNode):
+    """A node that drives a run and records its bag (see the module docstring)."""
+
+    def _open_run(self, bag: Path, metadata: dict[str, str], wait_for: Iterable[str]) -> None:
+        """Create the bag, publish the run's parameters on ``/ema/test``, listen on ``/ema/ready``."""
+        self.bag_path = bag
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        self.writer = BagWriter(bag, metadata)
+        self.wait_for = {n for item in wait_for for n in item.split(",") if n}
+        self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
+        self.test_pub.publish(String(data=json.dumps(metadata)))
+        self.ready: set[str] = set()
+        self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
+        self.phase = "waiting"
+        self.k = 0
+        self.start_wall = 0.0
+        self.late_publish = 0
+        self.finish_deadline = 0.0
+        self.drain_until = 0.0
+
+    def _wait_ready(self) -> float:
+        """Waiting: start once every awaited node is ready and the recorder is matched."""
+        if not (self.wait_for <= self.ready and self.matched()):
+            return 0.01
+        self.phase = "running"
+        self.mark_running()
+        self.get_logger().info("running")
+        self.announce_ready()
+        self.start_wall = time.monotonic() + START_DELAY_S
+        self._started()
+        return START_DELAY_S
+
+    def _started(self) -> None:
+        """The run has just started (the first frame is due at ``start_wall``)."""
+
+    def _finish(self, now: float, wait_s: float) -> None:
+        """The last frame is out: wait at most ``wait_s`` for its feedback."""
+        self.phase = "finishing"
+        self.finish_deadline = now + wait_s
+
+    def _answered(self) -> bool:
+        """The last frame's feedback is back."""
+        raise NotImplementedError
+
+    def _finish_up(self, now: float) -> float:
+        """Finishing, then draining what is still queued, then done."""
+        if self.phase == "finishing":
+            if self._answered() or now > self.finish_deadline:
+                self.phase = "draining"
+                self.drain_until = now + (0.25 if self.lockstep else 0.1)
+            return 0.005
+        # in real time the EMACs report on while braked: stop anyway
+        if now >= self.drain_until:
+            self.done = True
+        return max(self.drain_until - now, 0.0)
+
+    def _close_bag(self, frames: int, extra: dict[str, Any] | None = None) -> None:
+        """Note how far the run got (and ``extra``) in the bag's metadata, and close it."""
+        self.writer.set_metadata("frames_commanded", str(self.k))
+        self.writer.set_metadata("completed", str(self.k >= frames).lower())
+        for key, value in (extra or {}).items():
+            self.writer.set_metadata(key, value)
+        self.writer.close()
