@@ -10,6 +10,7 @@ one process per node with one EMAC node per channel (``processes``).
 
 from __future__ import annotations
 
+import json
 import os
 import statistics
 import subprocess
@@ -18,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 from ema_sim.benchmark import Benchmark, Result
+from ema_sim.nodes.frametimes import CAUSES
 from ema_sim.suite import SuiteConfig, free_domain_id, run_suite
 
 MODEL = os.environ.get("EMA_BENCH_MODEL", "hoad3")
@@ -62,12 +64,17 @@ def realtime(hosting: str, rt: int) -> Result:
     p99, missed = man["latency_p99_ms"], man["missed_frames"]
     late = sum(s.get("late_frames", 0) for s in sums.values())
     turn = max((s["turnaround_p99_ms"] for s in sums.values() if "turnaround_p99_ms" in s), default=float("nan"))
+    causes = ", ".join(f"{man[f'missed_{c}']} {c.replace('_', ' ')}" for c in CAUSES if f"missed_{c}" in man)
+    setup = man.get("realtime", {})
     return Result(p99, "ms p99", p99 <= 2.0 and missed == 0,
                   f"{MODEL}, {_describe(hosting)}, "
-                  f"{'SCHED_FIFO ' + str(rt) if rt else 'normal scheduling'}: {man['frames']} frames over "
-                  f"{REALTIME_S:g} s; p50 {man['latency_p50_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
-                  f"{missed} missed frames; {late} EMAC frames without a timely command; inside the EMAC node, "
-                  f"command received to feedback published p99 {turn:.2f} ms")
+                  f"{'real-time set-up ' + json.dumps(setup) if rt else 'normal scheduling'}: {man['frames']} frames "
+                  f"over {REALTIME_S:g} s; p50 {man['latency_p50_ms']:.2f} ms, max {man['latency_max_ms']:.2f} ms; "
+                  f"{missed} missed frames{' (' + causes + ')' if causes else ''}; "
+                  f"{man['late_publish']} commands published over a frame late; "
+                  f"{late} EMAC frames without a timely command; inside the EMAC node, "
+                  f"command received to feedback published p99 {turn:.2f} ms; "
+                  f"the machine's stolen CPU time {man.get('machine_steal_s', float('nan')):.2f} s")
 
 
 PINGPONG = r'''

@@ -79,7 +79,8 @@ class SuiteConfig:
     disable: list[str] = field(default_factory=list)
     window: int = 1
     rt_priority: int = 0
-    """SCHED_FIFO priority for every node (0: normal scheduling)."""
+    """Real time: every node process at this SCHED_FIFO priority, memory locked, CPUs kept from idle halts
+    (0: normal scheduling; see :mod:`ema_sim.nodes.realtime`)."""
     extra_emac_args: list[str] = field(default_factory=list)
     measure_busy: bool = False
     """Composed layouts: account the container thread's time to each node (``busy_s`` in the summaries)."""
@@ -124,22 +125,16 @@ class Suite:
 
     def _spawn(self, name: str, module: str, args: list[str], *, sim_time: bool | None = None) -> None:
         cmd = [sys.executable, "-m", f"ema_sim.nodes.{module}", *args, "--peers", ",".join(self.node_names())]
+        if self.cfg.rt_priority > 0:
+            cmd += ["--rt-priority", str(self.cfg.rt_priority)]
         if self.cfg.lockstep and (module != "clock" if sim_time is None else sim_time):
             cmd += ["--ros-args", "-p", "use_sim_time:=true"]
         log = (self.log_dir / f"{name}.log").open("wb")
         self._logs[name] = log
         log.write((" ".join(cmd) + "\n").encode())
         log.flush()
-        pre = None
-        if self.cfg.rt_priority > 0:
-            prio = self.cfg.rt_priority
-
-            def pre() -> None:
-                with contextlib.suppress(OSError):
-                    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-
         self.procs[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env(),
-                                            start_new_session=True, preexec_fn=pre)  # noqa: PLW1509
+                                            start_new_session=True)
 
     @property
     def driver(self) -> str:

@@ -24,6 +24,7 @@ from ema_sim.environment import load_profile
 from ema_sim.io.bag import bag_info, read_bag
 from ema_sim.models import create
 from ema_sim.nodes.common import make_executor
+from ema_sim.nodes.frametimes import CAUSES
 from ema_sim.suite import Suite, SuiteConfig, free_domain_id, run_suite
 
 pytestmark = pytest.mark.ros
@@ -158,13 +159,24 @@ def _messages(bag, topic):
 @pytest.mark.parametrize("layout", ["single", "container"])
 def test_real_time_run_measures_command_to_feedback_latency(tmp_path, layout):
     bag = tmp_path / "rt"
+    rt = 20 if layout == "single" else 0  # the real-time set-up, where the machine allows it
     cfg = SuiteConfig(bag=bag, model="loada", profile="flight", maneuver="steps:amps_deg=20,lead_s=0.2,hold_s=0.5",
-                      channels=["left_wing"], emac_box=True, layout=layout, domain_id=domain(2 + 11 * len(layout)))
+                      channels=["left_wing"], emac_box=True, layout=layout, domain_id=domain(2 + 11 * len(layout)),
+                      rt_priority=rt)
     summaries = run_suite(cfg, timeout_s=120)
     man = summaries["maneuver"]
     assert man["frames_commanded"] == man["frames"] == 240
     assert man["answered"] > 0
     assert 0.0 < man["latency_p50_ms"] <= man["latency_p99_ms"] <= man["latency_max_ms"]
+    causes = {k: v for k, v in man.items() if k.startswith("missed_") and k != "missed_frames"}
+    if layout == "single":  # the whole feedback path in the maneuver's thread: every missed frame has a cause
+        assert set(causes) == {f"missed_{c}" for c in CAUSES}
+        assert sum(causes.values()) == man["missed_frames"]
+        assert set(man["realtime"]) >= {"sched_fifo", "memory_locked", "cpu_latency_us"}
+        assert man["realtime"]["sched_fifo"] in (0, rt)
+    else:
+        assert not causes
+        assert "realtime" not in man
     data = read_bag(bag)
     assert data.metadata["clock"] == "realtime"
     assert float(data.metadata["realtime.frames"]) == 240

@@ -154,7 +154,9 @@ def register(sub: Any) -> None:
                         "path's, command.delay...) and the model's dead_band")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's, "
                    "else one derived from the pid)")
-    p.add_argument("--rt-priority", type=int, default=0, help="SCHED_FIFO priority of every node (0: off)")
+    p.add_argument("--rt-priority", type=int, default=0,
+                   help="real time: every node at this SCHED_FIFO priority, memory locked, "
+                        "idle CPUs polling instead of halting (0: off)")
     p.add_argument("--timeout", type=float, default=None, help="give up after this many wall seconds")
     p.add_argument("--fmu", action="store_true",
                    help="aircraft in the loop: the fmu node (vehicle, autopilot, hinge moments) drives the suite "

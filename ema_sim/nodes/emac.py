@@ -37,7 +37,7 @@ from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, Inp
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
 from ema_sim.models.switches import element_names, model_overrides
-from ema_sim.nodes.common import SuiteNode, percentile_ms, run
+from ema_sim.nodes.common import DurationHistogram, SuiteNode, run
 from ema_sim.nodes.params import merged, overrides
 from ema_sim.nodes.ports import Ports
 from ema_sim.signals.plans import channel_list
@@ -152,7 +152,7 @@ class EmacNode(SuiteNode):
         self.model_ns: int | None = None
         self.last_step_wall = time.monotonic()
         self.late_frames = 0
-        self.turnaround: list[float] = []
+        self.turnaround = DurationHistogram()
         self.waits_given_up = 0
         self.published = 0
         self.bad_messages = 0
@@ -307,7 +307,7 @@ class EmacNode(SuiteNode):
             stamp, item = self.commands.queue.popleft()
             self._apply_commands([(stamp, item)])
             self._step_all(stamp, {ch: self._age_wall(ch, now) for ch in self.units})
-            self.turnaround.append(time.monotonic() - item[1])  # command received → feedback published
+            self.turnaround.add(time.monotonic() - item[1])  # command received → feedback published
             stepped = True
         if stepped:
             self.last_step_wall = now
@@ -397,16 +397,18 @@ class EmacNode(SuiteNode):
         """One frame of every hosted channel; ``ages``: how old each channel's last good command is."""
         out: dict[str, Feedback] = {}
         meter = self.meter
+        changed = False
         for ch, unit in self.units.items():
             was = (unit.last.braked, unit.failure)
             fb = out[ch] = unit.step(ages[ch], meter.activity_except(ch) if self.sources or self.coupled else 0.0)
-            if fb.braked is not was[0] or unit.failure is not was[1]:
-                self._publish_diagnostics()
+            changed = changed or fb.braked is not was[0] or unit.failure is not was[1]
         self.model_ns = start_ns + self.frame_ns
         self._observe_own(out)
         self._publish(self.model_ns, out)
+        # After the frame's feedback is out (0.2 ms for five channels), once a second of model time and at
+        # once when a brake or a failure changed (once for the frame, however many channels changed).
         self._frames_to_diagnostics -= 1
-        if self._frames_to_diagnostics <= 0:  # once a second of model time
+        if changed or self._frames_to_diagnostics <= 0:
             self._frames_to_diagnostics = self._diagnostics_every
             self._publish_diagnostics()
 
@@ -456,9 +458,9 @@ class EmacNode(SuiteNode):
             "channels": self.channels, "mode": "lockstep" if self.lockstep else "realtime",
             "frames_published": self.published, "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
-            "turnaround_p50_ms": percentile_ms(self.turnaround, 50),
-            "turnaround_p99_ms": percentile_ms(self.turnaround, 99),
-            "turnaround_max_ms": percentile_ms(self.turnaround, 100),
+            "turnaround_p50_ms": self.turnaround.percentile_ms(50),
+            "turnaround_p99_ms": self.turnaround.percentile_ms(99),
+            "turnaround_max_ms": self.turnaround.percentile_ms(100),
             "counters": {ch: dict(u.counters) for ch, u in self.units.items()},
         }
 

@@ -5,7 +5,8 @@ the channels a test does not drive are held at 0°) and ``/ema/load/hinge_moment
 its own 200 Hz loop or one frame per ``/clock`` frame under lockstep; records every topic of the
 graph into a rosbag2 (MCAP) under ``bags/`` with the test's parameters in the bag's metadata. SIGINT
 or SIGTERM closes the bag: every message received so far is in it. In real time it measures, per
-frame, the time from publishing a command to receiving that frame's feedback back on the FMU side.
+frame, the time from publishing a command to receiving that frame's feedback back on the FMU side
+(:mod:`ema_sim.nodes.frametimes`, which also tells why a frame was missed where it can).
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
 from ema_sim import __version__
 from ema_sim.config import CHANNELS, load_channel
-from ema_sim.nodes.common import percentile_ms, run
+from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, stamped_bag
+from ema_sim.nodes.frametimes import FrameTimes
 from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.signals.plans import build_plan
@@ -71,8 +73,9 @@ class ManeuverNode(DriverNode):
         self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
         self._names = list(self.commanded)
         self.start_ns = 0
-        self.pub_wall: list[float] = []
-        self.arrivals: dict[int, dict[str, float]] = {}
+        self.times = FrameTimes(0 if self.lockstep else self.frames, self.expect, self.frame_ns / NS,
+                                one_thread=bool(getattr(self.ports, "composed", False)))
+        """Real time: per-frame command and feedback times (composed, the path runs in this thread)."""
         self.last_fb_stamp: dict[str, int] = {}
         self.get_logger().info(f"test {self.plan.test} ({self.plan.title}) on {', '.join(self.plan.channels)}; "
                                f"{self.plan.duration_s:g} s; bag {self.bag_path}")
@@ -91,11 +94,8 @@ class ManeuverNode(DriverNode):
             if stamp > self.last_fb_stamp.get(name, -1):
                 self.last_fb_stamp[name] = stamp
         if not self.lockstep and self.phase != "waiting":
-            k = (stamp - self.start_ns) // self.frame_ns - 1  # feedback of frame k is stamped at its end
-            if 0 <= k < len(self.pub_wall):
-                frame = self.arrivals.setdefault(k, {})
-                for name in msg.name:
-                    frame.setdefault(name, now)
+            # feedback of frame k is stamped at its end
+            self.times.feedback((stamp - self.start_ns) // self.frame_ns - 1, msg.name, now)
 
     # ----------------------------------------------------------------- the test
     def _publish_frame(self, k: int, stamp: int) -> float:
@@ -103,6 +103,8 @@ class ManeuverNode(DriverNode):
         load = cdr.JointFrame(stamp, self._names, [], [], [float(self.loads[ch][k]) for ch in self._names])
         cmd = cdr.JointFrame(stamp, self._names, [float(self.volts[ch][k]) for ch in self._names])
         self.load_pub.publish(load)
+        if not self.lockstep:
+            self.times.mark_sent()
         sent = time.monotonic()
         self.cmd_pub.publish(cmd)
         self.recorder.record_own(ct.HINGE_MOMENT, cdr.encode(load), stamp)
@@ -121,6 +123,8 @@ class ManeuverNode(DriverNode):
 
     def _started(self) -> None:
         self.start_ns = self.get_clock().now().nanoseconds + round(START_DELAY_S * NS)
+        if not self.lockstep:
+            self.times.start()
 
     def _answered(self) -> bool:
         end = self.start_ns + self.frames * self.frame_ns
@@ -135,9 +139,10 @@ class ManeuverNode(DriverNode):
             return due - now
         if now - due > self.frame_ns / NS:
             self.late_publish += 1
-        self.pub_wall.append(self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns))
+        self.times.sent_at(self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns))
         self.k += 1
         if self.k >= self.frames:
+            self.times.end()
             self._finish(now, 1.0)
             return 0.005
         return self.start_wall + self.k * self.frame_ns / NS - time.monotonic()
@@ -157,19 +162,7 @@ class ManeuverNode(DriverNode):
     # ----------------------------------------------------------------- results
     def latency(self) -> dict[str, Any]:
         """Command-to-feedback latency per frame (all expected channels back), real time only."""
-        lat, missed = [], 0
-        for k, sent in enumerate(self.pub_wall):
-            got = self.arrivals.get(k, {})
-            if not all(c in got for c in self.expect):
-                missed += 1
-                continue
-            value = max(got[c] for c in self.expect) - sent
-            lat.append(value)
-            if value > self.frame_ns / NS:
-                missed += 1
-        return {"frames": len(self.pub_wall), "answered": len(lat), "missed_frames": missed,
-                "late_publish": self.late_publish, "latency_p50_ms": percentile_ms(lat, 50),
-                "latency_p99_ms": percentile_ms(lat, 99), "latency_max_ms": percentile_ms(lat, 100)}
+        return {**self.times.summary(), "late_publish": self.late_publish}
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
         out: dict[str, Any] = {"bag": str(self.bag_path), "test": self.plan.test, "frames_commanded": self.k,
@@ -181,7 +174,7 @@ class ManeuverNode(DriverNode):
 
     def close(self) -> None:  # noqa: D102
         extra = {}
-        if not self.lockstep and self.pub_wall:
+        if not self.lockstep and self.times.count:
             extra = {f"realtime.{key}": f"{value:.4g}" if isinstance(value, float) else str(value)
                      for key, value in self.latency().items()}
         self._close_bag(self.frames, extra)
