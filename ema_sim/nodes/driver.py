@@ -9,6 +9,7 @@ frames, and when its last frame counts as answered.
 
 from __future__ import annotations
 
+import abc
 import datetime as dt
 import json
 import time
@@ -44,7 +45,7 @@ def calibration_metadata(channels: Iterable[str]) -> dict[str, str]:
     return out
 
 
-class DriverNode(SuiteNode):
+class DriverNode(SuiteNode, abc.ABC):
     """A node that drives a run and records its bag (see the module docstring)."""
 
     def _open_run(self, bag: Path, metadata: dict[str, str], wait_for: Iterable[str]) -> None:
@@ -84,9 +85,9 @@ class DriverNode(SuiteNode):
         self.phase = "finishing"
         self.finish_deadline = now + wait_s
 
+    @abc.abstractmethod
     def _answered(self) -> bool:
-        """The last frame's feedback is back."""
-        raise NotImplementedError
+        """The last frame's feedback is back (each driver knows what its last frame's feedback is)."""
 
     def _finish_up(self, now: float) -> float:
         """Finishing, then draining what is still queued, then done."""
