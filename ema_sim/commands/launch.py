@@ -8,57 +8,28 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ema_sim.errors import EmaError
-from ema_sim.suite import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
+from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 
 def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
-    """The run's :class:`~ema_sim.suite.SuiteConfig`, what it is, on what, for how long (one error if bad)."""
-    from ema_sim.config import CHANNELS  # noqa: PLC0415
-    from ema_sim.environment import load_profile  # noqa: PLC0415
-    from ema_sim.models import model_names  # noqa: PLC0415
-    from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
+    """The run's description (validated once, as it is made), what it is, on what, for how long."""
+    from ema_sim.nodes.fmu import default_bag as fmu_bag  # noqa: PLC0415
     from ema_sim.nodes.maneuver import default_bag  # noqa: PLC0415
-    from ema_sim.signals.plans import build_plan, channel_list  # noqa: PLC0415
-    from ema_sim.suite import SuiteConfig  # noqa: PLC0415
+    from ema_sim.run import RunDescription  # noqa: PLC0415
 
-    if args.model not in model_names():
-        from ema_sim.errors import UnknownNameError  # noqa: PLC0415
-
-        raise UnknownNameError("model", args.model, model_names())
-    if (args.open_loop or args.bungee is not None) and not args.fmu:
-        raise EmaError("--open-loop and --bungee belong to the aircraft-in-the-loop run: add --fmu")
-    if args.fmu and (args.maneuver or args.test):
-        raise EmaError("--fmu drives the suite with the vehicle and autopilot: no --maneuver or --test with it")
-    if not (args.maneuver or args.test or args.fmu):
-        raise EmaError("give --maneuver SPEC, --test SPEC (ema maneuvers, ema tests) or --fmu (aircraft in the loop)")
-    disable = list(element_names(args.disable))
-    model_overrides(args.model, disable)  # dead_band on a model without one: one error before starting
-    load_profile(args.profile, disable=environment_elements(disable))
-    driven = channel_list(args.channels or ["left_wing"])
-    if args.fmu:
-        from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
-        from ema_sim.nodes.fmu import default_bag as fmu_bag  # noqa: PLC0415
-
-        load_ail_config().setup(args.profile, bungee_inlb=args.bungee)  # a bad setup is one error before starting
-        duration = 24.0 if args.duration is None else args.duration
-        test, bag = "ail", Path(args.bag) if args.bag else fmu_bag(args.profile)
-        fmu_args = [*(["--open-loop"] if args.open_loop else []),
-                    *(["--bungee", f"{args.bungee:g}"] if args.bungee is not None else [])]
-        what = "every channel, with the vehicle and autopilot in the loop"
-    else:
-        plan = build_plan(args.test, maneuver=args.maneuver, load=args.load, channels=driven,
-                          duration_s=args.duration)
-        duration, test, fmu_args, what = plan.duration_s, plan.test, [], ", ".join(plan.channels)
-        bag = Path(args.bag) if args.bag else default_bag(plan.test)
-    cfg = SuiteConfig(
-        bag=bag, model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver, load=args.load,
-        channels=driven, emac_channels=list(CHANNELS) if args.fmu else channel_list(args.emacs or list(CHANNELS)),
-        duration_s=duration if args.fmu else args.duration, lockstep=args.lockstep, layout=args.layout,
-        emac="box" if args.emac_box else args.emac, domain_id=args.domain_id, disable=disable,
-        rt_priority=args.rt_priority, window=args.window, fmu=args.fmu, fmu_args=fmu_args, seed=args.seed,
+    bag = Path(args.bag) if args.bag else None
+    cfg = RunDescription(
+        bag=bag or Path("."), model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver,
+        load=args.load, channels=args.channels, emac_channels=args.emacs,
+        duration_s=24.0 if args.fmu and args.duration is None else args.duration, lockstep=args.lockstep,
+        layout=args.layout, emac="box" if args.emac_box else args.emac, domain_id=args.domain_id,
+        disable=args.disable, rt_priority=args.rt_priority, window=args.window, fmu=args.fmu,
+        open_loop=args.open_loop, bungee_inlb=args.bungee, seed=args.seed, namespace=args.namespace,
     )
-    return cfg, test, what, duration
+    if bag is None:
+        cfg.bag = fmu_bag(args.profile) if args.fmu else default_bag(cfg.test_name)
+    what = "every channel, with the vehicle and autopilot in the loop" if args.fmu else ", ".join(cfg.channels)
+    return cfg, cfg.test_name, what, cfg.run_s
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
     cfg, test, what, duration = _config(args)
     bag = cfg.bag
     suite = Suite(cfg)
-    for signum in (signal.SIGINT, signal.SIGTERM):  # both stop the suite the same way: the bag is closed
-        signal.signal(signum, _interrupt)
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way: the bag
+        signal.signal(signum, _interrupt)                              # is closed (SIGHUP: the terminal closed)
     mode = "lockstep" if args.lockstep else "real time"
     print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, "
           f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
@@ -157,6 +128,8 @@ def register(sub: Any) -> None:
     p.add_argument("--rt-priority", type=int, default=0,
                    help="real time: every node at this SCHED_FIFO priority, memory locked, "
                         "idle CPUs polling instead of halting (0: off)")
+    p.add_argument("--namespace", default="", help="ROS namespace of every node, e.g. /aircraft2 (every topic of "
+                   "the run moves with it; default: none)")
     p.add_argument("--timeout", type=float, default=None, help="give up after this many wall seconds")
     p.add_argument("--fmu", action="store_true",
                    help="aircraft in the loop: the fmu node (vehicle, autopilot, hinge moments) drives the suite "

@@ -21,12 +21,14 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from rcl_interfaces.msg import ParameterType
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos, set_stamp, stamp_ns
 from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.params import Spec, names_list
 from ema_sim.signals.plans import channel_list
 
 NS = 1_000_000_000
@@ -35,19 +37,26 @@ NS = 1_000_000_000
 class BridgeNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
-        super().__init__("fmu_bridge")
-        self.channels = channel_list(args.channels or ["all"])
-        self.joint = {ch: f"{args.joint_prefix}{ch}" for ch in self.channels}
+    def __init__(self, args: argparse.Namespace | None = None, name: str = "fmu_bridge") -> None:
+        super().__init__(name, args)
+        own = self.params.declare([
+            Spec("channels", ["all"], "channels to bridge", kind=ParameterType.PARAMETER_STRING_ARRAY),
+            Spec("joint_prefix", "", "URDF joint name = prefix + channel"),
+            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5),
+        ], name)
+        self.channels = channel_list(own["channels"] or ["all"])
+        self.joint = {ch: f"{own['joint_prefix']}{ch}" for ch in self.channels}
         self.channel_of = {j: ch for ch, j in self.joint.items()}
         self.scaling = {ch: ct.scaling(ch) for ch in self.channels}
-        self.frame_ns = round(NS / args.frame_hz)
+        self.frame_ns = round(NS / own["frame_hz"])
         self.lockstep = self.sim_time
         self.held_v: dict[str, float] = {}
         self.state: dict[str, tuple[int, float, float]] = {}
         self.clock_ns: int | None = None
         self.next_ns: int | None = None
         self.next_wall = time.monotonic()
+        self.next_stamp: int | None = None
+        """Real time: the stamp of the next command, on the frame grid from the first one's ROS time."""
         self.rejected = 0
         self.frames = 0
         fq = qos(ct.FRAME_QOS)
@@ -119,10 +128,15 @@ class BridgeNode(SuiteNode):
             return 0.05
         now = time.monotonic()
         if now >= self.next_wall:
-            self._publish(self.get_clock().now().nanoseconds)
+            if self.next_stamp is None:
+                self.next_stamp = self.get_clock().now().nanoseconds
+            self._publish(self.next_stamp)
             self.next_wall += self.frame_ns / NS
-            if now - self.next_wall > 1.0:
-                self.next_wall = now
+            self.next_stamp += self.frame_ns
+            if now - self.next_wall > 1.0:  # held up for a second: on from the present frame (stamps on the grid)
+                skipped = int((now - self.next_wall) * NS) // self.frame_ns
+                self.next_wall += skipped * self.frame_ns / NS
+                self.next_stamp += skipped * self.frame_ns
         return self.next_wall - now
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
@@ -130,11 +144,12 @@ class BridgeNode(SuiteNode):
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments."""
-    p = argparse.ArgumentParser(prog="fmu_bridge", description="topic_based_ros2_control JointState pair ↔ the suite.")
-    p.add_argument("--channels", action="append", default=[], help="channels to bridge (default all)")
-    p.add_argument("--joint-prefix", default="", help="URDF joint name = prefix + channel")
-    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ)
+    """Command-line flags: shorthands for the node's parameters."""
+    p = argparse.ArgumentParser(prog="fmu_bridge", description="topic_based_ros2_control JointState pair ↔ the suite.",
+                                argument_default=argparse.SUPPRESS)
+    p.add_argument("--channels", action="append", type=names_list, help="parameter channels: channels to bridge")
+    p.add_argument("--joint-prefix", dest="joint_prefix", help="parameter joint_prefix: URDF joint = prefix + channel")
+    p.add_argument("--frame-hz", dest="frame_hz", type=float, help="parameter frame_hz")
     return p
 
 

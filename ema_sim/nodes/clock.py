@@ -13,42 +13,66 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from rcl_interfaces.msg import ParameterType
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.params import Spec, names_list
 from ema_sim.nodes.ports import Ports
 
 NS = 1_000_000_000
+RESEND_S = 0.1
+"""While a frame waits this long for the EMACs' feedback, the clock sends its present value again."""
 
 
 class ClockNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
-        super().__init__("simclock")
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "simclock") -> None:
+        super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False
-        self.frame_ns = round(NS / args.frame_hz)
-        self.last_frame = round(args.duration * args.frame_hz) if args.duration > 0 else None
-        self.window = max(1, int(args.window))
-        self.expected = [c for item in args.channels for c in item.split(",") if c]
-        self.wait_for = {n for item in args.wait_for for n in item.split(",") if n}
-        self.stall_s = args.stall_timeout
-        self.rtf = args.realtime_factor
+        strings = ParameterType.PARAMETER_STRING_ARRAY
+        own = self.params.declare([
+            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5),
+            Spec("duration_s", 0.0, "simulated seconds to run (0: until stopped)", "s", 0.0, 1e7),
+            Spec("channels", [], "EMAC channels whose feedback gates each frame", kind=strings),
+            Spec("wait_for", [], "nodes to wait for on ready before the first frame", kind=strings),
+            Spec("window", 1, "frames the clock may run ahead of the slowest EMAC", low=1, high=1000),
+            Spec("stall_timeout_s", 5.0, "wall seconds to wait for a frame's feedback before going on", "s", 0.0,
+                 3600.0, read_only=False),
+            Spec("realtime_factor", 0.0, "pace to this multiple of real time (0: as fast as the suite goes)",
+                 low=0.0, high=1e6),
+        ], name)
+        frame_hz = own["frame_hz"]
+        self.frame_ns = round(NS / frame_hz)
+        self.last_frame = round(own["duration_s"] * frame_hz) if own["duration_s"] > 0 else None
+        self.window = int(own["window"])
+        self.expected = list(own["channels"])
+        self.wait_for = set(own["wait_for"])
+        self.stall_s = own["stall_timeout_s"]
+        self.rtf = own["realtime_factor"]
+        self.params.on_change("stall_timeout_s", self._set_stall)
+        self.last_sent = time.monotonic()
         self.ready: set[str] = set()
         self.reported: dict[str, int] = {}
         self.k = -1
         self.started_wall: float | None = None
         self.waiting_since = time.monotonic()
         self.stalls = 0
+        self.resent = 0
         self.pub = self.ports.clock_publisher()
         self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
         self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback,
                                       lambda text: self.throttled("bad", f"feedback message ignored: {text}"))
-        self.get_logger().info(f"lockstep at {args.frame_hz:g} Hz, waiting for {sorted(self.wait_for) or 'nobody'}")
+        self.get_logger().info(f"lockstep at {frame_hz:g} Hz, waiting for {sorted(self.wait_for) or 'nobody'}")
+
+    def _set_stall(self, value: Any) -> str:
+        old, self.stall_s = self.stall_s, float(value)
+        return f"stall_timeout_s: {old:g} → {self.stall_s:g} s"
 
     def _on_feedback(self, msg: JointFrame) -> None:
         ns = msg.stamp_ns
@@ -58,9 +82,20 @@ class ClockNode(SuiteNode):
 
     def _tick(self) -> None:
         self.k += 1
-        ns = self.k * self.frame_ns
-        self.pub.publish(ns)
-        self.waiting_since = time.monotonic()
+        self.pub.publish(self.k * self.frame_ns)
+        self.waiting_since = self.last_sent = time.monotonic()
+
+    def _resend(self, now: float) -> float:
+        """While waiting, the present frame again every :data:`RESEND_S`.
+
+        A subscriber may take ``/clock`` best effort (rclcpp's ClockQoS) and have missed it; a repeated value
+        changes nothing for one that has it.
+        """
+        if self.k >= 0 and now - self.last_sent >= RESEND_S:
+            self.pub.publish(self.k * self.frame_ns)
+            self.last_sent = now
+            self.resent += 1
+        return 0.002
 
     def poll(self) -> float:  # noqa: D102
         now = time.monotonic()
@@ -75,11 +110,11 @@ class ClockNode(SuiteNode):
             if self._barrier(self.k) or now - self.waiting_since > self.stall_s:
                 self.done = True
                 self.finished_wall = now
-            return 0.002
+            return self._resend(now)
         need = (self.k + 1 - self.window) * self.frame_ns
         if need >= 0 and not self._barrier(self.k + 1 - self.window):
             if now - self.waiting_since <= self.stall_s:
-                return 0.002
+                return self._resend(now)
             self.stalls += 1
             self.throttled("stall", f"no feedback for frame {need / NS:.3f} s from "
                            f"{[c for c in self.expected if self.reported.get(c, -1) < need]} after "
@@ -102,19 +137,25 @@ class ClockNode(SuiteNode):
         wall = getattr(self, "finished_wall", time.monotonic()) - self.started_wall
         sim = frames * self.frame_ns / NS
         return {"frames": frames, "sim_s": sim, "wall_s": wall, "realtime_factor": sim / wall if wall > 0 else 0.0,
-                "stalls": self.stalls}
+                "stalls": self.stalls, "resent": self.resent}
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments."""
-    p = argparse.ArgumentParser(prog="simclock", description="Lockstep /clock for the node suite.")
-    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ)
-    p.add_argument("--duration", type=float, default=0.0, help="simulated seconds to run (0: until stopped)")
-    p.add_argument("--channels", action="append", default=[], help="EMAC channels whose feedback gates each frame")
-    p.add_argument("--wait-for", action="append", default=[], help="node names to wait for on /ema/ready")
-    p.add_argument("--window", type=int, default=1, help="frames the clock may run ahead of the slowest EMAC")
-    p.add_argument("--stall-timeout", type=float, default=5.0, help="wall seconds to wait for a frame's feedback")
-    p.add_argument("--realtime-factor", type=float, default=0.0, help="pace to this multiple of real time (0: free)")
+    """Command-line flags: shorthands for the node's parameters."""
+    p = argparse.ArgumentParser(prog="simclock", description="Lockstep /clock for the node suite.",
+                                argument_default=argparse.SUPPRESS)
+    p.add_argument("--frame-hz", dest="frame_hz", type=float, help="parameter frame_hz")
+    p.add_argument("--duration", dest="duration_s", type=float, help="parameter duration_s: simulated seconds to run "
+                   "(0: until stopped)")
+    p.add_argument("--channels", action="append", type=names_list, help="parameter channels: EMAC channels whose "
+                   "feedback gates each frame")
+    p.add_argument("--wait-for", dest="wait_for", action="append", type=names_list,
+                   help="parameter wait_for: node names to wait for on ready")
+    p.add_argument("--window", type=int, help="parameter window: frames the clock may run ahead of the slowest EMAC")
+    p.add_argument("--stall-timeout", dest="stall_timeout_s", type=float,
+                   help="parameter stall_timeout_s: wall seconds to wait for a frame's feedback")
+    p.add_argument("--realtime-factor", dest="realtime_factor", type=float,
+                   help="parameter realtime_factor: pace to this multiple of real time (0: free)")
     return p
 
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
@@ -28,7 +29,8 @@ from std_msgs.msg import String
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.errors import EmaError
-from ema_sim.nodes import realtime
+from ema_sim.nodes import lifetime, realtime
+from ema_sim.nodes.params import Declared, Spec, cli_overrides, names_list
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
 """Each node prints one line with this prefix and a JSON summary when it stops."""
@@ -44,13 +46,20 @@ def make_executor(context: Any = None) -> Any:
 
 
 class SuiteNode(Node):
-    """Base of the suite's nodes: ``poll`` does the deadline work, ``close`` the last words."""
+    """Base of the suite's nodes: ``poll`` does the deadline work, ``close`` the last words.
 
-    def __init__(self, name: str, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
+    ``args``: the flags given on the node's command line (parameter overrides, :func:`params.cli_overrides`).
+    Every node declares its parameters (:mod:`ema_sim.nodes.params`) in its constructor, ``peers`` here.
+    """
+
+    def __init__(self, name: str, args: argparse.Namespace | None = None, **kwargs: Any) -> None:
+        super().__init__(name, parameter_overrides=cli_overrides(args) if args is not None else [], **kwargs)
+        self.params = Declared(self)
         self.done = False
-        self.peers: set[str] = set()
-        """Suite nodes that must be in the graph before this one calls itself ready (``--peers``)."""
+        self.peers: set[str] = set(self.params.declare([Spec(
+            "peers", [], "suite nodes to see in the graph (and be matched with) before calling itself ready",
+            kind=ParameterType.PARAMETER_STRING_ARRAY)], "peers")["peers"]) - {name}
+        """Suite nodes that must be in the graph before this one calls itself ready."""
         self.auto_ready = True
         """Announce readiness as soon as matched (the maneuver node announces itself when it starts)."""
         self._last_log: dict[str, float] = {}
@@ -119,6 +128,13 @@ class SuiteNode(Node):
             getattr(self.get_logger(), level)(message)
 
 
+def _join_lists(args: argparse.Namespace) -> None:
+    """Repeated list options (``--channel a --channel b,c``) as one list each."""
+    for key, value in vars(args).items():
+        if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+            setattr(args, key, [item for part in value for item in part])
+
+
 def ros_args(argv: Sequence[str] | None) -> list[str]:
     """The full argv (ROS arguments included) for ``rclpy.init``."""
     return list(sys.argv if argv is None else ["node", *argv])
@@ -147,14 +163,16 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     message from outside, at most until the earliest deadline a node asked for.
     """
     full = ros_args(argv)
-    parser.add_argument("--peers", action="append", default=[],
+    parser.add_argument("--peers", action="append", type=names_list, default=argparse.SUPPRESS,
                         help="suite node names to see in the graph (and be matched with) before calling ready")
     parser.add_argument("--rt-priority", type=int, default=0,
                         help="real time: SCHED_FIFO at this priority, memory locked, CPUs kept out of idle halts "
                              "(0: off; see ema_sim.nodes.realtime)")
     args = parser.parse_args(remove_ros_args(full)[1:])
+    _join_lists(args)
+    lifetime.follow_parent()  # started by `ema launch`: end with it, however it ends
     stop = {"signal": None}
-    rt = realtime.apply(args.rt_priority)  # before rclpy starts its threads: they inherit the policy
+    rt = realtime.apply(args.__dict__.pop("rt_priority"))  # before rclpy starts its threads: they inherit it
 
     def on_signal(signum: int, frame: Any) -> None:  # noqa: ARG001
         stop["signal"] = signum
@@ -167,9 +185,6 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     status = 0
     try:
         nodes, bus = factory(args)
-        peers = {n for item in args.peers for n in item.split(",") if n}
-        for node in nodes:
-            node.peers = peers - {node.get_name()}
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)

@@ -22,22 +22,24 @@ messages into the container and 6 out, instead of about 40 cross-process message
 from __future__ import annotations
 
 import argparse
-import shlex
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame, decode, encode
 from ema_msgs_py.ros import qos
+from ema_sim.errors import UnknownNameError
 from ema_sim.nodes import clock as clock_node
 from ema_sim.nodes import emac as emac_node
 from ema_sim.nodes import fmu as fmu_node
 from ema_sim.nodes import maneuver as maneuver_node
 from ema_sim.nodes import testenv as testenv_node
 from ema_sim.nodes.common import SuiteNode, run_nodes
+from ema_sim.nodes.params import Spec, names_list
 from ema_sim.nodes.ports import GRAPH_CACHE_S, ClockPublisher, FramePublisher, Ports, TimeFeed, own_time_source
 from ema_sim.signals.plans import channel_list
 
@@ -331,11 +333,30 @@ class ComposedPorts:
 class HostNode(SuiteNode):
     """The container's own node: DDS endpoints shared by the composed nodes, and the process's summary."""
 
-    def __init__(self) -> None:
-        super().__init__(NAME)
+    def __init__(self, args: argparse.Namespace | None = None) -> None:
+        super().__init__(NAME, args)
         self.auto_ready = False
         self.ports = Ports(self)
         self.meter: BusyMeter | None = None
+        own = self.params.declare([
+            Spec("nodes", [], "the nodes to compose (emac, emac_<channel>, testenv, maneuver, fmu, simclock); "
+                 "empty: from channels and emac_box", kind=ParameterType.PARAMETER_STRING_ARRAY),
+            Spec("channels", ["all"], "EMAC channels to compose when nodes is empty",
+                 kind=ParameterType.PARAMETER_STRING_ARRAY),
+            Spec("emac_box", False, "one EMAC node hosting every channel (an EMAC box) instead of one node per "
+                 "channel, when nodes is empty"),
+            Spec("measure_busy", False, "account the thread's time to each composed node (summary busy_s; costs "
+                 "≈ 1 µs a call)"),
+        ], NAME)
+        self.measure_busy = bool(own["measure_busy"])
+        channels = channel_list(own["channels"] or ["all"])
+        self.emac_channels = channels
+        self.from_channels = not own["nodes"]
+        """Composed from ``channels`` and ``emac_box`` (each EMAC node is told its channels)."""
+        self.composed = own["nodes"] or ["testenv", *(["emac"] if own["emac_box"] else [f"emac_{c}" for c in channels])]
+        unknown = [n for n in self.composed if _node_class(n) is None]
+        if unknown:
+            raise UnknownNameError("node to compose", unknown[0], ["emac", "emac_<channel>", *CLASSES])
 
     def summary(self) -> dict[str, Any]:
         """The process's CPU, and the thread's time on each composed node (the rest: DDS, executor, bus)."""
@@ -343,27 +364,35 @@ class HostNode(SuiteNode):
         return {"composed_busy_s": {k: round(v, 3) for k, v in composed.items()}}
 
 
+CLASSES: dict[str, Callable[..., SuiteNode]] = {
+    "testenv": testenv_node.TestEnvNode, "maneuver": maneuver_node.ManeuverNode, "fmu": fmu_node.FmuNode,
+    "simclock": clock_node.ClockNode,
+}
+"""Composed nodes by name (``emac`` and ``emac_<channel>`` are EMAC nodes)."""
+RANK = {"simclock": 0, "maneuver": 1, "fmu": 1, "testenv": 2}
+"""Polled in the order a frame flows (clock, FMU, environment, EMACs): one round does a whole frame."""
+
+
+def _node_class(name: str) -> Callable[..., SuiteNode] | None:
+    if name == "emac" or name.startswith("emac_"):
+        return emac_node.EmacNode
+    return CLASSES.get(name)
+
+
 def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
-    """The container's node, then the composed ones in the order a frame flows through them."""
-    host = HostNode()
-    meter = BusyMeter(enabled=args.measure_busy)
+    """The container's node, then the composed ones, each reading its own section of the parameter file."""
+    host = HostNode(args)
+    meter = BusyMeter(enabled=host.measure_busy)
     bus = Bus(host, meter)
     nodes: list[SuiteNode] = [host]
-    env_args = testenv_node.parser().parse_args(args.testenv_args)
-    nodes.append(testenv_node.TestEnvNode(env_args, ports=bus.ports))
-    groups = [",".join(channel_list(args.channels))] if args.emac_box else channel_list(args.channels)
-    for group in groups:
-        emac_args = emac_node.parser().parse_args(["--channel", group, *args.emac_args])
-        nodes.append(emac_node.EmacNode(emac_args, ports=bus.ports))
+    given = {"peers": args.peers} if getattr(args, "peers", None) else {}  # --peers: every composed node's
+    for name in host.composed:
+        cls = _node_class(name)
+        flags = dict(given)
+        if host.from_channels and cls is emac_node.EmacNode:
+            flags["channels"] = host.emac_channels if name == "emac" else [name[len("emac_"):]]
+        nodes.append(cls(argparse.Namespace(**flags), ports=bus.ports, name=name))  # type: ignore[call-arg]
     lockstep = any(getattr(n, "lockstep", False) for n in nodes)
-    if args.maneuver_args is not None:
-        man_args = maneuver_node.parser().parse_args(args.maneuver_args)
-        nodes.append(maneuver_node.ManeuverNode(man_args, ports=bus.ports))
-    if args.fmu_args is not None:
-        nodes.append(fmu_node.FmuNode(fmu_node.parser().parse_args(args.fmu_args), ports=bus.ports))
-    if args.clock_args is not None:
-        clock_args = clock_node.parser().parse_args(args.clock_args)
-        nodes.append(clock_node.ClockNode(clock_args, ports=bus.ports))
     for node in nodes:  # under use_sim_time: every composed node's ROS clock follows the in-process clock
         bus.time_feed.clocks.append(own_time_source(node))
     bus.time_feed.clocks = [c for c in bus.time_feed.clocks if c is not None]
@@ -373,45 +402,27 @@ def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
     for node in nodes[1:]:
         node.poll = meter.wrap(node.get_name(), node.poll)  # type: ignore[method-assign]
     host.meter = meter
-    # Polled in the order a frame flows (clock, FMU, environment, EMACs): one round does a whole frame.
-    rank = {"simclock": 0, "maneuver": 1, "fmu": 1, "testenv": 2}
-    nodes[1:] = sorted(nodes[1:], key=lambda n: rank.get(n.get_name(), 3))
+    nodes[1:] = sorted(nodes[1:], key=lambda n: RANK.get(n.get_name(), 3))
     return nodes, bus
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments: what each composed node gets, as a quoted argument string."""
-    p = argparse.ArgumentParser(prog="ema_container",
-                                description="EMAC channel nodes, test environment and clock in one process.")
-    p.add_argument("--channels", action="append", default=[], help="EMAC channels to compose (default all)")
-    p.add_argument("--emac-box", action="store_true",
-                   help="one EMAC node hosting every channel (an EMAC box) instead of one node per channel")
-    p.add_argument("--measure-busy", action="store_true",
-                   help="account the thread's time to each composed node (summary busy_s; costs ≈ 1 µs a call)")
-    p.add_argument("--emac-args", default="", help="arguments for every EMAC channel node, e.g. '--model hoad3'")
-    p.add_argument("--testenv-args", default="", help="arguments for the test-environment node, e.g. '--profile ail'")
-    p.add_argument("--maneuver-args", default=None,
-                   help="compose the maneuver node (FMU, load rig, recorder) with these arguments")
-    p.add_argument("--fmu-args", default=None,
-                   help="compose the fmu node (aircraft in the loop: vehicle, autopilot, recorder) with these "
-                        "arguments")
-    p.add_argument("--clock-args", default=None, help="compose the lockstep clock with these arguments")
+    """Command-line flags: shorthands for the container's parameters (the composed nodes read the parameter file)."""
+    p = argparse.ArgumentParser(prog="ema_container", argument_default=argparse.SUPPRESS,
+                                description="EMAC channel nodes, test environment, clock and driver in one process.")
+    p.add_argument("--nodes", action="append", type=names_list, help="parameter nodes: the nodes to compose")
+    p.add_argument("--channels", action="append", type=names_list,
+                   help="parameter channels: EMAC channels to compose (default all)")
+    p.add_argument("--emac-box", dest="emac_box", action="store_true",
+                   help="parameter emac_box: one EMAC node hosting every channel instead of one node per channel")
+    p.add_argument("--measure-busy", dest="measure_busy", action="store_true",
+                   help="parameter measure_busy: account the thread's time to each composed node")
     return p
-
-
-def _split(args: argparse.Namespace) -> argparse.Namespace:
-    args.channels = args.channels or ["all"]
-    args.emac_args = shlex.split(args.emac_args)
-    args.testenv_args = shlex.split(args.testenv_args)
-    args.clock_args = None if args.clock_args is None else shlex.split(args.clock_args)
-    args.maneuver_args = None if args.maneuver_args is None else shlex.split(args.maneuver_args)
-    args.fmu_args = None if args.fmu_args is None else shlex.split(args.fmu_args)
-    return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script ``ema_container``."""
-    return run_nodes(lambda a: compose(_split(a)), parser(), argv)
+    return run_nodes(compose, parser(), argv)
 
 
 if __name__ == "__main__":

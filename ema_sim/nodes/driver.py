@@ -17,6 +17,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from rcl_interfaces.msg import ParameterType
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
@@ -24,6 +25,7 @@ from ema_msgs_py.ros import qos
 from ema_sim.config import load_channel
 from ema_sim.io.bag import BagWriter
 from ema_sim.nodes.common import SuiteNode
+from ema_sim.nodes.params import Spec
 
 NS = 1_000_000_000
 START_DELAY_S = 0.05
@@ -43,6 +45,20 @@ def calibration_metadata(channels: Iterable[str]) -> dict[str, str]:
         out[f"calibration.{ch}"] = json.dumps({"command_cal_v": cfg.command_cal.coefficients(),
                                                "feedback_cal_deg": cfg.feedback_cal.coefficients()})
     return out
+
+
+def driver_specs(duration_s: float, duration_text: str, *, profile: str = "", frame_hz: float = ct.FRAME_HZ,
+                 profile_text: str = "the test environment's profile, for the bag's metadata") -> list[Spec]:
+    """The parameters both drivers have (read-only: a run is set up once)."""
+    return [
+        Spec("bag", "", "bag directory to create (empty: bags/<test>_<UTC time>)"),
+        Spec("model", "", "the EMACs' model, for the bag's metadata"),
+        Spec("profile", profile, profile_text),
+        Spec("frame_hz", frame_hz, "FMU frame rate", "Hz", 1.0, 1e5),
+        Spec("duration_s", duration_s, duration_text, "s", 0.0, 1e7),
+        Spec("wait_for", [], "nodes to wait for on ready before the first frame",
+             kind=ParameterType.PARAMETER_STRING_ARRAY),
+    ]
 
 
 class DriverNode(SuiteNode, abc.ABC):

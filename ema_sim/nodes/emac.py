@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import ParameterType
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
@@ -34,15 +34,62 @@ from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
+from ema_sim.emac.channel import about
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
 from ema_sim.models.switches import element_names, model_overrides
 from ema_sim.nodes.common import DurationHistogram, SuiteNode, run
-from ema_sim.nodes.params import merged, overrides
+from ema_sim.nodes.params import Spec, config_specs, names_list, nested, unit_of
 from ema_sim.nodes.ports import Ports
 from ema_sim.signals.plans import channel_list
 
 NS = 1_000_000_000
+KNOWN = frozenset(CHANNELS)
+DROPS = ("malformed", "unknown_names", "no_names", "lost_commands", "out_of_order")
+"""Why an input was dropped: a message whose arrays do not match its names; names that are no channel; a
+message without names; commands missing from the stream (a gap in the stamps: lost in the middleware or
+never sent); a command older than the last one taken."""
+CATCH_UP = 20
+"""Idle frames a late loop steps to catch up (0.1 s at 200 Hz); beyond that it skips to the present frame."""
+FAULT_HOLD_S = 2.0
+"""``/diagnostics`` warns for this long (wall time) after the last dropped input, then is OK again."""
+STRINGS = ParameterType.PARAMETER_STRING_ARRAY
+
+
+def node_specs(channels: list[str]) -> list[Spec]:
+    """The EMAC node's own parameters."""
+    return [
+        Spec("model", "loada", "actuator model of every hosted channel (ema models)"),
+        Spec("channels", channels, "hosted channels: one, or several for an EMAC box", kind=STRINGS),
+        Spec("rate_hz", 0.0, "integration rate of a discrete model (0: the model's default)", "Hz", 0.0, 1e7),
+        Spec("disable", [], "model elements switched off: dead_band, quantization, noise (others are the test "
+             "environment's and ignored here)", kind=STRINGS),
+    ]
+
+
+def emac_specs(base: dict[str, Any]) -> list[Spec]:
+    """``emac.*``: the channel logic's settings (:class:`EmacSettings` metadata; defaults from ``config/emac.yaml``)."""
+    defaults = EmacSettings.from_parameters({k: v for k, v in base.items() if not isinstance(v, dict)}, "emac.yaml")
+    out = []
+    for f, meta in about(EmacSettings):
+        name = f"emac.{f.name}"
+        out.append(Spec(name, getattr(defaults, f.name), meta["description"], unit_of(name), meta["low"],
+                        meta["high"], read_only=not meta["dynamic"]))
+    out.append(Spec("emac.lockstep_wait_s", float(base.get("lockstep_wait_s", 5.0)),
+                    "lockstep: wall time to wait for a frame's inputs while their publishers live", "s", 0.0, 3600.0,
+                    read_only=False))
+    out += [Spec(f"emac.crosstalk.{ch}_pp_v", float(base.get("crosstalk", {}).get(f"{ch}_pp_v", 0.0)),
+                 f"peak-to-peak feedback noise on {ch} while the other channels slew (section 2.2)", "V", 0.0, 20.0)
+            for ch in CHANNELS]
+    return out
+
+
+def channel_specs(channel: str, prefix: str = "") -> list[Spec]:
+    """A channel's physical and model parameters (``config/<channel>.yaml``), read-only: the model is built once."""
+    path = config_dir() / f"{channel}.yaml"
+    return config_specs(ros_parameters(path), path.name, f"{prefix}." if prefix else "",
+                        describe=lambda name: f"{channel}: {name.removeprefix(prefix + '.') if prefix else name} "
+                                              f"(config/{channel}.yaml; the model is built once: read-only)")
 
 
 class Stream:
@@ -114,26 +161,25 @@ class SourceStream(Stream):
 class EmacNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
-        channels = channel_list(args.channel or ["left_wing"])
-        name = f"emac_{channels[0]}" if len(channels) == 1 else "emac"
-        super().__init__(name, automatically_declare_parameters_from_overrides=True)
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None) -> None:
+        given = channel_list(getattr(args, "channels", None) or ["left_wing"])
+        super().__init__(name or (f"emac_{given[0]}" if len(given) == 1 else "emac"), args)
+        name = self.get_name()
         self.ports = ports(self)
-        if args.model not in model_names():
-            raise UnknownNameError("model", args.model, model_names())
-        self.channels = channels
+        own = self.params.declare(node_specs(given), name)
+        if own["model"] not in model_names():
+            raise UnknownNameError("model", own["model"], model_names())
+        self.channels = channel_list(own["channels"])
         self.lockstep = self.sim_time
         base = ros_parameters(config_dir() / "emac.yaml").get("emac", {})
-        node_params = merged(base, overrides(self, "emac"))
+        settings = self.params.declare(emac_specs(base), f"{name}: emac")
         self.settings = EmacSettings.from_parameters(
-            {k: v for k, v in node_params.items() if not isinstance(v, dict)}, f"{name}: emac")
-        if args.frame_hz:
-            self.settings = EmacSettings.from_parameters({**vars(self.settings), "frame_hz": args.frame_hz})
-        crosstalk = node_params.get("crosstalk", {})
-        self.wait_s = float(node_params.get("lockstep_wait_s", 5.0))
+            {k: v for k, v in nested(settings)["emac"].items() if not isinstance(v, dict)}, f"{name}: emac")
+        self.wait_s = float(settings["emac.lockstep_wait_s"])
         self.frame_ns = round(NS / self.settings.frame_hz)
         self.frame_s = self.frame_ns / NS
-        self.units = self._build_units(args, name, crosstalk)
+        self.model_name = own["model"]
+        self.units = self._build_units(own, name, nested(settings)["emac"].get("crosstalk", {}))
         self.has_current = all(u.model.has_current for u in self.units.values())
         self.meter = ActivityMeter(self.frame_s)
         self.coupled = any(u.crosstalk.active for u in self.units.values())
@@ -146,39 +192,81 @@ class EmacNode(SuiteNode):
         self._stream_list = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
         self._diagnostics_every = round(self.settings.frame_hz)
         self._frames_to_diagnostics = self._diagnostics_every
-        self.last_good_ns: dict[str, int | None] = dict.fromkeys(channels)
-        self.last_good_wall: dict[str, float | None] = dict.fromkeys(channels)
+        self.last_good_ns: dict[str, int | None] = dict.fromkeys(self.channels)
+        self.last_good_wall: dict[str, float | None] = dict.fromkeys(self.channels)
         self.clock_ns: int | None = None
         self.model_ns: int | None = None
         self.last_step_wall = time.monotonic()
+        self.next_idle = self.last_step_wall + 1.5 * self.frame_s
+        """Real time: when the next frame without a command is due (frames keep the frame rate when idle)."""
+        self.last_command_ns: int | None = None
         self.late_frames = 0
+        self.skipped_frames = 0
         self.turnaround = DurationHistogram()
         self.waits_given_up = 0
         self.published = 0
-        self.bad_messages = 0
+        self.drops = dict.fromkeys(DROPS, 0)
+        """Inputs dropped, by reason (:data:`DROPS`): each is counted, logged (throttled) and in ``/diagnostics``."""
+        self.last_fault_wall = -math.inf
         self._make_topics()
+        self._on_changes()
         self.get_logger().info(
-            f"{args.model} on {', '.join(channels)}; {'lockstep' if self.lockstep else 'real time'} at "
+            f"{self.model_name} on {', '.join(self.channels)}; {'lockstep' if self.lockstep else 'real time'} at "
             f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
 
-    def _build_units(self, args: argparse.Namespace, name: str, crosstalk: dict[str, Any]) -> dict[str, EmacChannel]:
-        """A model and an EMAC channel for each hosted channel."""
+    @property
+    def bad_messages(self) -> int:
+        """Messages dropped whole or in part (malformed, unknown or missing names, undecodable)."""
+        return self.drops["malformed"] + self.drops["unknown_names"] + self.drops["no_names"]
+
+    def _build_units(self, own: dict[str, Any], name: str, crosstalk: dict[str, Any]) -> dict[str, EmacChannel]:
+        """A model and an EMAC channel for each hosted channel, from the declared channel parameters."""
         units: dict[str, EmacChannel] = {}
+        single = len(self.channels) == 1
+        kwargs: dict[str, Any] = {"rate_hz": own["rate_hz"]} if own["rate_hz"] > 0.0 else {}
+        kwargs.update(model_overrides(self.model_name, element_names(own["disable"])))
         for ch in self.channels:
-            cfg = load_channel(ch)
-            if len(self.channels) == 1:  # a single channel takes its ROS parameters (--params-file config/<ch>.yaml)
-                own = overrides(self, "", exclude=("use_sim_time",))
-                own.pop("emac", None)
-                if own:
-                    cfg = parse_channel(merged(ros_parameters(config_dir() / f"{ch}.yaml"), own), f"{name} parameters")
-            kwargs: dict[str, Any] = {"rate_hz": args.rate} if args.rate else {}
-            kwargs.update(model_overrides(args.model, element_names(args.disable)))
-            model = create(args.model, cfg, **kwargs)
+            values = self.params.declare(channel_specs(ch, "" if single else ch), f"{name}: {ch}")
+            n = 0 if single else len(ch) + 1
+            cfg = parse_channel(nested({k[n:]: v for k, v in values.items()}), f"{name} parameters ({ch})")
+            model = create(self.model_name, cfg, **kwargs)
             if not units:  # compiled code loads on first use: take that hit now, not in the first frame
-                create(args.model, cfg, **kwargs).step_values(0.0, 0.0, self.frame_s)
+                create(self.model_name, cfg, **kwargs).step_values(0.0, 0.0, self.frame_s)
             pp_v = float(crosstalk.get(f"{ch}_pp_v", 0.0))
             units[ch] = EmacChannel(model, self.settings, crosstalk_noise_pp_v=pp_v, stream=CHANNELS.index(ch))
         return units
+
+    def _on_changes(self) -> None:
+        """The parameters a running EMAC applies at its next frame (every other one is read-only)."""
+        def setting(key: str, unit: str) -> None:
+            def apply(value: Any) -> str:
+                old = getattr(self.settings, key)
+                self.settings = EmacSettings.from_parameters({**vars(self.settings), key: value}, "emac")
+                for u in self.units.values():
+                    u.settings = self.settings
+                return f"emac.{key}: {old:g} → {value:g} {unit} (from the next frame)"
+            self.params.on_change(f"emac.{key}", apply)
+
+        def failure(value: Any) -> str:
+            failure = parse_failure(str(value))
+            for u in self.units.values():
+                u.set_failure(failure)
+            return f"emac.failure: {failure.spec()} on {', '.join(self.channels)} (from the next frame)"
+
+        def power(value: Any) -> str:
+            for u in self.units.values():
+                u.motor_power_on = bool(value)
+            return f"emac.motor_power_on: {bool(value)} (brake {'released' if value else 'engaged'} at the next frame)"
+
+        def wait(value: Any) -> str:
+            old, self.wait_s = self.wait_s, float(value)
+            return f"emac.lockstep_wait_s: {old:g} → {self.wait_s:g} s"
+
+        setting("watchdog_timeout_s", "s")
+        setting("hinge_moment_limit_inlb", "in·lb")
+        self.params.on_change("emac.failure", failure)
+        self.params.on_change("emac.motor_power_on", power)
+        self.params.on_change("emac.lockstep_wait_s", wait)
 
     def _make_topics(self) -> None:
         ports = self.ports
@@ -195,24 +283,44 @@ class EmacNode(SuiteNode):
             ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad)
         if self.lockstep:
             ports.clock_subscription(self._on_clock)
-        self.add_on_set_parameters_callback(self._on_parameters)
 
     # ----------------------------------------------------------------- callbacks (never raise)
     def _on_command(self, msg: JointFrame) -> None:
         try:
             values = self._pick(msg, msg.position, "position", "command")
+            stamp = msg.stamp_ns
+            if not stamp and not self.lockstep:  # an unstamped command in real time: now
+                stamp = self.get_clock().now().nanoseconds
+            elif stamp and self.lockstep:  # a command for frame t: the suite's time has reached t
+                self._on_clock(stamp)
+            if values and not self.lockstep and msg.stamp_ns and not self._in_sequence(stamp):
+                return
             if values:
-                stamp = msg.stamp_ns
-                if not stamp and not self.lockstep:  # an unstamped command in real time: now
-                    stamp = self.get_clock().now().nanoseconds
                 self.commands.push(stamp, (values, time.monotonic()))
                 self.mark_running()
         except Exception as exc:  # a bad message never kills the node
-            self._bad(f"command message dropped: {exc}")
+            self._drop("malformed", f"command message dropped: {exc}")
+
+    def _in_sequence(self, stamp: int) -> bool:
+        """Real time: count the frames missing between two commands' stamps; drop a command older than the last."""
+        last = self.last_command_ns
+        if last is not None:
+            if stamp <= last:
+                self._drop("out_of_order", f"command stamped {stamp / NS:.6f} s after one stamped {last / NS:.6f} s: "
+                           "dropped (an older frame's command)")
+                return False
+            missing = round((stamp - last) / self.frame_ns) - 1
+            if missing > 0:
+                self._drop("lost_commands", f"{missing} frame(s) of commands missing before the one stamped "
+                           f"{stamp / NS:.6f} s (lost on the way, or never sent)", missing)
+        self.last_command_ns = stamp
+        return True
 
     def _on_load(self, msg: JointFrame) -> None:
         try:
             values = self._pick(msg, msg.effort, "effort", "hinge moment")
+            if self.lockstep and msg.stamp_ns:
+                self._on_clock(msg.stamp_ns)
             if values:
                 self.loads.push(msg.stamp_ns, values)
         except Exception as exc:
@@ -224,10 +332,13 @@ class EmacNode(SuiteNode):
             seen = [(name, float(pos[i])) for i, name in enumerate(msg.name) if name in self.sources and i < len(pos)]
             if seen:
                 self.source_fb.push_from(msg.stamp_ns, seen)
+                if self.lockstep:  # the other EMACs stepped the frame ending here: the clock got there
+                    self._on_clock(msg.stamp_ns)
         except Exception as exc:
             self._bad(f"feedback message dropped: {exc}")
 
     def _on_clock(self, ns: int) -> None:
+        """Lockstep time: from ``/clock``, and from any input stamped for a frame (its frame has come)."""
         if self.clock_ns is None or ns > self.clock_ns:
             self.clock_ns = ns
 
@@ -239,34 +350,40 @@ class EmacNode(SuiteNode):
         except EmaError as exc:
             self._bad(f"{channel}: failure request ignored: {exc}")
 
-    def _on_parameters(self, params: Sequence[Any]) -> SetParametersResult:
-        for p in params:
-            try:
-                if p.name == "emac.failure":
-                    for unit in self.units.values():
-                        unit.set_failure(parse_failure(str(p.value)))
-                elif p.name == "emac.motor_power_on":
-                    for unit in self.units.values():
-                        unit.motor_power_on = bool(p.value)
-            except EmaError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
-
     def _pick(self, msg: JointFrame, array: list[float], field: str, what: str) -> dict[str, float]:
-        """This node's channels out of a frame (missing values are rejected and counted)."""
+        """This node's channels out of a frame; every malformed part is counted and logged (throttled).
+
+        A JointState's arrays are empty or as long as its names. A hosted channel without a value gets NaN,
+        which the channel rejects and counts; names that are no channel, a message without names and a
+        length mismatch (wherever the hosted channel stands) are counted as drops.
+        """
+        names = msg.name
+        if not names:
+            if array:
+                self._drop("no_names", f"{what} message without joint names ({len(array)} {field} values) dropped")
+            return {}
+        if len(array) != len(names):
+            self._drop("malformed", f"{what} message with {len(names)} names and {len(array)} {field} values: "
+                       f"the values past the arrays' end are dropped")
+        unknown = [n for n in names if n not in KNOWN]
+        if unknown:
+            self._drop("unknown_names", f"{what} for unknown joint(s) {', '.join(map(repr, unknown[:5]))} dropped "
+                       f"(channels: {', '.join(CHANNELS)})", len(unknown))
         out: dict[str, float] = {}
-        for i, name in enumerate(msg.name):
-            if name in self.units:
-                if i < len(array):
-                    out[name] = float(array[i])
-                else:
-                    out[name] = math.nan
-                    self._bad(f"{what} for {name} has no {field} value ({len(msg.name)} names, {len(array)} values)")
+        units = self.units
+        for i, name in enumerate(names):
+            if name in units:
+                out[name] = float(array[i]) if i < len(array) else math.nan
         return out
 
     def _bad(self, text: str) -> None:
-        self.bad_messages += 1
-        self.throttled("bad", f"{text} ({self.bad_messages} so far)")
+        """A message that could not be decoded."""
+        self._drop("malformed", text)
+
+    def _drop(self, reason: str, text: str, count: int = 1) -> None:
+        self.drops[reason] += count
+        self.last_fault_wall = time.monotonic()
+        self.throttled(f"drop-{reason}", f"{text} ({self.drops[reason]} {reason.replace('_', ' ')} so far)")
 
     # ----------------------------------------------------------------- inputs into the channels
     def _apply_commands(self, items: list[tuple[int, Any]]) -> None:
@@ -297,31 +414,44 @@ class EmacNode(SuiteNode):
         return self._poll_lockstep() if self.lockstep else self._poll_realtime()
 
     def _poll_realtime(self) -> float:
+        """Each command is a frame, answered at once; without commands the frames go on at the frame rate.
+
+        An idle frame is due 1.5 frames after the last command's (half a frame of grace for a late command),
+        then every frame, its stamp one frame after the last: the feedback keeps the frame rate and its stamps
+        stay on the frame grid of the last command, advancing as the wall clock does. A loop that fell
+        behind catches up (at most :data:`CATCH_UP` frames at once) and beyond that skips frames (counted).
+        """
         now = time.monotonic()
         if self.loads.queue:
             self._apply_loads(self.loads.take_until(1 << 62))
         if self.source_fb.queue:
             self._observe_sources(self.source_fb.take_until(1 << 62))
-        stepped = False
-        while self.commands.queue:
-            stamp, item = self.commands.queue.popleft()
-            self._apply_commands([(stamp, item)])
-            self._step_all(stamp, {ch: self._age_wall(ch, now) for ch in self.units})
-            self.turnaround.add(time.monotonic() - item[1])  # command received → feedback published
-            stepped = True
-        if stepped:
+        if self.commands.queue:
+            while self.commands.queue:
+                stamp, item = self.commands.queue.popleft()
+                self._apply_commands([(stamp, item)])
+                self._step_all(stamp, {ch: self._age_wall(ch, now) for ch in self.units})
+                self.turnaround.add(time.monotonic() - item[1])  # command received → feedback published
             self.last_step_wall = now
+            self.next_idle = now + 1.5 * self.frame_s
             return 1.5 * self.frame_s
-        due = self.last_step_wall + 1.5 * self.frame_s
-        if now >= due:
-            if any(self._age_wall(c, now) is not None and self._age_wall(c, now) <= self.settings.watchdog_timeout_s
-                   for c in self.units):
-                self.late_frames += 1
-            start = self.model_ns if self.model_ns is not None else self.get_clock().now().nanoseconds
-            self._step_all(start, {ch: self._age_wall(ch, now) for ch in self.units})
-            self.last_step_wall = now if now - due > self.frame_s else due
-            due = self.last_step_wall + 1.5 * self.frame_s
-        return due - now
+        if now < self.next_idle:
+            return self.next_idle - now
+        behind = int((now - self.next_idle) / self.frame_s)
+        if behind > CATCH_UP:  # the process was held up: jump to the present frame, stamps on the grid
+            self.skipped_frames += behind
+            self.model_ns = None if self.model_ns is None else self.model_ns + behind * self.frame_ns
+            self.next_idle += behind * self.frame_s
+        if any(self._age_wall(c, now) is not None and self._age_wall(c, now) <= self.settings.watchdog_timeout_s
+               for c in self.units):
+            self.late_frames += 1
+        if self.model_ns is None:  # no frame yet: start on the frame grid of the ROS clock
+            now_ns = self.get_clock().now().nanoseconds
+            self.model_ns = now_ns - now_ns % self.frame_ns
+        self._step_all(self.model_ns, {ch: self._age_wall(ch, now) for ch in self.units})
+        self.last_step_wall = now
+        self.next_idle += self.frame_s
+        return max(self.next_idle - time.monotonic(), 0.0)
 
     def _age_wall(self, ch: str, now: float) -> float | None:
         last = self.last_good_wall[ch]
@@ -437,17 +567,20 @@ class EmacNode(SuiteNode):
         self.published += 1
 
     def _publish_diagnostics(self) -> None:
+        """Per channel: ERROR while failing, WARN while braked or within :data:`FAULT_HOLD_S` of a dropped input."""
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
+        recent = time.monotonic() - self.last_fault_wall < FAULT_HOLD_S
         for ch, unit in self.units.items():
             st = unit.status()
             failing = unit.failure.kind != "none"
             level = DiagnosticStatus.ERROR if failing else (
-                DiagnosticStatus.WARN if unit.last.braked or self.bad_messages else DiagnosticStatus.OK)
-            text = (f"failure {unit.failure.spec()}" if failing else
-                    "brake engaged" if unit.last.braked else "nominal")
-            st.update({"late_frames": str(self.late_frames), "bad_messages": str(self.bad_messages),
-                       "waits_given_up": str(self.waits_given_up)})
+                DiagnosticStatus.WARN if unit.last.braked or recent else DiagnosticStatus.OK)
+            text = (f"failure {unit.failure.spec()}" if failing else "brake engaged" if unit.last.braked else
+                    f"inputs dropped in the last {FAULT_HOLD_S:g} s" if recent else "nominal")
+            st.update({"late_frames": str(self.late_frames), "skipped_frames": str(self.skipped_frames),
+                       "bad_messages": str(self.bad_messages), "waits_given_up": str(self.waits_given_up),
+                       **{f"dropped_{k}": str(v) for k, v in self.drops.items()}})
             msg.status.append(DiagnosticStatus(
                 level=level, name=f"emac/{ch}", message=text, hardware_id=unit.model.name,
                 values=[KeyValue(key=k, value=v) for k, v in st.items()]))
@@ -458,6 +591,7 @@ class EmacNode(SuiteNode):
             "channels": self.channels, "mode": "lockstep" if self.lockstep else "realtime",
             "frames_published": self.published, "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
+            "skipped_frames": self.skipped_frames, "dropped": dict(self.drops),
             "turnaround_p50_ms": self.turnaround.percentile_ms(50),
             "turnaround_p99_ms": self.turnaround.percentile_ms(99),
             "turnaround_max_ms": self.turnaround.percentile_ms(100),
@@ -469,16 +603,19 @@ class EmacNode(SuiteNode):
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments (ROS arguments go after ``--ros-args``)."""
-    p = argparse.ArgumentParser(prog="emac", description="One EMAC channel (or several: an EMAC box).")
-    p.add_argument("--model", default="loada", help="model name (ema models); default loada")
-    p.add_argument("--channel", action="append", default=[],
-                   help="channel (repeatable, comma-separated, or 'all' for an EMAC box of five)")
-    p.add_argument("--rate", type=float, default=None, help="integration rate of a discrete model, Hz")
-    p.add_argument("--frame-hz", type=float, default=None, help="FMU frame rate (default from config/emac.yaml)")
-    p.add_argument("--disable", action="append", default=[],
-                   help="switch the model's own elements off: dead_band (the PWM's), quantization, noise "
-                        "(others, the test environment's, are accepted and left to it)")
+    """Command-line flags: shorthands for the node's parameters (ROS arguments go after ``--ros-args``)."""
+    p = argparse.ArgumentParser(prog="emac", description="One EMAC channel (or several: an EMAC box).",
+                                argument_default=argparse.SUPPRESS)
+    p.add_argument("--model", help="parameter model: model name (ema models); default loada")
+    p.add_argument("--channel", dest="channels", action="append", type=names_list,
+                   help="parameter channels: channel (repeatable, comma-separated, or 'all' for an EMAC box of five)")
+    p.add_argument("--rate", dest="rate_hz", type=float, help="parameter rate_hz: integration rate of a discrete "
+                   "model, Hz")
+    p.add_argument("--frame-hz", dest="emac.frame_hz", type=float, help="parameter emac.frame_hz: FMU frame rate "
+                   "(default from config/emac.yaml)")
+    p.add_argument("--disable", action="append", type=names_list,
+                   help="parameter disable: switch the model's own elements off: dead_band (the PWM's), quantization, "
+                        "noise (others, the test environment's, are accepted and left to it)")
     return p
 
 

@@ -24,21 +24,24 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rcl_interfaces.msg import ParameterType
+
 from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
 from ema_sim import __version__
 from ema_sim.ail.fmu import EMAC_COMMAND, FEEDBACK, SURFACE, Fmu, FrameInputs
-from ema_sim.ail.params import config_path, load_ail_config
+from ema_sim.ail.params import AilConfig, config_path
 from ema_sim.ail.vehicle import STATES
-from ema_sim.config import CHANNELS
-from ema_sim.errors import EmaError
+from ema_sim.config import CHANNELS, ros_parameters
+from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.nodes.common import run
-from ema_sim.nodes.driver import NS, DriverNode, calibration_metadata, stamped_bag
-from ema_sim.nodes.params import overrides
+from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
+from ema_sim.nodes.params import Spec, config_specs, names_list, nested
 from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
 
 INPUT_TOPICS = {FEEDBACK: ct.FMU_FEEDBACK, SURFACE: ct.SURFACE, EMAC_COMMAND: ct.EMAC_COMMAND}
+MODES = ("closed_loop", "open_loop")
 INPUT_FIELDS = {FEEDBACK: "position", SURFACE: "position", EMAC_COMMAND: "position"}
 
 
@@ -50,36 +53,57 @@ def default_bag(profile: str) -> Path:
 class FmuNode(DriverNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
-        super().__init__("fmu", automatically_declare_parameters_from_overrides=True)
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "fmu") -> None:
+        super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False  # ready when the run starts, after its recorder is matched
         self.lockstep = self.sim_time
-        cfg = load_ail_config(args.vehicle_config, overrides(self))
-        if abs(cfg.frame_hz - args.frame_hz) > 1e-9:
-            raise EmaError(f"--frame-hz {args.frame_hz:g} differs from the vehicle parameters' {cfg.frame_hz:g} Hz")
-        setup = cfg.setup(args.profile, aero_input=args.aero_input, surface_load=args.surface_load,
-                          bungee_inlb=args.bungee)
-        self.fmu = Fmu(cfg, setup, open_loop=args.open_loop, sim_model=args.sim_model)
+        path = config_path(self.params.declare([Spec(
+            "vehicle_config", "", "vehicle and flight-computer parameter file (empty: config/ail_vehicle.yaml)")],
+            name)["vehicle_config"] or None)
+        file_values = ros_parameters(path)
+        own = self.params.declare([
+            *driver_specs(24.0, "seconds to fly", profile="ail", frame_hz=float(file_values.get("frame_hz", 200.0)),
+                          profile_text="the test environment it runs in: ail, flight, none (its vehicle setup)"),
+            Spec("mode", "closed_loop", "closed_loop (the actuators fly the vehicle) or open_loop (a model actuator "
+                 "in the simulation does, 2.10)"),
+            Spec("aero_input", "", "what drives the aerodynamics: feedback or surface (empty: the setup's)"),
+            Spec("surface_load", "", "what loads the surfaces: aerodynamic or bungee (empty: the setup's)"),
+            Spec("bungee_inlb", math.nan, "bungee on the wings (NaN: the setup's)", "in·lb"),
+            Spec("seed", -1, "the test environment's noise seed, for the metadata (-1: the profile's)", low=-1,
+                 high=2**62),
+            Spec("disable", [], "elements switched off, for the metadata", kind=ParameterType.PARAMETER_STRING_ARRAY),
+            Spec("lockstep_wait_s", 5.0, "lockstep: wall seconds to wait for a frame's inputs", "s", 0.0, 3600.0),
+        ], name)
+        specs = [spec for spec in config_specs(file_values, path.name) if spec.name != "frame_hz"]
+        vehicle = self.params.declare(specs, f"{name}: {path.name}")
+        cfg = AilConfig.from_parameters(nested({**vehicle, "frame_hz": own["frame_hz"]}), f"{name} parameters")
+        if own["mode"] not in MODES:
+            raise UnknownNameError("mode", own["mode"], MODES)
+        open_loop = own["mode"] == "open_loop"
+        bungee = None if math.isnan(own["bungee_inlb"]) else own["bungee_inlb"]
+        setup = cfg.setup(own["profile"], aero_input=own["aero_input"] or None,
+                          surface_load=own["surface_load"] or None, bungee_inlb=bungee)
+        self.fmu = Fmu(cfg, setup, open_loop=open_loop)
         self.frame_ns = round(NS / cfg.frame_hz)
-        if not (math.isfinite(args.duration) and args.duration > 0.0):
-            raise EmaError(f"--duration must be a positive number of seconds, got {args.duration!r}")
-        self.frames = max(1, round(args.duration * cfg.frame_hz))
-        self.wait_s = float(args.lockstep_wait)
+        if not own["duration_s"] > 0.0:
+            raise EmaError(f"duration_s must be a positive number of seconds, got {own['duration_s']!r}")
+        self.frames = max(1, round(own["duration_s"] * cfg.frame_hz))
+        self.wait_s = float(own["lockstep_wait_s"])
+        args_model, profile, seed, disable = own["model"], own["profile"], own["seed"], own["disable"]
         meta = {
             "test": "ail", "section": "2.10, 4.3", "title": "aircraft in the loop: attitude hold in trimmed flight",
             "channel": "left_wing", "channels": ",".join(CHANNELS), "maneuver": "", "load": setup.surface_load,
-            "duration_s": f"{self.frames / cfg.frame_hz:g}", "dynamic": "false", "model": args.model,
-            "profile": args.profile, "mode": "open loop" if args.open_loop else "closed loop",
-            "sim_model": self.fmu.sim_model if args.open_loop else "", "setup": setup.describe(),
-            "vehicle_config": str(config_path(args.vehicle_config)),
-            "seed": "" if args.seed is None else str(args.seed),
-            "disabled": ",".join(args.disable) or "none", "clock": "lockstep" if self.lockstep else "realtime",
+            "duration_s": f"{self.frames / cfg.frame_hz:g}", "dynamic": "false", "model": args_model,
+            "profile": profile, "mode": "open loop" if open_loop else "closed loop",
+            "sim_model": self.fmu.sim_model if open_loop else "", "setup": setup.describe(),
+            "vehicle_config": str(path), "seed": "" if seed < 0 else str(seed),
+            "disabled": ",".join(disable) or "none", "clock": "lockstep" if self.lockstep else "realtime",
             "frame_hz": f"{cfg.frame_hz:g}", "frames": str(self.frames), "commanded": ",".join(CHANNELS),
             "generator": f"ema_sim {__version__} fmu node", "recorded_utc": dt.datetime.now(dt.UTC).isoformat(),
         }
         meta.update(calibration_metadata(CHANNELS))
-        self._open_run(Path(args.bag) if args.bag else default_bag(args.profile), meta, args.wait_for)
+        self._open_run(Path(own["bag"]) if own["bag"] else default_bag(profile), meta, own["wait_for"])
         hooks = {topic: (lambda raw, _log_time, kind=kind: self._on_input(kind, raw))
                  for kind, topic in INPUT_TOPICS.items()}
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
@@ -93,7 +117,8 @@ class FmuNode(DriverNode):
         self.latest: dict[str, dict[str, float]] = {kind: {} for kind in INPUT_TOPICS}
         self.waiting_since: float | None = None
         self.waits_given_up = 0
-        self.get_logger().info(f"aircraft in the loop, profile {args.profile}, {meta['mode']}: {setup.describe()}; "
+        self.start_ns = 0
+        self.get_logger().info(f"aircraft in the loop, profile {profile}, {meta['mode']}: {setup.describe()}; "
                                f"{self.frames} frames; bag {self.bag_path}")
 
     # ----------------------------------------------------------------- callbacks (never raise)
@@ -107,6 +132,8 @@ class FmuNode(DriverNode):
             self.throttled(f"bad {kind}", f"{INPUT_TOPICS[kind]}: {exc}")
             return
         values = getattr(msg, INPUT_FIELDS[kind])
+        if self.lockstep:  # an input stamped for a frame: the suite's time has reached it
+            self._on_clock(msg.stamp_ns)
         frame = self.inputs[kind].setdefault(msg.stamp_ns, {}) if self.lockstep else {}
         for i, name in enumerate(msg.name):
             if name in CHANNELS and i < len(values):
@@ -181,12 +208,16 @@ class FmuNode(DriverNode):
             return due - now
         if now - due > self.frame_ns / NS:
             self.late_publish += 1
-        self._publish_frame(self.k, self.get_clock().now().nanoseconds, self._frame_inputs(self.k, newest=True))
+        self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns, self._frame_inputs(self.k, newest=True))
         self.k += 1
         if self.k >= self.frames:
             self._finish(now, 1.0)
             return 0.005
         return max(self.start_wall + self.k * self.frame_ns / NS - time.monotonic(), 0.0)
+
+    def _started(self) -> None:
+        """Real time: frames stamped on the frame grid from the first one's ROS time."""
+        self.start_ns = self.get_clock().now().nanoseconds + round(START_DELAY_S * NS)
 
     def _answered(self) -> bool:
         """Lockstep: the feedback of the last frame is in; real time: the newest is what there is."""
@@ -203,23 +234,30 @@ class FmuNode(DriverNode):
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments (ROS arguments go after ``--ros-args``)."""
-    p = argparse.ArgumentParser(prog="fmu", description="Flight computer and vehicle simulation in the loop (AIL).")
-    p.add_argument("--profile", default="ail", help="the test environment it runs in: ail, flight, none (its setup)")
-    p.add_argument("--open-loop", action="store_true", help="drive the vehicle with a model actuator (2.10)")
-    p.add_argument("--sim-model", default=None, help="open loop: the simulation's model actuator (default loada)")
-    p.add_argument("--duration", type=float, default=24.0, help="seconds (default 24)")
-    p.add_argument("--bag", default=None, help="bag directory to create (default bags/ail_<profile>_<time>)")
-    p.add_argument("--model", default="", help="the EMACs' model, for the bag's metadata")
-    p.add_argument("--seed", type=int, default=None, help="the test environment's noise seed, for the metadata")
-    p.add_argument("--disable", action="append", default=[], help="disabled elements, for the metadata")
-    p.add_argument("--bungee", type=float, default=None, help="load the wings with a bungee, in·lb")
-    p.add_argument("--aero-input", choices=("feedback", "surface"), default=None)
-    p.add_argument("--surface-load", choices=("aerodynamic", "bungee"), default=None)
-    p.add_argument("--vehicle-config", default=None, help="parameter file (default config/ail_vehicle.yaml)")
-    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ)
-    p.add_argument("--lockstep-wait", type=float, default=5.0, help="wall seconds to wait for a frame's inputs")
-    p.add_argument("--wait-for", action="append", default=[], help="node names to wait for on /ema/ready")
+    """Command-line flags: shorthands for the node's parameters (ROS arguments go after ``--ros-args``)."""
+    p = argparse.ArgumentParser(prog="fmu", description="Flight computer and vehicle simulation in the loop (AIL).",
+                                argument_default=argparse.SUPPRESS)
+    p.add_argument("--profile", help="parameter profile: the test environment it runs in: ail, flight, none")
+    p.add_argument("--open-loop", dest="mode", action="store_const", const="open_loop",
+                   help="parameter mode=open_loop: drive the vehicle with a model actuator (2.10)")
+    p.add_argument("--sim-model", dest="open_loop.sim_model",
+                   help="parameter open_loop.sim_model: open loop, the simulation's model actuator")
+    p.add_argument("--duration", dest="duration_s", type=float, help="parameter duration_s: seconds (default 24)")
+    p.add_argument("--bag", help="parameter bag: bag directory to create (default bags/ail_<profile>_<time>)")
+    p.add_argument("--model", help="parameter model: the EMACs' model, for the bag's metadata")
+    p.add_argument("--seed", type=int, help="parameter seed: the test environment's noise seed, for the metadata")
+    p.add_argument("--disable", action="append", type=names_list, help="parameter disable: for the metadata")
+    p.add_argument("--bungee", dest="bungee_inlb", type=float, help="parameter bungee_inlb: bungee on the wings")
+    p.add_argument("--aero-input", dest="aero_input", choices=("feedback", "surface"), help="parameter aero_input")
+    p.add_argument("--surface-load", dest="surface_load", choices=("aerodynamic", "bungee"),
+                   help="parameter surface_load")
+    p.add_argument("--vehicle-config", dest="vehicle_config", help="parameter vehicle_config: parameter file "
+                   "(default config/ail_vehicle.yaml)")
+    p.add_argument("--frame-hz", dest="frame_hz", type=float, help="parameter frame_hz")
+    p.add_argument("--lockstep-wait", dest="lockstep_wait_s", type=float,
+                   help="parameter lockstep_wait_s: wall seconds to wait for a frame's inputs")
+    p.add_argument("--wait-for", dest="wait_for", action="append", type=names_list,
+                   help="parameter wait_for: node names to wait for on ready")
     return p
 
 

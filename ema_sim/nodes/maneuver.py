@@ -19,17 +19,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rcl_interfaces.msg import ParameterType
 
 from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
 from ema_sim import __version__
-from ema_sim.config import CHANNELS, load_channel
+from ema_sim.config import load_channel
 from ema_sim.nodes.common import run
-from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, stamped_bag
+from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.frametimes import FrameTimes
+from ema_sim.nodes.params import Spec, names_list
 from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
-from ema_sim.signals.plans import build_plan
+from ema_sim.signals.plans import build_plan, channel_list
 
 
 def default_bag(test: str) -> Path:
@@ -40,31 +42,41 @@ def default_bag(test: str) -> Path:
 class ManeuverNode(DriverNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
-        super().__init__("maneuver", automatically_declare_parameters_from_overrides=True)
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "maneuver") -> None:
+        super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False  # ready when the test starts, after its recorder is matched
         self.lockstep = self.sim_time
-        self.plan = build_plan(args.test, maneuver=args.maneuver, load=args.load,
-                               channels=args.channels or ["left_wing"], duration_s=args.duration)
-        self.frame_ns = round(NS / args.frame_hz)
-        self.frames = max(1, round(self.plan.duration_s * args.frame_hz))
-        commanded = [c for item in (args.command_channels or ["all"]) for c in item.split(",") if c]
-        self.commanded = list(CHANNELS) if "all" in commanded else commanded
-        expect = [c for item in args.expect_feedback for c in item.split(",") if c]
-        self.expect = expect or list(self.plan.channels)
-        t = np.arange(self.frames) / args.frame_hz
+        strings = ParameterType.PARAMETER_STRING_ARRAY
+        own = self.params.declare([
+            *driver_specs(0.0, "seconds to run (0: the test's length)"),
+            Spec("test", "", "section-2 test spec (ema tests), e.g. static_crosstalk:observed=right_wing"),
+            Spec("maneuver", "", "maneuver spec of the driven channels (ema maneuvers)"),
+            Spec("load", "", "hinge-moment spec of the driven channels"),
+            Spec("channels", ["left_wing"], "driven channels", kind=strings),
+            Spec("command_channels", ["all"], "channels the FMU commands", kind=strings),
+            Spec("expect_feedback", [], "channels whose feedback ends each frame (empty: the driven ones)",
+                 kind=strings),
+        ], name)
+        frame_hz = own["frame_hz"]
+        self.plan = build_plan(own["test"] or None, maneuver=own["maneuver"] or None, load=own["load"] or None,
+                               channels=own["channels"] or ["left_wing"], duration_s=own["duration_s"] or None)
+        self.frame_ns = round(NS / frame_hz)
+        self.frames = max(1, round(self.plan.duration_s * frame_hz))
+        self.commanded = channel_list(own["command_channels"] or ["all"])
+        self.expect = channel_list(own["expect_feedback"]) or list(self.plan.channels)
+        t = np.arange(self.frames) / frame_hz
         self.volts = {ch: np.asarray(load_channel(ch).deg_to_v(self.plan.command_deg(ch, t)), dtype=float)
                       for ch in self.commanded}
         self.loads = {ch: self.plan.hinge_moment_inlb(ch, t) for ch in self.commanded}
         meta = self.plan.metadata()
         meta.update({
-            "model": args.model, "profile": args.profile, "clock": "lockstep" if self.lockstep else "realtime",
-            "frame_hz": f"{args.frame_hz:g}", "frames": str(self.frames), "commanded": ",".join(self.commanded),
+            "model": own["model"], "profile": own["profile"], "clock": "lockstep" if self.lockstep else "realtime",
+            "frame_hz": f"{frame_hz:g}", "frames": str(self.frames), "commanded": ",".join(self.commanded),
             "generator": f"ema_sim {__version__} maneuver node", "recorded_utc": dt.datetime.now(dt.UTC).isoformat(),
         })
         meta.update(calibration_metadata(self.commanded))
-        self._open_run(Path(args.bag) if args.bag else default_bag(self.plan.test), meta, args.wait_for)
+        self._open_run(Path(own["bag"]) if own["bag"] else default_bag(self.plan.test), meta, own["wait_for"])
         self.clock_ns: int | None = None
         own = (ct.FMU_COMMAND, ct.HINGE_MOMENT)
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports, own=own,
@@ -93,7 +105,9 @@ class ManeuverNode(DriverNode):
         for name in msg.name:
             if stamp > self.last_fb_stamp.get(name, -1):
                 self.last_fb_stamp[name] = stamp
-        if not self.lockstep and self.phase != "waiting":
+        if self.lockstep:  # the feedback ending a frame: the suite's time has reached its stamp
+            self._on_clock(stamp)
+        elif self.phase != "waiting":
             # feedback of frame k is stamped at its end
             self.times.feedback((stamp - self.start_ns) // self.frame_ns - 1, msg.name, now)
 
@@ -181,22 +195,26 @@ class ManeuverNode(DriverNode):
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments."""
-    p = argparse.ArgumentParser(prog="maneuver", description="Drive a section-2 test and record the bag.")
-    p.add_argument("--test", default=None,
-                   help="test spec (ema tests lists them), e.g. static_crosstalk:observed=right_wing")
-    p.add_argument("--maneuver", default=None, help="maneuver spec for the driven channels (ema maneuvers)")
-    p.add_argument("--load", default=None, help="load spec for the driven channels")
-    p.add_argument("--channels", action="append", default=[], help="driven channels (comma-separated, or all)")
-    p.add_argument("--duration", type=float, default=None, help="seconds (default: the test's length)")
-    p.add_argument("--bag", default=None, help="bag directory to create (default bags/<test>_<time>)")
-    p.add_argument("--model", default="", help="model name, for the bag's metadata")
-    p.add_argument("--profile", default="", help="test-environment profile, for the bag's metadata")
-    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ)
-    p.add_argument("--command-channels", action="append", default=[], help="channels the FMU commands (default all)")
-    p.add_argument("--expect-feedback", action="append", default=[],
-                   help="channels whose feedback ends each frame (default: the driven ones)")
-    p.add_argument("--wait-for", action="append", default=[], help="node names to wait for on /ema/ready")
+    """Command-line flags: shorthands for the node's parameters."""
+    p = argparse.ArgumentParser(prog="maneuver", description="Drive a section-2 test and record the bag.",
+                                argument_default=argparse.SUPPRESS)
+    p.add_argument("--test", help="parameter test: test spec (ema tests lists them), e.g. "
+                   "static_crosstalk:observed=right_wing")
+    p.add_argument("--maneuver", help="parameter maneuver: maneuver spec for the driven channels (ema maneuvers)")
+    p.add_argument("--load", help="parameter load: load spec for the driven channels")
+    p.add_argument("--channels", action="append", type=names_list, help="parameter channels: driven channels")
+    p.add_argument("--duration", dest="duration_s", type=float, help="parameter duration_s: seconds (default: the "
+                   "test's length)")
+    p.add_argument("--bag", help="parameter bag: bag directory to create (default bags/<test>_<time>)")
+    p.add_argument("--model", help="parameter model: model name, for the bag's metadata")
+    p.add_argument("--profile", help="parameter profile: test-environment profile, for the bag's metadata")
+    p.add_argument("--frame-hz", dest="frame_hz", type=float, help="parameter frame_hz")
+    p.add_argument("--command-channels", dest="command_channels", action="append", type=names_list,
+                   help="parameter command_channels: channels the FMU commands (default all)")
+    p.add_argument("--expect-feedback", dest="expect_feedback", action="append", type=names_list,
+                   help="parameter expect_feedback: channels whose feedback ends each frame (default: the driven ones)")
+    p.add_argument("--wait-for", dest="wait_for", action="append", type=names_list,
+                   help="parameter wait_for: node names to wait for on ready")
     return p
 
 

@@ -1,12 +1,100 @@
-"""ROS parameters ↔ the nested mappings of ``config/*.yaml`` (files give defaults, ROS overrides)."""
+"""A node's ROS parameters: declared at start-up with descriptors, changed at run time only where it takes effect.
+
+Every suite node declares all of its parameters when it starts (``ros2 param list`` shows them before any
+file is given), each with a descriptor: what it is, its unit, its range and whether it is read-only. A
+parameter file (``--params-file``) or a command-line flag overrides the declared default, which comes from
+the package's ``config/`` files. A run-time change (``ros2 param set``) of a parameter the node can apply
+mid-run (the EMAC's watchdog, failure and motor power) takes effect at the next frame and is logged; every
+other parameter is read-only, and ROS refuses the change with the reason (``Trying to set a read-only
+parameter``); a value outside the declared range is refused the same way.
+"""
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+import math
+import sys
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from ema_sim.errors import ConfigError
+
+HUGE = sys.float_info.max
+"""Open end of a range (a ROS range needs both ends)."""
+
+UNITS: tuple[tuple[str, str], ...] = (
+    ("_lbf_s_per_in", "lbf·s/in"), ("_lbf_per_in", "lbf/in"), ("_inlb_per_deg", "in·lb/deg"),
+    ("_deg_per_kinlb", "deg per 1000 in·lb"), ("_per_kinlb", "1/(1000 in·lb)"), ("_dps_per_lb", "(deg/s)/lbf"),
+    ("_deg_per_deg", "deg/deg"), ("_a_per_in_s", "A/(in/s)"), ("_v_per_a", "V/A"), ("_v_s_per_rad", "V·s/rad"),
+    ("_in_per_rev", "in/rev"), ("_inlbs2", "in·lb·s²"), ("_rad_s", "rad/s"), ("_per_s2", "1/s²"),
+    ("_per_s", "1/s"), ("_in_s", "in/s"), ("_dps", "deg/s"), ("_deg", "deg"), ("_inlb", "in·lb"), ("_lbf", "lbf"),
+    ("_hz", "Hz"), ("_ohm", "Ω"), ("_mh", "mH"), ("_uf", "µF"), ("_ms", "ms"), ("_s", "s"), ("_in", "in"),
+    ("_v", "V"), ("_a", "A"), ("_ratio", "ratio"),
+)
+"""Unit of a parameter from the suffix of its name (every name carries its unit: CONTRIBUTING.md)."""
+
+
+def unit_of(name: str) -> str:
+    """The unit a parameter's name declares (its suffix), or ``""``."""
+    leaf = name.rsplit(".", 1)[-1]
+    return next((unit for suffix, unit in UNITS if leaf.endswith(suffix)), "")
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One parameter: its default and its descriptor's content."""
+
+    name: str
+    default: Any
+    description: str
+    unit: str = ""
+    low: float | None = None
+    high: float | None = None
+    read_only: bool = True
+    kind: int | None = None
+    """A :class:`ParameterType` where the default cannot tell (an empty list)."""
+
+    def type(self) -> int:
+        """The ROS parameter type."""
+        if self.kind is not None:
+            return self.kind
+        return int(Parameter.Type.from_parameter_value(_plain(self.default)).value)
+
+    def descriptor(self) -> ParameterDescriptor:
+        """The ROS descriptor: description (with the unit), range, read-only flag, type."""
+        text = self.description + (f" [{self.unit}]" if self.unit else "")
+        d = ParameterDescriptor(name=self.name, type=self.type(), description=text, read_only=self.read_only)
+        if self.unit:
+            d.additional_constraints = f"unit: {self.unit}"
+        if self.low is not None or self.high is not None:
+            low = -HUGE if self.low is None else self.low
+            high = HUGE if self.high is None else self.high
+            if d.type == ParameterType.PARAMETER_INTEGER:
+                d.integer_range = [IntegerRange(from_value=int(max(low, -2**62)), to_value=int(min(high, 2**62)),
+                                                step=0)]
+            elif d.type == ParameterType.PARAMETER_DOUBLE:
+                d.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
+        return d
+
+
+def _plain(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
+    """``{"a": {"b": 1}}`` → ``("a.b", 1)``: a nested parameter mapping as ROS parameter names."""
+    for key, value in mapping.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            yield from flatten(value, f"{name}.")
+        else:
+            yield name, value
 
 
 def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
@@ -32,7 +120,108 @@ def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, An
     return out
 
 
-def overrides(node: Node, prefix: str = "", exclude: tuple[str, ...] = ("use_sim_time",)) -> dict[str, Any]:
-    """The node's declared parameters under ``prefix`` (nested, prefix stripped)."""
-    flat = {name: p.value for name, p in node.get_parameters_by_prefix(prefix).items() if name not in exclude}
-    return nested(flat)
+def config_specs(values: Mapping[str, Any], origin: str, prefix: str = "",
+                 describe: Callable[[str], str] | None = None) -> list[Spec]:
+    """Read-only specs of a parameter file's mapping (defaults: its values; units from the names)."""
+    out = []
+    for name, value in flatten(values, prefix):
+        text = describe(name) if describe is not None else f"from {origin}"
+        unit = unit_of(name) if isinstance(value, float | int | list) and not isinstance(value, bool) else ""
+        out.append(Spec(name, value, text, unit))
+    return out
+
+
+def names_list(text: str) -> list[str]:
+    """A comma-separated list flag's items (repeated flags are joined by :func:`ema_sim.nodes.common.run_nodes`)."""
+    return [item.strip() for item in text.split(",") if item.strip()]
+
+
+def cli_overrides(args: Any, exclude: Iterable[str] = ()) -> list[Parameter]:
+    """The flags given on a node's command line as parameter overrides (they win over parameter files).
+
+    A parser whose options default to ``argparse.SUPPRESS`` and whose ``dest`` is the parameter's name
+    gives exactly the flags that were given.
+    """
+    skip = set(exclude)
+    return [Parameter(k, value=_plain(v)) for k, v in vars(args).items() if k not in skip and v is not None]
+
+
+class Declared:
+    """The parameters a node declared, their values, and who applies a run-time change."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.specs: dict[str, Spec] = {}
+        self.appliers: dict[str, Callable[[Any], str]] = {}
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def declare(self, specs: Sequence[Spec], origin: str) -> dict[str, Any]:
+        """Declare ``specs`` (overrides applied); their values by name. A bad override is one :class:`ConfigError`."""
+        node = self.node
+        overrides = node._parameter_overrides  # a file's 25 for a double parameter becomes 25.0
+        batch: list[tuple[str, Any, ParameterDescriptor]] = []
+        for spec in specs:
+            d = spec.descriptor()
+            given = overrides.get(spec.name)
+            if given is not None:
+                overrides[spec.name] = _coerced(given, d.type)
+            value: Any = _plain(spec.default)
+            if given is None and isinstance(value, list) and not value:
+                batch.append((spec.name, Parameter.Type(d.type), d))  # an empty list: typed, not set
+            else:
+                batch.append((spec.name, value, d))
+            self.specs[spec.name] = spec
+        try:
+            node.declare_parameters("", batch)
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+            raise ConfigError(f"{node.get_name()} parameters ({origin}): {exc}") from None
+        return {spec.name: self.value(spec.name) for spec in specs}
+
+    def value(self, name: str) -> Any:
+        """A declared parameter's value (an empty list when a list parameter was never set)."""
+        p = self.node.get_parameter_or(name, Parameter(name, value=None))
+        if p.type_ == Parameter.Type.NOT_SET:
+            return []
+        value = p.value
+        return list(value) if isinstance(value, list | tuple) or hasattr(value, "tolist") else value
+
+    def prefixed(self, prefix: str) -> dict[str, Any]:
+        """The declared values under ``prefix.``, nested, prefix stripped."""
+        n = len(prefix) + 1
+        return nested({name[n:]: self.value(name) for name in self.specs if name.startswith(prefix + ".")})
+
+    def on_change(self, name: str, apply: Callable[[Any], str]) -> None:
+        """``apply(value)`` makes a run-time change take effect and says what changed (for the log)."""
+        self.appliers[name] = apply
+
+    def _on_set(self, params: Sequence[Parameter]) -> SetParametersResult:
+        applied = []
+        for p in params:
+            apply = self.appliers.get(p.name)
+            if apply is None:
+                continue
+            try:
+                applied.append(apply(p.value))
+            except (ConfigError, ValueError) as exc:
+                return SetParametersResult(successful=False, reason=f"{p.name}: {exc}")
+        for line in applied:
+            self.node.get_logger().info(line)
+        return SetParametersResult(successful=True)
+
+
+def _coerced(param: Parameter, kind: int) -> Parameter:
+    """An integer override of a double parameter as a double (rcl types ``25`` as an integer)."""
+    value = param.value
+    if kind == ParameterType.PARAMETER_DOUBLE and param.type_ == Parameter.Type.INTEGER:
+        return Parameter(param.name, value=float(value))
+    if kind == ParameterType.PARAMETER_DOUBLE_ARRAY and param.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(param.name, value=[float(v) for v in value])
+    return param
+
+
+def finite(value: Any, name: str) -> float:
+    """A finite float, or one :class:`ConfigError`."""
+    out = float(value)
+    if not math.isfinite(out):
+        raise ConfigError(f"{name} must be finite, got {value!r}")
+    return out

@@ -15,32 +15,48 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from rcl_interfaces.msg import ParameterType
+
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.environment import Profile, SignalPath, TransportDelay, load_profile
 from ema_sim.environment.profile import PATHS
 from ema_sim.nodes.common import SuiteNode, run
-from ema_sim.nodes.params import merged, overrides
+from ema_sim.nodes.params import Spec, names_list, nested, unit_of
 from ema_sim.nodes.ports import Ports
+
+ELEMENT_TEXT = {"lag_hz": "first-order lag corner (0: off)", "quantization_v": "quantum (0: off)",
+                "delay_s": "transport delay (0: off)", "noise_rms_v": "white noise, rms (0: off)"}
+"""What each element parameter of a path is (the profile files' names)."""
+
+
+def profile_specs(profile: Profile) -> list[Spec]:
+    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them), read-only."""
+    out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62),
+           Spec("full_scale_v", profile.full_scale_v, "converters' full scale", "V", 0.1, 1000.0)]
+    for path in PATHS:
+        for key, value in getattr(profile, path).as_dict().items():
+            out.append(Spec(f"{path}.{key}", value, f"{path} path: {ELEMENT_TEXT[key]}", unit_of(key), 0.0, 1e6))
+    return out
 
 
 class TestEnvNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace, ports: Any = Ports) -> None:
-        super().__init__("testenv", automatically_declare_parameters_from_overrides=True)
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "testenv") -> None:
+        super().__init__(name, args)
         self.ports = ports(self)
-        profile = load_profile(args.profile)
-        own = overrides(self)
-        if any(k in own for k in (*PATHS, "seed", "full_scale_v")):
-            base = {"profile": profile.name, "seed": profile.seed, "full_scale_v": profile.full_scale_v,
-                    "command": profile.command.as_dict(), "feedback": profile.feedback.as_dict()}
-            profile = Profile.from_parameters(merged(base, own), "testenv parameters")
-        disable = [d for item in (args.disable or []) for d in item.split(",") if d.strip()]
-        self.profile = profile.without(*disable) if disable else profile
-        if args.seed is not None:
-            self.profile = self.profile.with_seed(args.seed)
-        self.frame_s = 1.0 / args.frame_hz
+        own = self.params.declare([
+            Spec("profile", "none", "test environment: ail, flight, none, or a profile parameter file"),
+            Spec("disable", [], "elements switched off: delay, lag, quantization, noise, or command.X / feedback.X",
+                 kind=ParameterType.PARAMETER_STRING_ARRAY),
+            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5),
+        ], name)
+        loaded = load_profile(own["profile"])
+        values = self.params.declare(profile_specs(loaded), f"{name}: profile {loaded.name}")
+        profile = Profile.from_parameters({"profile": loaded.name, **nested(values)}, f"{name} parameters")
+        self.profile = profile.without(*own["disable"]) if own["disable"] else profile
+        self.frame_s = 1.0 / own["frame_hz"]
         self.cmd_paths: dict[str, SignalPath] = {}
         self.fb_paths: dict[str, SignalPath] = {}
         self.cur_delays: dict[str, TransportDelay] = {}
@@ -108,13 +124,15 @@ class TestEnvNode(SuiteNode):
 
 
 def parser() -> argparse.ArgumentParser:
-    """Command-line arguments."""
-    p = argparse.ArgumentParser(prog="testenv", description="Test environment between FMU and EMACs (section 4.3).")
-    p.add_argument("--profile", default="none", help="ail, flight, none, or a profile parameter file")
-    p.add_argument("--disable", action="append", default=[],
-                   help="switch elements off: delay, lag, quantization, noise, or command.X / feedback.X")
-    p.add_argument("--seed", type=int, default=None, help="noise seed (default: the profile's)")
-    p.add_argument("--frame-hz", type=float, default=ct.FRAME_HZ, help="FMU frame rate (200)")
+    """Command-line flags: shorthands for the node's parameters."""
+    p = argparse.ArgumentParser(prog="testenv", description="Test environment between FMU and EMACs (section 4.3).",
+                                argument_default=argparse.SUPPRESS)
+    p.add_argument("--profile", help="parameter profile: ail, flight, none, or a profile parameter file")
+    p.add_argument("--disable", action="append", type=names_list,
+                   help="parameter disable: switch elements off: delay, lag, quantization, noise, or command.X / "
+                        "feedback.X")
+    p.add_argument("--seed", type=int, help="parameter seed: noise seed (default: the profile's)")
+    p.add_argument("--frame-hz", dest="frame_hz", type=float, help="parameter frame_hz: FMU frame rate (200)")
     return p
 
 
