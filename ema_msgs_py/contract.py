@@ -48,11 +48,14 @@ class QosSpec:
 FRAME_QOS = QosSpec("reliable", "volatile", 1000)
 """Per-frame signals: reliable so lockstep never loses a frame; deep so a recorder may lag."""
 CLOCK_QOS = QosSpec("reliable", "transient_local", 100)
-"""``/clock`` from the lockstep clock: the latest frame reaches a late joiner (rclpy's best-effort,
-volatile TimeSource subscription is compatible). Nodes step every frame up to the clock's value, so
-only the latest matters."""
-CLOCK_SUB_QOS = QosSpec("reliable", "transient_local", 100)
-"""Our own ``/clock`` subscriptions (reliable, and late joiners get the latest frame)."""
+"""``clock`` from the lockstep clock: the latest frame reaches a late joiner; every subscription matches it
+(best effort or reliable, volatile or transient local). Nodes step every frame up to the clock's value,
+so only the latest matters, and the clock sends it again while it waits (a best-effort reader may miss one)."""
+CLOCK_SUB_QOS = QosSpec("best_effort", "volatile", 10)
+"""The nodes' ``clock`` subscriptions: best effort and volatile, so any ordinary ``/clock`` publisher matches
+(default QoS, rclcpp's ``ClockQoS``, ``ros2 bag play --clock``, a simulator's bridge). Lockstep does not
+rest on the clock's delivery: a node steps a frame only with the inputs stamped for it, and an input
+stamped *t* tells it the suite's time has reached *t*."""
 LATCHED_QOS = QosSpec("reliable", "transient_local", 10)
 """Test metadata and readiness: late joiners get the last messages."""
 EVENT_QOS = QosSpec("reliable", "volatile", 10)
@@ -114,6 +117,26 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
 def topic(name: str) -> TopicSpec:
     """A contract topic by name."""
     return TOPICS[name]
+
+
+def endpoint(name: str) -> str:
+    """The name a node gives its publisher or subscription: relative (``ema/fmu/command``).
+
+    It resolves in the node's namespace: ``-r __ns:=/aircraft2`` moves every topic to ``/aircraft2/ema/...``.
+    """
+    return name.lstrip("/")
+
+
+def canonical(resolved: str, namespace: str = "/") -> str | None:
+    """A resolved topic name as the contract (and a bag) names it: the node's namespace taken off.
+
+    ``/aircraft2/ema/fmu/command`` in ``/aircraft2`` → ``/ema/fmu/command``; None for a topic outside the
+    namespace (another vehicle's).
+    """
+    ns = namespace.rstrip("/")
+    if not ns:
+        return resolved
+    return resolved[len(ns):] if resolved.startswith(ns + "/") else None
 
 
 FMU_COMMAND = "/ema/fmu/command"
@@ -214,5 +237,5 @@ def scaling_of(cfg: object) -> Scaling:
 
 __all__ = [
     "CHANNELS", "CLOCK_QOS", "FRAME_HZ", "FRAME_QOS", "FULL_SCALE_V", "LATCHED_QOS", "TOPICS", "QosSpec", "Scaling",
-    "TopicSpec", "failure_topic", "scaling", "scaling_of", "topic",
+    "TopicSpec", "canonical", "endpoint", "failure_topic", "scaling", "scaling_of", "topic",
 ]

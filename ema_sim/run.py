@@ -78,6 +78,13 @@ def _fmu_options(items: list[str]) -> argparse.Namespace:
     return args
 
 
+class _PlainDumper(yaml.SafeDumper):
+    """Every value written out where it is used (rcl's parser knows no YAML anchors or aliases)."""
+
+    def ignore_aliases(self, data: Any) -> bool:  # noqa: ARG002
+        return True
+
+
 def _namespace(text: str) -> str:
     """``aircraft2`` or ``/aircraft2/`` → ``/aircraft2`` (empty: none); one error for a name ROS refuses."""
     parts = [p for p in text.strip("/").split("/") if p]
@@ -260,7 +267,7 @@ class RunDescription:
                for name, params in self.parameters().items()}
         head = (f"# ema_sim run: {self.test_name} on {', '.join(self.channels)}, {self.model}, profile "
                 f"{self.profile}, {'lockstep' if self.lockstep else 'real time'}, layout {self.layout}\n")
-        return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
+        return head + yaml.dump(doc, Dumper=_PlainDumper, sort_keys=False, default_flow_style=None, width=120)
 
     def write(self, path: str | Path) -> Path:
         """Write :meth:`parameter_file` to ``path``."""

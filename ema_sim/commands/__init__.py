@@ -12,6 +12,7 @@ COMMANDS: tuple[str, ...] = (
     "acceptance",
     "bench",
     "launch",
+    "bag",
     "ail",
     "listing",
 )

@@ -60,12 +60,12 @@ class BridgeNode(SuiteNode):
         self.rejected = 0
         self.frames = 0
         fq = qos(ct.FRAME_QOS)
-        self.cmd_pub = self.create_publisher(JointState, ct.FMU_COMMAND, fq)
-        self.js_pub = self.create_publisher(JointState, ct.JOINT_STATES, fq)
-        self.create_subscription(JointState, ct.JOINT_COMMANDS, self._on_joint_commands, qos(ct.EVENT_QOS))
-        self.create_subscription(JointState, ct.FMU_FEEDBACK, self._on_feedback, fq)
+        self.cmd_pub = self.create_publisher(JointState, ct.endpoint(ct.FMU_COMMAND), fq)
+        self.js_pub = self.create_publisher(JointState, ct.endpoint(ct.JOINT_STATES), fq)
+        self.create_subscription(JointState, ct.endpoint(ct.JOINT_COMMANDS), self._on_joint_commands, qos(ct.EVENT_QOS))
+        self.create_subscription(JointState, ct.endpoint(ct.FMU_FEEDBACK), self._on_feedback, fq)
         if self.lockstep:
-            self.create_subscription(Clock, ct.CLOCK_TOPIC, self._on_clock, qos(ct.CLOCK_SUB_QOS))
+            self.create_subscription(Clock, ct.endpoint(ct.CLOCK_TOPIC), self._on_clock, qos(ct.CLOCK_SUB_QOS))
 
     def _on_joint_commands(self, msg: JointState) -> None:
         try:
@@ -106,7 +106,7 @@ class BridgeNode(SuiteNode):
         self.clock_ns = msg.clock.sec * NS + msg.clock.nanosec
 
     def _publish(self, stamp: int) -> None:
-        if not self.held_v or self.count_publishers(ct.JOINT_COMMANDS) == 0:
+        if not self.held_v or self.count_publishers(ct.endpoint(ct.JOINT_COMMANDS)) == 0:
             return
         out = JointState()
         set_stamp(out, stamp)

@@ -65,7 +65,7 @@ class ClockNode(SuiteNode):
         self.stalls = 0
         self.resent = 0
         self.pub = self.ports.clock_publisher()
-        self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
+        self.create_subscription(String, ct.endpoint(ct.READY), lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
         self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback,
                                       lambda text: self.throttled("bad", f"feedback message ignored: {text}"))
         self.get_logger().info(f"lockstep at {frame_hz:g} Hz, waiting for {sorted(self.wait_for) or 'nobody'}")

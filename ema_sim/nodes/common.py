@@ -63,7 +63,7 @@ class SuiteNode(Node):
         self.auto_ready = True
         """Announce readiness as soon as matched (the maneuver node announces itself when it starts)."""
         self._last_log: dict[str, float] = {}
-        self._ready_pub = self.create_publisher(String, ct.READY, qos(ct.LATCHED_QOS))
+        self._ready_pub = self.create_publisher(String, ct.endpoint(ct.READY), qos(ct.LATCHED_QOS))
         self._ready_sent = False
         self._matched_since: float | None = None
         self.running_cpu_s: float | None = None

@@ -70,10 +70,10 @@ class DriverNode(SuiteNode, abc.ABC):
         bag.parent.mkdir(parents=True, exist_ok=True)
         self.writer = BagWriter(bag, metadata)
         self.wait_for = {n for item in wait_for for n in item.split(",") if n}
-        self.test_pub = self.create_publisher(String, ct.TEST, qos(ct.LATCHED_QOS))
+        self.test_pub = self.create_publisher(String, ct.endpoint(ct.TEST), qos(ct.LATCHED_QOS))
         self.test_pub.publish(String(data=json.dumps(metadata)))
         self.ready: set[str] = set()
-        self.create_subscription(String, ct.READY, lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
+        self.create_subscription(String, ct.endpoint(ct.READY), lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
         self.phase = "waiting"
         self.k = 0
         self.start_wall = 0.0

@@ -273,12 +273,12 @@ class EmacNode(SuiteNode):
         self.fb_pub = ports.frame_publisher(ct.EMAC_FEEDBACK)
         self.surface_pub = ports.frame_publisher(ct.SURFACE)
         self.bus_pub = ports.frame_publisher(ct.BUS) if self.has_current else None
-        self.diag_pub = self.create_publisher(DiagnosticArray, ct.DIAGNOSTICS, qos(ct.EVENT_QOS))
+        self.diag_pub = self.create_publisher(DiagnosticArray, ct.endpoint(ct.DIAGNOSTICS), qos(ct.EVENT_QOS))
         ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad)
         ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad)
         for ch in self.channels:
-            self.create_subscription(String, ct.failure_topic(ch), lambda m, ch=ch: self._on_failure(ch, m.data),
-                                     qos(ct.FAILURE_QOS))
+            self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)),
+                                     lambda m, ch=ch: self._on_failure(ch, m.data), qos(ct.FAILURE_QOS))
         if self.sources:
             ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad)
         if self.lockstep:

@@ -166,10 +166,9 @@ class Declared:
             if given is not None:
                 overrides[spec.name] = _coerced(given, d.type)
             value: Any = _plain(spec.default)
-            if given is None and isinstance(value, list) and not value:
-                batch.append((spec.name, Parameter.Type(d.type), d))  # an empty list: typed, not set
-            else:
-                batch.append((spec.name, value, d))
+            if isinstance(value, list) and not value:  # an empty list tells no type: declare the type itself
+                value = Parameter.Type(d.type) if given is None else overrides[spec.name].value
+            batch.append((spec.name, value, d))
             self.specs[spec.name] = spec
         try:
             node.declare_parameters("", batch)

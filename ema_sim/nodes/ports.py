@@ -39,7 +39,7 @@ class FramePublisher:
 
     def __init__(self, node: Node, topic: str, profile: Any) -> None:
         self.topic = topic
-        self.dds = node.create_publisher(JointState, topic, profile)
+        self.dds = node.create_publisher(JointState, ct.endpoint(topic), profile)
 
     def publish(self, frame: cdr.JointFrame) -> None:
         """One frame to every subscriber."""
@@ -50,7 +50,7 @@ class ClockPublisher:
     """Publishes lockstep ``/clock`` frames as CDR bytes."""
 
     def __init__(self, node: Node) -> None:
-        self.dds = node.create_publisher(Clock, ct.CLOCK_TOPIC, qos(ct.CLOCK_QOS))
+        self.dds = node.create_publisher(Clock, ct.endpoint(ct.CLOCK_TOPIC), qos(ct.CLOCK_QOS))
 
     def publish(self, ns: int) -> None:
         """The clock at ``ns``."""
@@ -81,11 +81,11 @@ class Ports:
                 return
             callback(frame)
 
-        self.node.create_subscription(JointState, topic, take, qos(ct.FRAME_QOS), raw=True)
+        self.node.create_subscription(JointState, ct.endpoint(topic), take, qos(ct.FRAME_QOS), raw=True)
 
     def raw_subscription(self, topic: str, callback: Callable[[bytes], None]) -> None:
         """A per-frame topic's messages as CDR bytes (a recorder's view)."""
-        self.node.create_subscription(JointState, topic, callback, qos(ct.FRAME_QOS), raw=True)
+        self.node.create_subscription(JointState, ct.endpoint(topic), callback, qos(ct.FRAME_QOS), raw=True)
 
     def clock_publisher(self) -> ClockPublisher:
         """The lockstep clock's ``/clock`` publisher."""
@@ -102,14 +102,14 @@ class Ports:
             feed(ns)
             callback(ns)
 
-        self.node.create_subscription(Clock, ct.CLOCK_TOPIC, take, qos(ct.CLOCK_SUB_QOS), raw=True)
+        self.node.create_subscription(Clock, ct.endpoint(ct.CLOCK_TOPIC), take, qos(ct.CLOCK_SUB_QOS), raw=True)
 
     def publishers(self, topic: str) -> int:
         """Publishers of a topic in the graph (a graph query, reused for :data:`GRAPH_CACHE_S`)."""
         now = time.monotonic()
         cached = self._counts.get(topic)
         if cached is None or now - cached[0] > GRAPH_CACHE_S:
-            cached = self._counts[topic] = (now, self.node.count_publishers(topic))
+            cached = self._counts[topic] = (now, self.node.count_publishers(ct.endpoint(topic)))
         return cached[1]
 
     def endpoint_nodes(self) -> list[Node]:

@@ -1,10 +1,12 @@
 """Records every topic of the graph into a bag, as ``ros2 bag record -a`` would, raw (no re-serialisation).
 
 Contract topics are subscribed at once with their contract QoS; others are discovered every second
-and subscribed with their publishers' reliability. Messages are written as the CDR bytes they arrived
-in, straight into the bag; in a container, frames from composed nodes are serialized once, for the bag.
-The node's own publications are written as it publishes them. Under lockstep the log time of a stamped
-message is its stamp (a reproducible bag); in real time it is the receive time, as rosbag2 does.
+and subscribed with their publishers' reliability. Topics are recorded under their contract names
+(``/ema/fmu/command``) whatever the node's namespace; a namespaced recorder records its namespace only.
+Messages are written as the CDR bytes they arrived in, straight into the bag; in a container, frames
+from composed nodes are serialized once, for the bag. The node's own publications are written as it
+publishes them. Under lockstep the log time of a stamped message is its stamp (a reproducible bag); in
+real time it is the receive time, as rosbag2 does.
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ class Recorder:
         self.last_message = time.monotonic()
         self.errors = 0
         self._next_discovery = 0.0
+        self._last_clock = -1
+        self.namespace = node.get_namespace()
         self._now_ns = (lambda: node.get_clock().now().nanoseconds) if lockstep else time.time_ns
         for topic in own:  # the node's own publications: written as it publishes them, not taken back
             self._add(topic, ct.TOPICS[topic].msgtype)
@@ -71,6 +75,9 @@ class Recorder:
         self.writer.add_topic(topic, msgtype, ct.TOPICS[topic].qos if topic in ct.TOPICS else None)
 
     def _record_clock(self, ns: int) -> None:
+        if ns <= self._last_clock:  # a clock sent again while it waits (best-effort readers may miss one)
+            return
+        self._last_clock = ns
         try:
             self.writer.write(ct.CLOCK_TOPIC, ct.CLOCK, ns if self.lockstep else self._now_ns(), cdr.encode_clock(ns))
             self.last_message = time.monotonic()
@@ -80,13 +87,14 @@ class Recorder:
             self.errors += 1
             self.node.get_logger().error(f"recording {ct.CLOCK_TOPIC}: {exc}", throttle_duration_sec=1.0)
 
-    def _subscribe(self, topic: str, msgtype: str, profile: QoSProfile) -> None:
+    def _subscribe(self, topic: str, msgtype: str, profile: QoSProfile, resolved: str | None = None) -> None:
+        """Record ``topic`` (its contract name; ``resolved``: its full name when discovered)."""
         if topic in self.topics or topic in EXCLUDED or msgtype not in ts.typestore().types:
             return
         self._add(topic, msgtype)
         stamped = msgtype in LEADING_STAMP
-        self.node.create_subscription(message_class(msgtype), topic, self._callback(topic, msgtype, stamped),
-                                      profile, raw=True)
+        self.node.create_subscription(message_class(msgtype), resolved or ct.endpoint(topic),
+                                      self._callback(topic, msgtype, stamped), profile, raw=True)
 
     def record_own(self, topic: str, raw: bytes, stamp_ns: int) -> None:
         """One of the node's own publications (stamped ``stamp_ns``), with the log time a take would give it."""
@@ -113,17 +121,18 @@ class Recorder:
         if now < self._next_discovery:
             return
         self._next_discovery = now + 1.0
-        for topic, types in self.node.get_topic_names_and_types():
-            if topic in self.topics or topic in EXCLUDED or len(types) != 1:
+        for resolved, types in self.node.get_topic_names_and_types():
+            topic = ct.canonical(resolved, self.namespace)
+            if topic is None or topic in self.topics or topic in EXCLUDED or len(types) != 1:
                 continue
-            infos = self.node.get_publishers_info_by_topic(topic)
+            infos = self.node.get_publishers_info_by_topic(resolved)
             if not infos:
                 continue
             offered = infos[0].qos_profile
             profile = QoSProfile(depth=1000, reliability=offered.reliability, durability=offered.durability)
             if offered.reliability not in (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT):
                 profile.reliability = ReliabilityPolicy.BEST_EFFORT
-            self._subscribe(topic, types[0], profile)
+            self._subscribe(topic, types[0], profile, resolved)
 
     def summary(self) -> dict[str, Any]:
         """Messages recorded per topic."""
