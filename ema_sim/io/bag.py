@@ -619,7 +619,7 @@ class ReindexReport:
     partial_chunk_messages: int
     """Complete messages taken from a chunk cut short (uncompressed chunks only)."""
     dropped_bytes: int
-    """Bytes at the end that held no complete record."""
+    """Bytes at the end that held no complete record (an incomplete message, a chunk header)."""
     backup: Path | None
     """The original file, kept beside the repaired one."""
 
@@ -740,10 +740,11 @@ def _salvage_cut_chunk(buf: memoryview, found: _Salvage) -> None:
         return
     if compression:
         return  # a compressed chunk cut short cannot be decompressed
-    for iop, irec, _ in _records(buf, inner + 8, len(buf)):
+    for iop, irec, after in _records(buf, inner + 8, len(buf)):
         before = len(found.messages)
         _take(found, iop, irec)
         found.partial += len(found.messages) - before
+        found.end = after
 
 
 def reindex_bag(path: str | Path, *, keep_original: bool = True) -> ReindexReport:
@@ -785,10 +786,10 @@ def reindex_bag(path: str | Path, *, keep_original: bool = True) -> ReindexRepor
             rihs01=None if known else "RIHS01_" + "0" * 64, serialization_format=encoding or "cdr",
             offered_qos_profiles=parse_qos(meta.get("offered_qos_profiles", "[]")))
     counts = dict.fromkeys((found.channels[c][0] for c in conns), 0)
-    for cid, log_time, data in found.messages:
+    for cid, log_time, raw in found.messages:
         conn = conns.get(cid)
         if conn is not None:
-            writer.write(conn, log_time, data)
+            writer.write(conn, log_time, raw)
             counts[conn.topic] += 1
     for key, value in custom.items():
         writer.set_custom_data(key, value)
