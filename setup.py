@@ -14,6 +14,8 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
+        (f"share/{PACKAGE}/rosdep", ["rosdep/ema_sim.yaml"]),
         (f"share/{PACKAGE}/ema_msgs_py", ["ema_msgs_py/README.md"]),
     ],
     python_requires=">=3.10",

@@ -97,7 +97,8 @@ def _namespace(text: str) -> str:
 class RunDescription:
     """One run of the suite (validated when made: one clear error before anything starts)."""
 
-    bag: Path
+    bag: Path | None
+    """The bag directory to create (None: ``bags/<test>_<UTC time>``)."""
     model: str = "loada"
     profile: str = "none"
     test: str | None = None
@@ -141,9 +142,8 @@ class RunDescription:
         from ema_sim.environment import load_profile  # noqa: PLC0415
         from ema_sim.models import model_names  # noqa: PLC0415
         from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
-        from ema_sim.signals.plans import build_plan, channel_list  # noqa: PLC0415
+        from ema_sim.signals.plans import channel_list  # noqa: PLC0415
 
-        self.bag = Path(self.bag)
         if self.emac_box is not None:
             self.emac = "box" if self.emac_box else "channels"
         if self.layout not in LAYOUTS:
@@ -167,6 +167,17 @@ class RunDescription:
         self.bungee_inlb = self.bungee_inlb if opts.bungee is None else opts.bungee
         self.fmu_args = []
         self.namespace = _namespace(self.namespace)
+        self._check_driver()
+        if self.bag is None:
+            from ema_sim.nodes.driver import stamped_bag  # noqa: PLC0415
+
+            self.bag = stamped_bag(f"ail_{self.profile}" if self.fmu else self.test_name)
+        self.bag = Path(self.bag)
+
+    def _check_driver(self) -> None:
+        """The driver's part: the aircraft-in-the-loop set-up, or the test and its length."""
+        from ema_sim.signals.plans import build_plan  # noqa: PLC0415
+
         if self.fmu:
             from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
 
@@ -284,3 +295,61 @@ class RunDescription:
         if self.namespace:
             out += ["-r", f"__ns:={self.namespace}"]
         return out
+
+
+LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
+    "model": ("loada", "model of every channel (ema models)"),
+    "profile": ("none", "test environment: ail, flight or none"),
+    "test": ("", "section-2 test spec (ema tests)"),
+    "maneuver": ("", "maneuver spec of the driven channels (ema maneuvers)"),
+    "load": ("", "hinge-moment spec of the driven channels"),
+    "channels": ("left_wing", "driven channels, comma-separated (all: the five)"),
+    "emacs": ("all", "channels that get an EMAC, comma-separated"),
+    "emac": (DEFAULT_EMAC, "box: one EMAC node for every channel; channels: one EMAC node per channel"),
+    "duration": ("", "seconds (empty: the test's length; 24 with fmu)"),
+    "lockstep": ("false", "run on the clock, frame by frame (true/false)"),
+    "window": ("1", "lockstep: frames the clock may run ahead of the slowest EMAC"),
+    "bag": ("", "bag directory to create (empty: bags/<test>_<UTC time>)"),
+    "disable": ("", "elements switched off, comma-separated (delay, lag, quantization, noise, dead_band...)"),
+    "seed": ("", "test-environment noise seed (empty: the profile's)"),
+    "rt_priority": ("0", "real time: SCHED_FIFO priority of every process (0: off)"),
+    "fmu": ("false", "aircraft in the loop: the fmu node drives the suite (true/false)"),
+    "open_loop": ("false", "with fmu: open-loop AIL"),
+    "bungee": ("", "with fmu: bungee on the wings, in·lb"),
+    "namespace": ("", "ROS namespace of every node, e.g. /aircraft2"),
+    "clock_topic": ("clock", "the topic the nodes take the lockstep clock from (/clock: a graph-wide clock)"),
+}
+"""The launch files' arguments (``ros2 launch ema_sim single.launch.py maneuver:=step``): ``ema launch``'s options."""
+
+
+def from_launch_arguments(values: dict[str, str], layout: str) -> RunDescription:
+    """A run from launch arguments (strings, as ``ros2 launch`` gives them); the same checks as ``ema launch``."""
+    def text(name: str) -> str:
+        return str(values.get(name, LAUNCH_ARGUMENTS[name][0])).strip()
+
+    def flag(name: str) -> bool:
+        value = text(name).lower()
+        if value not in ("true", "false"):
+            raise EmaError(f"launch argument {name}: true or false, got {value!r}")
+        return value == "true"
+
+    def number(name: str) -> float | None:
+        value = text(name)
+        try:
+            return float(value) if value else None
+        except ValueError:
+            raise EmaError(f"launch argument {name}: a number, got {value!r}") from None
+
+    fmu = flag("fmu")
+    duration = number("duration")
+    seed = number("seed")
+    return RunDescription(
+        bag=Path(text("bag")) if text("bag") else None, model=text("model"), profile=text("profile"),
+        test=text("test") or None, maneuver=text("maneuver") or None, load=text("load") or None,
+        channels=[text("channels")], emac_channels=[text("emacs")], emac=text("emac"),
+        duration_s=24.0 if fmu and duration is None else duration, lockstep=flag("lockstep"),
+        window=int(number("window") or 1), layout=layout, disable=[text("disable")],
+        seed=None if seed is None else int(seed), rt_priority=int(number("rt_priority") or 0), fmu=fmu,
+        open_loop=flag("open_loop"), bungee_inlb=number("bungee"), namespace=text("namespace"),
+    )
+

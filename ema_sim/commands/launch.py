@@ -13,21 +13,16 @@ from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
     """The run's description (validated once, as it is made), what it is, on what, for how long."""
-    from ema_sim.nodes.fmu import default_bag as fmu_bag  # noqa: PLC0415
-    from ema_sim.nodes.maneuver import default_bag  # noqa: PLC0415
     from ema_sim.run import RunDescription  # noqa: PLC0415
 
-    bag = Path(args.bag) if args.bag else None
     cfg = RunDescription(
-        bag=bag or Path("."), model=args.model, profile=args.profile, test=args.test, maneuver=args.maneuver,
-        load=args.load, channels=args.channels, emac_channels=args.emacs,
+        bag=Path(args.bag) if args.bag else None, model=args.model, profile=args.profile, test=args.test,
+        maneuver=args.maneuver, load=args.load, channels=args.channels, emac_channels=args.emacs,
         duration_s=24.0 if args.fmu and args.duration is None else args.duration, lockstep=args.lockstep,
         layout=args.layout, emac="box" if args.emac_box else args.emac, domain_id=args.domain_id,
         disable=args.disable, rt_priority=args.rt_priority, window=args.window, fmu=args.fmu,
         open_loop=args.open_loop, bungee_inlb=args.bungee, seed=args.seed, namespace=args.namespace,
     )
-    if bag is None:
-        cfg.bag = fmu_bag(args.profile) if args.fmu else default_bag(cfg.test_name)
     what = "every channel, with the vehicle and autopilot in the loop" if args.fmu else ", ".join(cfg.channels)
     return cfg, cfg.test_name, what, cfg.run_s
 

@@ -1,0 +1,45 @@
+"""The suite as ``ros2 launch`` actions: the launch files under ``launch/`` call :func:`generate`.
+
+The launch files and ``ema launch`` start the same processes from the same
+:class:`~ema_sim.run.RunDescription`: its :meth:`~ema_sim.run.RunDescription.processes` become
+``launch_ros`` ``Node`` actions, each given the run's one parameter file (written next to the bag, as
+``<bag>.logs/run.yaml``), its node name, the namespace and the clock remapping; the driver's end shuts the
+launch down (its bag is then closed). Imports ``launch`` and ``launch_ros``, which a ROS 2 install has.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from ema_sim.run import LAUNCH_ARGUMENTS, from_launch_arguments
+
+PACKAGE = "ema_sim"
+
+
+def generate(layout: str) -> Any:
+    """The launch description of one layout (``single``, ``container``, ``processes``)."""
+    from launch import LaunchDescription  # noqa: PLC0415
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction  # noqa: PLC0415
+
+    declared = [DeclareLaunchArgument(name, default_value=default, description=text)
+                for name, (default, text) in LAUNCH_ARGUMENTS.items()]
+    return LaunchDescription([*declared, OpaqueFunction(function=_nodes, kwargs={"layout": layout})])
+
+
+def _nodes(context: Any, layout: str) -> list[Any]:
+    """The run's processes as ``Node`` actions, once the launch arguments are known."""
+    from launch.actions import Shutdown  # noqa: PLC0415
+    from launch.substitutions import LaunchConfiguration  # noqa: PLC0415
+    from launch_ros.actions import Node  # noqa: PLC0415
+
+    values = {name: LaunchConfiguration(name).perform(context) for name in LAUNCH_ARGUMENTS}
+    run = from_launch_arguments(values, layout)
+    params = run.write(Path(f"{run.bag}.logs") / "run.yaml")
+    clock = values.get("clock_topic") or "clock"
+    remap = [("clock", clock)] if clock != "clock" else []
+    procs = run.processes()
+    return [Node(package=PACKAGE, executable=proc.executable, name=proc.node_name, namespace=run.namespace or None,
+                 parameters=[str(params)], remappings=remap, arguments=list(proc.arguments), output="screen",
+                 on_exit=[Shutdown(reason=f"{run.driver} finished")] if proc is procs[-1] else None)
+            for proc in procs]

@@ -1,0 +1,11 @@
+"""`ros2 launch ema_sim single.launch.py maneuver:=step lockstep:=true`: the suite in the `single` layout.
+
+The same processes as `ema launch --layout single` (ema_sim.run.RunDescription); `ros2 launch ema_sim
+single.launch.py --show-args` lists the arguments (ema launch's options).
+"""
+
+from ema_sim.launching import generate
+
+
+def generate_launch_description():  # noqa: ANN201, D103
+    return generate("single")
