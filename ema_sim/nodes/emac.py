@@ -205,6 +205,8 @@ class EmacNode(SuiteNode):
         self.turnaround = DurationHistogram()
         self.waits_given_up = 0
         self.published = 0
+        self.commands_taken = 0
+        """Command messages taken (each a frame in real time)."""
         self.drops = dict.fromkeys(DROPS, 0)
         """Inputs dropped, by reason (:data:`DROPS`): each is counted, logged (throttled) and in ``/diagnostics``."""
         self.last_fault_wall = -math.inf
@@ -289,14 +291,15 @@ class EmacNode(SuiteNode):
         try:
             values = self._pick(msg, msg.position, "position", "command")
             stamp = msg.stamp_ns
-            if not stamp and not self.lockstep:  # an unstamped command in real time: now
-                stamp = self.get_clock().now().nanoseconds
-            elif stamp and self.lockstep:  # a command for frame t: the suite's time has reached t
+            if self.lockstep:  # a command for frame t: the suite's time has reached t
                 self._on_clock(stamp)
+            elif not stamp:  # an unstamped command in real time: now
+                stamp = self.get_clock().now().nanoseconds
             if values and not self.lockstep and msg.stamp_ns and not self._in_sequence(stamp):
                 return
             if values:
                 self.commands.push(stamp, (values, time.monotonic()))
+                self.commands_taken += 1
                 self.mark_running()
         except Exception as exc:  # a bad message never kills the node
             self._drop("malformed", f"command message dropped: {exc}")
@@ -319,7 +322,7 @@ class EmacNode(SuiteNode):
     def _on_load(self, msg: JointFrame) -> None:
         try:
             values = self._pick(msg, msg.effort, "effort", "hinge moment")
-            if self.lockstep and msg.stamp_ns:
+            if self.lockstep:
                 self._on_clock(msg.stamp_ns)
             if values:
                 self.loads.push(msg.stamp_ns, values)
@@ -578,7 +581,8 @@ class EmacNode(SuiteNode):
                 DiagnosticStatus.WARN if unit.last.braked or recent else DiagnosticStatus.OK)
             text = (f"failure {unit.failure.spec()}" if failing else "brake engaged" if unit.last.braked else
                     f"inputs dropped in the last {FAULT_HOLD_S:g} s" if recent else "nominal")
-            st.update({"late_frames": str(self.late_frames), "skipped_frames": str(self.skipped_frames),
+            st.update({"commands": str(self.commands_taken), "late_frames": str(self.late_frames),
+                       "skipped_frames": str(self.skipped_frames),
                        "bad_messages": str(self.bad_messages), "waits_given_up": str(self.waits_given_up),
                        **{f"dropped_{k}": str(v) for k, v in self.drops.items()}})
             msg.status.append(DiagnosticStatus(
@@ -591,7 +595,7 @@ class EmacNode(SuiteNode):
             "channels": self.channels, "mode": "lockstep" if self.lockstep else "realtime",
             "frames_published": self.published, "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
-            "skipped_frames": self.skipped_frames, "dropped": dict(self.drops),
+            "skipped_frames": self.skipped_frames, "dropped": dict(self.drops), "commands": self.commands_taken,
             "turnaround_p50_ms": self.turnaround.percentile_ms(50),
             "turnaround_p99_ms": self.turnaround.percentile_ms(99),
             "turnaround_max_ms": self.turnaround.percentile_ms(100),

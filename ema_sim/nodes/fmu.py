@@ -206,6 +206,12 @@ class FmuNode(DriverNode):
         due = self.start_wall + self.k * self.frame_ns / NS
         if now < due:
             return due - now
+        missing = [f"{kind} {ch}" for kind in self.fmu.needs for ch in CHANNELS if ch not in self.latest[kind]]
+        if missing:  # nothing to fly on yet: the first frame waits for every input once
+            self.throttled("inputs", f"waiting for {', '.join(missing[:4])}{' …' if len(missing) > 4 else ''}")
+            self.start_wall = now + self.frame_ns / NS
+            self.start_ns = self.get_clock().now().nanoseconds + self.frame_ns
+            return self.frame_ns / NS
         if now - due > self.frame_ns / NS:
             self.late_publish += 1
         self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns, self._frame_inputs(self.k, newest=True))

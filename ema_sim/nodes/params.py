@@ -23,7 +23,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ema_sim.errors import ConfigError
+from ema_sim.errors import ConfigError, EmaError
 
 HUGE = sys.float_info.max
 """Open end of a range (a ROS range needs both ends)."""
@@ -201,7 +201,7 @@ class Declared:
                 continue
             try:
                 applied.append(apply(p.value))
-            except (ConfigError, ValueError) as exc:
+            except (EmaError, ValueError) as exc:  # refused with the reason; the node goes on
                 return SetParametersResult(successful=False, reason=f"{p.name}: {exc}")
         for line in applied:
             self.node.get_logger().info(line)

@@ -1,0 +1,401 @@
+"""What a ROS user meets first (issue 15), against real node processes and an rclpy client written here.
+
+The client uses rclpy alone (its own context, executor, QoS profiles and parameter services: none of the
+project's helpers) on a ROS domain of its own per test, derived from the pid.
+"""
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from ema_sim.config import load_channel
+
+pytestmark = pytest.mark.ros
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "config"
+NS = 1_000_000_000
+FRAME_NS = 5_000_000
+RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+DEFAULT_QOS = QoSProfile(depth=10)  # what create_publisher(..., 10) gives: reliable, volatile
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE)  # rclcpp::ClockQoS
+
+
+def domain(offset):
+    return 1 + (os.getpid() + 53 * offset) % 101
+
+
+class Client:
+    """A plain rclpy node on its own context and domain."""
+
+    def __init__(self, did, name="probe"):
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=did)
+        self.node = rclpy.create_node(name, context=self.ctx)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def spin(self, seconds, until=None):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            if until is not None and until():
+                return True
+            self.ex.spin_once(timeout_sec=0.005)
+        return until() if until is not None else True
+
+    def call(self, srv_type, name, request, timeout=10.0):
+        cli = self.node.create_client(srv_type, name)
+        assert self.spin(timeout, cli.service_is_ready), f"no service {name}"
+        future = cli.call_async(request)
+        assert self.spin(timeout, future.done), f"{name} did not answer"
+        self.node.destroy_client(cli)
+        return future.result()
+
+    def close(self):
+        self.ex.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def client(request):
+    did = domain(hash(request.node.name) % 97)
+    c = Client(did)
+    c.did = did
+    yield c
+    c.close()
+
+
+def start(did, *args, log=None, cwd=None, env=None, exe=None):
+    """A node process (``exe``: an installed executable, else ``python -m``)."""
+    full = dict(os.environ, ROS_DOMAIN_ID=str(did), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                PYTHONUNBUFFERED="1", **(env or {}))
+    cmd = [*exe] if exe else [sys.executable, "-m"]
+    out = subprocess.DEVNULL if log is None else Path(log).open("w")  # noqa: SIM115  (the child writes it)
+    return subprocess.Popen([*cmd, *args], env=full, stdout=out, stderr=subprocess.STDOUT, text=True, cwd=cwd)
+
+
+def stop(*procs):
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def summary(log):
+    line = next(x for x in Path(log).read_text().splitlines() if x.startswith("EMA_SUMMARY "))
+    return json.loads(line[len("EMA_SUMMARY "):])
+
+
+def get_params(c, node, names):
+    resp = c.call(GetParameters, f"{node}/get_parameters", GetParameters.Request(names=names))
+    return {n: _value(v) for n, v in zip(names, resp.values, strict=True)}
+
+
+def _value(v):
+    return {ParameterType.PARAMETER_BOOL: v.bool_value, ParameterType.PARAMETER_INTEGER: v.integer_value,
+            ParameterType.PARAMETER_DOUBLE: v.double_value, ParameterType.PARAMETER_STRING: v.string_value,
+            ParameterType.PARAMETER_DOUBLE_ARRAY: list(v.double_array_value),
+            ParameterType.PARAMETER_STRING_ARRAY: list(v.string_array_value)}.get(v.type)
+
+
+def set_param(c, node, name, value):
+    v = ParameterValue()
+    if isinstance(value, bool):
+        v.type, v.bool_value = ParameterType.PARAMETER_BOOL, value
+    elif isinstance(value, float):
+        v.type, v.double_value = ParameterType.PARAMETER_DOUBLE, value
+    else:
+        v.type, v.string_value = ParameterType.PARAMETER_STRING, value
+    resp = c.call(SetParameters, f"{node}/set_parameters",
+                  SetParameters.Request(parameters=[ParameterMsg(name=name, value=v)]))
+    return resp.results[0]
+
+
+def wait_for_node(c, name, timeout=30.0):
+    assert c.spin(timeout, lambda: name in c.node.get_node_names()), f"{name} never appeared"
+
+
+def command_v(deg):
+    return float(load_channel("left_wing").deg_to_v(deg))
+
+
+# --------------------------------------------------------------------------- 1. parameter files
+def test_every_node_starts_with_every_shipped_parameter_file(client, tmp_path):
+    """rcl parses every file of config/ (mixed int/float lists were refused), and each node takes its own."""
+    files = [a for f in sorted(CONFIG.glob("*.yaml")) for a in ("--params-file", str(f))]
+    ros = ["--ros-args", *files]
+    procs = {
+        "container": start(client.did, "ema_sim.nodes.container", "--channels", "all", *ros,
+                           log=tmp_path / "container.log"),
+        "maneuver": start(client.did, "ema_sim.nodes.maneuver", "--maneuver", "ramp:rate_dps=0.05,peak_deg=5",
+                          "--bag", str(tmp_path / "m"), *ros, log=tmp_path / "maneuver.log"),
+        "fmu": start(client.did, "ema_sim.nodes.fmu", "--bag", str(tmp_path / "f"), *ros, log=tmp_path / "fmu.log"),
+        "simclock": start(client.did, "ema_sim.nodes.clock", "--realtime-factor", "1", *ros,
+                          log=tmp_path / "simclock.log"),
+        "bridge": start(client.did, "ema_sim.nodes.bridge", *ros, log=tmp_path / "bridge.log"),
+    }
+    try:
+        for node in ("emac_left_wing", "emac_cowl_door", "testenv", "maneuver", "fmu", "simclock", "fmu_bridge"):
+            wait_for_node(client, node, 60)
+        for ch, breakpoints in (("left_wing", [25.0, 342.6]), ("left_rudder", [10.0, 90.5]),
+                                ("cowl_door", [25.0, 342.6])):
+            got = get_params(client, f"/emac_{ch}", ["high_order.hoad3.total_breakpoints_lbf", "channel",
+                                                      "emac.watchdog_timeout_s", "second_order.wn_rad_s"])
+            assert got["high_order.hoad3.total_breakpoints_lbf"] == breakpoints
+            assert got["channel"] == ch
+            assert got["emac.watchdog_timeout_s"] == 0.05
+        env = get_params(client, "/testenv", ["profile", "command.delay_s", "seed"])
+        assert env["profile"] in ("ail", "flight")  # both files address testenv: the later one wins
+        veh = get_params(client, "/fmu", ["vehicle.m_alpha_per_s2", "setup.ail.aero_input", "frame_hz"])
+        assert veh == {"vehicle.m_alpha_per_s2": -40.0, "setup.ail.aero_input": "feedback", "frame_hz": 200.0}
+        for name, p in procs.items():
+            assert p.poll() is None, (name, (tmp_path / f"{name}.log").read_text()[-2000:])
+    finally:
+        stop(*procs.values())
+    for name in procs:
+        text = (tmp_path / f"{name}.log").read_text()
+        assert "Traceback" not in text, text[-2000:]
+
+
+# --------------------------------------------------------------------------- 3. parameters
+def check_declared(client, node):
+    """Every parameter declared without a file; descriptors with text, unit, range and read-only flags."""
+    names = client.call(ListParameters, f"{node}/list_parameters", ListParameters.Request()).result.names
+    assert {"emac.failure", "emac.watchdog_timeout_s", "emac.motor_power_on", "second_order.wn_rad_s",
+            "high_order.hoad3.total_breakpoints_lbf", "model", "channels"} <= set(names)
+    assert len(names) > 100  # no file given: every parameter declared all the same
+    described = client.call(DescribeParameters, f"{node}/describe_parameters", DescribeParameters.Request(
+        names=["emac.watchdog_timeout_s", "emac.failure", "second_order.wn_rad_s", "emac.frame_hz"])).descriptors
+    d = {x.name: x for x in described}
+    assert all(x.description for x in described)
+    assert "[s]" in d["emac.watchdog_timeout_s"].description
+    assert d["emac.watchdog_timeout_s"].floating_point_range[0].from_value > 0.0
+    assert not d["emac.watchdog_timeout_s"].read_only
+    assert not d["emac.failure"].read_only
+    assert d["second_order.wn_rad_s"].read_only
+    assert d["emac.frame_hz"].read_only
+    assert "rad/s" in d["second_order.wn_rad_s"].description
+
+
+def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it_takes_effect(client, tmp_path):
+    log = tmp_path / "emac.log"
+    proc = start(client.did, "ema_sim.nodes.emac", "--model", "loada", "--channel", "left_wing", log=log)
+    node = "/emac_left_wing"
+    try:
+        wait_for_node(client, "emac_left_wing", 60)
+        check_declared(client, node)
+
+        fb, diag = [], {}
+        client.node.create_subscription(JointState, "/ema/emac/feedback", fb.append, RELIABLE)
+        client.node.create_subscription(
+            DiagnosticArray, "/diagnostics",
+            lambda m: diag.update({s.name: {**{v.key: v.value for v in s.values}, "_t": time.monotonic()}
+                                   for s in m.status}), 10)
+        cmd = client.node.create_publisher(JointState, "/ema/emac/command", RELIABLE)
+        assert client.spin(20, lambda: cmd.get_subscription_count() > 0 and len(fb) > 2)
+
+        def brake_delay():
+            """Command for 0.5 s, stop: seconds until the node reports the brake engaged."""
+            end = time.monotonic() + 0.5
+            while time.monotonic() < end:
+                cmd.publish(JointState(name=["left_wing"], position=[command_v(1.0)]))
+                client.spin(0.005)
+            assert client.spin(2, lambda: diag.get("emac/left_wing", {}).get("brake_engaged") == "false")
+            last = time.monotonic()
+            assert client.spin(5, lambda: diag["emac/left_wing"]["brake_engaged"] == "true")
+            return diag["emac/left_wing"]["_t"] - last
+
+        short = brake_delay()
+        result = set_param(client, node, "emac.watchdog_timeout_s", 0.6)
+        assert result.successful, result.reason
+        long = brake_delay()
+        assert short < 0.3, short
+        assert 0.5 < long < 1.5, long  # the watchdog took the new timeout
+        assert set_param(client, node, "emac.failure", "stuck").successful
+        assert client.spin(3, lambda: diag["emac/left_wing"].get("failure") == "stuck")
+        assert set_param(client, node, "emac.failure", "none").successful
+        assert not set_param(client, node, "emac.failure", "melt").successful  # refused, node goes on
+        refused = set_param(client, node, "second_order.wn_rad_s", 80.0)
+        assert not refused.successful
+        assert "read-only" in refused.reason
+        assert not set_param(client, node, "emac.frame_hz", 400.0).successful
+        out_of_range = set_param(client, node, "emac.watchdog_timeout_s", -1.0)
+        assert not out_of_range.successful
+        assert "range" in out_of_range.reason
+        assert get_params(client, node, ["second_order.wn_rad_s"])["second_order.wn_rad_s"] == 56.5
+    finally:
+        stop(proc)
+    text = log.read_text()
+    assert "emac.watchdog_timeout_s: 0.05 → 0.6 s" in text
+    assert "emac.failure: stuck" in text
+
+
+# --------------------------------------------------------------------------- 2. /clock from any publisher
+@pytest.mark.parametrize(("qos_name", "clock_every"), [("default", 1), ("clockqos", 1), ("clockqos", 7)])
+def test_lockstep_follows_any_clock_publisher_and_keeps_every_frame(client, tmp_path, qos_name, clock_every):
+    """Default-QoS and ClockQoS (best effort) /clock both drive the node; with most ticks missing, the stamped
+    commands still give every frame exactly once, the same values as the model replayed offline."""
+    from ema_sim.emac import EmacChannel, EmacSettings  # noqa: PLC0415
+    from ema_sim.models import create  # noqa: PLC0415
+
+    log = tmp_path / "emac.log"
+    proc = start(client.did, "ema_sim.nodes.emac", "--model", "loada", "--channel", "left_wing",
+                 "--ros-args", "-p", "use_sim_time:=true", log=log)
+    frames = 120
+    fb = {}
+    try:
+        wait_for_node(client, "emac_left_wing", 60)
+        sub = client.node.create_subscription(
+            JointState, "/ema/emac/feedback",
+            lambda m: fb.setdefault(m.header.stamp.sec * NS + m.header.stamp.nanosec, []).append(m.position[0]),
+            RELIABLE)
+        clock = client.node.create_publisher(Clock, "/clock", DEFAULT_QOS if qos_name == "default" else CLOCK_QOS)
+        cmd = client.node.create_publisher(JointState, "/ema/emac/command", RELIABLE)
+        assert client.spin(20, lambda: min(clock.get_subscription_count(), cmd.get_subscription_count(),
+                                           sub.get_publisher_count()) > 0)
+        client.spin(0.3)  # the node's side of each match too
+        volts = [command_v(2.0 * math.sin(k / 15.0)) for k in range(frames)]
+
+        def tick(ns):
+            m = Clock()
+            m.clock.sec, m.clock.nanosec = divmod(ns, NS)
+            clock.publish(m)
+
+        tick(0)
+        for k in range(frames):
+            msg = JointState(name=["left_wing"], position=[volts[k]])
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(k * FRAME_NS, NS)
+            cmd.publish(msg)
+            if (k + 1) % clock_every == 0:
+                tick((k + 1) * FRAME_NS)
+            client.spin(0.002)
+        tick(frames * FRAME_NS)  # the run's end
+        assert client.spin(20, lambda: (frames * FRAME_NS) in fb), sorted(fb)[-3:]
+    finally:
+        stop(proc)
+    assert sorted(fb) == [k * FRAME_NS for k in range(frames + 1)]
+    assert all(len(v) == 1 for v in fb.values())  # each frame exactly once
+    replay = EmacChannel(create("loada", "left_wing"), EmacSettings())
+    want = [replay.last.position_v]
+    for v in volts:
+        replay.set_command(v)
+        want.append(replay.step(0.0).position_v)
+    assert [fb[k * FRAME_NS][0] for k in range(frames + 1)] == pytest.approx(want, abs=1e-12)
+
+
+# --------------------------------------------------------------------------- 4. namespaces
+def test_a_namespace_moves_every_topic_of_a_node(client):
+    procs = [start(client.did, "ema_sim.nodes.emac", "--channel", "all", "--ros-args", "-r", "__ns:=/aircraft2"),
+             start(client.did, "ema_sim.nodes.testenv", "--ros-args", "-r", "__ns:=/aircraft2")]
+    try:
+        got = []
+        client.node.create_subscription(JointState, "/aircraft2/ema/fmu/feedback", got.append, RELIABLE)
+        cmd = client.node.create_publisher(JointState, "/aircraft2/ema/fmu/command", RELIABLE)
+        assert client.spin(60, lambda: cmd.get_subscription_count() > 0 and len(got) > 5)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            cmd.publish(JointState(name=["left_wing"], position=[command_v(3.0)]))
+            client.spin(0.005)
+        assert load_channel("left_wing").v_to_deg(got[-1].position[0]) == pytest.approx(3.0, abs=0.05)
+        ours = {n for n, _ in client.node.get_topic_names_and_types() if n not in ("/rosout", "/parameter_events")}
+        assert all(t.startswith("/aircraft2/") for t in ours), sorted(ours)
+        assert {"/aircraft2/ema/emac/feedback", "/aircraft2/ema/emac/command", "/aircraft2/diagnostics",
+                "/aircraft2/ema/emac/left_wing/failure", "/aircraft2/ema/ready"} <= ours
+    finally:
+        stop(*procs)
+
+
+# --------------------------------------------------------------------------- 9. idle feedback
+def test_idle_feedback_keeps_the_frame_rate_with_stamps_on_the_frame_grid(client):
+    proc = start(client.did, "ema_sim.nodes.emac", "--channel", "left_wing")
+    rows = []
+    try:
+        client.node.create_subscription(
+            JointState, "/ema/emac/feedback",
+            lambda m: rows.append((time.time_ns(), m.header.stamp.sec * NS + m.header.stamp.nanosec)), RELIABLE)
+        assert client.spin(60, lambda: len(rows) > 20)
+        rows.clear()
+        client.spin(3.0)
+    finally:
+        stop(proc)
+    wall, stamp = np.array(rows, dtype=np.int64).T
+    assert np.all(np.diff(stamp) == FRAME_NS)  # every frame, on the grid
+    period_ms = np.median(np.diff(wall)) / 1e6
+    assert 4.5 < period_ms < 5.5, period_ms  # was 7.5 ms (133 Hz)
+    lag = (wall - stamp) / 1e6
+    assert np.ptp(lag) < 60.0, (lag.min(), lag.max())  # no drift: was 1 s behind after 3 s
+
+
+# --------------------------------------------------------------------------- 10. drops counted
+def test_every_dropped_command_is_counted_and_logged_and_diagnostics_recover(client, tmp_path):
+    log = tmp_path / "emac.log"
+    proc = start(client.did, "ema_sim.nodes.emac", "--channel", "left_wing", log=log)
+    diag = []
+    try:
+        client.node.create_subscription(DiagnosticArray, "/diagnostics", diag.append, 100)
+        cmd = client.node.create_publisher(JointState, "/ema/emac/command", QoSProfile(depth=10))
+        assert client.spin(60, lambda: cmd.get_subscription_count() > 0 and len(diag) > 0)
+        cmd.publish(JointState(name=["tail", "canard"], position=[0.1, 0.2]))   # no such channels
+        cmd.publish(JointState(name=[], position=[0.3]))                         # no names
+        cmd.publish(JointState(name=["left_wing", "tail"], position=[0.5]))      # ours first, arrays short
+        client.spin(0.3)
+        base = (time.time_ns() // FRAME_NS + 200) * FRAME_NS
+        msg = JointState(name=["left_wing"], position=[command_v(1.0)])
+        for k in range(10_000):  # a burst: far faster than the node's frames
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(base + k * FRAME_NS, NS)
+            cmd.publish(msg)
+        client.spin(1.0)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(base + 10_000 * FRAME_NS, NS)
+        cmd.publish(msg)  # the last frame: every gap before it is known
+        client.spin(0.5)
+        faulted = [s for m in diag for s in m.status if s.level == DiagnosticStatus.WARN and "dropped" in s.message]
+        assert faulted
+        t_good = base + 10_001 * FRAME_NS
+        end = time.monotonic() + 3.5  # good commands only: the warning ages out
+        k = 0
+        while time.monotonic() < end:
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_good + k * FRAME_NS, NS)
+            cmd.publish(msg)
+            k += 1
+            client.spin(0.005)
+        last = next(s for s in diag[-1].status if s.name == "emac/left_wing")
+        assert (last.level, last.message) == (DiagnosticStatus.OK, "nominal")
+        values = {v.key: v.value for v in last.values}
+    finally:
+        stop(proc)
+    s = summary(log)
+    dropped = s["dropped"]
+    assert (dropped["unknown_names"], dropped["no_names"], dropped["malformed"]) == (3, 1, 1)
+    burst = 10_001
+    assert s["commands"] - 1 - k + dropped["lost_commands"] == burst  # 1: the short message; k: the good ones
+    assert int(values["dropped_lost_commands"]) == dropped["lost_commands"]
+    text = log.read_text()
+    assert "unknown joint(s) 'tail', 'canard'" in text
+    assert "without joint names" in text
+    assert "names and 1 position values" in text
+    if dropped["lost_commands"]:
+        assert "frame(s) of commands missing" in text
