@@ -399,3 +399,52 @@ def test_every_dropped_command_is_counted_and_logged_and_diagnostics_recover(cli
     assert "names and 1 position values" in text
     if dropped["lost_commands"]:
         assert "frame(s) of commands missing" in text
+
+
+# --------------------------------------------------------------------------- 7. the launcher owns its nodes
+def _children(pid):
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        out += [int(x) for x in (task / "children").read_text().split()]
+    return out
+
+
+def _alive(pid):
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGHUP, signal.SIGTERM, signal.SIGKILL], ids=["hup", "term", "kill"])
+def test_no_node_outlives_the_launcher_and_the_bag_is_closed(client, tmp_path, sig):
+    """``ema launch`` in a namespace: every topic under it; SIGHUP, SIGTERM or SIGKILL of the launcher ends every
+    node (the kernel's parent-death signal when the launcher cannot act), each bag closed and complete."""
+    from rosbags.rosbag2 import Reader  # noqa: PLC0415
+
+    bag = tmp_path / "run"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(client.did), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "ramp:rate_dps=0.05,peak_deg=5", "--lockstep",
+           "--layout", "container", "--bag", str(bag), "--namespace", "/aircraft2"]
+    with (tmp_path / "launch.out").open("w") as out:
+        proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        log = tmp_path / "run.logs" / "maneuver.log"
+        assert client.spin(90, lambda: log.is_file() and "running" in log.read_text()), (tmp_path / "launch.out")
+        kids = _children(proc.pid)
+        assert len(kids) == 2  # the container (EMACs, test environment, clock) and the maneuver
+        client.spin(1.0)
+        topics = {n for n, _ in client.node.get_topic_names_and_types()} - {"/rosout", "/parameter_events"}
+        assert topics
+        assert all(t.startswith("/aircraft2/") for t in topics), sorted(topics)
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=30)
+        assert client.spin(30, lambda: not any(_alive(k) for k in kids)), [k for k in kids if _alive(k)]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    with Reader(bag) as reader:  # metadata.yaml written: closed, not cut
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts["/ema/fmu/command"] > 100  # recorded under the contract's names
+    assert counts["/ema/emac/feedback"] > 100
