@@ -56,3 +56,53 @@ def test_makefile_and_ci_use_the_readme_commands():
     assert "make demo" in readme
     assert "make test" in readme
     assert "make test" in (ROOT / ".ci" / "run").read_text()
+
+
+ROSDEP_KEYS = {
+    "rclpy": "rclpy", "std_msgs": "std_msgs", "sensor_msgs": "sensor_msgs", "rosgraph_msgs": "rosgraph_msgs",
+    "builtin_interfaces": "builtin_interfaces", "diagnostic_msgs": "diagnostic_msgs",
+    "rcl_interfaces": "rcl_interfaces", "ament_index_python": "ament_index_python", "launch": "launch",
+    "launch_ros": "launch_ros", "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
+    "matplotlib": "python3-matplotlib", "numba": "python3-numba-pip", "control": "python3-control-pip",
+    "rosbags": "python3-rosbags-pip", "mcap": "python3-mcap-pip",
+}
+"""Top-level import → its rosdep key (a new import without one fails the test below)."""
+
+
+def _third_party_imports():
+    import sys  # noqa: PLC0415
+
+    mods = set()
+    for folder in ("ema_sim", "ema_msgs_py", "launch"):
+        for path in (ROOT / folder).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Import):
+                    mods |= {a.name.split(".")[0] for a in node.names}
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    mods.add(node.module.split(".")[0])
+    return {m for m in mods if m not in sys.stdlib_module_names and m not in ("ema_sim", "ema_msgs_py")}
+
+
+def test_package_xml_has_a_rosdep_key_for_every_import_and_defines_the_pip_ones():
+    import yaml  # noqa: PLC0415
+
+    imports = _third_party_imports()
+    assert imports >= {"numba", "rosbags", "mcap", "control", "launch", "launch_ros"}
+    unmapped = imports - set(ROSDEP_KEYS)
+    assert not unmapped, f"give these imports a rosdep key in package.xml: {sorted(unmapped)}"
+    deps = {e.text for e in ET.parse(ROOT / "package.xml").getroot().findall("exec_depend")}
+    missing = {ROSDEP_KEYS[m] for m in imports} - deps
+    assert not missing, missing
+    own = yaml.safe_load((ROOT / "rosdep" / "ema_sim.yaml").read_text())
+    for key in (d for d in deps if d.endswith("-pip")):
+        assert set(own[key]) >= {"ubuntu", "debian"}, key
+        assert own[key]["ubuntu"]["pip"]["packages"], key
+
+
+def test_setup_py_installs_the_launch_files_and_requirements_pin_the_workspace_build():
+    text = ast.unparse(ast.parse((ROOT / "setup.py").read_text()))
+    assert "launch/*.launch.py" in text
+    assert "rosdep/ema_sim.yaml" in text
+    pins = dict(line.split("==") for line in (ROOT / "requirements.txt").read_text().splitlines()
+                if "==" in line and not line.startswith("#"))
+    assert {"colcon-core", "colcon-ros", "ros-jazzy-ament-package"} <= set(pins)
