@@ -346,8 +346,8 @@ def test_idle_feedback_keeps_the_frame_rate_with_stamps_on_the_frame_grid(client
     assert np.all(np.diff(stamp) == FRAME_NS)  # every frame, on the grid
     period_ms = np.median(np.diff(wall)) / 1e6
     assert 4.5 < period_ms < 5.5, period_ms  # was 7.5 ms (133 Hz)
-    lag = (wall - stamp) / 1e6
-    assert np.ptp(lag) < 60.0, (lag.min(), lag.max())  # no drift: was 1 s behind after 3 s
+    slope = np.polyfit((wall - wall[0]) / 1e9, (stamp - stamp[0]) / 1e9, 1)[0]
+    assert 0.98 < slope < 1.02, slope  # stamps advance with the wall clock: was 0.67 (1 s behind after 3 s)
 
 
 # --------------------------------------------------------------------------- 10. drops counted

@@ -440,17 +440,18 @@ class EmacNode(SuiteNode):
             return 1.5 * self.frame_s
         if now < self.next_idle:
             return self.next_idle - now
+        if self.model_ns is None:  # no frame yet: start on the ROS clock's frame grid, the schedule from now
+            now_ns = self.get_clock().now().nanoseconds
+            self.model_ns = now_ns - now_ns % self.frame_ns
+            self.next_idle = now
         behind = int((now - self.next_idle) / self.frame_s)
         if behind > CATCH_UP:  # the process was held up: jump to the present frame, stamps on the grid
             self.skipped_frames += behind
-            self.model_ns = None if self.model_ns is None else self.model_ns + behind * self.frame_ns
+            self.model_ns += behind * self.frame_ns
             self.next_idle += behind * self.frame_s
         if any(self._age_wall(c, now) is not None and self._age_wall(c, now) <= self.settings.watchdog_timeout_s
                for c in self.units):
             self.late_frames += 1
-        if self.model_ns is None:  # no frame yet: start on the frame grid of the ROS clock
-            now_ns = self.get_clock().now().nanoseconds
-            self.model_ns = now_ns - now_ns % self.frame_ns
         self._step_all(self.model_ns, {ch: self._age_wall(ch, now) for ch in self.units})
         self.last_step_wall = now
         self.next_idle += self.frame_s
