@@ -143,6 +143,14 @@ def command_v(deg):
     return float(load_channel("left_wing").deg_to_v(deg))
 
 
+def hold(c, pub, deg, seconds):
+    """Command the left wing to ``deg`` every 5 ms for ``seconds``."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        pub.publish(JointState(name=["left_wing"], position=[command_v(deg)]))
+        c.spin(0.005)
+
+
 # --------------------------------------------------------------------------- 1. parameter files
 def test_every_node_starts_with_every_shipped_parameter_file(client, tmp_path):
     """rcl parses every file of config/ (mixed int/float lists were refused), and each node takes its own."""
@@ -220,10 +228,7 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
 
         def brake_delay():
             """Command for 0.5 s, stop: seconds until the node reports the brake engaged."""
-            end = time.monotonic() + 0.5
-            while time.monotonic() < end:
-                cmd.publish(JointState(name=["left_wing"], position=[command_v(1.0)]))
-                client.spin(0.005)
+            hold(client, cmd, 1.0, 0.5)
             assert client.spin(2, lambda: diag.get("emac/left_wing", {}).get("brake_engaged") == "false")
             last = time.monotonic()
             assert client.spin(5, lambda: diag["emac/left_wing"]["brake_engaged"] == "true")
@@ -239,6 +244,10 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
         assert client.spin(3, lambda: diag["emac/left_wing"].get("failure") == "stuck")
         assert set_param(client, node, "emac.failure", "none").successful
         assert not set_param(client, node, "emac.failure", "melt").successful  # refused, node goes on
+        assert set_param(client, node, "emac.motor_power_on", False).successful
+        hold(client, cmd, 1.0, 0.5)  # commanded, but unpowered: the brake holds
+        assert diag["emac/left_wing"]["motor_power_on"] == "false"
+        assert diag["emac/left_wing"]["brake_engaged"] == "true"
         refused = set_param(client, node, "second_order.wn_rad_s", 80.0)
         assert not refused.successful
         assert "read-only" in refused.reason
@@ -252,6 +261,7 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
     text = log.read_text()
     assert "emac.watchdog_timeout_s: 0.05 → 0.6 s" in text
     assert "emac.failure: stuck" in text
+    assert "emac.motor_power_on: False (brake engaged at the next frame)" in text
 
 
 # --------------------------------------------------------------------------- 2. /clock from any publisher
@@ -321,10 +331,14 @@ def test_a_namespace_moves_every_topic_of_a_node(client):
             cmd.publish(JointState(name=["left_wing"], position=[command_v(3.0)]))
             client.spin(0.005)
         assert load_channel("left_wing").v_to_deg(got[-1].position[0]) == pytest.approx(3.0, abs=0.05)
-        ours = {n for n, _ in client.node.get_topic_names_and_types() if n not in ("/rosout", "/parameter_events")}
-        assert all(t.startswith("/aircraft2/") for t in ours), sorted(ours)
-        assert {"/aircraft2/ema/emac/feedback", "/aircraft2/ema/emac/command", "/aircraft2/diagnostics",
-                "/aircraft2/ema/emac/left_wing/failure", "/aircraft2/ema/ready"} <= ours
+        wanted = {"/aircraft2/ema/emac/feedback", "/aircraft2/ema/emac/command", "/aircraft2/diagnostics",
+                  "/aircraft2/ema/emac/left_wing/failure", "/aircraft2/ema/ready"}
+
+        def ours():
+            return {n for n, _ in client.node.get_topic_names_and_types() if n not in ("/rosout", "/parameter_events")}
+
+        assert client.spin(20, lambda: wanted <= ours()), sorted(wanted - ours())
+        assert all(t.startswith("/aircraft2/") for t in ours()), sorted(ours())
     finally:
         stop(*procs)
 
