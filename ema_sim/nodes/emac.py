@@ -22,7 +22,7 @@ import argparse
 import math
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -192,6 +192,8 @@ class EmacNode(SuiteNode):
         self._stream_list = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
         self._diagnostics_every = round(self.settings.frame_hz)
         self._frames_to_diagnostics = self._diagnostics_every
+        self._diagnose_now = False
+        """A run-time change was applied: the next frame's diagnostics show it."""
         self.last_good_ns: dict[str, int | None] = dict.fromkeys(self.channels)
         self.last_good_wall: dict[str, float | None] = dict.fromkeys(self.channels)
         self.clock_ns: int | None = None
@@ -199,6 +201,15 @@ class EmacNode(SuiteNode):
         self.last_step_wall = time.monotonic()
         self.next_idle = self.last_step_wall + 1.5 * self.frame_s
         """Real time: when the next frame without a command is due (frames keep the frame rate when idle)."""
+        self._init_counters()
+        self._make_topics()
+        self._on_changes()
+        self.get_logger().info(
+            f"{self.model_name} on {', '.join(self.channels)}; {'lockstep' if self.lockstep else 'real time'} at "
+            f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
+
+    def _init_counters(self) -> None:
+        """What the node counts: frames late or skipped, waits, messages, inputs dropped."""
         self.last_command_ns: int | None = None
         self.late_frames = 0
         self.skipped_frames = 0
@@ -210,11 +221,6 @@ class EmacNode(SuiteNode):
         self.drops = dict.fromkeys(DROPS, 0)
         """Inputs dropped, by reason (:data:`DROPS`): each is counted, logged (throttled) and in ``/diagnostics``."""
         self.last_fault_wall = -math.inf
-        self._make_topics()
-        self._on_changes()
-        self.get_logger().info(
-            f"{self.model_name} on {', '.join(self.channels)}; {'lockstep' if self.lockstep else 'real time'} at "
-            f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
 
     @property
     def bad_messages(self) -> int:
@@ -240,6 +246,12 @@ class EmacNode(SuiteNode):
 
     def _on_changes(self) -> None:
         """The parameters a running EMAC applies at its next frame (every other one is read-only)."""
+        def on(name: str, apply: Callable[[Any], str]) -> None:
+            def applied(value: Any) -> str:
+                self._diagnose_now = True  # the next frame's diagnostics show the change
+                return apply(value)
+            self.params.on_change(name, applied)
+
         def setting(key: str, unit: str) -> None:
             def apply(value: Any) -> str:
                 old = getattr(self.settings, key)
@@ -247,7 +259,7 @@ class EmacNode(SuiteNode):
                 for u in self.units.values():
                     u.settings = self.settings
                 return f"emac.{key}: {old:g} → {value:g} {unit} (from the next frame)"
-            self.params.on_change(f"emac.{key}", apply)
+            on(f"emac.{key}", apply)
 
         def failure(value: Any) -> str:
             failure = parse_failure(str(value))
@@ -266,9 +278,9 @@ class EmacNode(SuiteNode):
 
         setting("watchdog_timeout_s", "s")
         setting("hinge_moment_limit_inlb", "in·lb")
-        self.params.on_change("emac.failure", failure)
-        self.params.on_change("emac.motor_power_on", power)
-        self.params.on_change("emac.lockstep_wait_s", wait)
+        on("emac.failure", failure)
+        on("emac.motor_power_on", power)
+        on("emac.lockstep_wait_s", wait)
 
     def _make_topics(self) -> None:
         ports = self.ports
@@ -542,7 +554,8 @@ class EmacNode(SuiteNode):
         # After the frame's feedback is out (0.2 ms for five channels), once a second of model time and at
         # once when a brake or a failure changed (once for the frame, however many channels changed).
         self._frames_to_diagnostics -= 1
-        if changed or self._frames_to_diagnostics <= 0:
+        if changed or self._diagnose_now or self._frames_to_diagnostics <= 0:
+            self._diagnose_now = False
             self._frames_to_diagnostics = self._diagnostics_every
             self._publish_diagnostics()
 
