@@ -12,7 +12,6 @@ parameter``); a value outside the declared range is refused the same way.
 from __future__ import annotations
 
 import copy
-import math
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -217,10 +216,3 @@ def _coerced(param: Parameter, kind: int) -> Parameter:
         return Parameter(param.name, value=[float(v) for v in value])
     return param
 
-
-def finite(value: Any, name: str) -> float:
-    """A finite float, or one :class:`ConfigError`."""
-    out = float(value)
-    if not math.isfinite(out):
-        raise ConfigError(f"{name} must be finite, got {value!r}")
-    return out
