@@ -35,11 +35,12 @@ def run(args: argparse.Namespace) -> int:
     cfg, test, what, duration = _config(args)
     bag = cfg.bag
     suite = Suite(cfg)
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way: the bag
-        signal.signal(signum, _interrupt)                              # is closed (SIGHUP: the terminal closed)
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the bag
+        signal.signal(signum, _interrupt)  # closed (SIGHUP: the terminal closed; SIGKILL: ema_sim.nodes.lifetime)
     mode = "lockstep" if args.lockstep else "real time"
-    print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, "
-          f"profile {args.profile}, {mode}, ROS_DOMAIN_ID {suite.domain_id}; logs in {suite.log_dir}", flush=True)
+    print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, profile {args.profile}, {mode}, "
+          f"ROS_DOMAIN_ID {suite.domain_id}; logs and the run's parameters ({suite.params_file.name}) in "
+          f"{suite.log_dir}", flush=True)
     try:
         suite.run(args.timeout)
     except KeyboardInterrupt:  # the suite is stopped: the bag is closed
