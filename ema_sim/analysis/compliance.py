@@ -15,16 +15,24 @@ first zero-load level.
   piecewise linear and continuous with knots ``b₁ < b₂`` (free-play region, moderate load, high
   load), knots by exhaustive search, slopes by least squares. Upper and lower bounds: the same knots
   fitted to each branch, the largest and smallest slope of each segment.
+
+The test is recognised from a held command under a staircase of load levels (:func:`read_load_steps`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from typing_extensions import override
 
+from ema_sim.analysis import figure
+from ema_sim.analysis.markdown import bullets, image, num, table
+from ema_sim.analysis.section2 import RecordAnalysis, Section2Test
+from ema_sim.analysis.segments import HeldStretch, Reading
 from ema_sim.analysis.series import Hold, settled
 
 FloatArray = NDArray[np.float64]
@@ -238,3 +246,114 @@ def analyze_compliance(position: FloatArray | None, surface: FloatArray | None, 
         if c is not None and c.mean is None:
             notes.append(f"{c.name}: fewer than 3 load magnitudes: no three-segment fit")
     return ComplianceResult(command_deg, crank_arm_in, lvdt, total, notes)
+
+
+def read_load_steps(h: HeldStretch) -> Reading | None:
+    """A held command under a load staircase: at least three held load levels covering 70 % of the stretch.
+
+    Parameters
+    ----------
+    h : HeldStretch
+        A held stretch of the command.
+
+    Returns
+    -------
+    Reading or None
+        ``load_steps``, or None.
+    """
+    if h.load is None or h.covered < 0.7 or h.load_levels < 3:
+        return None
+    return Reading("load_steps", f"command held; load staircase over {h.load_levels} levels ({h.swing:.4g} in·lb "
+                                 "swing)")
+
+
+class Compliance(Section2Test[ComplianceResult]):
+    """LVDT and total compliance curves of each load staircase."""
+
+    key = "compliance"
+    title = "Compliance (sections 2.8, 3.2.1)"
+    kinds = ("load_steps",)
+    absent = "no load staircase with the command held recognised"
+
+    @override
+    def run(self, ra: RecordAnalysis) -> list[ComplianceResult]:
+        data = ra.data
+        if data.hinge_moment_inlb is None:
+            ra.not_computed[self.key] = "no hinge moment: compliance not computed"
+            return []
+        out = []
+        for seg in ra.segments(*self.kinds):
+            holds = list(seg.holds)
+            if len(holds) < 3:
+                continue
+            out.append(analyze_compliance(data.position_deg, data.surface_deg, data.hinge_moment_inlb, holds,
+                                          seg.params.get("command_deg", float(data.command_deg[seg.start])),
+                                          ra.channel.crank_arm_in))
+        return out
+
+    @override
+    def result_json(self, r: ComplianceResult) -> dict[str, Any]:
+        return r.as_dict()
+
+    @override
+    def markdown(self, ra: RecordAnalysis, results: list[ComplianceResult],
+                 images: list[str | None]) -> list[str]:
+        lines: list[str] = []
+        for c, img in zip(results, images, strict=True):
+            lines += [f"Command {c.command_deg:g}°.", ""]
+            rows = []
+            for cur in (c.lvdt, c.total):
+                if cur is None:
+                    continue
+                m = cur.mean
+                seg = ("—" if m is None else
+                       f"knots {m.knots_lb[0]:.0f} / {m.knots_lb[1]:.0f} lb; slopes "
+                       + " / ".join(f"{1e3 * s:.3g}" for s in m.slopes_deg_per_lb) + " °/klb")
+                rows.append(["LVDT (inside the loop)" if cur.name == "lvdt" else "total (surface)",
+                             num(cur.slope_deg_per_kinlb, ".4f"), num(cur.span_deg, ".4f"), num(cur.gap_deg, ".4f"),
+                             seg])
+            lines += table(["curve", "compliance, °/kin·lb", "span, °", "gap at zero load, °",
+                            "three-segment (mean)"], rows)
+            so, sp = c.share_outside, c.share_outside_span
+            lines += [f"Share of the compliance outside the servo loop: {num(None if so is None else 100 * so, '.1f')}"
+                      f" % (slopes), {num(None if sp is None else 100 * sp, '.1f')} % (span, free play included); "
+                      "the report: > 81 % (wings, vehicle 2), 77 % (vehicle 3).", ""]
+            lines += bullets(c.notes)
+            lines += image(img, "compliance")
+        return lines
+
+    @override
+    def summary(self, ra: RecordAnalysis, r: ComplianceResult) -> list[str]:
+        share = "—" if r.share_outside is None else f"{100 * r.share_outside:.1f} %"
+        return [f"compliance: share outside the servo loop {share}"]
+
+    @override
+    def plot(self, ra: RecordAnalysis, r: ComplianceResult, path: Path) -> bool:
+        fig, ax = figure.pyplot().subplots(1, 2, figsize=(12, 4.2))
+        for cur, col in ((r.lvdt, figure.COLORS["position_deg"]), (r.total, figure.COLORS["surface_deg"])):
+            if cur is None:
+                continue
+            label = "LVDT (inside the servo loop)" if cur.name == "lvdt" else "total (surface)"
+            ax[0].plot(cur.load_inlb, cur.deflection_deg, "o-", ms=3, lw=0.8, color=col, label=label)
+            if cur.mean is not None:
+                f = cur.bisector_load_inlb / r.crank_arm_in
+                ff = np.linspace(f.min(), f.max(), 400)
+                ax[1].plot(f, cur.bisector_deg, "o", ms=3, color=col, label=f"{cur.name} bisector")
+                ax[1].plot(ff, cur.mean(ff), "-", color=col, lw=1.2, label=f"{cur.name} three-segment mean")
+                if cur.upper and cur.lower:
+                    ax[1].plot(ff, cur.upper(ff), "--", color=col, lw=0.8, label=f"{cur.name} upper / lower")
+                    ax[1].plot(ff, cur.lower(ff), "--", color=col, lw=0.8)
+        ax[0].set_xlabel("hinge moment, in·lb")
+        ax[0].set_ylabel("deflection, deg")
+        ax[0].set_title(f"compliance curves (figure 16), command {r.command_deg:g}°")
+        ax[1].set_xlabel("force at the crank arm, lb")
+        ax[1].set_ylabel("deflection, deg")
+        ax[1].set_title("three-segment model (figure 35)")
+        for a in ax:
+            a.legend(fontsize=7)
+            a.grid(lw=0.3)
+        figure.save(fig, path)
+        return True
+
+
+TEST = Compliance()

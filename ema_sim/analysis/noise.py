@@ -8,6 +8,11 @@ Used by the offline analysis (`ema analyze`) to set detection thresholds and by 
   the signal (an 18 Hz sweep at 1 kHz leaves 1.6e-4 of it, where a second difference would leave
   1.3e-2, comparable to the noise) and multiplies the noise variance by 70. The median absolute
   deviation makes the estimate ignore the few samples at steps and edges.
+* :func:`detect_resolution` finds the step of an output logged in counts (a position written in
+  hundredths of a degree, a 5 mV A/D converter through its calibration): every change of such a
+  signal is a whole number of counts. :func:`output_noise` is the floor a record can resolve:
+  the white noise, but never less than the counts' own quantization error ``q/√12`` (a still output
+  that reads the same count for seconds has a fourth-difference MAD of zero, not a zero floor).
 * :func:`whiteness` is the Ljung-Box portmanteau test on the residual's autocorrelation.
 * :func:`input_independence` tests the residual's cross-correlation with the input (a model that
   explains everything leaves a residual uncorrelated with the input at every lag); the band holds
@@ -25,15 +30,145 @@ FloatArray = NDArray[np.float64]
 
 MAD_TO_SIGMA = 1.4826
 """Median absolute deviation of Gaussian noise times this is its standard deviation."""
+COUNT_TOLERANCE = 0.1
+"""A change within this share of a count of a whole number of counts is a whole number of counts."""
+COUNT_SHARE = 0.9
+"""Share of the small changes that must be whole numbers of counts for a signal to be logged in counts."""
+MIN_COUNT_CHANGES = 20
+"""Changes of at most ten counts needed before a resolution is claimed."""
+MIN_COUNTS_SPANNED = 100
+"""A resolution is a fine grid: the signal spans at least this many counts (a staircase's step is no count)."""
 
 
 def noise_floor(y: FloatArray) -> float:
-    """Standard deviation of the white noise on ``y``, from the MAD of its fourth differences."""
+    """Standard deviation of the white noise on a signal, from the MAD of its fourth differences.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal, uniformly sampled.
+
+    Returns
+    -------
+    float
+        The white-noise standard deviation (0 for fewer than 6 samples). It knows nothing of the
+        signal's resolution: :func:`output_noise` adds that.
+    """
     y = np.asarray(y, dtype=float)
     if y.size < 6:
         return 0.0
     d4 = np.diff(y, 4)
     return float(MAD_TO_SIGMA * np.median(np.abs(d4 - np.median(d4))) / np.sqrt(70.0))
+
+
+def detect_resolution(y: FloatArray) -> float | None:
+    """The count a signal is logged in, when every change of it is a whole number of counts.
+
+    The smallest changes of a signal in counts are one count; a continuous signal's smallest changes
+    are arbitrarily small and its small changes are no multiples of anything. The count is the 1st
+    percentile of the non-zero changes (robust to a stray rounding glitch), accepted when at least
+    90 % of the changes of up to ten counts lie within 0.1 count of a whole number (a calibration
+    curve between the counts and the degrees may stretch the count by a few per cent; ten counts
+    keep that inside the tolerance) and there are at least 20 of them; a signal that mostly rests
+    and jumps (a square wave) has its changes of up to 1000 counts tested instead. A count is a fine
+    grid: the signal must span at least 100 of them (a staircase's step is not a resolution).
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal as logged.
+
+    Returns
+    -------
+    float or None
+        The count in the signal's unit, or None when the signal is continuous or too still to tell.
+    """
+    y = np.asarray(y, dtype=float)
+    if y.size < 3:
+        return None
+    scale = max(1.0, float(np.max(np.abs(y))))
+    d = np.abs(np.diff(y))
+    nz = d[d > 1e-7 * scale]
+    if nz.size < MIN_COUNT_CHANGES:
+        return None
+    span = float(np.ptp(y))
+    for q in sorted({float(np.min(nz)), float(np.percentile(nz, 1.0))}):
+        count = _whole_counts(nz, q)
+        if count is not None and span >= MIN_COUNTS_SPANNED * count:
+            return count
+    return None
+
+
+def _whole_counts(changes: FloatArray, q: float) -> float | None:
+    """``q`` refined, when the changes are whole numbers of ``q`` (see :func:`detect_resolution`)."""
+    ratio = changes / q
+    small = ratio[ratio < 10.5]
+    if small.size < MIN_COUNT_CHANGES:  # a signal that mostly rests or jumps: its jumps must be whole counts
+        small = ratio[ratio < 1000.5]
+    if small.size < MIN_COUNT_CHANGES:
+        return None
+    whole = np.abs(small - np.round(small)) <= COUNT_TOLERANCE
+    if float(np.mean(whole)) < COUNT_SHARE:
+        return None
+    ones = small[whole & (np.round(small) == 1.0)]
+    if ones.size == 0:
+        return None
+    return float(f"{float(np.median(ones * q)):.10g}")
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """The noise floor of one measured output: white noise, never below its counts' quantization."""
+
+    sigma: float
+    """The floor: ``max(white, resolution/√12)``."""
+    white: float
+    """White noise from the fourth differences (:func:`noise_floor`)."""
+    resolution: float | None
+    """The count the output is logged in (None: continuous)."""
+
+    @property
+    def quantization(self) -> float:
+        """Standard deviation of the rounding to whole counts, ``resolution/√12`` (0 when continuous)."""
+        return 0.0 if self.resolution is None else self.resolution / np.sqrt(12.0)
+
+    @property
+    def limited_by_resolution(self) -> bool:
+        """True when the counts, not the noise, set the floor."""
+        return self.resolution is not None and self.quantization >= self.white
+
+    def as_dict(self) -> dict[str, float | bool | None]:
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            ``sigma``, ``white``, ``resolution`` and ``limited_by_resolution``.
+        """
+        return {"sigma": self.sigma, "white": self.white, "resolution": self.resolution,
+                "limited_by_resolution": self.limited_by_resolution}
+
+
+def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
+    """The noise floor of a measured output, aware of the counts it is logged in.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The output, uniformly sampled.
+    resolution : float, optional
+        Its count when known (a rig's data sheet); detected by :func:`detect_resolution` otherwise.
+
+    Returns
+    -------
+    NoiseFloor
+        ``sigma = max(white, resolution/√12)``: a position logged in counts of 0.01 has a floor of at
+        least 0.0029 from the counts alone.
+    """
+    white = noise_floor(y)
+    q = detect_resolution(y) if resolution is None else float(resolution)
+    floor = max(white, q / np.sqrt(12.0)) if q is not None else white
+    return NoiseFloor(float(floor), white, q)
 
 
 def autocovariance(x: FloatArray, max_lag: int) -> FloatArray:

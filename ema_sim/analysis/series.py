@@ -33,18 +33,33 @@ def is_uniform(time_s: FloatArray) -> bool:
     return bool(np.all(np.abs(dt - med) <= UNIFORM_TOLERANCE * med))
 
 
-JITTER_LIMIT = 0.25
-"""Intervals within 25 % of the median (no gap, no burst) are regular sampling with jittery time stamps."""
+JITTER_LIMIT = 0.5
+"""Stamps within half a sample of the least-squares line through them: regular sampling, no sample missing."""
 
 
-def uniform_record(data: MeasuredData) -> MeasuredData:
-    """``data`` on a uniform grid (unchanged when it already is uniform).
+def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> MeasuredData:
+    """The record on a uniform grid (unchanged when it already is uniform).
 
-    Time stamps that only jitter (every interval within 25 % of the median) belong to regular
-    sampling: they are replaced by the least-squares line through them and the samples are kept as
-    they are (resampling would delay the held command by up to a sample against the outputs). Records
-    with gaps or mixed rates are resampled at the median rate: held columns (the command) by
-    zero-order hold, as the contract defines the command, measured columns by linear interpolation.
+    Time stamps that only jitter belong to regular sampling: when every stamp lies within half a
+    sample of the least-squares line through them (a missing sample or a burst shifts the later
+    stamps by a whole sample), they are replaced by that line and the samples are kept as they are
+    (resampling would delay the held command by up to a sample against the outputs, and blur an
+    output logged in counts). Records with gaps or mixed rates are resampled at the median rate:
+    held columns (the command) by zero-order hold, as the contract defines the command, measured
+    columns by linear interpolation.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        A record as read.
+    command_sampled : bool
+        The command was sampled from a running demand rather than held: a resampled command is then
+        interpolated like the outputs, not held.
+
+    Returns
+    -------
+    MeasuredData
+        The record on a uniform grid; ``metadata["resampled"]`` says what was done.
     """
     t = data.time_s
     if is_uniform(t):
@@ -52,14 +67,15 @@ def uniform_record(data: MeasuredData) -> MeasuredData:
     dt_all = np.diff(t)
     med = float(np.median(dt_all))
     meta = dict(data.metadata)
-    if np.all(np.abs(dt_all - med) <= JITTER_LIMIT * med):
-        k = np.arange(t.size, dtype=float)
-        slope, icpt = np.polyfit(k, t, 1)
-        jitter = float(np.max(np.abs(t - (icpt + slope * k))))
+    k = np.arange(t.size, dtype=float)
+    slope, icpt = np.polyfit(k, t, 1)
+    jitter = float(np.max(np.abs(t - (icpt + slope * k))))
+    if jitter < JITTER_LIMIT * slope:
         meta["resampled"] = (f"time stamps jitter by up to {1e3 * jitter:.3g} ms: samples taken as uniform at "
                              f"{1.0 / slope:.6g} Hz (least-squares line through the stamps), not resampled")
         return replace(data, time_s=icpt + slope * k, metadata=meta)
     dt = med
+    held = () if command_sampled else (*HELD, "fmu_command_deg")
     n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
     grid = t[0] + dt * np.arange(n)
     idx = np.clip(np.searchsorted(t, grid + 1e-12, side="right") - 1, 0, t.size - 1)
@@ -68,9 +84,11 @@ def uniform_record(data: MeasuredData) -> MeasuredData:
         value = getattr(data, f.name)
         if not isinstance(value, np.ndarray) or f.name == "time_s":
             continue
-        changes[f.name] = value[idx] if f.name in HELD else np.interp(grid, t, value)
+        changes[f.name] = value[idx] if f.name in held else np.interp(grid, t, value)
+    changes["extra"] = {k: v[idx] if k in held else np.interp(grid, t, v) for k, v in data.extra.items()}
     meta["resampled"] = (f"time stamps not uniform (intervals {1e3 * dt_all.min():.3g}-{1e3 * dt_all.max():.3g} ms): "
-                         f"resampled at {1.0 / dt:.6g} Hz, command held, outputs interpolated")
+                         f"resampled at {1.0 / dt:.6g} Hz, command "
+                         f"{'interpolated (sampled)' if command_sampled else 'held'}, outputs interpolated")
     changes["metadata"] = meta
     return replace(data, **changes)  # type: ignore[arg-type]
 
@@ -94,16 +112,42 @@ class Hold:
         return self.stop - self.start
 
 
+def _d2_noise(x: FloatArray) -> float:
+    """Standard deviation of white noise on ``x`` from the MAD of its second differences."""
+    d2 = np.abs(np.diff(x, 2))
+    return 1.4826 * float(np.median(d2)) / np.sqrt(6.0) if d2.size else 0.0
+
+
 def hold_tolerance(x: FloatArray) -> float:
     """How much a held signal may wander and still count as held.
 
     A digital command is exact (a rounding allowance of 1e-6 of its scale); a recorded analog signal
-    gets five times its sample-to-sample noise, estimated robustly from second differences.
+    gets five times its noise while it is held. The noise is first estimated robustly from the second
+    differences of the whole signal, then again from the samples that sit still within that first
+    tolerance only: a demand that spends most of its time on ramps sampled at jittery instants must
+    not lend its ramps' scatter to its holds.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+
+    Returns
+    -------
+    float
+        The tolerance, in the signal's unit.
     """
     scale = max(1.0, float(np.max(np.abs(x))) if x.size else 1.0)
-    d2 = np.abs(np.diff(x, 2))
-    noise = 1.4826 * float(np.median(d2)) / np.sqrt(6.0) if d2.size else 0.0
-    return max(1e-6 * scale, 5.0 * noise)
+    floor = 1e-6 * scale
+    first = max(floor, 5.0 * _d2_noise(x))
+    if x.size < 4:
+        return first
+    still = np.abs(np.diff(x)) <= first
+    both = still[:-1] & still[1:]  # second differences whose two steps are both still
+    if both.sum() < 10:
+        return first
+    d2 = np.abs(np.diff(x, 2))[both]
+    return max(floor, 5.0 * 1.4826 * float(np.median(d2)) / np.sqrt(6.0))
 
 
 HOLD_BAND = 3.0
@@ -199,7 +243,7 @@ def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
     """Smoothed derivative (Savitzky-Golay, quadratic, over ``window_s``)."""
     from scipy.signal import savgol_filter  # noqa: PLC0415
 
-    n = max(5, round(window_s / dt) | 1)
+    n = max(3, round(window_s / dt) | 1)
     if y.size < n:
         return np.gradient(y, dt)
     return savgol_filter(y, n, 2, deriv=1, delta=dt)

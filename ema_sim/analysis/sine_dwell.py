@@ -7,6 +7,9 @@ frequencies), so all dwells run in one compiled call: instance ``i`` is trimmed 
 driven by ``bias + amp·sin(2π·f_i·t)`` on an input grid, and its gain and phase come from the
 single-frequency Fourier coefficient of the output over whole cycles after it has settled, relative
 to the same coefficient of the command the model saw.
+
+The same measurement on a record: :class:`SineDwellTest` reads gain and phase of each output at a
+recognised sine dwell's frequency (:func:`read_sine`), over whole cycles after the first.
 """
 
 from __future__ import annotations
@@ -14,12 +17,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from typing_extensions import override
 
+from ema_sim.analysis.frequency_response import zoh_factor
+from ema_sim.analysis.markdown import quality, table
+from ema_sim.analysis.quality import Quality
+from ema_sim.analysis.section2 import RecordAnalysis, Section2Test
+from ema_sim.analysis.segments import SINE_R2, MovingStretch, Reading
+from ema_sim.analysis.sine_fit import sine_at
 from ema_sim.errors import EmaError
-from ema_sim.models import ActuatorModel
+
+if TYPE_CHECKING:
+    from ema_sim.models import ActuatorModel
 
 FloatArray = NDArray[np.float64]
 
@@ -106,3 +119,118 @@ def sine_dwell(
         gain[i] = 20.0 * np.log10(abs(h))
         phase[i] = math.degrees(np.angle(h))
     return FrequencyResponse(f, gain, np.degrees(np.unwrap(np.radians(phase))), amp_deg, output)
+
+
+# ---------------------------------------------------------------------------------------------- measured dwells
+@dataclass(frozen=True)
+class DwellResult:
+    """Gain and phase of one output at a measured sine dwell's frequency (section-2 ``sine`` segment)."""
+
+    output: str
+    freq_hz: float
+    command_amplitude_deg: float
+    gain_db: float
+    phase_deg: float
+    output_r2: float
+    start_s: float
+    end_s: float
+    hold_corrected: bool
+    """Half a sample of hold divided out (a held command); not for a sampled one."""
+
+    @property
+    def quality(self) -> Quality:
+        """``not_determined`` when the output's tone explains less than half its variance."""
+        return "not_determined" if self.output_r2 < 0.5 else "ok"
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Output, frequency, command amplitude, gain, phase, the output's R², span and quality.
+        """
+        return {"output": self.output, "freq_hz": self.freq_hz, "command_amplitude_deg": self.command_amplitude_deg,
+                "gain_db": self.gain_db, "phase_deg": self.phase_deg, "output_r2": self.output_r2,
+                "start_s": self.start_s, "end_s": self.end_s, "hold_corrected": self.hold_corrected,
+                "quality": self.quality}
+
+
+def read_sine(m: MovingStretch) -> Reading | None:
+    """A steady tone a sine explains (R² > 0.99): a sine dwell.
+
+    Parameters
+    ----------
+    m : MovingStretch
+        A moving stretch of the command.
+
+    Returns
+    -------
+    Reading or None
+        ``sine`` with its frequency and amplitude, or None.
+    """
+    if not m.steady or m.sine is None or m.sine.r2 <= SINE_R2:
+        return None
+    freq = m.sine.freq_hz
+    return Reading("sine", f"steady {freq:.4g} Hz sine (sine R² {m.sine.r2:.3f})",
+                   {"freq_hz": freq, "amp_deg": float(np.median(m.swings) / 2)})
+
+
+class SineDwellTest(Section2Test[DwellResult]):
+    """Gain and phase of every output at each sine dwell's frequency, over whole cycles after the first."""
+
+    key = "sine_dwell"
+    title = "Sine dwell"
+    kinds = ("sine",)
+    absent = "no sine dwell recognised"
+
+    @override
+    def run(self, ra: RecordAnalysis) -> list[DwellResult]:
+        data = ra.data
+        out: list[DwellResult] = []
+        held = not ra.command.assumed_sampled
+        for seg in ra.segments(*self.kinds):
+            sl = slice(seg.start, seg.stop)
+            t, u = data.time_s[sl], data.command_deg[sl]
+            f = seg.params.get("freq_hz")
+            where = f"sine at {t[0]:.2f}-{t[-1]:.2f} s"
+            if not f:
+                ra.not_computed[f"{self.key}: {where}"] = "no frequency read from the signal or the metadata"
+                continue
+            per = 1.0 / f
+            keep = (t >= t[0] + per) & (t <= t[0] + per * np.floor((t[-1] - t[0]) / per))
+            if keep.sum() < 20:
+                ra.not_computed[f"{self.key}: {where}"] = (
+                    f"{f:.3g} Hz: fewer than 20 samples in whole cycles after the first (the first cycle is the "
+                    "start-up transient)")
+                continue
+            su = sine_at(t[keep], u[keep], f)
+            for name, y in ra.outputs(sl).items():
+                sy = sine_at(t[keep], y[keep], f)
+                h = (sy.amplitude / su.amplitude) * np.exp(1j * (sy.phase_rad - su.phase_rad))
+                if held:
+                    h = h / zoh_factor(np.array([f]), data.sample_hz)[0]
+                out.append(DwellResult(name, f, su.amplitude, float(20 * np.log10(abs(h))),
+                                       float(np.degrees(np.angle(h))), sy.r2, float(t[0]), float(t[-1]), held))
+        return out
+
+    @override
+    def result_json(self, r: DwellResult) -> dict[str, Any]:
+        return r.as_dict()
+
+    @override
+    def markdown(self, ra: RecordAnalysis, results: list[DwellResult],
+                 images: list[str | None]) -> list[str]:
+        lines = table(["output", "f, Hz", "command amplitude, °", "gain, dB", "phase, °", "quality"],
+                      [[s.output, f"{s.freq_hz:g}", f"{s.command_amplitude_deg:.3g}", f"{s.gain_db:+.2f}",
+                        f"{s.phase_deg:.1f}", quality(s.quality, f"output R² {s.output_r2:.2f}")] for s in results])
+        if results and not results[0].hold_corrected:
+            lines += ["The command is sampled, not held: no hold correction.", ""]
+        return lines
+
+    @override
+    def summary(self, ra: RecordAnalysis, r: DwellResult) -> list[str]:
+        return [f"sine dwell {r.freq_hz:.3g} Hz → {r.output}: gain {r.gain_db:+.2f} dB, phase {r.phase_deg:.1f}°"]
+
+
+SINE_DWELL = SineDwellTest()

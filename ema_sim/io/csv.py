@@ -47,6 +47,10 @@ class MeasuredData:
     """Motor bus voltage (section 2.5), when the rig or model records it."""
     rate_dps: FloatArray | None = None
     """Surface rate, when recorded."""
+    unit: str = "deg"
+    """Unit of the command and outputs: ``deg``, or a rig's linear unit (``mm``, ``in``) kept as logged."""
+    extra: dict[str, FloatArray] = field(default_factory=dict)
+    """Further recorded signals outside the contract's columns (a bag's FMU-side command and feedback)."""
 
     @property
     def outputs(self) -> list[str]:
