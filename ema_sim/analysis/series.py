@@ -194,7 +194,7 @@ class Edge:
     """A jump of a held signal: from hold ``before`` to hold ``after``."""
 
     index: int
-    """First sample at the new level."""
+    """First sample that left the old level (for a command through a lag, the start of its transition)."""
     before: Hold
     after: Hold
 
@@ -208,14 +208,35 @@ def edges(x: FloatArray, dt: float, *, min_hold_s: float = 0.04, min_jump: float
           max_gap_s: float = 0.02, tol: float | None = None) -> list[Edge]:
     """Jumps of at least ``min_jump`` between two holds of at least ``min_hold_s`` each.
 
-    ``max_gap_s`` allows a recorded (analog) command a short transition between the two levels.
+    ``max_gap_s`` allows a recorded (analog) command a short transition between the two levels;
+    the edge is then at the transition's first sample.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The held signal.
+    dt : float
+        Sample interval, s.
+    min_hold_s : float
+        Shortest hold on either side, s.
+    min_jump : float
+        Smallest jump between the two holds.
+    max_gap_s : float
+        Longest transition between the holds, s.
+    tol : float, optional
+        Hold tolerance (default: :func:`hold_tolerance`).
+
+    Returns
+    -------
+    list of Edge
+        In time order.
     """
     hs = holds(x, max(2, round(min_hold_s / dt)), tol)
     out = []
     max_gap = round(max_gap_s / dt) + 1
     for a, b in pairwise(hs):
         if b.start - a.stop <= max_gap and abs(b.value - a.value) >= min_jump:
-            out.append(Edge(b.start if b.start > a.stop else a.stop, a, b))
+            out.append(Edge(a.stop, a, b))
     return out
 
 

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ema_sim.commands.common import add_data_args, check_channel, rig_format
 from ema_sim.errors import SpecError
 
 
@@ -47,13 +48,15 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415
 
+    check_channel(args.channel)
+    rig = rig_format(args)
     options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
-                      compliance_deg_per_kinlb=args.compliance, channel=args.channel)
+                      compliance_deg_per_kinlb=args.compliance, channel=args.channel, command=args.command_hold)
     if args.model:
         from ema_sim.models import model_class  # noqa: PLC0415
 
         model_class(args.model)  # an unknown name is one clear error before any work
-    records = analyze_records([load_record(path, args.channel) for path in args.data], options)
+    records = analyze_records([load_record(path, args.channel, rig) for path in args.data], options)
     for ra in records:
         print("\n".join(_summary(ra)))
     if args.json:
@@ -89,4 +92,8 @@ def register(sub: Any) -> None:
                    help="threshold the crosstalk noise is judged against (default: measured, else table A2)")
     p.add_argument("--compliance", type=float, default=None, metavar="DEG_PER_KINLB",
                    help="compliance taken out of free-play jumps (default: measured in the same record)")
+    p.add_argument("--command", dest="command_hold", default="detect", choices=("detect", "held", "sampled"),
+                   help="how the rig logged its command: held between samples (the data contract), sampled from a "
+                        "running demand, or detect it from the record (default)")
+    add_data_args(p)
     p.set_defaults(func=run)

@@ -516,15 +516,35 @@ def _pick_channel(src: _Source, path: str | Path, meta: Mapping[str, str], chann
     return channel
 
 
+def _on_frames(series: Mapping[int, float], stamps: list[int]) -> FloatArray | None:
+    """A recorded series on the frames: each frame's value, else the last one before it (None if never recorded)."""
+    if not series:
+        return None
+    out = np.array([series.get(s, math.nan) for s in stamps])
+    if not np.isfinite(out).any():
+        return None
+    first = out[np.isfinite(out)][0]
+    last = first
+    for k, v in enumerate(out):
+        if math.isfinite(v):
+            last = v
+        else:
+            out[k] = last
+    return out
+
+
 def _optional_columns(src: _Source, channel: str, stamps: list[int], fb_topic: str) -> dict[str, FloatArray | None]:
-    """Surface angle, applied hinge moment and motor current on the frames, where recorded."""
-    cols: dict[str, FloatArray | None] = {"surface_deg": None, "hinge_moment_inlb": None, "current_a": None}
+    """Surface angle and rate, applied hinge moment, motor current and bus voltage on the frames, where recorded."""
+    cols: dict[str, FloatArray | None] = {"surface_deg": None, "hinge_moment_inlb": None, "current_a": None,
+                                          "bus_v": None, "rate_dps": None}
     has_surface = ct.SURFACE in src.topics
     surface = _joint_series(src, ct.SURFACE, channel, "position") if has_surface else {}
     applied = _joint_series(src, ct.SURFACE, channel, "effort") if has_surface else {}
     load = _joint_series(src, ct.HINGE_MOMENT, channel, "effort") if ct.HINGE_MOMENT in src.topics else {}
     if surface and all(s in surface for s in stamps):
         cols["surface_deg"] = np.array([surface[s] for s in stamps])
+    if has_surface:
+        cols["rate_dps"] = _on_frames(_joint_series(src, ct.SURFACE, channel, "velocity"), stamps)
     if applied or load:
         nxt = dict(itertools.pairwise(stamps))
         hm: list[float] = []
@@ -536,7 +556,24 @@ def _optional_columns(src: _Source, channel: str, stamps: list[int], fb_topic: s
     cur = np.array([current.get(s, math.nan) for s in stamps])
     if np.isfinite(cur).any():
         cols["current_a"] = np.where(np.isfinite(cur), cur, 0.0)
+    if ct.BUS in src.topics:
+        cols["bus_v"] = _on_frames(_joint_series(src, ct.BUS, channel, "position"), stamps)
     return cols
+
+
+def _other_side(src: _Source, channel: str, stamps: list[int], side: str, sc: ct.Scaling) -> dict[str, FloatArray]:
+    """The other side of the test environment on the frames, in degrees (``fmu_command_deg``...)."""
+    other = "fmu" if side == "emac" else "emac"
+    out: dict[str, FloatArray] = {}
+    for what, convert, name in (("command", sc.command_v_to_deg, "command_deg"),
+                                ("feedback", sc.feedback_v_to_deg, "position_deg")):
+        topic = f"/ema/{other}/{what}"
+        if topic not in src.topics:
+            continue
+        volts = _on_frames(_joint_series(src, topic, channel, "position"), stamps)
+        if volts is not None:
+            out[f"{other}_{name}"] = np.array([convert(v) for v in volts])
+    return out
 
 
 def read_joint_topic(path: str | Path, topic: str, field_name: str = "position") -> dict[str, dict[int, float]]:
@@ -553,12 +590,26 @@ def read_joint_topic(path: str | Path, topic: str, field_name: str = "position")
 
 
 def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac") -> MeasuredData:
-    """One channel of a suite bag as data-contract columns, in degrees.
+    """One channel of a suite bag as data-contract columns, in degrees, with every other signal it recorded.
 
-    ``side="emac"`` (default) reads what the actuator saw and reported, the EMAC side of the test
-    environment; ``side="fmu"`` what the flight computer sent and read. Rows are the frames with
-    both a command and a feedback; the command holds over its frame, position and surface are at the
-    frame's start, the hinge moment is the one applied over the frame.
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+    channel : str, optional
+        The channel to read (default: the test's, else the only one).
+    side : {"emac", "fmu"}
+        ``emac`` (default) reads what the actuator saw and reported, the EMAC side of the test
+        environment; ``fmu`` what the flight computer sent and read.
+
+    Returns
+    -------
+    MeasuredData
+        Rows are the frames with both a command and a feedback; the command holds over its frame,
+        position and surface are at the frame's start, the hinge moment is the one applied over the
+        frame. Besides the contract's columns: ``bus_v`` (``/ema/sensor/bus``), ``rate_dps`` (the
+        surface topic's velocity) and, in ``extra``, the other side's command and feedback
+        (``fmu_command_deg``, ``fmu_position_deg`` on the EMAC side).
     """
     if side not in SIDES:
         raise DataError(f"side must be one of {', '.join(SIDES)}, got {side!r}")
@@ -598,5 +649,6 @@ def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac"
         position_v=pv,
         metadata=meta,
         source=str(src.path),
+        extra=_other_side(src, channel, stamps, side, sc),
         **_optional_columns(src, channel, stamps, fb_topic),
     )
