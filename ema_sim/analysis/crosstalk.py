@@ -13,11 +13,12 @@ Peak-to-peak and RMS of that residual, the RMS in excess of the white sensor noi
 volts through the feedback curve's slope, and the verdict against the threshold: the report's right
 wing saw 0.02 V (≈ 0.086°) of noise, "below the threshold command level".
 
-Crosstalk is what the command does *not* explain, so on a moving command the residual must also be
-independent of the command (:func:`ema_sim.analysis.noise.input_independence`, lags up to 0.1 s):
-a residual that still follows the command's rate is tracking error the second order could not take
-out (a rate limit, a profile the actuator lags), not crosstalk, and is not judged against the
-threshold (quality ``not_determined``).
+Crosstalk is what the command does *not* explain, so on a moving command the observed channel must
+follow its command: an output whose rate on the triangle's ramps falls 5 % short of the command's
+(a rate limit) lags ever further behind, and the residual must be independent of the command
+(:func:`ema_sim.analysis.noise.input_independence`, lags up to 0.1 s). Otherwise what the fit leaves
+is tracking error, not crosstalk, and it is not judged against the threshold (quality
+``not_determined``).
 
 The test is recognised from a held command with a constant load (:func:`read_hold`) or a steady
 tone that is no sine (:func:`read_triangle`); dither runs on the same holds.
@@ -49,6 +50,8 @@ FloatArray = NDArray[np.float64]
 SPEC_THRESHOLD_IN = 0.0075
 """Threshold with inertial load, table A2 (inches of actuator travel)."""
 INDEPENDENCE_LAG_S = 0.1
+KEEP_UP = 0.95
+"""The output's rate on the ramps must reach this share of the command's."""
 
 @dataclass(frozen=True)
 class CrosstalkResult:
@@ -68,6 +71,8 @@ class CrosstalkResult:
     notes: list[str] = field(default_factory=list)
     independence: IndependenceTest | None = None
     """The residual against the command (moving command only)."""
+    rates_dps: tuple[float, float] | None = None
+    """Command's and output's median rate on the ramps (moving command only)."""
     start: int = 0
     stop: int = 0
 
@@ -77,15 +82,25 @@ class CrosstalkResult:
         return self.peak_to_peak_deg < self.threshold_deg
 
     @property
+    def lags_behind(self) -> bool:
+        """The output's rate on the ramps falls 5 % short of the command's."""
+        return self.rates_dps is not None and self.rates_dps[1] < KEEP_UP * self.rates_dps[0]
+
+    @property
     def quality(self) -> Quality:
-        """``not_determined`` when the residual still follows the command (tracking error, not crosstalk)."""
-        return "not_determined" if self.independence is not None and not self.independence.independent else "ok"
+        """``not_determined`` when the output does not follow its command (tracking error, not crosstalk)."""
+        dependent = self.independence is not None and not self.independence.independent
+        return "not_determined" if dependent or self.lags_behind else "ok"
 
     @property
     def quality_note(self) -> str:
         """Why the quality is what it is."""
         if self.quality == "ok" or self.independence is None:
             return ""
+        if self.lags_behind and self.rates_dps is not None:
+            rc, ro = self.rates_dps
+            return (f"the output moves at {ro:.3g} °/s on the ramps against the command's {rc:.3g} °/s: it lags ever "
+                    "further behind, so the residual is tracking error, not crosstalk noise")
         ind = self.independence
         return (f"the residual follows the command's rate (correlation {ind.peak_correlation:+.2f} at lag "
                 f"{ind.peak_lag}, band ±{ind.bound:.2g}): tracking error, not crosstalk noise")
@@ -159,6 +174,7 @@ def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: f
     notes: list[str] = []
     held = np.ptp(u) <= 1e-9 * max(1.0, float(np.max(np.abs(u))))
     independence = None
+    rates = (0.0, 0.0)
     if held:
         coef = np.polyfit(t - t[0], y, 1)
         resid = y - np.polyval(coef, t - t[0])
@@ -169,11 +185,15 @@ def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: f
         notes.append(how)
         dt = float(np.median(np.diff(t)))
         independence = input_independence(resid, u, max(2, round(INDEPENDENCE_LAG_S / dt)))
+        du, dy = np.gradient(u, t), np.gradient(y, t)
+        ramp = np.abs(du) >= 0.5 * float(np.max(np.abs(du)))
+        rates = (float(np.median(np.abs(du[ramp]))), float(np.median(np.abs(dy[ramp]))))
     rms = float(np.sqrt(np.mean(resid**2)))
     excess = float(np.sqrt(max(rms * rms - sensor_noise * sensor_noise, 0.0)))
     dom = dominant_frequency(t, resid, f_min=0.2)
     return CrosstalkResult(output, kind, float(np.ptp(resid)), rms, excess, sensor_noise, dom, volts_per_deg,
-                           threshold_deg, threshold_source, resid, notes, independence)
+                           threshold_deg, threshold_source, resid, notes, independence,
+                           None if held else rates)
 
 
 def read_hold(h: HeldStretch) -> Reading | None:

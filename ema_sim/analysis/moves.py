@@ -5,13 +5,13 @@ cruise at a set speed, decelerate, dwell, move again. Such a demand is neither a
 time) nor a tone (it dwells). :func:`find_moves` reads it from the command: two consecutive held
 levels joined by a monotone transition longer than a step's are a *move* when
 
-* it cruises: at least 45 % of the move within 10 % of its top speed (a sine's arc between two
-  turning points spends 29 % there, a drive's trapezoid with up to 25 % of each move accelerating
-  at least 55 %), and its holds are longer than the counts explain (a quantized ramp turning
-  round sits still for about two counts' worth of travel, ``2q/speed``: a dwell is longer than
-  twice that plus two samples); or
-* it dwells for at least a quarter of the move at each end, the move spanning at least 40 counts
-  (a sine that sits still that long between turns spans fewer than 20 counts).
+* its holds at both ends are deliberate: twice as long as a sine through the same swing in the same
+  time would sit still at its turns (while it stays within one count of its peak, ``2·√(2q/A)/ω``,
+  and for two samples at least); and
+* it cruises: at least 45 % of the move (of 10 samples or more) within 10 % of its top speed (a
+  sine's arc between two turning points spends 29 % there, a drive's trapezoid with up to 25 % of
+  each move accelerating at least 55 %); or it dwells for at least a quarter of the move at each
+  end, the move spanning at least 40 counts.
 
 Per move (:class:`MoveMetrics`): the command's cruise speed and acceleration, the output's
 following error while cruising and the lag it means (error / speed), the overshoot past the target,
@@ -46,6 +46,8 @@ from ema_sim.analysis.series import Hold, settled
 FloatArray = NDArray[np.float64]
 
 CRUISE_SHARE = 0.45
+MIN_MOVE_SAMPLES = 10
+"""Fewer samples in a move tell nothing of a cruise."""
 TOP_SPEED = 0.9
 DWELL_SHARE = 0.25
 MIN_COUNTS = 40
@@ -112,9 +114,15 @@ def characterise_move(t: FloatArray, u: FloatArray, a: Hold, b: Hold, counts: fl
     q = max(counts, tol)
     dwell = min(a.length, b.length) * dt
     move_s = (b.start - a.stop + 1) * dt
-    deliberate = dwell >= 2.0 * (2.0 * q / cruise_speed) + 2.0 * dt
+    # A sine through the same swing in the same time sits still at its turns while it stays within a count
+    # (2·√(2q/A)/ω) and for two samples at least: a dwell is deliberate when it lasts twice that.
+    amp, omega = 0.5 * abs(jump), np.pi / move_s
+    sine_dwell = 2.0 * np.sqrt(2.0 * q / amp) / omega + 2.0 * dt
+    if dwell < 2.0 * sine_dwell:
+        return None
+    cruises = seg.size >= MIN_MOVE_SAMPLES and share >= CRUISE_SHARE
     long_dwell = dwell >= DWELL_SHARE * move_s and abs(jump) >= MIN_COUNTS * q
-    if not ((share >= CRUISE_SHARE and deliberate) or long_dwell):
+    if not (cruises or long_dwell):
         return None
     return Move(a, b, share, cruise_speed)
 
@@ -439,9 +447,10 @@ class Profiles(Section2Test[ProfileResult]):
             ax[2].plot(t[zoom], model[zoom], "k--", lw=0.8, label="fit")
         ax[2].set_title("zoom: where the residual is largest", fontsize=9)
         ax[0].set_title(f"profiled moves on {r.output}: quality {r.quality}", fontsize=9)
+        for a in (ax[0], ax[2]):
+            a.legend(fontsize=7)
         for a in ax:
             a.grid(lw=0.3)
-            a.legend(fontsize=7)
         ax[2].set_xlabel("time, s")
         figure.save(fig, path)
         return True

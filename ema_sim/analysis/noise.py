@@ -36,8 +36,8 @@ COUNT_SHARE = 0.9
 """Share of the small changes that must be whole numbers of counts for a signal to be logged in counts."""
 MIN_COUNT_CHANGES = 20
 """Changes of at most ten counts needed before a resolution is claimed."""
-MIN_COUNTS_SPANNED = 100
-"""A resolution is a fine grid: the signal spans at least this many counts (a staircase's step is no count)."""
+COMMAND_COUNTS_SPANNED = 100.0
+"""A command's count is a fine grid: the command spans at least this many (a staircase's step is no count)."""
 
 
 def noise_floor(y: FloatArray) -> float:
@@ -61,7 +61,7 @@ def noise_floor(y: FloatArray) -> float:
     return float(MAD_TO_SIGMA * np.median(np.abs(d4 - np.median(d4))) / np.sqrt(70.0))
 
 
-def detect_resolution(y: FloatArray) -> float | None:
+def detect_resolution(y: FloatArray, min_span: float = 0.0) -> float | None:
     """The count a signal is logged in, when every change of it is a whole number of counts.
 
     The smallest changes of a signal in counts are one count; a continuous signal's smallest changes
@@ -70,13 +70,15 @@ def detect_resolution(y: FloatArray) -> float | None:
     90 % of the changes of up to ten counts lie within 0.1 count of a whole number (a calibration
     curve between the counts and the degrees may stretch the count by a few per cent; ten counts
     keep that inside the tolerance) and there are at least 20 of them; a signal that mostly rests
-    and jumps (a square wave) has its changes of up to 1000 counts tested instead. A count is a fine
-    grid: the signal must span at least 100 of them (a staircase's step is not a resolution).
+    and jumps (a square wave) has its changes of up to 1000 counts tested instead.
 
     Parameters
     ----------
     y : numpy.ndarray
         The signal as logged.
+    min_span : float
+        How many counts the signal must span: 0 for an output (a still one toggling a single count is
+        logged in counts all the same), 100 for a command, whose staircase's step is no count.
 
     Returns
     -------
@@ -94,7 +96,7 @@ def detect_resolution(y: FloatArray) -> float | None:
     span = float(np.ptp(y))
     for q in sorted({float(np.min(nz)), float(np.percentile(nz, 1.0))}):
         count = _whole_counts(nz, q)
-        if count is not None and span >= MIN_COUNTS_SPANNED * count:
+        if count is not None and span >= min_span * count:
             return count
     return None
 

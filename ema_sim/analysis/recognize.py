@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from ema_sim.analysis import series
 from ema_sim.analysis.moves import find_moves
-from ema_sim.analysis.noise import detect_resolution
+from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
 from ema_sim.analysis.registry import EDGE_READERS, HELD_READERS, MOVE_READERS, MOVING_READERS
 from ema_sim.analysis.segments import (
     EdgeRun,
@@ -109,7 +109,7 @@ def edge_threshold(u: FloatArray) -> tuple[float, float]:
         The hold tolerance and the edge threshold, deg.
     """
     tol = series.hold_tolerance(u)
-    counts = detect_resolution(u) or 0.0
+    counts = detect_resolution(u, COMMAND_COUNTS_SPANNED) or 0.0
     scale = max(1.0, float(np.max(np.abs(u)))) if u.size else 1.0
     return tol, max(2.0 * series.HOLD_BAND * tol, 3.0 * counts, 1e-6 * scale)
 
@@ -152,7 +152,7 @@ def _move_segments(t: FloatArray, u: FloatArray, tol: float, min_jump: float, cl
     out = []
     short_holds = series.holds(u, max(2, round(MIN_EDGE_HOLD_S / dt)), tol)
     for run in find_moves(t, u, short_holds, min_jump=min_jump, max_gap=round(MAX_STEP_S / dt) + 1,
-                          counts=detect_resolution(u) or 0.0, tol=tol):
+                          counts=detect_resolution(u, COMMAND_COUNTS_SPANNED) or 0.0, tol=tol):
         start, stop = run[0].before.start, run[-1].after.stop
         if claimed[start:stop].any():
             continue
@@ -177,12 +177,14 @@ def _moving_segments(t: FloatArray, u: FloatArray, tol: float, held: NDArray[np.
             merged.append((a, b))
     out = []
     for lo, hi in merged:
-        # Leading and trailing samples where the command sits still belong to no test.
+        # Leading and trailing samples where the command has not yet left (or has come back to) the level it
+        # starts (ends) at belong to no test; a slow start that creeps away a count at a time is moving.
         a, b = lo, hi
         before = max(lo - 1, 0)
-        changes = np.flatnonzero(np.abs(np.diff(u[before:hi])) > tol)
-        if changes.size:
-            a, b = before + int(changes[0]) + 1, before + int(changes[-1]) + 2
+        left = np.flatnonzero(np.abs(u[before:hi] - u[before]) > tol)
+        back = np.flatnonzero(np.abs(u[before:hi] - u[hi - 1]) > tol)
+        if left.size and back.size:
+            a, b = before + max(int(left[0]) - 1, 0) + 1, before + int(back[-1]) + 2
         if (b - a) * dt < MIN_MOVING_S:
             continue
         r = _read(MOVING_READERS, MovingStretch(t[a:b], u[a:b]))
@@ -253,7 +255,7 @@ def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver 
     inside = [seg for seg in segments if seg.kind in MOVING_KINDS and seg.start < b and seg.stop > a]
     agreeing = [seg for seg in inside if seg.kind == kind or (seg.kind, kind) in COMPATIBLE]
     covered = sum(min(seg.stop, b) - max(seg.start, a) for seg in agreeing)
-    if not agreeing or len(agreeing) < len(inside) or covered >= 0.99 * (b - a):
+    if not agreeing or len(agreeing) < len(inside) or covered >= (b - a) - 1:
         return segments
     seen = ", ".join(f"{seg.kind} {t[seg.start]:.3g}–{t[seg.stop - 1]:.3g} s" for seg in agreeing)
     window = Segment(agreeing[0].kind, a, b, f"signal: {seen}; widened to the metadata's {maneuver.kind} window "

@@ -407,11 +407,19 @@ def fit_step(time_s: FloatArray, command_deg: FloatArray, output: FloatArray, *,
     quality, note = assess({"wn_rad_s": theta[0], "zeta": theta[1], "delay_s": theta[2]},
                            {"wn_rad_s": sig[0], "zeta": sig[1], "delay_s": sig[2]}, best.active_mask,
                            (lo_phys, hi_phys), nyquist)
+    rms = float(np.sqrt(np.mean(r * r)))
+    if not sampled and theta[2] <= 1e-9 * max_delay:
+        # On the 0 bound: what the record says when the command may have changed up to a sample early.
+        early = fit_step(time_s, command_deg, output, test=test, output_name=output_name, wn0=theta[0],
+                         zeta0=theta[1], delay0=0.0, sampled=True)
+        note += (f"; with the command allowed to have changed up to a sample before it was logged (sampled, "
+                 f"not held) the fit gives a delay of {1e3 * early.delay_s.value:.2f} ms and RMS {early.rms:.3g} "
+                 f"(against {rms:.3g}): rerun with --command sampled if the rig samples its demand")
     return SecondOrderFit(
         test=test, method="time-domain least squares on the step", output=output_name,
         wn_rad_s=_estimate(values, sig, sig_w, 0), zeta=_estimate(values, sig, sig_w, 1),
         delay_s=_estimate(values, sig, sig_w, 2), gain=_estimate(values, sig, sig_w, 3),
-        bias_deg=_estimate(values, sig, sig_w, 4), rms=float(np.sqrt(np.mean(r * r))), rms_unit="deg",
+        bias_deg=_estimate(values, sig, sig_w, 4), rms=rms, rms_unit="deg",
         points=int(u.size), start_s=float(time_s[0]), end_s=float(time_s[-1]),
         residual_whiteness=whiteness(r, fitted_params=5), hand=hand, quality=quality, quality_note=note,
         command_sampled=sampled, sample_s=dt,
