@@ -103,7 +103,8 @@ def bandwidth_hz(name: str = "hoac1", channel: str = "left_wing", amp_deg: float
 def _unpowered_static(name: str, channel: str, forces_lbf: list[float]) -> tuple[np.ndarray, np.ndarray, Any]:
     """Brake on (unpowered): slowly applied loads; LVDT (output against the housing) and surface, in."""
     model = _model(name, channel, n=len(forces_lbf))
-    model.set_power(False)
+    powered: Any = model  # the high-order models have a power switch; the base interface does not
+    powered.set_power(False)
     model.trim(0.0, 0.0)
     arm = model.channel.crank_arm_in
     t = _frames(1.2)

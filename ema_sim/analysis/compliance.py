@@ -54,7 +54,8 @@ class ThreeSegment:
     def __call__(self, force_lb: FloatArray) -> FloatArray:
         """Deflection at ``force_lb``."""
         f = np.asarray(force_lb, dtype=float)
-        return self.offset_deg + np.sign(f) * (_basis(np.abs(f), self.knots_lb) @ np.array(self.slopes_deg_per_lb))
+        return np.asarray(self.offset_deg + np.sign(f) * (_basis(np.abs(f), self.knots_lb)
+                                                          @ np.array(self.slopes_deg_per_lb)), dtype=float)
 
     def stiffness_lb_per_in(self, crank_arm_in: float) -> list[float | None]:
         """Each segment as a stiffness at the actuator: force over ball-screw deflection (arc at the crank)."""
@@ -175,8 +176,11 @@ def _curve(name: str, load: FloatArray, defl: FloatArray, direction: NDArray[np.
             fits.append(mean)
             slopes = np.array([f.slopes_deg_per_lb for f in fits])
             offs = np.array([f.offset_deg for f in fits])
-            upper = ThreeSegment(mean.knots_lb, tuple(map(float, slopes.max(axis=0))), float(offs.max()), mean.rms_deg)
-            lower = ThreeSegment(mean.knots_lb, tuple(map(float, slopes.min(axis=0))), float(offs.min()), mean.rms_deg)
+            hi_s, lo_s = slopes.max(axis=0), slopes.min(axis=0)
+            upper = ThreeSegment(mean.knots_lb, (float(hi_s[0]), float(hi_s[1]), float(hi_s[2])), float(offs.max()),
+                                 mean.rms_deg)
+            lower = ThreeSegment(mean.knots_lb, (float(lo_s[0]), float(lo_s[1]), float(lo_s[2])), float(offs.min()),
+                                 mean.rms_deg)
     return ComplianceCurve(name, load, defl, direction, slope, gap, float(hi - lo), bis_load, bis_defl,
                            mean, upper, lower, crank_in)
 

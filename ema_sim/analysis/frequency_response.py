@@ -95,7 +95,7 @@ class FrequencyResponse:
 def zoh_factor(freq_hz: FloatArray, fs: float) -> ComplexArray:
     """What holding the command between samples does to a sampled response: sinc(f/fs)·e^(−jπf/fs)."""
     x = np.asarray(freq_hz, dtype=float) / fs
-    return np.sinc(x) * np.exp(-1j * np.pi * x)
+    return np.asarray(np.sinc(x) * np.exp(-1j * np.pi * x), dtype=complex)
 
 
 def excitation_band(u: FloatArray, fs: float, floor_db: float = 30.0) -> tuple[float, float]:

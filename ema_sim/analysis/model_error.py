@@ -17,7 +17,7 @@ TABLE6_MANEUVER = "steps:amps_deg=1/20/0.5,lead_s=0.5,hold_s=1.5"
 TABLE6_CANDIDATES: tuple[tuple[str, float], ...] = (
     ("loadf", 200.0), ("loada", 200.0), ("loada", 400.0), ("loada", 800.0), ("loada", 1000.0), ("loada", 2000.0),
 )
-TABLE6_OVERRIDES: dict[str, float] = {"delay_s": 0.0}
+TABLE6_OVERRIDES: dict[str, Any] = {"delay_s": 0.0}
 """The delay is exact in LOAC but falls on a step of each discrete model; leaving it out isolates the
 integrators, which is what table 6 compares."""
 
@@ -77,7 +77,7 @@ def table6(channel: str = "left_wing") -> list[ErrorRow]:
 FIGURE40_MANEUVER = "steps:amps_deg=0.5/1/2,lead_s=0.5,hold_s=1.0"
 """Figure 40's input: small steps (0.5°, 1°, 2°), where section 4.2.6 judged HOAD2 against HOAC1."""
 FIGURE40_RATES_HZ: tuple[float, ...] = (10_000.0, 20_000.0, 50_000.0, 100_000.0)
-FIGURE40_OVERRIDES: dict[str, float] = {
+FIGURE40_OVERRIDES: dict[str, Any] = {
     "command_delay_s": 0.0, "feedback_delay_s": 0.0, "quantization_v": 0.0, "noise": 0.0,
 }
 """HOAD2's flight/test elements (delay, quantization, noise) are not in HOAC1: left out, the comparison

@@ -114,14 +114,24 @@ def edge_threshold(u: FloatArray) -> tuple[float, float]:
     return tol, max(2.0 * series.HOLD_BAND * tol, 3.0 * counts, 1e-6 * scale)
 
 
-def _spec(data: MeasuredData, key: str) -> tuple[Maneuver | Load | None, str | None]:
-    text = data.metadata.get(key)
+def _maneuver(data: MeasuredData) -> tuple[Maneuver | None, str | None]:
+    text = data.metadata.get("maneuver")
     if not text:
         return None, None
     try:
-        return (parse_maneuver(text) if key == "maneuver" else parse_load(text)), None
+        return parse_maneuver(text), None
     except EmaError as exc:
-        return None, f"metadata {key} {text!r} not understood ({exc})"
+        return None, f"metadata maneuver {text!r} not understood ({exc})"
+
+
+def _load(data: MeasuredData) -> tuple[Load | None, str | None]:
+    text = data.metadata.get("load")
+    if not text:
+        return None, None
+    try:
+        return parse_load(text), None
+    except EmaError as exc:
+        return None, f"metadata load {text!r} not understood ({exc})"
 
 
 def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -208,8 +218,8 @@ def recognize(data: MeasuredData) -> Recognition:
     t, u = data.time_s, data.command_deg
     dt = float(np.median(np.diff(t)))
     notes: list[str] = []
-    maneuver, note_m = _spec(data, "maneuver")
-    load, note_l = _spec(data, "load")
+    maneuver, note_m = _maneuver(data)
+    load, note_l = _load(data)
     notes += [n for n in (note_m, note_l) if n]
     tol, min_jump = edge_threshold(u)
     claimed = np.zeros(u.size, dtype=bool)
@@ -242,12 +252,13 @@ def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver 
     inside the spec's window but short of it, the segment takes the whole window.
     A contradicted reading is left alone for the reconciliation to report.
     """
-    if maneuver is None or not hasattr(maneuver, "lead_s"):
+    lead = getattr(maneuver, "lead_s", None)
+    if maneuver is None or lead is None:
         return segments
     kind = MANEUVER_KINDS.get(maneuver.kind, maneuver.kind)
     if kind not in MOVING_KINDS:
         return segments
-    start_s, stop_s = float(maneuver.lead_s), float(maneuver.duration_s)  # type: ignore[attr-defined]
+    start_s, stop_s = float(lead), float(maneuver.duration_s)
     a = int(np.searchsorted(t, t[0] + start_s, side="left"))
     b = min(int(np.searchsorted(t, t[0] + stop_s, side="right")), t.size)
     if b - a < 2 or t[b - 1] - t[a] < MIN_MOVING_S:
@@ -274,7 +285,7 @@ def _expected(maneuver: Maneuver | None) -> list[str]:
 def _spec_params(maneuver: Maneuver, kind: str) -> dict[str, float]:
     parts: list[Maneuver] = [maneuver]
     if maneuver.kind == "pid":
-        parts = [m for _, m in maneuver._parts]
+        parts = [m for _, m in getattr(maneuver, "_parts", ())]
     out: dict[str, float] = {}
     for m in parts:
         mk = MANEUVER_KINDS.get(m.kind, m.kind)

@@ -209,10 +209,11 @@ def simulate(u: FloatArray, dt: float, wn: float, zeta: float, delay_s: float) -
     b, a = discrete_second_order(wn, zeta, delay_s, dt)
     zi = lfilter_zi(b, a) * u[0]
     y, _ = lfilter(b, a, u, zi=zi)
-    return y
+    return np.asarray(y, dtype=float)
 
 
-def response(freq_hz: FloatArray, wn: float, zeta: float, delay_s: float = 0.0, gain: float = 1.0) -> NDArray:
+def response(freq_hz: FloatArray, wn: float, zeta: float, delay_s: float = 0.0,
+             gain: float = 1.0) -> NDArray[np.complex128]:
     """``K·ωn²/(s² + 2ζωn·s + ωn²)·e^(−sτ)`` at ``s = j2πf``."""
     s = 2j * np.pi * np.asarray(freq_hz, dtype=float)
     return gain * wn * wn / (s * s + 2.0 * zeta * wn * s + wn * wn) * np.exp(-s * delay_s)

@@ -147,7 +147,7 @@ def hold_tolerance(x: FloatArray) -> float:
     if both.sum() < 10:
         return first
     d2 = np.abs(np.diff(x, 2))[both]
-    return max(floor, 5.0 * 1.4826 * float(np.median(d2)) / np.sqrt(6.0))
+    return float(max(floor, 5.0 * 1.4826 * float(np.median(d2)) / np.sqrt(6.0)))
 
 
 HOLD_BAND = 3.0
@@ -257,7 +257,7 @@ def moving_average(y: FloatArray, n: int) -> FloatArray:
     idx = np.arange(y.size)
     lo = np.clip(idx - half, 0, y.size)
     hi = np.clip(idx - half + n, 0, y.size)
-    return (c[hi] - c[lo]) / (hi - lo)
+    return np.asarray((c[hi] - c[lo]) / (hi - lo), dtype=float)
 
 
 def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
@@ -266,8 +266,8 @@ def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
 
     n = max(3, round(window_s / dt) | 1)
     if y.size < n:
-        return np.gradient(y, dt)
-    return savgol_filter(y, n, 2, deriv=1, delta=dt)
+        return np.asarray(np.gradient(y, dt), dtype=float)
+    return np.asarray(savgol_filter(y, n, 2, deriv=1, delta=dt), dtype=float)
 
 
 def extrema(x: FloatArray) -> NDArray[np.int64]:

@@ -83,7 +83,7 @@ def welch(x: FloatArray, ys: FloatArray, fs: float, window_s: float, overlap: fl
     gxx[0] *= 0.5
     gyy[:, 0] *= 0.5
     gxy[:, 0] *= 0.5
-    freq = np.fft.rfftfreq(nperseg, 1.0 / fs)
+    freq = np.asarray(np.fft.rfftfreq(nperseg, 1.0 / fs), dtype=float)
     return CrossSpectra(freq, gxx, gyy, gxy, effective_averages(n_seg, nperseg, step), nperseg / fs)
 
 
@@ -104,7 +104,7 @@ def coherence(gxx: FloatArray, gyy: FloatArray, gxy: ComplexArray) -> FloatArray
 def random_error(coh: FloatArray, averages: FloatArray | float) -> FloatArray:
     """Normalised random error of a frequency-response estimate: √(1−γ²) / (|γ|·√(2ν))."""
     g = np.clip(coh, 1e-6, MAX_COHERENCE)
-    return np.sqrt(1.0 - g) / (np.sqrt(g) * np.sqrt(2.0 * np.asarray(averages, dtype=float)))
+    return np.asarray(np.sqrt(1.0 - g) / (np.sqrt(g) * np.sqrt(2.0 * np.asarray(averages, dtype=float))), dtype=float)
 
 
 def _on_grid(sp: CrossSpectra, grid: FloatArray) -> tuple[FloatArray, FloatArray, ComplexArray, FloatArray]:
@@ -180,7 +180,7 @@ def composite(x: FloatArray, ys: FloatArray, fs: float, grid: FloatArray,
             sxy[i] += w * gxy[i]
             snu[i] = np.maximum(snu[i], np.where(valid, nu, 0.0))
     safe = np.where(sw > 0, sw, 1.0)
-    return CompositeSpectra(grid, sxx / safe, syy / safe, sxy / safe, snu, tuple(windows_s))
+    return CompositeSpectra(grid, sxx / safe, syy / safe, np.asarray(sxy / safe, dtype=complex), snu, tuple(windows_s))
 
 
 def dft_at(x: FloatArray, fs: float, f0_hz: float, df_hz: float, m: int) -> ComplexArray:
@@ -189,4 +189,4 @@ def dft_at(x: FloatArray, fs: float, f0_hz: float, df_hz: float, m: int) -> Comp
 
     w = np.exp(-2j * np.pi * df_hz / fs)
     a = np.exp(2j * np.pi * f0_hz / fs)
-    return czt(np.asarray(x, dtype=float), m, w, a)
+    return np.asarray(czt(np.asarray(x, dtype=float), m, w, a), dtype=complex)

@@ -88,7 +88,7 @@ def first_motion(t: FloatArray, y: FloatArray, edge: int, y0: float, amplitude: 
     def model(p: FloatArray) -> FloatArray:
         t0, c, d, e = p
         s = np.maximum(fit_t - t0, 0.0)
-        return c * s * s * (1.0 - d * s + e * s * s)
+        return np.asarray(c * s * s * (1.0 - d * s + e * s * s), dtype=float)
 
     def resid(p: FloatArray) -> FloatArray:
         return model(p) - fit_z

@@ -56,7 +56,7 @@ def _middle(jac: FloatArray, residual: FloatArray) -> FloatArray:
     if nfft % 2 == 0:
         weight[-1] = 1.0
     m = (np.conj(jf) * (w * weight[:, None])).T @ jf
-    return np.real(m) / (n * nfft)
+    return np.asarray(np.real(m) / (n * nfft), dtype=float)
 
 
 def coloured_covariance(jac: FloatArray, residual: FloatArray | Sequence[FloatArray],

@@ -499,7 +499,9 @@ def _scaling(meta: Mapping[str, str], channel: str) -> ct.Scaling:
         return ct.scaling(channel)
     try:
         doc = json.loads(text)
-        return ct.Scaling(channel, tuple(map(float, doc["command_cal_v"])), tuple(map(float, doc["feedback_cal_deg"])))
+        c0, c1, c2, c3 = (float(x) for x in doc["command_cal_v"])
+        f0, f1, f2, f3 = (float(x) for x in doc["feedback_cal_deg"])
+        return ct.Scaling(channel, (c0, c1, c2, c3), (f0, f1, f2, f3))
     except (ValueError, KeyError, TypeError):
         raise DataError(f"calibration.{channel}: malformed calibration in the bag's metadata") from None
 
@@ -641,14 +643,19 @@ def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac"
     t0 = int(t[0])
     meta = {**meta, "source": "rosbag2", "side": side, "channel": channel,
             "bag_complete": str(src.complete).lower(), "start_stamp_s": f"{t0 * 1e-9:.9f}"}
+    cols = _optional_columns(src, channel, stamps, fb_topic)
     return MeasuredData(
-        time_s=(t - t0) * 1e-9,
+        time_s=np.asarray((t - t0) * 1e-9, dtype=float),
         command_deg=np.array([sc.command_v_to_deg(v) for v in cv]),
         position_deg=np.array([sc.feedback_v_to_deg(v) for v in pv]),
+        surface_deg=cols["surface_deg"],
+        hinge_moment_inlb=cols["hinge_moment_inlb"],
+        current_a=cols["current_a"],
         command_v=cv,
         position_v=pv,
         metadata=meta,
         source=str(src.path),
+        bus_v=cols["bus_v"],
+        rate_dps=cols["rate_dps"],
         extra=_other_side(src, channel, stamps, side, sc),
-        **_optional_columns(src, channel, stamps, fb_topic),
     )

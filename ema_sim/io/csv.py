@@ -81,7 +81,7 @@ class MeasuredData:
         value = getattr(self, name, None)
         if value is None:
             raise DataError(f"{self.source or 'data'}: no column {name!r}")
-        return value
+        return np.asarray(value, dtype=float)
 
     @property
     def sample_hz(self) -> float:
