@@ -43,7 +43,37 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Calibration:
-    """The command error found on one staircase."""
+    """The command error found on one staircase.
+
+    Parameters
+    ----------
+    levels : dict
+        Settled value of each recorded column at each held level, in staircase order.
+    direct : CommandError
+        Kb and offset of the line through settled output minus command.
+    direct_sigma : tuple
+        Standard errors of that Kb and offset.
+    direct_reference : str
+        The output the direct line is measured on.
+    command_curve : Cubic or None
+        Third-order command curve, degrees → volts.
+    command_curve_rms_v : float or None
+        RMS of its fit, V.
+    feedback_curve : Cubic or None
+        Third-order feedback curve, volts → degrees.
+    feedback_curve_rms_deg : float or None
+        RMS of its fit, deg.
+    feedback_reference : str or None
+        The output the feedback curve is fitted against.
+    curve_error : CommandError or None
+        Kb and offset from the two curves (section 3.1.2.2).
+    nominal_deg : numpy.ndarray
+        Nominal angles the bounds are given at, deg.
+    bounds_deg : tuple
+        Four-corner lower and upper bounds at those angles, deg.
+    notes : list
+        What could not be computed, and why.
+    """
 
     levels: dict[str, list[float]]
     """Settled value of each recorded column at each held level, in staircase order."""
@@ -66,7 +96,13 @@ class Calibration:
         return self.curve_error or self.direct
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         def curve(c: Cubic | None) -> list[float] | None:
             return c.coefficients() if c else None
 
@@ -97,7 +133,20 @@ def _rms(x: FloatArray) -> float:
 
 
 def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
-    """Command error of a staircase whose held levels are ``holds`` (see the module docstring)."""
+    """Command error of a staircase whose held levels are ``holds`` (see the module docstring).
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    holds : list
+        The held levels, in order.
+
+    Returns
+    -------
+    Calibration
+        The command error, both ways.
+    """
     notes: list[str] = []
     cols = [c for c in ("command_deg", "command_v", "position_v", "position_deg", "surface_deg")
             if getattr(data, c) is not None]
@@ -141,7 +190,22 @@ def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
 
 
 def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> dict[str, Any]:
-    """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1)."""
+    """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1).
+
+    Parameters
+    ----------
+    errors : list
+        The calibrations' command errors.
+    lo_deg : float
+        Lowest nominal angle, deg.
+    hi_deg : float
+        Highest nominal angle, deg.
+
+    Returns
+    -------
+    dict
+        Calibrations pooled, largest |Kb| and |offset|, and the bounds over the nominal angles.
+    """
     nominal = np.linspace(lo_deg, hi_deg, 81)
     lo, hi = four_corner_bounds(errors, nominal)
     return {"calibrations": len(errors), "kb_max_abs": max(abs(e.kb) for e in errors),

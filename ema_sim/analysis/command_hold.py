@@ -49,7 +49,25 @@ HoldMode = Literal["detect", "held", "sampled"]
 
 @dataclass(frozen=True)
 class CommandHold:
-    """How the command was logged, and the evidence."""
+    """How the command was logged, and the evidence.
+
+    Parameters
+    ----------
+    sampled : bool or None
+        True: sampled from a running demand; False: held (the contract); None: the record cannot tell.
+    onsets : int
+        Step-like command changes from rest examined.
+    same_sample : int
+        Onsets at which the output had already moved at the onset sample.
+    chance_rate : float
+        Share of resting samples that move as far by chance.
+    sample_s : float
+        The record's sample interval, s.
+    evidence : str
+        The finding in words.
+    source : str
+        ``detected`` from the signals, or ``given`` by the user.
+    """
 
     sampled: bool | None
     """True: sampled from a running demand; False: held (the contract); None: the record cannot tell."""

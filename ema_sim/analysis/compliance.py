@@ -44,7 +44,19 @@ KNOT_CANDIDATES = 40
 
 @dataclass(frozen=True)
 class ThreeSegment:
-    """``δ = offset + sign(F)·g(|F|)``, ``g`` with slopes ``s`` (deg/lb) between knots (lb)."""
+    """``δ = offset + sign(F)·g(|F|)``, ``g`` with slopes ``s`` (deg/lb) between knots (lb).
+
+    Parameters
+    ----------
+    knots_lb : tuple
+        The two knots, lb.
+    slopes_deg_per_lb : tuple
+        Slope of each segment, deg/lb.
+    offset_deg : float
+        Deflection at zero force, deg.
+    rms_deg : float
+        RMS of the fit, deg.
+    """
 
     knots_lb: tuple[float, float]
     slopes_deg_per_lb: tuple[float, float, float]
@@ -58,11 +70,33 @@ class ThreeSegment:
                                                           @ np.array(self.slopes_deg_per_lb)), dtype=float)
 
     def stiffness_lb_per_in(self, crank_arm_in: float) -> list[float | None]:
-        """Each segment as a stiffness at the actuator: force over ball-screw deflection (arc at the crank)."""
+        """Each segment as a stiffness at the actuator: force over ball-screw deflection (arc at the crank).
+
+        Parameters
+        ----------
+        crank_arm_in : float
+            Crank arm, in.
+
+        Returns
+        -------
+        list
+            Each segment's stiffness, lbf/in (None for a segment without slope).
+        """
         return [1.0 / (s * np.pi / 180.0 * crank_arm_in) if s > 0 else None for s in self.slopes_deg_per_lb]
 
     def as_dict(self, crank_arm_in: float | None = None) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Parameters
+        ----------
+        crank_arm_in : float or None
+            Crank arm, in.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         out: dict[str, Any] = {"knots_lb": list(self.knots_lb), "slopes_deg_per_lb": list(self.slopes_deg_per_lb),
                                "offset_deg": self.offset_deg, "rms_deg": self.rms_deg}
         if crank_arm_in:
@@ -83,7 +117,20 @@ def _fit_segments(force: FloatArray, defl: FloatArray, knots: tuple[float, float
 
 
 def fit_three_segments(force: FloatArray, defl: FloatArray) -> ThreeSegment | None:
-    """Best three-segment model over a grid of knot pairs (None with fewer than 4 load magnitudes)."""
+    """Best three-segment model over a grid of knot pairs (None with fewer than 4 load magnitudes).
+
+    Parameters
+    ----------
+    force : numpy.ndarray
+        Force at the crank arm, lb.
+    defl : numpy.ndarray
+        Deflection, deg.
+
+    Returns
+    -------
+    ThreeSegment or None
+        The best model, or None.
+    """
     mags = np.unique(np.round(np.abs(force), 6))
     mags = mags[mags > 0]
     if mags.size < 3:
@@ -106,7 +153,37 @@ def fit_three_segments(force: FloatArray, defl: FloatArray) -> ThreeSegment | No
 
 @dataclass(frozen=True)
 class ComplianceCurve:
-    """Deflection against hinge moment at each load level, and its fits."""
+    """Deflection against hinge moment at each load level, and its fits.
+
+    Parameters
+    ----------
+    name : str
+        ``lvdt`` or ``total``.
+    load_inlb : numpy.ndarray
+        Settled hinge moment of each level, in·lb.
+    deflection_deg : numpy.ndarray
+        Deflection at each level from the first zero-load level, deg.
+    direction : numpy.ndarray
+        Loading direction at each level (+1 rising, −1 falling).
+    slope_deg_per_kinlb : float or None
+        Linear compliance, deg per 1000 in·lb.
+    gap_deg : float or None
+        Gap between the positive- and negative-load lines at zero load, deg.
+    span_deg : float
+        Deflection from −max to +max load, deg.
+    bisector_load_inlb : numpy.ndarray
+        Load levels of the bisector, in·lb.
+    bisector_deg : numpy.ndarray
+        Bisector of the loading and unloading branches, deg.
+    mean : ThreeSegment or None
+        Three-segment fit to the bisector.
+    upper : ThreeSegment or None
+        Upper three-segment bound.
+    lower : ThreeSegment or None
+        Lower three-segment bound.
+    crank_arm_in : float
+        Crank arm, in.
+    """
 
     name: str
     load_inlb: FloatArray
@@ -123,7 +200,13 @@ class ComplianceCurve:
     crank_arm_in: float
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {
             "load_inlb": self.load_inlb.tolist(), "deflection_deg": self.deflection_deg.tolist(),
             "loading_direction": self.direction.tolist(),
@@ -187,7 +270,21 @@ def _curve(name: str, load: FloatArray, defl: FloatArray, direction: NDArray[np.
 
 @dataclass(frozen=True)
 class ComplianceResult:
-    """LVDT and total compliance of one load staircase."""
+    """LVDT and total compliance of one load staircase.
+
+    Parameters
+    ----------
+    command_deg : float
+        Commanded level, deg.
+    crank_arm_in : float
+        Crank arm, in.
+    lvdt : ComplianceCurve or None
+        Compliance curve of the LVDT (inside the servo loop).
+    total : ComplianceCurve or None
+        Compliance curve of the surface (total).
+    notes : list
+        What could not be computed, and why.
+    """
 
     command_deg: float
     crank_arm_in: float
@@ -211,7 +308,13 @@ class ComplianceResult:
         return 1.0 - self.lvdt.span_deg / self.total.span_deg
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {
             "command_deg": self.command_deg, "crank_arm_in": self.crank_arm_in,
             "lvdt": self.lvdt.as_dict() if self.lvdt else None, "total": self.total.as_dict() if self.total else None,
@@ -221,7 +324,20 @@ class ComplianceResult:
 
 
 def load_levels(hinge_moment: FloatArray, holds: list[Hold]) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Settled load of each hold and its loading direction (+1 rising, −1 falling)."""
+    """Settled load of each hold and its loading direction (+1 rising, −1 falling).
+
+    Parameters
+    ----------
+    hinge_moment : numpy.ndarray
+        Hinge moment, in·lb.
+    holds : list
+        The held levels, in order.
+
+    Returns
+    -------
+    tuple
+        Settled load of each hold, in·lb, and its loading direction.
+    """
     load = np.array([settled(hinge_moment, h.start, h.stop, 0.5)[0] for h in holds])
     d = np.sign(np.diff(load)).astype(np.int64)
     direction = np.concatenate([[d[0] if d.size else 0], d])
@@ -230,7 +346,28 @@ def load_levels(hinge_moment: FloatArray, holds: list[Hold]) -> tuple[FloatArray
 
 def analyze_compliance(position: FloatArray | None, surface: FloatArray | None, hinge_moment: FloatArray,
                        holds: list[Hold], command_deg: float, crank_arm_in: float) -> ComplianceResult:
-    """Compliance curves and fits of a load staircase whose held levels are ``holds``."""
+    """Compliance curves and fits of a load staircase whose held levels are ``holds``.
+
+    Parameters
+    ----------
+    position : numpy.ndarray or None
+        LVDT position, deg (None: not recorded).
+    surface : numpy.ndarray or None
+        External surface angle, deg (None: not recorded).
+    hinge_moment : numpy.ndarray
+        Hinge moment, in·lb.
+    holds : list
+        The held levels, in order.
+    command_deg : float
+        Commanded level, deg.
+    crank_arm_in : float
+        Crank arm, in.
+
+    Returns
+    -------
+    ComplianceResult
+        Both curves and their fits.
+    """
     notes: list[str] = []
     load, direction = load_levels(hinge_moment, holds)
     ref = int(np.argmin(np.abs(load)))

@@ -55,7 +55,43 @@ KEEP_UP = 0.95
 
 @dataclass(frozen=True)
 class CrosstalkResult:
-    """Noise on the observed channel and how it compares with the threshold."""
+    """Noise on the observed channel and how it compares with the threshold.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    kind : str
+        ``static (command held)`` or ``dynamic (command moving)``.
+    peak_to_peak_deg : float
+        Peak to peak of the residual, deg.
+    rms_deg : float
+        Its RMS, deg.
+    excess_rms_deg : float
+        RMS above the sensor noise, deg.
+    sensor_noise_deg : float
+        The output's noise floor, deg.
+    dominant_hz : float or None
+        Frequency of the residual's largest spectral peak, Hz.
+    volts_per_deg : float
+        Feedback volts per degree.
+    threshold_deg : float
+        The threshold it is judged against, deg.
+    threshold_source : str
+        Where the threshold comes from.
+    residual : numpy.ndarray
+        What the command does not explain, deg.
+    notes : list
+        How the tracking was taken out.
+    independence : IndependenceTest or None
+        The residual against the command (moving command only).
+    rates_dps : tuple[float, float] or None
+        Command's and output's median rate on the ramps (moving command only).
+    start : int
+        First sample of the segment.
+    stop : int
+        One past the last sample.
+    """
 
     output: str
     kind: str

@@ -45,7 +45,37 @@ MIN_PP_DEG = 1e-4
 
 @dataclass(frozen=True)
 class DitherResult:
-    """Outcome of the limit-cycle search on one held stretch."""
+    """Outcome of the limit-cycle search on one held stretch.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    start_s : float
+        Start of the held stretch, s.
+    end_s : float
+        End of the held stretch, s.
+    detected : bool
+        Whether a limit cycle was found.
+    peak_hz : float
+        Frequency of the largest spectral peak in the band, Hz.
+    peak_db_above_floor : float
+        That peak above the band's median level, dB.
+    freq_hz : float or None
+        Refined frequency of the limit cycle, Hz.
+    peak_to_peak_deg : float or None
+        Peak to peak of the synchronous average, deg.
+    fundamental_amplitude_deg : float or None
+        Amplitude of the cycle's fundamental, deg.
+    waveform_deg : numpy.ndarray or None
+        The synchronous average over one period, deg.
+    reason : str
+        Why there is no limit cycle.
+    local_db : float or None
+        The largest peak above the spectrum an octave either side of it, dB.
+    resolution_deg : float or None
+        The output's count, deg.
+    """
 
     output: str
     start_s: float

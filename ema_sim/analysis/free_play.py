@@ -35,7 +35,19 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Reversal:
-    """One load reversal: the raw jump of surface minus LVDT, elastic part included."""
+    """One load reversal: the raw jump of surface minus LVDT, elastic part included.
+
+    Parameters
+    ----------
+    time_s : float
+        Time of the reversal, s.
+    load_from_inlb : float
+        Settled load before, in·lb.
+    load_to_inlb : float
+        Settled load after, in·lb.
+    jump_deg : float
+        Jump of surface minus LVDT, deg.
+    """
 
     time_s: float
     load_from_inlb: float
@@ -56,7 +68,33 @@ class Reversal:
 
 @dataclass(frozen=True)
 class FreePlayResult:
-    """Free-play width from load reversals."""
+    """Free-play width from load reversals.
+
+    Parameters
+    ----------
+    method : str
+        How the width was measured.
+    width_deg : float
+        Median width, deg.
+    spread_deg : float
+        Standard deviation over the reversals, deg.
+    reversals : list
+        Every reversal.
+    compliance_deg_per_kinlb : float or None
+        Compliance taken out of the jumps, deg per 1000 in·lb.
+    compliance_source : str or None
+        Where that compliance comes from.
+    has_position : bool
+        Whether the LVDT was taken out.
+    notes : list
+        What was and was not taken out.
+    start : int
+        First sample.
+    stop : int
+        Samples of the load-reversal segment.
+    resolution_deg : float or None
+        The surface sensor's count.
+    """
 
     method: str
     width_deg: float

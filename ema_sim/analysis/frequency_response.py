@@ -63,7 +63,27 @@ COHERENCE_FIT = 0.6
 
 @dataclass(frozen=True)
 class FrequencyResponse:
-    """Command-to-``output`` response on ``freq_hz``."""
+    """Command-to-``output`` response on ``freq_hz``.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    method : str
+        How it was estimated.
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    h : numpy.ndarray
+        The complex response.
+    coherence : numpy.ndarray
+        Coherence at each frequency.
+    random_error : numpy.ndarray
+        Normalised random error at each frequency.
+    start_s : float
+        Start of the data, s.
+    end_s : float
+        End of the data, s.
+    """
 
     output: str
     method: str
@@ -88,18 +108,57 @@ class FrequencyResponse:
         return ph
 
     def good(self, level: float = COHERENCE_FIT) -> NDArray[np.bool_]:
-        """Points whose coherence reaches ``level``."""
+        """Points whose coherence reaches ``level``.
+
+        Parameters
+        ----------
+        level : float
+            Coherence a point needs.
+
+        Returns
+        -------
+        numpy.ndarray
+            True where the coherence reaches the level.
+        """
         return self.coherence >= level
 
 
 def zoh_factor(freq_hz: FloatArray, fs: float) -> ComplexArray:
-    """What holding the command between samples does to a sampled response: sinc(f/fs)·e^(−jπf/fs)."""
+    """What holding the command between samples does to a sampled response: sinc(f/fs)·e^(−jπf/fs).
+
+    Parameters
+    ----------
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    fs : float
+        Sample rate, Hz.
+
+    Returns
+    -------
+    numpy.ndarray
+        The factor at each frequency.
+    """
     x = np.asarray(freq_hz, dtype=float) / fs
     return np.asarray(np.sinc(x) * np.exp(-1j * np.pi * x), dtype=complex)
 
 
 def excitation_band(u: FloatArray, fs: float, floor_db: float = 30.0) -> tuple[float, float]:
-    """Where the command carries power: within ``floor_db`` of its spectral peak (long-window Welch)."""
+    """Where the command carries power: within ``floor_db`` of its spectral peak (long-window Welch).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The command, deg.
+    fs : float
+        Sample rate, Hz.
+    floor_db : float
+        Depth below the spectral peak, dB.
+
+    Returns
+    -------
+    tuple
+        Lowest and highest excited frequency, Hz.
+    """
     sp = spectra.welch(u, u[None, :], fs, min(u.size / fs / 4.0, 20.0))
     f, g = sp.freq_hz[1:], sp.gxx[1:]
     keep = g >= g.max() * 10 ** (-floor_db / 10.0)
@@ -250,7 +309,20 @@ def _interp_log(f: FloatArray, values: FloatArray, at: float) -> float:
 
 
 def low_frequency_gain_db(fr: FrequencyResponse, level: float = COHERENCE_FIT) -> float | None:
-    """Mean gain of the lowest coherent decile of the band: the reference for the −3 dB bandwidth."""
+    """Mean gain of the lowest coherent decile of the band: the reference for the −3 dB bandwidth.
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+        The measured frequency response.
+    level : float
+        Coherence a point needs.
+
+    Returns
+    -------
+    float or None
+        The reference gain, dB (None with fewer than 3 coherent points).
+    """
     good = np.flatnonzero(fr.good(level))
     if good.size < 3:
         return None
@@ -259,7 +331,20 @@ def low_frequency_gain_db(fr: FrequencyResponse, level: float = COHERENCE_FIT) -
 
 
 def bandwidth_3db(fr: FrequencyResponse, level: float = COHERENCE_FIT) -> tuple[float | None, str]:
-    """First frequency where the gain falls 3 dB below its low-frequency value, and a note."""
+    """First frequency where the gain falls 3 dB below its low-frequency value, and a note.
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+        The measured frequency response.
+    level : float
+        Coherence a point needs.
+
+    Returns
+    -------
+    tuple
+        The frequency (None when there is none) and a note.
+    """
     ref = low_frequency_gain_db(fr, level)
     if ref is None:
         return None, "fewer than 3 coherent points: no bandwidth"
@@ -278,7 +363,20 @@ def bandwidth_3db(fr: FrequencyResponse, level: float = COHERENCE_FIT) -> tuple[
 
 
 def at_frequencies(fr: FrequencyResponse, freqs_hz: list[float]) -> list[dict[str, Any]]:
-    """Gain, phase and coherence interpolated (in log frequency) at each chosen frequency."""
+    """Gain, phase and coherence interpolated (in log frequency) at each chosen frequency.
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+        The measured frequency response.
+    freqs_hz : list
+        Frequencies, Hz.
+
+    Returns
+    -------
+    list
+        One row per frequency: gain, phase, coherence, note.
+    """
     out: list[dict[str, Any]] = []
     f = fr.freq_hz
     gain, phase = fr.gain_db, fr.phase_deg
@@ -297,7 +395,20 @@ def at_frequencies(fr: FrequencyResponse, freqs_hz: list[float]) -> list[dict[st
 
 
 def coherence_statement(fr: FrequencyResponse, level: float = COHERENCE_GOOD) -> tuple[float | None, str]:
-    """Where the coherence falls below ``level``: the start of the top run of low coherence, and a sentence."""
+    """Where the coherence falls below ``level``: the start of the top run of low coherence, and a sentence.
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+        The measured frequency response.
+    level : float
+        Coherence a point needs.
+
+    Returns
+    -------
+    tuple
+        Where the top run of low coherence starts (or None) and a sentence.
+    """
     low = fr.coherence < level
     if not low.any():
         return None, f"coherence ≥ {level} from {fr.freq_hz[0]:.3g} to {fr.freq_hz[-1]:.3g} Hz"
@@ -315,7 +426,22 @@ def coherence_statement(fr: FrequencyResponse, level: float = COHERENCE_GOOD) ->
 
 
 def phase_crossing_hz(fr: FrequencyResponse, phase_deg: float = -90.0, level: float = COHERENCE_FIT) -> float | None:
-    """Lowest coherent frequency where the phase crosses ``phase_deg``."""
+    """Lowest coherent frequency where the phase crosses ``phase_deg``.
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+        The measured frequency response.
+    phase_deg : float
+        Phase to cross, deg.
+    level : float
+        Coherence a point needs.
+
+    Returns
+    -------
+    float or None
+        The frequency, Hz, or None.
+    """
     good = fr.good(level)
     f, ph = fr.freq_hz[good], fr.phase_deg[good]
     below = np.flatnonzero(ph <= phase_deg)
@@ -339,7 +465,25 @@ CEILING = 0.9
 
 @dataclass(frozen=True)
 class SlewCheck:
-    """A sweep's command against the actuator's slew rate."""
+    """A sweep's command against the actuator's slew rate.
+
+    Parameters
+    ----------
+    command_amplitude_deg : float
+        The command's amplitude (median over its cycles), deg.
+    command_peak_rate_dps : float
+        The command's peak rate, deg/s.
+    output_rate_ceiling_dps : float or None
+        The highest peak rate of the output's fundamental over the sweep's cycles.
+    measured_slew_dps : float or None
+        The slew the record measured, deg/s.
+    slew_source : str
+        Where it comes from.
+    saturated_from_hz : float or None
+        Where the output's rate reaches its ceiling, when the cycles from there on are clipped.
+    third_harmonic_excess : float or None
+        Mean output-minus-command third harmonic (over fundamental) on the ceiling.
+    """
 
     command_amplitude_deg: float
     command_peak_rate_dps: float
@@ -370,7 +514,23 @@ class SlewCheck:
 
 @dataclass(frozen=True)
 class Cycle:
-    """One command cycle of a sweep: the fundamental and third harmonic of command and output."""
+    """One command cycle of a sweep: the fundamental and third harmonic of command and output.
+
+    Parameters
+    ----------
+    freq_hz : float
+        Frequency, Hz.
+    u1 : complex
+        Command's fundamental (complex amplitude).
+    y1 : complex
+        Output's fundamental.
+    h3_u : float
+        Command's third harmonic over its fundamental.
+    h3_y : float
+        Output's third harmonic over its fundamental.
+    amplitude_deg : float
+        Amplitude, deg.
+    """
 
     freq_hz: float
     u1: complex
@@ -523,6 +683,39 @@ class FrequencyResult:
     and ends there, so every window that sees those frequencies also sees the record's start or end
     (on a noise-free SLOAC sweep 0.2-18 Hz the estimate is 0.5° off at 0.2 Hz and 6° at 18 Hz, under
     0.4° in between).
+
+    Parameters
+    ----------
+    kind : str
+        The segment kind.
+    response : FrequencyResponse
+        The measured response.
+    bandwidth_hz : float or None
+        The −3 dB frequency, Hz.
+    bandwidth_note : str
+        How it was found, or why there is none.
+    at : list
+        Gain, phase and coherence at the chosen frequencies.
+    low_coherence_above_hz : float or None
+        Where the top run of low coherence starts, Hz.
+    coherence_note : str
+        The coherence in a sentence.
+    phase_90_hz : float or None
+        Where the phase crosses −90°, Hz.
+    fit : SecondOrderFit or None
+        The second-order fit.
+    fit_band_hz : tuple
+        The band the fit used, Hz.
+    overlay : FrequencyResponse or None
+        A model simulated on the same command, analysed the same way.
+    overlay_model : str or None
+        That model's name.
+    slew : SlewCheck or None
+        The command against the actuator's slew.
+    bandwidth_quality : Quality
+        The bandwidth's quality (``saturated`` when it is rate saturation).
+    bandwidth_quality_note : str
+        Why.
     """
 
     kind: str

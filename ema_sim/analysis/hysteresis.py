@@ -43,13 +43,38 @@ MIN_LOAD_SWING_INLB = 20.0
 
 
 def hysteretic_damping_constant(area_inlb: float, peak_in: float) -> float:
-    """``h = A/(π·Pk²)`` in lb/in, from the loop area in in·lb and the peak deflection in inches."""
+    """``h = A/(π·Pk²)`` in lb/in, from the loop area in in·lb and the peak deflection in inches.
+
+    Parameters
+    ----------
+    area_inlb : float
+        Loop area, in·lb.
+    peak_in : float
+        Peak deflection, in.
+
+    Returns
+    -------
+    float
+        The hysteretic damping constant h, lb/in.
+    """
     return float(area_inlb / (np.pi * peak_in * peak_in))
 
 
 @dataclass(frozen=True)
 class LoadCycle:
-    """One whole load cycle."""
+    """One whole load cycle.
+
+    Parameters
+    ----------
+    start_s : float
+        Start of the cycle, s.
+    end_s : float
+        End of the cycle, s.
+    area_inlb : float
+        Loop area, in·lb.
+    peak_in : float
+        Peak deflection, in.
+    """
 
     start_s: float
     end_s: float
@@ -62,14 +87,40 @@ class LoadCycle:
         return hysteretic_damping_constant(abs(self.area_inlb), self.peak_in)
 
     def as_dict(self) -> dict[str, float]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {"start_s": self.start_s, "end_s": self.end_s, "area_inlb": self.area_inlb, "peak_in": self.peak_in,
                 "h_lb_per_in": self.h_lb_per_in}
 
 
 @dataclass(frozen=True)
 class HysteresisResult:
-    """Hysteresis loops of a sinusoidal load test and their damping constant."""
+    """Hysteresis loops of a sinusoidal load test and their damping constant.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    freq_hz : float
+        Load frequency, Hz.
+    load_amplitude_inlb : float
+        Amplitude of the load, in·lb.
+    crank_arm_in : float
+        Crank arm, in.
+    cycles : list
+        Every whole load cycle.
+    force_lb : numpy.ndarray
+        Force at the crank arm over the cycles, lb.
+    deflection_in : numpy.ndarray
+        Deflection at the actuator over the cycles, in.
+    notes : list
+        What to check.
+    """
 
     output: str
     freq_hz: float
@@ -96,7 +147,13 @@ class HysteresisResult:
         return hysteretic_damping_constant(abs(self.area_inlb), self.peak_in)
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         hs = [c.h_lb_per_in for c in self.cycles]
         return {
             "output": self.output, "load_freq_hz": self.freq_hz, "load_omega_rad_s": 2 * np.pi * self.freq_hz,
@@ -112,7 +169,28 @@ class HysteresisResult:
 
 def analyze_hysteresis(t: FloatArray, hinge_moment: FloatArray, deflection_deg: FloatArray, *, output: str,
                        crank_arm_in: float, freq_hz: float | None = None) -> HysteresisResult | None:
-    """Loops of every whole load cycle (None when the record holds less than one)."""
+    """Loops of every whole load cycle (None when the record holds less than one).
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    hinge_moment : numpy.ndarray
+        Hinge moment, in·lb.
+    deflection_deg : numpy.ndarray
+        Surface (or LVDT) angle, deg.
+    output : str
+        Name of the output.
+    crank_arm_in : float
+        Crank arm, in.
+    freq_hz : float or None
+        Load frequency when known (else fitted), Hz.
+
+    Returns
+    -------
+    HysteresisResult or None
+        The loops, or None when the record holds less than one cycle.
+    """
     fs = 1.0 / float(np.median(np.diff(t)))
     sine = fit_sine(t, hinge_moment, freq_hz)
     if sine is None:

@@ -25,7 +25,18 @@ def _bag_reader() -> Callable[..., MeasuredData] | None:
 
 
 def looks_like_bag(path: Path) -> bool:
-    """A rosbag2 directory (``metadata.yaml`` or MCAP/SQLite files inside) or a bag file."""
+    """A rosbag2 directory (``metadata.yaml`` or MCAP/SQLite files inside) or a bag file.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        Where to read or write.
+
+    Returns
+    -------
+    bool
+        True for a bag.
+    """
     if path.is_dir():
         return (path / "metadata.yaml").is_file() or any(p.suffix in BAG_SUFFIXES for p in path.iterdir())
     return path.suffix in BAG_SUFFIXES

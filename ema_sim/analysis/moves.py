@@ -211,7 +211,33 @@ def read_ramp(m: MovingStretch) -> Reading | None:
 
 @dataclass(frozen=True)
 class MoveMetrics:
-    """How the output followed one profiled move."""
+    """How the output followed one profiled move.
+
+    Parameters
+    ----------
+    start_s : float
+        When the command left its old level, s.
+    end_s : float
+        When the command left its old level and when it reached the new one, s.
+    jump_deg : float
+        The move, deg.
+    speed_dps : float
+        The command's cruise speed, deg/s.
+    accel_dps2 : float or None
+        The command's acceleration, deg/s².
+    following_error_deg : float or None
+        Command minus output while cruising (median), in the direction of the move.
+    lag_s : float or None
+        Following error over speed, s.
+    output_rate_dps : float or None
+        The output's own speed while the command cruises (slope through the cruise).
+    overshoot_pct : float or None
+        Overshoot past the target, % of the move.
+    settling_s : float or None
+        After the command reached its new level.
+    saturated : bool
+        The output could not keep up with the commanded speed.
+    """
 
     start_s: float
     end_s: float
@@ -245,7 +271,23 @@ class MoveMetrics:
 
 @dataclass(frozen=True)
 class ProfileResult:
-    """The profiled moves of one segment, and a second order fitted over them."""
+    """The profiled moves of one segment, and a second order fitted over them.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    start : int
+        First sample of the segment.
+    stop : int
+        One past the last sample.
+    moves : list
+        Every move's figures.
+    fit : SecondOrderFit or None
+        Second order fitted over the profile.
+    notes : list
+        Notes.
+    """
 
     output: str
     start: int

@@ -120,7 +120,17 @@ def _whole_counts(changes: FloatArray, q: float) -> float | None:
 
 @dataclass(frozen=True)
 class NoiseFloor:
-    """The noise floor of one measured output: white noise, never below its counts' quantization."""
+    """The noise floor of one measured output: white noise, never below its counts' quantization.
+
+    Parameters
+    ----------
+    sigma : float
+        The floor: ``max(white, resolution/√12)``.
+    white : float
+        White noise from the fourth differences (:func:`noise_floor`).
+    resolution : float or None
+        The count the output is logged in (None: continuous).
+    """
 
     sigma: float
     """The floor: ``max(white, resolution/√12)``."""
@@ -174,7 +184,20 @@ def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
 
 
 def autocovariance(x: FloatArray, max_lag: int) -> FloatArray:
-    """Biased autocovariance r(k), k = 0…max_lag, by FFT (for coloured-residual covariances)."""
+    """Biased autocovariance r(k), k = 0…max_lag, by FFT (for coloured-residual covariances).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+    max_lag : int
+        The largest lag, samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        The autocovariance r(0) … r(max_lag).
+    """
     x = np.asarray(x, dtype=float) - np.mean(x)
     n = x.size
     max_lag = min(int(max_lag), n - 1)
@@ -184,7 +207,20 @@ def autocovariance(x: FloatArray, max_lag: int) -> FloatArray:
 
 
 def autocorrelation(x: FloatArray, max_lag: int | None = None) -> FloatArray:
-    """Normalised autocorrelation ρ(k), k = 0…max_lag, biased estimator (ρ(0) = 1), by FFT."""
+    """Normalised autocorrelation ρ(k), k = 0…max_lag, biased estimator (ρ(0) = 1), by FFT.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+    max_lag : int or None
+        The largest lag, samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        The autocorrelation ρ(0) … ρ(max_lag).
+    """
     x = np.asarray(x, dtype=float) - np.mean(x)
     n = x.size
     max_lag = n - 1 if max_lag is None else min(int(max_lag), n - 1)
@@ -195,7 +231,22 @@ def autocorrelation(x: FloatArray, max_lag: int | None = None) -> FloatArray:
 
 
 def cross_correlation(x: FloatArray, y: FloatArray, max_lag: int) -> tuple[NDArray[np.int64], FloatArray]:
-    """Normalised cross-correlation r_xy(k) = E[x(t)·y(t+k)], k = −max_lag…max_lag, by FFT."""
+    """Normalised cross-correlation r_xy(k) = E[x(t)·y(t+k)], k = −max_lag…max_lag, by FFT.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+    y : numpy.ndarray
+        The other signal.
+    max_lag : int
+        The largest lag, samples.
+
+    Returns
+    -------
+    tuple
+        The lags and r_xy at each.
+    """
     x = np.asarray(x, dtype=float) - np.mean(x)
     y = np.asarray(y, dtype=float) - np.mean(y)
     n = x.size
@@ -210,7 +261,21 @@ def cross_correlation(x: FloatArray, y: FloatArray, max_lag: int) -> tuple[NDArr
 
 @dataclass(frozen=True)
 class WhitenessTest:
-    """Ljung-Box test of a residual for whiteness."""
+    """Ljung-Box test of a residual for whiteness.
+
+    Parameters
+    ----------
+    lags : int
+        Number of lags tested.
+    q_statistic : float
+        Ljung-Box Q.
+    p_value : float
+        Its p-value.
+    fraction_outside : float
+        Share of the lags 1…``lags`` whose |ρ| exceeds the 95 % band 1.96/√N.
+    white : bool
+        True when the test does not reject whiteness at the 5 % level.
+    """
 
     lags: int
     q_statistic: float
@@ -221,13 +286,34 @@ class WhitenessTest:
     """True when the test does not reject whiteness at the 5 % level."""
 
     def as_dict(self) -> dict[str, float | int | bool]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {"lags": self.lags, "q_statistic": self.q_statistic, "p_value": self.p_value,
                 "fraction_outside_95": self.fraction_outside, "white": self.white}
 
 
 def whiteness(residual: FloatArray, lags: int = 20, fitted_params: int = 0) -> WhitenessTest:
-    """Ljung-Box Q = N(N+2)·Σ ρ(k)²/(N−k) over ``lags`` lags, χ² with ``lags − fitted_params`` dof."""
+    """Ljung-Box Q = N(N+2)·Σ ρ(k)²/(N−k) over ``lags`` lags, χ² with ``lags − fitted_params`` dof.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        The residual.
+    lags : int
+        Number of lags tested.
+    fitted_params : int
+        Parameters the model fitted (degrees of freedom lost).
+
+    Returns
+    -------
+    WhitenessTest
+        The test.
+    """
     from scipy.stats import chi2  # noqa: PLC0415
 
     r = np.asarray(residual, dtype=float)
@@ -244,7 +330,21 @@ def whiteness(residual: FloatArray, lags: int = 20, fitted_params: int = 0) -> W
 
 @dataclass(frozen=True)
 class IndependenceTest:
-    """Whether a residual is uncorrelated with the input at every lag up to ``max_lag``."""
+    """Whether a residual is uncorrelated with the input at every lag up to ``max_lag``.
+
+    Parameters
+    ----------
+    max_lag : int
+        The largest lag, samples.
+    peak_correlation : float
+        Largest cross-correlation.
+    peak_lag : int
+        Its lag, samples.
+    bound : float
+        The band uncorrelated sequences stay inside at every lag with 99 % probability (Bonferroni over the lags).
+    independent : bool
+        Whether every lag stays inside the band.
+    """
 
     max_lag: int
     peak_correlation: float
@@ -254,7 +354,13 @@ class IndependenceTest:
     independent: bool
 
     def as_dict(self) -> dict[str, float | int | bool]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {"max_lag": self.max_lag, "peak_correlation": self.peak_correlation, "peak_lag": self.peak_lag,
                 "bound_99_all_lags": self.bound, "independent": self.independent}
 
@@ -264,6 +370,20 @@ def input_independence(residual: FloatArray, u: FloatArray, max_lag: int = 50) -
 
     Differencing the input removes its own strong low-frequency autocorrelation, which would widen
     the band of a raw cross-correlation far beyond 2.58/√N.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        The residual.
+    u : numpy.ndarray
+        The command, deg.
+    max_lag : int
+        The largest lag, samples.
+
+    Returns
+    -------
+    IndependenceTest
+        The test.
     """
     from scipy.stats import norm  # noqa: PLC0415
 

@@ -30,7 +30,19 @@ BUS_LIMIT_V = 185.0
 
 @dataclass(frozen=True)
 class RegenerationResult:
-    """Bus-voltage peak of a record."""
+    """Bus-voltage peak of a record.
+
+    Parameters
+    ----------
+    nominal_v : float
+        Median bus voltage, V.
+    peak_v : float
+        Peak, V.
+    peak_time_s : float
+        When it peaked, s.
+    limit_v : float
+        The allowed peak, V.
+    """
 
     nominal_v: float
     peak_v: float

@@ -57,20 +57,48 @@ NAMES = ("ωn", "ζ", "delay")
 
 @dataclass(frozen=True)
 class Estimate:
-    """A fitted value with its standard error, coloured-residual corrected and white-noise."""
+    """A fitted value with its standard error, coloured-residual corrected and white-noise.
+
+    Parameters
+    ----------
+    value : float
+        The estimate.
+    sigma : float
+        Standard error corrected for coloured residuals.
+    sigma_white : float
+        White-noise standard error.
+    """
 
     value: float
     sigma: float
     sigma_white: float
 
     def as_dict(self) -> dict[str, float]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {"value": self.value, "sigma": self.sigma, "sigma_white": self.sigma_white}
 
 
 @dataclass(frozen=True)
 class HandCalculation:
-    """ωn and ζ from a step's rise and settling times (figure 22's hand calculation)."""
+    """Natural frequency ωn and damping ζ from a step's rise and settling times (figure 22's hand calculation).
+
+    Parameters
+    ----------
+    rise_s : float
+        10-90 % rise time, s.
+    settling_s : float
+        2 % settling time, s.
+    wn_rad_s : float
+        Natural frequency, rad/s.
+    zeta : float
+        Damping ratio.
+    """
 
     rise_s: float
     settling_s: float
@@ -78,13 +106,61 @@ class HandCalculation:
     zeta: float
 
     def as_dict(self) -> dict[str, float]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {"rise_s": self.rise_s, "settling_s": self.settling_s, "wn_rad_s": self.wn_rad_s, "zeta": self.zeta}
 
 
 @dataclass(frozen=True)
 class SecondOrderFit:
-    """One least-squares estimate of the second-order parameters from one test."""
+    """One least-squares estimate of the second-order parameters from one test.
+
+    Parameters
+    ----------
+    test : str
+        Label of the test.
+    method : str
+        How it was fitted.
+    output : str
+        Name of the output.
+    wn_rad_s : Estimate
+        Natural frequency, rad/s.
+    zeta : Estimate
+        Damping ratio.
+    delay_s : Estimate
+        Pure delay, s.
+    gain : Estimate
+        Steady-state gain.
+    bias_deg : Estimate or None
+        Output bias, deg (time-domain fits).
+    rms : float
+        RMS of the residual.
+    rms_unit : str
+        ``deg`` (time) or ``db`` (frequency).
+    points : int
+        Points fitted.
+    start_s : float
+        Start of the fitted data, s.
+    end_s : float
+        End of the fitted data, s.
+    residual_whiteness : WhitenessTest
+        Ljung-Box test of the residual.
+    hand : HandCalculation or None
+        The hand calculation beside it.
+    quality : Quality
+        ``ok``, ``on_bound`` or ``not_determined``.
+    quality_note : str
+        Why.
+    command_sampled : bool
+        The command was sampled, not held: the delay is against the sample the change was logged at.
+    sample_s : float
+        Sample interval, s.
+    """
 
     test: str
     method: str
@@ -161,7 +237,24 @@ def _zoh_blocks(wn: float, zeta: float, t: float) -> tuple[FloatArray, FloatArra
 
 
 def discrete_second_order(wn: float, zeta: float, delay_s: float, dt: float) -> tuple[FloatArray, FloatArray]:
-    """``(b, a)`` of the exact ZOH discretization at ``dt`` of the delayed second order (unit DC gain)."""
+    """``(b, a)`` of the exact ZOH discretization at ``dt`` of the delayed second order (unit DC gain).
+
+    Parameters
+    ----------
+    wn : float
+        Natural frequency, rad/s.
+    zeta : float
+        Damping ratio.
+    delay_s : float
+        Pure delay, s.
+    dt : float
+        Sample interval, s.
+
+    Returns
+    -------
+    tuple
+        Numerator and denominator for ``lfilter``.
+    """
     d = int(np.floor(delay_s / dt + 1e-9))
     frac = max(delay_s - d * dt, 0.0)
     phi, _ = _zoh_blocks(wn, zeta, dt)
@@ -214,7 +307,26 @@ def simulate(u: FloatArray, dt: float, wn: float, zeta: float, delay_s: float) -
 
 def response(freq_hz: FloatArray, wn: float, zeta: float, delay_s: float = 0.0,
              gain: float = 1.0) -> NDArray[np.complex128]:
-    """``K·ωn²/(s² + 2ζωn·s + ωn²)·e^(−sτ)`` at ``s = j2πf``."""
+    """``K·ωn²/(s² + 2ζωn·s + ωn²)·e^(−sτ)`` at ``s = j2πf``.
+
+    Parameters
+    ----------
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    wn : float
+        Natural frequency, rad/s.
+    zeta : float
+        Damping ratio.
+    delay_s : float
+        Pure delay, s.
+    gain : float
+        Steady-state gain.
+
+    Returns
+    -------
+    numpy.ndarray
+        The complex response.
+    """
     s = 2j * np.pi * np.asarray(freq_hz, dtype=float)
     return gain * wn * wn / (s * s + 2.0 * zeta * wn * s + wn * wn) * np.exp(-s * delay_s)
 
@@ -236,7 +348,20 @@ def _rise_factor(zeta: float) -> float:
 
 
 def hand_calculation(rise_s: float, settling_s: float) -> HandCalculation | None:
-    """Solve ``tr·ωn = 1 − 0.4167ζ + 2.917ζ²`` and ``ts·ζωn = 4`` for ωn and ζ (None when out of range)."""
+    """Solve ``tr·ωn = 1 − 0.4167ζ + 2.917ζ²`` and ``ts·ζωn = 4`` for ωn and ζ (None when out of range).
+
+    Parameters
+    ----------
+    rise_s : float
+        10-90 % rise time, s.
+    settling_s : float
+        2 % settling time, s.
+
+    Returns
+    -------
+    HandCalculation or None
+        The natural frequency and damping, or None when no ζ in range fits.
+    """
     if not (rise_s > 0.0 and settling_s > 0.0):
         return None
     target = 4.0 * rise_s / settling_s

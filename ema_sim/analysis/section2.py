@@ -43,7 +43,23 @@ __all__ = ["QUALITY_WORDS", "Options", "Quality", "RecordAnalysis", "Section2Tes
 
 @dataclass(frozen=True)
 class Options:
-    """What ``ema analyze`` was asked for."""
+    """What ``ema analyze`` was asked for.
+
+    Parameters
+    ----------
+    at_hz : tuple
+        Frequencies for gain and phase, Hz.
+    model : str or None
+        A registered model simulated on the measured command and overlaid on the Bode plots.
+    threshold_deg : float or None
+        Threshold the crosstalk noise is compared with (default: measured, else table A2).
+    compliance_deg_per_kinlb : float or None
+        Compliance taken out of the free-play jumps (default: measured in the same run, else none).
+    channel : str or None
+        Channel whose configuration is used (default: the record's, else left_wing).
+    command : HoldMode
+        How the command was logged: ``detect`` it, or take it as ``held`` or ``sampled``.
+    """
 
     at_hz: tuple[float, ...] = DEFAULT_AT_HZ
     model: str | None = None
@@ -59,7 +75,31 @@ class Options:
 
 @dataclass
 class RecordAnalysis:
-    """One record, what the pipeline found in it, and every test's results."""
+    """One record, what the pipeline found in it, and every test's results.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record on a uniform grid.
+    channel : ChannelConfig
+        The channel's configuration (crank arm, calibration slopes).
+    recognition : Recognition
+        The recognised segments.
+    noise : dict
+        Each output's noise floor and resolution.
+    command : CommandHold
+        How the command was logged.
+    options : Options
+        What was asked.
+    results : dict
+        Each test's results, by key.
+    fits : list
+        Every second-order fit of the record (steps, moves and frequency responses).
+    not_computed : dict
+        What was not computed, and why.
+    notes : list
+        Notes.
+    """
 
     data: MeasuredData
     """The record on a uniform grid."""

@@ -39,7 +39,17 @@ SINE_R2 = 0.99
 
 @dataclass(frozen=True)
 class Reading:
-    """A reader's answer: the kind of test, why, and the parameters it read off the signal."""
+    """A reader's answer: the kind of test, why, and the parameters it read off the signal.
+
+    Parameters
+    ----------
+    kind : str
+        The segment kind.
+    evidence : str
+        Why.
+    params : dict
+        Parameters read off the signal.
+    """
 
     kind: str
     evidence: str
@@ -48,7 +58,19 @@ class Reading:
 
 @dataclass(frozen=True)
 class Move:
-    """A finite-rate monotone move of the command from one hold to the next."""
+    """A finite-rate monotone move of the command from one hold to the next.
+
+    Parameters
+    ----------
+    before : Hold
+        The hold before.
+    after : Hold
+        The hold after.
+    cruise_share : float
+        Share of the move spent within 10 % of its top speed.
+    speed_dps : float
+        The command's speed while cruising (median over the cruise), deg/s.
+    """
 
     before: Hold
     after: Hold
@@ -75,7 +97,27 @@ class Move:
 
 @dataclass(frozen=True)
 class Segment:
-    """Samples ``[start, stop)`` of one test of kind ``kind``."""
+    """Samples ``[start, stop)`` of one test of kind ``kind``.
+
+    Parameters
+    ----------
+    kind : str
+        The segment kind.
+    start : int
+        First sample of the segment.
+    stop : int
+        One past the last sample.
+    evidence : str
+        What it was recognised from.
+    params : dict
+        Parameters of the test (band, frequency...).
+    edges : tuple
+        Its command edges (steps, square waves...).
+    holds : tuple
+        Its held levels (of the command, or of the load).
+    moves : tuple
+        Its profiled moves.
+    """
 
     kind: str
     start: int
@@ -105,7 +147,23 @@ class Segment:
 
 @dataclass(frozen=True)
 class Recognition:
-    """The segments of a record, in time order, and what the metadata said."""
+    """The segments of a record, in time order, and what the metadata said.
+
+    Parameters
+    ----------
+    segments : list
+        The segments, in time order.
+    maneuver : Maneuver or None
+        The maneuver spec.
+    load : Load or None
+        The load spec (None: unloaded).
+    notes : list
+        Notes.
+    command_tolerance_deg : float
+        How far the command may wander and still count as held (five times its noise).
+    edge_threshold_deg : float
+        The smallest jump between two holds read as a command edge.
+    """
 
     segments: list[Segment]
     maneuver: Maneuver | None
@@ -134,7 +192,15 @@ class Recognition:
 
 @dataclass(frozen=True)
 class EdgeRun:
-    """Consecutive edges of the held command, each one's ``after`` hold the next one's ``before``."""
+    """Consecutive edges of the held command, each one's ``after`` hold the next one's ``before``.
+
+    Parameters
+    ----------
+    edges : tuple
+        The command edges.
+    dt : float
+        Sample interval, s.
+    """
 
     edges: tuple[Edge, ...]
     dt: float
@@ -191,7 +257,15 @@ class EdgeRun:
 
 @dataclass(frozen=True)
 class MoveRun:
-    """Consecutive moves sharing their holds."""
+    """Consecutive moves sharing their holds.
+
+    Parameters
+    ----------
+    moves : tuple
+        The moves.
+    dt : float
+        Sample interval, s.
+    """
 
     moves: tuple[Move, ...]
     dt: float
@@ -221,7 +295,15 @@ class MoveRun:
 
 @dataclass(frozen=True)
 class MovingStretch:
-    """A stretch of a command that keeps moving, with the measures the readers share."""
+    """A stretch of a command that keeps moving, with the measures the readers share.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    u : numpy.ndarray
+        The command, deg.
+    """
 
     t: FloatArray
     u: FloatArray
@@ -276,7 +358,21 @@ class MovingStretch:
 
 @dataclass(frozen=True)
 class HeldStretch:
-    """Samples ``[start, stop)`` of the record over which the command is held at ``value``."""
+    """Samples ``[start, stop)`` of the record over which the command is held at ``value``.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        The record's time, s.
+    hinge_moment : numpy.ndarray or None
+        The record's hinge moment, in·lb (None when it has none).
+    start : int
+        First sample of the stretch.
+    stop : int
+        One past the last sample.
+    value : float
+        The held command, deg.
+    """
 
     t: FloatArray
     hinge_moment: FloatArray | None

@@ -27,7 +27,18 @@ HELD = ("command_deg", "command_v")
 
 
 def is_uniform(time_s: FloatArray) -> bool:
-    """True when every sample interval is within 1 % of the median interval."""
+    """True when every sample interval is within 1 % of the median interval.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times, s.
+
+    Returns
+    -------
+    bool
+        Whether the intervals are uniform.
+    """
     dt = np.diff(time_s)
     med = float(np.median(dt))
     return bool(np.all(np.abs(dt - med) <= UNIFORM_TOLERANCE * med))
@@ -94,13 +105,34 @@ def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> Meas
 
 
 def sample_period(data: MeasuredData) -> float:
-    """Median sample interval, s."""
+    """Median sample interval, s.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+
+    Returns
+    -------
+    float
+        The interval, s.
+    """
     return float(np.median(np.diff(data.time_s)))
 
 
 @dataclass(frozen=True)
 class Hold:
-    """Samples ``[start, stop)`` over which a signal keeps ``value``."""
+    """Samples ``[start, stop)`` over which a signal keeps ``value``.
+
+    Parameters
+    ----------
+    start : int
+        First sample.
+    stop : int
+        One past the last sample.
+    value : float
+        The held level (median).
+    """
 
     start: int
     stop: int
@@ -161,7 +193,22 @@ def _spread(x: FloatArray) -> float:
 
 
 def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hold]:
-    """Runs of at least ``min_samples`` samples whose consecutive changes are within ``tol``."""
+    """Runs of at least ``min_samples`` samples whose consecutive changes are within ``tol``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+    min_samples : int
+        Shortest hold, samples.
+    tol : float or None
+        Hold tolerance (default: the signal's own).
+
+    Returns
+    -------
+    list
+        The holds, in time order.
+    """
     if x.size < 2:
         return []
     tol = hold_tolerance(x) if tol is None else tol
@@ -191,7 +238,17 @@ def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hol
 
 @dataclass(frozen=True)
 class Edge:
-    """A jump of a held signal: from hold ``before`` to hold ``after``."""
+    """A jump of a held signal: from hold ``before`` to hold ``after``.
+
+    Parameters
+    ----------
+    index : int
+        First sample that left the old level (for a command through a lag, the start of its transition).
+    before : Hold
+        The hold before.
+    after : Hold
+        The hold after.
+    """
 
     index: int
     """First sample that left the old level (for a command through a lag, the start of its transition)."""
@@ -241,14 +298,44 @@ def edges(x: FloatArray, dt: float, *, min_hold_s: float = 0.04, min_jump: float
 
 
 def settled(y: FloatArray, start: int, stop: int, fraction: float = 0.5) -> tuple[float, float]:
-    """Mean and standard deviation of ``y`` over the last ``fraction`` of ``[start, stop)``."""
+    """Mean and standard deviation of ``y`` over the last ``fraction`` of ``[start, stop)``.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal.
+    start : int
+        First sample.
+    stop : int
+        One past the last sample.
+    fraction : float
+        Share of the stretch at its end to average.
+
+    Returns
+    -------
+    tuple
+        Mean and standard deviation.
+    """
     first = stop - max(1, int((stop - start) * fraction))
     seg = y[first:stop]
     return float(np.mean(seg)), float(np.std(seg))
 
 
 def moving_average(y: FloatArray, n: int) -> FloatArray:
-    """Centred moving average over ``n`` samples (edges use the samples available)."""
+    """Centred moving average over ``n`` samples (edges use the samples available).
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal.
+    n : int
+        Window length, samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        The averaged signal.
+    """
     n = max(1, int(n))
     if n == 1:
         return y.astype(float, copy=True)
@@ -261,7 +348,22 @@ def moving_average(y: FloatArray, n: int) -> FloatArray:
 
 
 def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
-    """Smoothed derivative (Savitzky-Golay, quadratic, over ``window_s``)."""
+    """Smoothed derivative (Savitzky-Golay, quadratic, over ``window_s``).
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal.
+    dt : float
+        Sample interval, s.
+    window_s : float
+        Window length, s.
+
+    Returns
+    -------
+    numpy.ndarray
+        The derivative.
+    """
     from scipy.signal import savgol_filter  # noqa: PLC0415
 
     n = max(3, round(window_s / dt) | 1)
@@ -271,7 +373,18 @@ def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
 
 
 def extrema(x: FloatArray) -> NDArray[np.int64]:
-    """Indices of the turning points of ``x`` (plateaus count once, at their middle)."""
+    """Indices of the turning points of ``x`` (plateaus count once, at their middle).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+
+    Returns
+    -------
+    numpy.ndarray
+        Indices of the turning points.
+    """
     d = np.diff(x)
     nz = np.flatnonzero(d != 0.0)
     if nz.size < 2:
@@ -285,7 +398,17 @@ def extrema(x: FloatArray) -> NDArray[np.int64]:
 
 
 def require_length(data: MeasuredData, seconds: float, what: str) -> None:
-    """Raise a DataError when the record is shorter than ``seconds``."""
+    """Raise a DataError when the record is shorter than ``seconds``.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    seconds : float
+        The shortest record, s.
+    what : str
+        What needs it.
+    """
     span = float(data.time_s[-1] - data.time_s[0])
     if span < seconds:
         raise DataError(f"{data.source or 'data'}: {what} needs at least {seconds:g} s of data, got {span:g} s")

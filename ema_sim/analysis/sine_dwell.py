@@ -39,7 +39,21 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class FrequencyResponse:
-    """Gain (dB) and phase (deg) of an output against the command at each dwell frequency."""
+    """Gain (dB) and phase (deg) of an output against the command at each dwell frequency.
+
+    Parameters
+    ----------
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    gain_db : numpy.ndarray
+        Gain at each frequency, dB.
+    phase_deg : numpy.ndarray
+        Phase at each frequency, deg.
+    amp_deg : float
+        Dwell amplitude, deg.
+    output : str
+        Name of the output.
+    """
 
     freq_hz: FloatArray
     gain_db: FloatArray
@@ -53,7 +67,18 @@ class FrequencyResponse:
         return 10.0 ** (self.gain_db / 20.0) * np.exp(1j * np.radians(self.phase_deg))
 
     def bandwidth_hz(self, level_db: float = -3.0) -> float:
-        """The lowest frequency where the gain falls through ``level_db`` (linear in log f); NaN if never."""
+        """The lowest frequency where the gain falls through ``level_db`` (linear in log f); NaN if never.
+
+        Parameters
+        ----------
+        level_db : float
+            Gain level, dB.
+
+        Returns
+        -------
+        float
+            The frequency, Hz (NaN when the gain never falls through the level).
+        """
         below = np.nonzero(self.gain_db < level_db)[0]
         if below.size == 0 or below[0] == 0:
             return math.nan
@@ -65,7 +90,24 @@ class FrequencyResponse:
 
 def dwell_plan(freq_hz: FloatArray, settle_cycles: float, measure_cycles: int, min_settle_s: float
                ) -> tuple[FloatArray, FloatArray]:
-    """Start and end of each dwell's measurement window (whole cycles after the settling time)."""
+    """Start and end of each dwell's measurement window (whole cycles after the settling time).
+
+    Parameters
+    ----------
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    settle_cycles : float
+        Cycles left to settle before measuring.
+    measure_cycles : int
+        Whole cycles measured.
+    min_settle_s : float
+        Shortest settling time, s.
+
+    Returns
+    -------
+    tuple
+        Start and end of each measurement, s.
+    """
     start = np.maximum(settle_cycles / freq_hz, min_settle_s)
     start = np.ceil(start * freq_hz) / freq_hz  # begin on a zero crossing of the command
     return start, start + measure_cycles / freq_hz
@@ -89,6 +131,36 @@ def sine_dwell(
 
     ``input_hz`` is the grid the sine is held on (default: the model's own rate, or 10 kHz for a
     continuous model), so a discrete model sees a fresh input every step.
+
+    Parameters
+    ----------
+    model : ActuatorModel
+        The model, one instance per frequency.
+    freq_hz : ArrayLike
+        Dwell frequencies, Hz (one per model instance).
+    amp_deg : float
+        Amplitude, deg.
+    bias_deg : float
+        Command the sine rides on, deg.
+    hinge_moment_inlb : float or ArrayLike
+        Hinge moment, in·lb.
+    settle_cycles : float
+        Cycles left to settle before measuring.
+    measure_cycles : int
+        Whole cycles measured.
+    min_settle_s : float
+        Shortest settling time, s.
+    input_hz : float or None
+        Rate the sine is held at, Hz.
+    output : str
+        Name of the output.
+    before_run : Callable[[ActuatorModel], None] or None
+        Called with the model after trim, before the run.
+
+    Returns
+    -------
+    FrequencyResponse
+        Gain and phase at every frequency.
     """
     f = np.asarray(freq_hz, dtype=float).ravel()
     if model.n != f.size:
@@ -124,7 +196,29 @@ def sine_dwell(
 # ---------------------------------------------------------------------------------------------- measured dwells
 @dataclass(frozen=True)
 class DwellResult:
-    """Gain and phase of one output at a measured sine dwell's frequency (section-2 ``sine`` segment)."""
+    """Gain and phase of one output at a measured sine dwell's frequency (section-2 ``sine`` segment).
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    freq_hz : float
+        Frequency, Hz.
+    command_amplitude_deg : float
+        The command's amplitude, deg.
+    gain_db : float
+        Gain, dB.
+    phase_deg : float
+        Phase, deg.
+    output_r2 : float
+        Share of the output's variance the tone explains.
+    start_s : float
+        Start of the dwell, s.
+    end_s : float
+        End of the dwell, s.
+    hold_corrected : bool
+        Half a sample of hold divided out (a held command); not for a sampled one.
+    """
 
     output: str
     freq_hz: float

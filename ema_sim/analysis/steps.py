@@ -52,7 +52,55 @@ SHORTFALL = 0.85
 
 @dataclass(frozen=True)
 class StepResponse:
-    """Metrics (and fit) of one step."""
+    """Metrics (and fit) of one step.
+
+    Parameters
+    ----------
+    time_s : float
+        Time of the command edge, s.
+    command_from_deg : float
+        Command before the edge, deg.
+    command_to_deg : float
+        Command after it, deg.
+    output : str
+        Name of the output.
+    initial_deg : float
+        Output before the edge, deg.
+    final_deg : float
+        Settled output after it, deg.
+    noise_deg : float
+        Noise on the output before the edge, deg.
+    delay_s : float or None
+        First motion after the edge, s.
+    rise_s : float or None
+        10-90 % rise time, s.
+    settling_s : float or None
+        2 % settling time, s.
+    settling_band : float
+        Settling band, share of the step.
+    overshoot_pct : float or None
+        Overshoot, %.
+    peak_rate_dps : float
+        Peak rate, deg/s.
+    plateau_s : float
+        Time within 5 % of the peak rate, s.
+    plateau_rate_dps : float or None
+        Slope of a line through the samples whose rate is within 5 % of the peak (the slew rate).
+    rate_limited : bool
+        Whether the step is rate-limited.
+    rate_reason : str
+        The evidence.
+    fit : SecondOrderFit or None
+        Its second-order fit.
+    fit_note : str
+        Why there is no fit, or ``fitted``.
+    start : int
+        First sample of the step's window.
+    stop : int
+        One past its last sample.
+    edge : int
+        Sample of the command edge.
+    """
 
     time_s: float
     command_from_deg: float
@@ -278,7 +326,19 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
 
 @dataclass(frozen=True)
 class SlewRates:
-    """Small- and large-amplitude slew rates (section 2.7)."""
+    """Small- and large-amplitude slew rates (section 2.7).
+
+    Parameters
+    ----------
+    small_dps : float or None
+        Peak rate of the steps that are not rate-limited, deg/s.
+    small_steps_deg : list
+        Their sizes, deg.
+    large_dps : float or None
+        Plateau rate of the longest rate-limited step, deg/s.
+    large_steps_deg : list
+        The rate-limited steps' sizes, deg.
+    """
 
     small_dps: float | None
     small_steps_deg: list[float]

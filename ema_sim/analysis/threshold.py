@@ -52,7 +52,31 @@ def _first_sustained(flags: NDArray[np.bool_]) -> int | None:
 
 @dataclass(frozen=True)
 class StaticThreshold:
-    """Static threshold from slowly growing triangles."""
+    """Static threshold from slowly growing triangles.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    onset_deg : float or None
+        Motion onset (dead-zone half width), deg.
+    follow_deg : float or None
+        Amplitude from which the output follows, deg.
+    volts_per_deg : float
+        Command volts per degree.
+    swing_deg : numpy.ndarray
+        Command swing of each half cycle, deg.
+    output_swing_deg : numpy.ndarray
+        Output swing of each half cycle, deg.
+    gain : float or None
+        Tracking gain above the threshold.
+    notes : list
+        What the test could not find.
+    start_s : float
+        Start of the segment, s.
+    end_s : float
+        End of the segment, s.
+    """
 
     output: str
     onset_deg: float | None
@@ -91,7 +115,28 @@ class StaticThreshold:
 
 def static_threshold(t: FloatArray, u: FloatArray, y: FloatArray, noise: float, *, output: str,
                      volts_per_deg: float) -> StaticThreshold | None:
-    """See the module docstring; None when there are fewer than 4 half cycles."""
+    """See the module docstring; None when there are fewer than 4 half cycles.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    u : numpy.ndarray
+        The command, deg.
+    y : numpy.ndarray
+        The output, deg.
+    noise : float
+        The output's noise floor, deg.
+    output : str
+        Name of the output.
+    volts_per_deg : float
+        Command volts per degree.
+
+    Returns
+    -------
+    StaticThreshold or None
+        The threshold, or None with fewer than 4 half cycles.
+    """
     dt = float(np.median(np.diff(t)))
     turns = extrema(u)
     if turns.size < 4:
@@ -121,7 +166,29 @@ def static_threshold(t: FloatArray, u: FloatArray, y: FloatArray, noise: float, 
 
 @dataclass(frozen=True)
 class DynamicThreshold:
-    """Dynamic threshold from a tone of growing amplitude."""
+    """Dynamic threshold from a tone of growing amplitude.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    freq_hz : float
+        Frequency, Hz.
+    onset_deg : float or None
+        Motion onset, deg.
+    follow_deg : float or None
+        Amplitude from which the output follows, deg.
+    volts_per_deg : float
+        Command volts per degree.
+    command_amp_deg : numpy.ndarray
+        Command amplitude of each window, deg.
+    output_amp_deg : numpy.ndarray
+        Output amplitude of each window, deg.
+    r2 : numpy.ndarray
+        Share of the output's variance the tone explains, per window.
+    notes : list
+        What the test could not find.
+    """
 
     output: str
     freq_hz: float
@@ -158,7 +225,32 @@ class DynamicThreshold:
 
 def dynamic_threshold(t: FloatArray, u: FloatArray, y: FloatArray, freq_hz: float, noise: float, *,
                       output: str, volts_per_deg: float, periods: int = 2) -> DynamicThreshold | None:
-    """See the module docstring; None when the record holds fewer than 4 windows."""
+    """See the module docstring; None when the record holds fewer than 4 windows.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    u : numpy.ndarray
+        The command, deg.
+    y : numpy.ndarray
+        The output, deg.
+    freq_hz : float
+        Frequency, Hz.
+    noise : float
+        The output's noise floor, deg.
+    output : str
+        Name of the output.
+    volts_per_deg : float
+        Command volts per degree.
+    periods : int
+        Periods per window.
+
+    Returns
+    -------
+    DynamicThreshold or None
+        The threshold, or None with fewer than 4 windows.
+    """
     dt = float(np.median(np.diff(t)))
     n_win = max(8, round(periods / freq_hz / dt))
     step = max(1, round(1.0 / freq_hz / dt))

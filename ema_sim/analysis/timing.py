@@ -60,7 +60,30 @@ FIT_TOP_DEG = 0.5
 
 def first_motion(t: FloatArray, y: FloatArray, edge: int, y0: float, amplitude: float, noise: float,
                  stop: int | None = None) -> float | None:
-    """Instant the response to the edge at sample ``edge`` leaves ``y0`` (None when it never clearly does)."""
+    """Instant the response to the edge at sample ``edge`` leaves ``y0`` (None when it never clearly does).
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    y : numpy.ndarray
+        The output, deg.
+    edge : int
+        Sample of the command edge.
+    y0 : float
+        Level before the edge.
+    amplitude : float
+        Step of the output (settled minus initial).
+    noise : float
+        The output's noise floor, deg.
+    stop : int or None
+        One past the last sample of the edge's hold (default: the end).
+
+    Returns
+    -------
+    float or None
+        The instant, s, or None when the output never clearly leaves its level.
+    """
     stop = y.size if stop is None else stop
     if amplitude == 0.0:
         return None
@@ -103,7 +126,21 @@ def first_motion(t: FloatArray, y: FloatArray, edge: int, y0: float, amplitude: 
 
 @dataclass(frozen=True)
 class EdgeTiming:
-    """Timing of one command edge."""
+    """Timing of one command edge.
+
+    Parameters
+    ----------
+    time_s : float
+        Time of the edge, s.
+    jump_deg : float
+        The command's jump, deg.
+    command_to_motion_s : float or None
+        Command edge to first motion, s.
+    motion_to_feedback_s : float or None
+        First motion to the LVDT's, s.
+    fmu_to_motion_s : float or None
+        FMU command edge to first motion, s.
+    """
 
     time_s: float
     jump_deg: float
@@ -125,7 +162,27 @@ class EdgeTiming:
 
 @dataclass(frozen=True)
 class TimingResult:
-    """Median timing over the edges of a square wave or step set (section 2.3)."""
+    """Median timing over the edges of a square wave or step set (section 2.3).
+
+    Parameters
+    ----------
+    motion_signal : str
+        The output first motion is taken from.
+    command_to_motion_s : float or None
+        Median command to first motion, s.
+    motion_to_feedback_s : float or None
+        Median motion to feedback, s.
+    edges : list
+        The command edges.
+    notes : list
+        What could not be measured.
+    sampled : bool
+        The command was sampled from a running demand, not held.
+    sample_s : float
+        The record's sample interval, s.
+    fmu_to_motion_s : float or None
+        FMU command to first motion (a suite bag's flight-computer side), median over the edges.
+    """
 
     motion_signal: str
     command_to_motion_s: float | None

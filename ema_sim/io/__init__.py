@@ -13,7 +13,18 @@ from ema_sim.io.csv import MeasuredData, RigFormat, read_csv, read_rig
 
 
 def is_bag(path: str | Path) -> bool:
-    """A rosbag2 directory (metadata.yaml or an .mcap inside) or an .mcap file."""
+    """A rosbag2 directory (metadata.yaml or an .mcap inside) or an .mcap file.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The path.
+
+    Returns
+    -------
+    bool
+        True for a bag.
+    """
     p = Path(path)
     if p.is_dir():
         return (p / "metadata.yaml").is_file() or any(p.glob("*.mcap"))

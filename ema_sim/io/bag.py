@@ -430,7 +430,25 @@ def _test_metadata(src: _Source) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class BagInfo:
-    """What a bag holds."""
+    """What a bag holds.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The bag directory.
+    topics : dict
+        Topic → (message type, message count).
+    start_s : float
+        First log time, s.
+    duration_s : float
+        From the first log time to the last, s.
+    metadata : dict
+        The test's parameters.
+    channels : list of str
+        Channels whose EMAC feedback was recorded.
+    complete : bool
+        False when the bag was never closed (read record by record).
+    """
 
     path: Path
     topics: dict[str, tuple[str, int]]
@@ -449,7 +467,18 @@ class BagInfo:
 
 
 def bag_info(path: str | Path) -> BagInfo:
-    """Topics, counts, time span, test metadata and channels of a bag."""
+    """Topics, counts, time span, test metadata and channels of a bag.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+
+    Returns
+    -------
+    BagInfo
+        What it holds.
+    """
     src = _open(path)
     lo, hi = math.inf, -math.inf
     channels: set[str] = set()
@@ -472,7 +501,18 @@ def bag_info(path: str | Path) -> BagInfo:
 
 
 def bag_channels(path: str | Path) -> list[str]:
-    """The channels whose EMAC feedback the bag recorded."""
+    """The channels whose EMAC feedback the bag recorded.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+
+    Returns
+    -------
+    list of str
+        The channels, the contract's order first.
+    """
     return bag_info(path).channels
 
 
@@ -579,7 +619,22 @@ def _other_side(src: _Source, channel: str, stamps: list[int], side: str, sc: ct
 
 
 def read_joint_topic(path: str | Path, topic: str, field_name: str = "position") -> dict[str, dict[int, float]]:
-    """Every name of a ``JointState`` topic → {stamp_ns: value of ``field_name``} (e.g. ``/ema/fmu/vehicle``)."""
+    """Every name of a ``JointState`` topic → {stamp_ns: value of ``field_name``} (e.g. ``/ema/fmu/vehicle``).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+    topic : str
+        A ``sensor_msgs/JointState`` topic.
+    field_name : str
+        ``position``, ``velocity`` or ``effort``.
+
+    Returns
+    -------
+    dict
+        Name → {stamp in ns: value}.
+    """
     src = _open(path)
     if topic not in src.topics:
         raise DataError(f"{src.path}: no topic {topic} (topics: {', '.join(sorted(src.topics)) or 'none'})")

@@ -45,7 +45,39 @@ MIN_ROWS = 100
 
 @dataclass(frozen=True)
 class MeasuredData:
-    """One record of actuator data: the contract's columns as arrays, plus its metadata."""
+    """One record of actuator data: the contract's columns as arrays, plus its metadata.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times, s.
+    command_deg : numpy.ndarray
+        Surface command, deg.
+    position_deg : numpy.ndarray or None
+        LVDT position feedback, deg.
+    surface_deg : numpy.ndarray or None
+        External surface angle, deg.
+    hinge_moment_inlb : numpy.ndarray or None
+        Hinge moment, in·lb (positive aids positive deflection).
+    current_a : numpy.ndarray or None
+        Motor current, A.
+    command_v : numpy.ndarray or None
+        The command's ±10 V signal.
+    position_v : numpy.ndarray or None
+        The LVDT's ±10 V signal.
+    metadata : dict
+        ``# key: value`` lines of a CSV, a bag's test parameters.
+    source : str
+        Where the record was read from.
+    bus_v : numpy.ndarray or None
+        Motor bus voltage (section 2.5), when the rig or model records it.
+    rate_dps : numpy.ndarray or None
+        Surface rate, when recorded.
+    unit : str
+        Unit of the command and outputs: ``deg``, or a rig's linear unit (``mm``, ``in``) kept as logged.
+    extra : dict
+        Further recorded signals outside the contract's columns (a bag's FMU-side command and feedback).
+    """
 
     time_s: FloatArray
     command_deg: FloatArray
@@ -77,7 +109,18 @@ class MeasuredData:
         return self.hinge_moment_inlb if self.hinge_moment_inlb is not None else np.zeros_like(self.time_s)
 
     def column(self, name: str) -> FloatArray:
-        """A present column by name."""
+        """A present column by name.
+
+        Parameters
+        ----------
+        name : str
+            The column (``position_deg``...).
+
+        Returns
+        -------
+        numpy.ndarray
+            Its values.
+        """
         value = getattr(self, name, None)
         if value is None:
             raise DataError(f"{self.source or 'data'}: no column {name!r}")
@@ -104,7 +147,17 @@ def _parse_metadata(line: str, lineno: int, source: str) -> tuple[str, str] | No
 
 @dataclass(frozen=True)
 class RigFormat:
-    """How a rig's own file maps onto the contract: its columns, its delimiter, its linear positions."""
+    """How a rig's own file maps onto the contract: its columns, its delimiter, its linear positions.
+
+    Parameters
+    ----------
+    columns : dict
+        Contract name with its unit (``time_ms``, ``position_mm``...) → the file's column name.
+    delimiter : str or None
+        ``tab``, ``comma`` or ``semicolon``; None: sniffed from the header row.
+    crank_arm_in : float or None
+        Linear positions are turned into degrees through this crank arm; None: kept as logged.
+    """
 
     columns: dict[str, str] = field(default_factory=dict)
     """Contract name with its unit (``time_ms``, ``position_mm``...) → the file's column name."""
@@ -345,7 +398,17 @@ def parse_csv(text: str, source: str = "<csv>", fmt: RigFormat | None = None) ->
 def write_csv(
     path: str | Path, columns: Mapping[str, FloatArray], metadata: Mapping[str, object] | None = None
 ) -> None:
-    """Write columns (``time_s`` first) with ``# key: value`` metadata lines before the header."""
+    """Write columns (``time_s`` first) with ``# key: value`` metadata lines before the header.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The file (its folder is created when missing).
+    columns : mapping
+        Column name → values.
+    metadata : mapping, optional
+        Written as ``# key: value`` lines.
+    """
     names = list(columns)
     if "time_s" in names:
         names.remove("time_s")
