@@ -101,4 +101,4 @@ def test_a_commanded_step_the_command_does_not_show_is_listed_with_its_reason(tm
     assert set(missing) == {"steps: +0.05° at 0.500 s", "steps: -0.05° at 2.000 s"}
     for why in missing.values():
         assert "not found in the command as an edge" in why
-        assert "edges from" in why
+        assert "as stepping from" in why

@@ -134,6 +134,11 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
             ra.fits += test.fits(r)
         if not results and test.key not in ra.not_computed:
             ra.not_computed[test.key] = test.absent or f"no {test.key} segment recognised"
+    if rec.maneuver is not None and any("no such test found" in n for n in rec.notes):
+        ra.not_computed[f"{rec.maneuver.kind} (the metadata's maneuver)"] = (
+            f"commanded by the metadata ({data.metadata.get('maneuver')}) but not recognised in the command "
+            f"(the command counts as held within {rec.command_tolerance_deg:.2g}° and as stepping from "
+            f"{rec.edge_threshold_deg:.3g}°)")
     claimed = {k for test in TESTS for k in test.kinds}
     t = data.time_s
     for seg in rec.segments:

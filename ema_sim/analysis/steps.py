@@ -426,7 +426,8 @@ def _missing_steps(ra: RecordAnalysis, found: list[StepResponse]) -> None:
         if not seen:
             ra.not_computed[f"steps: {jump:+g}° at {when:.3f} s"] = (
                 "commanded by the metadata's maneuver but not found in the command as an edge between two holds "
-                f"(command noise {rec.command_tolerance_deg / 5:.2g}°; edges from {rec.edge_threshold_deg:.3g}°)")
+                f"(the command counts as held within {rec.command_tolerance_deg:.2g}° and as stepping from "
+                f"{rec.edge_threshold_deg:.3g}°)")
 
 
 class Steps(Section2Test[StepResponse]):
