@@ -168,9 +168,13 @@ def detect_command_hold(time_s: FloatArray, command: FloatArray, output: FloatAr
     band = max(4.0 * noise_sigma, 1.5 * (resolution or 0.0), 1e-12)
     onsets = same = 0
     tries = exceed = 0
-    for k in np.flatnonzero(moving) + 1:
-        if k < rest + 1 or np.any(moving[k - rest:k - 1]) or abs(du[k - 1]) < STEP_LIKE * band:
-            continue
+    # Changes after rest: no change in the rest − 1 steps before (a running count of the moving steps).
+    count = np.concatenate([[0], np.cumsum(moving)])
+    k_all = np.flatnonzero(moving) + 1
+    k_all = k_all[k_all >= rest + 1]
+    quiet = count[k_all - 1] - count[k_all - rest] == 0
+    step_like = np.abs(du[k_all - 1]) >= STEP_LIKE * band
+    for k in k_all[quiet & step_like]:
         pre = output[k - rest:k]
         y0 = float(np.median(pre))
         if np.any(np.abs(pre - y0) > band):

@@ -577,8 +577,8 @@ def sweep_cycles(t: FloatArray, u: FloatArray, y: FloatArray) -> list[Cycle]:
         f = 1.0 / float(t[b] - t[a])
         w = 2.0 * np.pi * f * (tt - tt[0])
         x = np.column_stack([np.cos(w), np.sin(w), np.cos(3 * w), np.sin(3 * w), np.ones_like(w)])
-        cu, *_ = np.linalg.lstsq(x, u[a:b], rcond=None)
-        cy, *_ = np.linalg.lstsq(x, y[a:b], rcond=None)
+        coef, *_ = np.linalg.lstsq(x, np.column_stack([u[a:b], y[a:b]]), rcond=None)
+        cu, cy = coef[:, 0], coef[:, 1]
         u1, y1 = complex(cu[0], -cu[1]), complex(cy[0], -cy[1])
         if abs(u1) == 0.0 or abs(y1) == 0.0:
             continue
@@ -587,8 +587,8 @@ def sweep_cycles(t: FloatArray, u: FloatArray, y: FloatArray) -> list[Cycle]:
     return out
 
 
-def check_slew(t: FloatArray, u: FloatArray, y: FloatArray,
-               known_slew: tuple[float, str] | None = None) -> SlewCheck:
+def check_slew(t: FloatArray, u: FloatArray, y: FloatArray, known_slew: tuple[float, str] | None = None,
+               cycles: list[Cycle] | None = None) -> SlewCheck:
     """The command's amplitude and rate against the actuator's slew (see the module docstring).
 
     A linear actuator answers a sine with a sine; a rate limit clips the output's rate and adds odd
@@ -607,13 +607,15 @@ def check_slew(t: FloatArray, u: FloatArray, y: FloatArray,
         The output.
     known_slew : tuple, optional
         A slew rate measured elsewhere in the record (°/s) and where.
+    cycles : list of Cycle, optional
+        The sweep's cycles when already computed (:func:`sweep_cycles`).
 
     Returns
     -------
     SlewCheck
         The check.
     """
-    cycles = sweep_cycles(t, u, y)
+    cycles = sweep_cycles(t, u, y) if cycles is None else cycles
     du = np.gradient(u, t)
     peak_rate = float(np.max(np.abs(du))) if du.size else 0.0
     amp = float(np.median([c.amplitude_deg for c in cycles])) if cycles else 0.5 * float(np.ptp(u))
@@ -939,8 +941,8 @@ class FrequencyTest(Section2Test[FrequencyResult]):
         known = _known_slew(ra)
         out = []
         for r in responses:
-            check = check_slew(t, u, outs[r.output], known)
             cycles = sweep_cycles(t, u, outs[r.output])
+            check = check_slew(t, u, outs[r.output], known, cycles)
             top = fit_band[1] if check.saturated_from_hz is None else min(fit_band[1], check.saturated_from_hz)
             band_r = (fit_band[0], top)
             bw, bw_note = bandwidth_3db(r)
