@@ -64,7 +64,7 @@ ROSDEP_KEYS = {
     "rcl_interfaces": "rcl_interfaces", "ament_index_python": "ament_index_python", "launch": "launch",
     "launch_ros": "launch_ros", "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
     "matplotlib": "python3-matplotlib", "numba": "python3-numba-pip", "control": "python3-control-pip",
-    "rosbags": "python3-rosbags-pip", "mcap": "python3-mcap-pip",
+    "rosbags": "python3-rosbags-pip", "mcap": "python3-mcap-pip", "typing_extensions": "python3-typing-extensions",
 }
 """Top-level import → its rosdep key (a new import without one fails the test below)."""
 
