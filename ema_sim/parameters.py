@@ -262,7 +262,7 @@ def kernel_vector(params: Any, layout: Slots, extra: Mapping[str, float] | None 
 
 
 # ------------------------------------------------------------------------------ loading and checking
-def _coerce(name: str, m: Meta, value: Any, origin: str, family: str) -> Value:
+def coerce(name: str, m: Meta, value: Any, origin: str, family: str) -> Value:
     """A number (or ``m.size`` numbers) from a YAML or override value; one error naming the parameter."""
     try:
         if m.size == 1:
@@ -343,8 +343,8 @@ def load(
     missing = sorted(required - chosen.keys())
     if missing:
         raise ConfigError(f"{origin}: {where} is missing {', '.join(missing)}")
-    out = cls(**{k: _coerce(k, info[k], v, origin, family) for k, v in chosen.items()})
-    validate(out, family)
+    out = cls(**{k: coerce(k, info[k], v, origin, family) for k, v in chosen.items()})
+    validate(out, family, origin)
     return out
 
 
@@ -371,7 +371,7 @@ Relation = tuple[str, str, str]
 """``(a, "<" or "<=", b)``: a declared relation between two parameters of a set."""
 
 
-def validate(params: Any, family: str) -> None:
+def validate(params: Any, family: str, origin: str = "") -> None:
     """The one validator: every value in its declared range, then the set's declared relations.
 
     Parameters
@@ -381,27 +381,30 @@ def validate(params: Any, family: str) -> None:
         (a tuple of :data:`Relation`).
     family : str
         The family's name in messages.
+    origin : str
+        Where the values come from, prefixed to messages when given.
 
     Raises
     ------
     ConfigError
         One message naming the parameter and what is wrong with it.
     """
+    where = f"{origin}: " if origin else ""
     for name, m in metas(params).items():
         value = getattr(params, name)
         items = value if isinstance(value, tuple) else (value,)
         for item in items:
             why = _bad(item, m)
             if why is not None:
-                raise ConfigError(f"{family} parameter {name} {why}")
+                raise ConfigError(f"{where}{family} parameter {name} {why}")
         if m.increasing and not all(a < b for a, b in itertools.pairwise(items)):
-            raise ConfigError(f"{family} parameter {name} must be {m.size} increasing values, got {items}")
+            raise ConfigError(f"{where}{family} parameter {name} must be {m.size} increasing values, got {items}")
     for a, rel, b in getattr(type(params), "RELATIONS", ()):
         va, vb = getattr(params, a), getattr(params, b)
         if rel == "<" and not va < vb:
-            raise ConfigError(f"{family} parameter {a} must be below {b}")
+            raise ConfigError(f"{where}{family} parameter {a} must be below {b}")
         if rel == "<=" and not va <= vb:
-            raise ConfigError(f"{family} parameter {b} must be at least {a}")
+            raise ConfigError(f"{where}{family} parameter {b} must be at least {a}")
 
 
 def switched_off(cls: type, elements: Iterable[str] | None = None) -> dict[str, float]:

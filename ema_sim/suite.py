@@ -36,8 +36,8 @@ from typing import IO, Any
 
 from ema_sim.config import CHANNELS
 from ema_sim.errors import EmaError
-from ema_sim.models.switches import element_names, environment_elements
 from ema_sim.signals.plans import build_plan
+from ema_sim.switches import element_names, environment_elements
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
 STOP_TIMEOUT_S = 8.0

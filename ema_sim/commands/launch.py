@@ -17,10 +17,10 @@ def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
     from ema_sim.config import CHANNELS  # noqa: PLC0415
     from ema_sim.environment import load_profile  # noqa: PLC0415
     from ema_sim.models import model_names  # noqa: PLC0415
-    from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
     from ema_sim.nodes.maneuver import default_bag  # noqa: PLC0415
     from ema_sim.signals.plans import build_plan, channel_list  # noqa: PLC0415
     from ema_sim.suite import SuiteConfig  # noqa: PLC0415
+    from ema_sim.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
 
     if args.model not in model_names():
         from ema_sim.errors import UnknownNameError  # noqa: PLC0415

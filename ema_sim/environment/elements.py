@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.models.stages import lag_gain, quantize, quantize_array
+
 Signal = Any
 """A float, or a numpy array with one value per channel."""
 
@@ -101,7 +103,7 @@ class FirstOrderLag(Element):
         if not (math.isfinite(corner_hz) and corner_hz >= 0.0):
             raise ValueError(f"corner_hz must be a non-negative number, got {corner_hz!r}")
         self.corner_hz = float(corner_hz)
-        self.gain = 1.0 if corner_hz == 0.0 else 1.0 - math.exp(-2.0 * math.pi * corner_hz * frame_s)
+        self.gain = lag_gain(self.corner_hz, frame_s)
         self._y: Signal = _copy(initial)
 
     @property
@@ -140,11 +142,11 @@ class Quantizer(Element):
     def step(self, x: Signal) -> Signal:  # noqa: D102
         if self.step_v == 0.0:
             return x
-        if type(x) is float and math.isfinite(x):  # one channel: the same arithmetic without numpy
-            q = self.step_v * math.floor(x / self.step_v + 0.5)
-            return min(max(q, -self.full_scale_v), self.full_scale_v)
-        q = self.step_v * np.floor(np.asarray(x) / self.step_v + 0.5)
-        q = np.clip(q, -self.full_scale_v, self.full_scale_v)
+        if type(x) is float:  # one channel
+            return min(max(quantize(x, self.step_v), -self.full_scale_v), self.full_scale_v)
+        arr = np.asarray(x, dtype=float)
+        flat = quantize_array(np.ascontiguousarray(arr.reshape(-1)), self.step_v)
+        q = np.clip(flat.reshape(arr.shape), -self.full_scale_v, self.full_scale_v)
         return float(q) if np.ndim(q) == 0 else q
 
     def describe(self) -> str:  # noqa: D102

@@ -11,56 +11,81 @@ Profiles are ROS 2 parameter files for the ``testenv`` node: ``config/flight.yam
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from ema_sim import parameters as pm
 from ema_sim.config import config_dir, ros_parameters
 from ema_sim.environment.elements import FirstOrderLag, Noise, Quantizer, SignalPath, TransportDelay
 from ema_sim.errors import ConfigError, UnknownNameError
 
-ELEMENTS: tuple[str, ...] = ("lag", "quantization", "delay", "noise")
-"""Element names, for :meth:`Profile.without` (``"delay"``, or one path: ``"command.delay"``)."""
 PATHS: tuple[str, ...] = ("command", "feedback")
 BUILTIN = ("none",)
-_KEYS = {"lag": "lag_hz", "quantization": "quantization_v", "delay": "delay_s", "noise": "noise_rms_v"}
+FAMILY = "test-environment"
 
 
+@pm.documented
 @dataclass(frozen=True)
 class PathSpec:
-    """Parameters of one direction; a zero switches its element off."""
+    """Parameters of one direction; each declares the element a zero switches off."""
 
-    lag_hz: float = 0.0
-    quantization_v: float = 0.0
-    delay_s: float = 0.0
-    noise_rms_v: float = 0.0
+    lag_hz: float = pm.param("Hz", "FMU first-order lag filter corner (4.3: 50 Hz)", min=0.0, off=0.0, element="lag",
+                             default=0.0)
+    quantization_v: float = pm.param("V", "FMU D/A or A/D quantization (4.3: 5 mV)", min=0.0, off=0.0,
+                                     element="quantization", default=0.0)
+    delay_s: float = pm.param("s", "transport delay of the harness (4.3: 30 ms FMU to first motion in the AIL)",
+                              min=0.0, off=0.0, element="delay", default=0.0)
+    noise_rms_v: float = pm.param("V", "harness and interface noise rms (4.3, measured, not published)", min=0.0,
+                                  off=0.0, element="noise", default=0.0)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], origin: str) -> PathSpec:
-        """Validate a ``command:`` or ``feedback:`` mapping."""
-        known = {f.name for f in fields(cls)}
-        out: dict[str, float] = {}
-        for key, value in values.items():
-            if key not in known:
-                raise ConfigError(f"{origin}: unknown parameter {key!r} (known: {', '.join(sorted(known))})")
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"{origin}: {key} must be a number, got {value!r}") from None
-            if not (math.isfinite(number) and number >= 0.0):
-                raise ConfigError(f"{origin}: {key} must be a finite number ≥ 0, got {value!r}")
-            out[key] = number
-        return cls(**out)
+        """Validate a ``command:`` or ``feedback:`` mapping.
+
+        Parameters
+        ----------
+        values : mapping
+            Parameter name → value.
+        origin : str
+            Where it comes from, for messages.
+
+        Returns
+        -------
+        PathSpec
+            The validated path.
+        """
+        return pm.load(cls, values, origin=origin, family=FAMILY, section="path")
 
     def without(self, element: str) -> PathSpec:
-        """This path with ``element`` switched off."""
-        return replace(self, **{_KEYS[element]: 0.0})
+        """This path with ``element`` switched off.
+
+        Parameters
+        ----------
+        element : str
+            One of :data:`ELEMENTS`.
+
+        Returns
+        -------
+        PathSpec
+            The changed copy.
+        """
+        return replace(self, **pm.switched_off(PathSpec, [element]))
 
     def as_dict(self) -> dict[str, float]:
-        """Parameter name → value."""
+        """Parameter name → value.
+
+        Returns
+        -------
+        dict
+            Every parameter.
+        """
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+ELEMENTS: tuple[str, ...] = pm.elements(PathSpec)
+"""Element names, for :meth:`Profile.without` (``"delay"``, or one path: ``"command.delay"``)."""
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ import logging
 import math
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.models import stages
+from ema_sim.parameters import ParameterInfo, Slots, describe, elements, switched_off
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -144,6 +145,16 @@ class ActuatorModel(ABC):
     """Internal integration rate of a discrete model; 0 for the continuous ones."""
     has_current: ClassVar[bool] = False
     """True when the model knows motor current and bus voltage."""
+    params_class: ClassVar[type]
+    """Its parameter set: a dataclass declared with :func:`ema_sim.parameters.param`."""
+    params_section: ClassVar[str]
+    """The channel file's section the parameters come from."""
+    params_layout: ClassVar[Slots | None] = None
+    """Its kernel layout (None for the linear models, which have no parameter kernel)."""
+    variant: ClassVar[str | None] = None
+    """Which subsection variant of the section it reads (the high-order family's ``hoad2``, ``hoad3``)."""
+    switchable: ClassVar[bool] = True
+    """False when the model has none of its parameters' switchable elements (the linear models)."""
 
     def __init__(self, channel: str | ChannelConfig = "left_wing", *, n: int = 1, rate_hz: float | None = None) -> None:
         if n < 1:
@@ -181,10 +192,89 @@ class ActuatorModel(ABC):
         Returns an array ``(n, len(sample_t), N_OUT)``; the caller updates ``self._t``.
         """
 
+    @classmethod
+    @abstractmethod
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> Any:
+        """The parameters a model of this class takes from ``channel``, then ``overrides`` (validated).
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel.
+        **overrides : float
+            Values that replace the channel's.
+
+        Returns
+        -------
+        object
+            An instance of :attr:`params_class`.
+        """
+
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
-        """The held command whose equilibrium is ``position_deg`` (families with command maps refine)."""
+        """The held command whose equilibrium is ``position_deg`` (families with command maps refine).
+
+        Parameters
+        ----------
+        position_deg : numpy.ndarray
+            The wanted position of each instance (deg).
+        hinge_moment_inlb : numpy.ndarray
+            The load of each instance (in·lb).
+
+        Returns
+        -------
+        numpy.ndarray
+            The command of each instance (deg).
+        """
         del hinge_moment_inlb
         return position_deg
+
+    # ----------------------------------------------------------------- parameters
+    @classmethod
+    def parameters(cls, channel: str | ChannelConfig | None = None) -> list[ParameterInfo]:
+        """Every parameter of this model with its metadata, and a channel's defaults when one is given.
+
+        Parameters
+        ----------
+        channel : str or ChannelConfig, optional
+            The channel whose values are listed as defaults.
+
+        Returns
+        -------
+        list of ParameterInfo
+            In declaration order (see :func:`ema_sim.parameters.describe`).
+        """
+        defaults = None
+        if channel is not None:
+            defaults = cls.default_params(load_channel(channel) if isinstance(channel, str) else channel)
+        return describe(cls.params_class, defaults=defaults, layout=cls.params_layout, section=cls.params_section,
+                        variant=cls.variant)
+
+    @classmethod
+    def elements(cls) -> tuple[str, ...]:
+        """The element names this model switches off by name: its parameters' declared elements.
+
+        Returns
+        -------
+        tuple of str
+            Empty for a model without them (the linear models removed them).
+        """
+        return elements(cls.params_class) if cls.switchable else ()
+
+    @classmethod
+    def element_overrides(cls, names: Iterable[str]) -> dict[str, float]:
+        """The parameter overrides that switch the named elements off (those this model has).
+
+        Parameters
+        ----------
+        names : iterable of str
+            Element names.
+
+        Returns
+        -------
+        dict
+            Parameter name → its switch-off value.
+        """
+        return switched_off(cls.params_class, set(names) & set(cls.elements()))
 
     # ----------------------------------------------------------------- public interface
     @property

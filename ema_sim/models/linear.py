@@ -15,6 +15,7 @@ system and the delays exactly.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import control as ct
@@ -22,12 +23,14 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ema_sim import parameters as pm
 from ema_sim.config import ChannelConfig, load_channel
-from ema_sim.errors import ConfigError, UnknownNameError
 from ema_sim.models import stages as st
 from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel, FloatArray
-from ema_sim.models.high_order import BOUNDS, HighOrderParams, linearize
-from ema_sim.models.second_order import SecondOrderParams
+from ema_sim.models.high_order.linear import linearize
+from ema_sim.models.high_order.models import bound_value
+from ema_sim.models.high_order.params import HighOrderParams
+from ema_sim.models.second_order.params import SecondOrderParams
 
 
 @nb.njit(cache=True)
@@ -134,6 +137,7 @@ class LinearModel(ActuatorModel):
 
     default_rate_hz = 10_000.0
     linear: ClassVar[bool] = True
+    switchable: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -255,6 +259,8 @@ class Sloac(LinearModel):
 
     name = "sloac"
     title = "Simplified low-order actuator continuous model (SLOAC)"
+    params_class: ClassVar[type] = SecondOrderParams
+    params_section: ClassVar[str] = "second_order"
 
     def __init__(
         self,
@@ -265,11 +271,29 @@ class Sloac(LinearModel):
         **overrides: float,
     ) -> None:
         ch = load_channel(channel) if isinstance(channel, str) else channel
-        self.params = SecondOrderParams.from_channel(ch, **overrides)
+        self.params = self.default_params(ch, **overrides)
         super().__init__(
             second_order_system(self.params.wn_rad_s, self.params.zeta), self.params.delay_s, ch,
             n=n, rate_hz=rate_hz,
         )
+
+    @classmethod
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:
+        """LOAC's parameters (SLOAC keeps ωn, ζ and the delay).
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel.
+        **overrides : float
+            Values that replace the channel's.
+
+        Returns
+        -------
+        SecondOrderParams
+            The validated parameters.
+        """
+        return SecondOrderParams.from_channel(channel, **overrides)
 
 
 class Hoalm(LinearModel):
@@ -282,6 +306,9 @@ class Hoalm(LinearModel):
 
     name = "hoalm"
     title = "High-order actuator linear model (HOALM)"
+    params_class: ClassVar[type] = HighOrderParams
+    params_section: ClassVar[str] = "high_order"
+    variant: ClassVar[str | None] = "hoad3"
 
     def __init__(
         self,
@@ -294,14 +321,32 @@ class Hoalm(LinearModel):
         **overrides: float,
     ) -> None:
         ch = load_channel(channel) if isinstance(channel, str) else channel
-        self.params = HighOrderParams.from_channel(ch, "hoad3", **overrides)
+        self.params = self.default_params(ch, **overrides)
         self.load_inlb = float(load_inlb)
-        self.bound = BOUNDS[bound] if isinstance(bound, str) else float(bound)
+        self.bound = bound_value(bound)
         self.linearized = linearize(self.params, self.load_inlb, bound=self.bound)
         lin = self.linearized
         system = ct.ss(lin.a, lin.b, lin.c, np.zeros((2, 2)), inputs=["command_deg", "hinge_moment_inlb"],
                        outputs=["position_deg", "surface_deg"])
         super().__init__(system, lin.command_delay_s, ch, n=n, rate_hz=rate_hz, position_delay_s=lin.feedback_delay_s)
+
+    @classmethod
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:
+        """HOAD3's parameters, the model it linearizes.
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel.
+        **overrides : float
+            Values that replace the channel's.
+
+        Returns
+        -------
+        HighOrderParams
+            The validated parameters.
+        """
+        return HighOrderParams.from_channel(channel, "hoad3", **overrides)
 
     def describe(self) -> dict[str, Any]:  # noqa: D102
         info = super().describe()
@@ -309,7 +354,27 @@ class Hoalm(LinearModel):
         return info
 
 
+@pm.documented
+@dataclass(frozen=True)
+class LoesParams:
+    """The LOES coefficients and the settings of the fit that wrote them (config ``loes``)."""
+
+    wn_rad_s: float = pm.param("rad/s", "natural frequency of the equivalent second order (3.4)", min=0.0,
+                               min_exclusive=True)
+    zeta: float = pm.param("-", "damping ratio of the equivalent second order", min=0.0, min_exclusive=True)
+    delay_s: float = pm.param("s", "equivalent delay", min=0.0)
+    dc_gain_ratio: float = pm.param("-", "steady-state gain K", min=0.0, min_exclusive=True)
+    fit_min_hz: float = pm.param("Hz", "lowest sine dwell of the fit that wrote the coefficients (ema loes)",
+                                 min=0.0, min_exclusive=True, default=0.5)
+    fit_max_hz: float = pm.param("Hz", "highest sine dwell of the fit", min=0.0, min_exclusive=True, default=20.0)
+    dwell_amp_deg: float = pm.param("deg", "amplitude of the fit's sine dwells", min=0.0, min_exclusive=True,
+                                    default=1.0)
+
+    RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("fit_min_hz", "<", "fit_max_hz"),)
+
+
 LOES_FIELDS = ("wn_rad_s", "zeta", "delay_s", "dc_gain_ratio")
+"""The coefficients the model uses (the rest of :class:`LoesParams` are the fit's settings)."""
 
 
 def loes_system(wn_rad_s: float, zeta: float, dc_gain_ratio: float) -> ct.StateSpace:
@@ -332,6 +397,8 @@ class Loes(LinearModel):
 
     name = "loes"
     title = "Low-order equivalent system actuator model (LOES)"
+    params_class: ClassVar[type] = LoesParams
+    params_section: ClassVar[str] = "loes"
 
     def __init__(
         self,
@@ -342,19 +409,26 @@ class Loes(LinearModel):
         **overrides: float,
     ) -> None:
         ch = load_channel(channel) if isinstance(channel, str) else channel
-        sec = ch.section("loes")
-        values: dict[str, float] = {}
-        for key in LOES_FIELDS:
-            if key in overrides:
-                values[key] = float(overrides.pop(key))
-            elif key in sec:
-                values[key] = float(sec[key])
-            else:
-                raise ConfigError(f"{ch.channel}: loes is missing {key}")
-        if overrides:
-            raise UnknownNameError("LOES parameter", next(iter(overrides)), LOES_FIELDS)
-        if not (values["wn_rad_s"] > 0.0 and values["zeta"] > 0.0 and values["delay_s"] >= 0.0):
-            raise ConfigError(f"{ch.channel}: loes needs wn_rad_s > 0, zeta > 0 and delay_s >= 0")
-        self.coefficients = values
-        super().__init__(loes_system(values["wn_rad_s"], values["zeta"], values["dc_gain_ratio"]),
-                         values["delay_s"], ch, n=n, rate_hz=rate_hz)
+        self.params = self.default_params(ch, **overrides)
+        self.coefficients = {k: getattr(self.params, k) for k in LOES_FIELDS}
+        super().__init__(loes_system(self.params.wn_rad_s, self.params.zeta, self.params.dc_gain_ratio),
+                         self.params.delay_s, ch, n=n, rate_hz=rate_hz)
+
+    @classmethod
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> LoesParams:
+        """The channel's ``loes`` section, then ``overrides``.
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel.
+        **overrides : float
+            Values that replace the channel's.
+
+        Returns
+        -------
+        LoesParams
+            The validated coefficients.
+        """
+        return pm.load(LoesParams, channel.section("loes"), origin=channel.channel, family="LOES", section="loes",
+                       overrides=overrides)

@@ -9,16 +9,16 @@ from ema_sim.errors import UnknownNameError
 from ema_sim.models.base import ActuatorModel
 
 _MODELS: dict[str, str] = {
-    "loac": "ema_sim.models.second_order:Loac",
-    "loadf": "ema_sim.models.second_order:Loadf",
-    "loada": "ema_sim.models.second_order:Loada",
-    "hoac1": "ema_sim.models.high_order:Hoac1",
-    "hoad2": "ema_sim.models.high_order:Hoad2",
-    "hoad3": "ema_sim.models.high_order:Hoad3",
+    "loac": "ema_sim.models.second_order.models:Loac",
+    "loadf": "ema_sim.models.second_order.models:Loadf",
+    "loada": "ema_sim.models.second_order.models:Loada",
+    "hoac1": "ema_sim.models.high_order.models:Hoac1",
+    "hoad2": "ema_sim.models.high_order.models:Hoad2",
+    "hoad3": "ema_sim.models.high_order.models:Hoad3",
     "sloac": "ema_sim.models.linear:Sloac",
     "hoalm": "ema_sim.models.linear:Hoalm",
     "loes": "ema_sim.models.linear:Loes",
-    "second_order": "ema_sim.models.second_order:SecondOrder",
+    "second_order": "ema_sim.models.second_order.models:SecondOrder",
 }
 """Registry name → ``module:class`` (imported on first use, so listing names stays cheap)."""
 

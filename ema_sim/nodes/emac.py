@@ -36,11 +36,11 @@ from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ro
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
-from ema_sim.models.switches import element_names, model_overrides
 from ema_sim.nodes.common import DurationHistogram, SuiteNode, run
 from ema_sim.nodes.params import merged, overrides
 from ema_sim.nodes.ports import Ports
 from ema_sim.signals.plans import channel_list
+from ema_sim.switches import element_names, model_overrides
 
 NS = 1_000_000_000
 

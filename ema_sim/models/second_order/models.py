@@ -23,8 +23,9 @@ from ema_sim.models.base import N_OUT, ActuatorModel, batch_params
 from ema_sim.models.second_order.figure26 import command_path, compliance_correction, compliance_deflection
 from ema_sim.models.second_order.loac import run_continuous
 from ema_sim.models.second_order.loada import METHOD_FORWARD_EULER, METHOD_LOADF, run_discrete
-from ema_sim.models.second_order.params import N_STATE, P, SecondOrderParams, X
+from ema_sim.models.second_order.params import N_STATE, SECTION, P, SecondOrderParams, X
 from ema_sim.models.second_order.rk4 import run_rk4
+from ema_sim.parameters import Slots
 
 
 class SecondOrderModel(ActuatorModel):
@@ -45,6 +46,8 @@ class SecondOrderModel(ActuatorModel):
     """
 
     params_class: ClassVar[type] = SecondOrderParams
+    params_section: ClassVar[str] = SECTION
+    params_layout: ClassVar[Slots | None] = P
 
     def __init__(
         self,

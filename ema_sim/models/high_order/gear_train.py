@@ -28,18 +28,11 @@ import math
 import numba as nb
 import numpy as np
 
-from ema_sim.models.stages import jit
-
+from ema_sim.models.stages import band_side, jit
 
 # ------------------------------------------------------------------------------------ figure 32
-@jit
-def dead_zone_segment(d: float, half_width: float) -> int:
-    """Which side of the figure-32 dead zone ``d`` is on: −1, 0 (free play) or +1 (in contact)."""
-    if d > half_width:
-        return 1
-    if d < -half_width:
-        return -1
-    return 0
+dead_zone_segment = band_side
+"""Which side of the figure-32 dead zone a deflection is on: −1, 0 (free play) or +1 (in contact)."""
 
 
 @jit
