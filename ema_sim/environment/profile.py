@@ -112,13 +112,14 @@ class Profile:
             full_scale = float(params.get("full_scale_v", 10.0))
         except (TypeError, ValueError) as exc:
             raise ConfigError(f"{origin}: {exc}") from None
-        paths = {}
+        paths: dict[str, PathSpec] = {}
         for name in PATHS:
             section = params.get(name, {})
             if not isinstance(section, Mapping):
                 raise ConfigError(f"{origin}: {name} must be a mapping of element parameters")
             paths[name] = PathSpec.from_mapping(section, f"{origin}: {name}")
-        return cls(name=str(params.get("profile", Path(origin).stem)), full_scale_v=full_scale, seed=seed, **paths)
+        return cls(name=str(params.get("profile", Path(origin).stem)), full_scale_v=full_scale, seed=seed,
+                   command=paths["command"], feedback=paths["feedback"])
 
     def without(self, *elements: str) -> Profile:
         """This profile with elements switched off: ``"noise"`` (both paths) or ``"feedback.noise"``."""

@@ -145,6 +145,12 @@ class ActuatorModel(ABC):
     """Internal integration rate of a discrete model; 0 for the continuous ones."""
     has_current: ClassVar[bool] = False
     """True when the model knows motor current and bus voltage."""
+    _buf_t: FloatArray
+    _buf_u: FloatArray
+    _buf_h: FloatArray
+    _h_lo: int
+    _h_hi: int
+    """The input history: breakpoint buffers and the live range ``[_h_lo, _h_hi)``."""
     params_class: ClassVar[type]
     """Its parameter set: a dataclass declared with :func:`ema_sim.parameters.param`."""
     params_section: ClassVar[str]
@@ -321,9 +327,11 @@ class ActuatorModel(ABC):
         The same frame as :meth:`step`, without building arrays for one instance: the per-frame path of
         the node layer (flags come back as a float; ``int()`` them).
         """
-        return self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
+        values: list[float] = self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
+        return values
 
-    def _advance(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike, frame_s: float) -> FloatArray:
+    def _advance(self, command_deg: float | ArrayLike, hinge_moment_inlb: float | ArrayLike,
+                 frame_s: float) -> FloatArray:
         if not (math.isfinite(frame_s) and frame_s > 0.0):
             raise ValueError(f"frame_s must be positive, got {frame_s!r}")
         hi = self._h_hi

@@ -26,7 +26,8 @@ from numpy.typing import ArrayLike
 from ema_sim import parameters as pm
 from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.models import stages as st
-from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel, FloatArray
+from ema_sim.models.arrays import FloatArray, IntArray
+from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel
 from ema_sim.models.high_order.linear import linearize
 from ema_sim.models.high_order.models import bound_value
 from ema_sim.models.high_order.params import HighOrderParams
@@ -34,7 +35,9 @@ from ema_sim.models.second_order.params import SecondOrderParams
 
 
 @nb.njit(cache=True)
-def run_lti(Ad, Bd, Cd, Dd, Crate, Drate, X, bp_t, bp_u, bp_h, delay_s, t0, dt, n_steps, sample_t, out):  # noqa: ANN001, ANN201
+def run_lti(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArray, Crate: FloatArray, Drate: FloatArray,
+            X: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, delay_s: float, t0: float, dt: float,
+            n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
     """Step ``x ← Ad·x + Bd·[u(t − delay), hm]`` for every instance; samples as the discrete models."""
     k_samples = sample_t.shape[0]
     nx = Ad.shape[0]
@@ -76,7 +79,10 @@ def run_lti(Ad, Bd, Cd, Dd, Crate, Drate, X, bp_t, bp_u, bp_h, delay_s, t0, dt, 
 
 
 @nb.njit(cache=True)
-def run_lti_delayed(Ad, Bd, Cd, Dd, Crate, Drate, X, bp_t, bp_u, bp_h, source, delay, t0, dt, n_steps, sample_t, out):  # noqa: ANN001, ANN201
+def run_lti_delayed(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArray, Crate: FloatArray,
+                    Drate: FloatArray, X: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
+                    source: IntArray, delay: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray,
+                    out: FloatArray) -> None:
     """:func:`run_lti` for inputs that are each the command or the load, each with its own delay.
 
     Input ``j`` is the command (``source[j] = 0``) or the hinge moment (1) delayed by ``delay[j]``: the
@@ -198,9 +204,11 @@ class LinearModel(ActuatorModel):
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
         """The command whose steady state (DC gain) is ``position_deg`` under the given load."""
         dc = np.asarray(ct.dcgain(self.system), dtype=float)
-        return (position_deg - dc[0, 1] * hinge_moment_inlb) / dc[0, 0]
+        command: FloatArray = (position_deg - dc[0, 1] * hinge_moment_inlb) / dc[0, 0]
+        return command
 
-    def _integrate(self, bp_t, bp_u, bp_h, t_end, sample_t):  # noqa: ANN001, ANN202
+    def _integrate(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float,
+                   sample_t: FloatArray) -> FloatArray:
         dt = 1.0 / self.rate_hz
         t0 = self._steps * dt
         n_steps = max(int(np.floor((t_end - t0) / dt + 1e-6)), 0)
@@ -229,7 +237,8 @@ class LinearModel(ActuatorModel):
         w = 2.0 * np.pi * f
         resp = ct.frequency_response(self.system[output, 0], w)
         delay = self.delay_s + (self.position_delay_s if output == 0 else 0.0)
-        return np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * delay)
+        response: np.ndarray = np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * delay)
+        return response
 
     def describe(self) -> dict[str, Any]:  # noqa: D102
         info = super().describe()

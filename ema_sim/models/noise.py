@@ -38,7 +38,8 @@ def next_u64(state: np.ndarray) -> np.uint64:
     x ^= x << np.uint64(25)
     x ^= x >> np.uint64(27)
     state[0] = x
-    return x * np.uint64(0x2545F4914F6CDD1D)
+    out: np.uint64 = x * np.uint64(0x2545F4914F6CDD1D)
+    return out
 
 
 @jit
@@ -79,7 +80,7 @@ _ZIG_R = 3.442619855899
 
 
 @jit
-def _signed_draw(state: np.ndarray) -> tuple:
+def _signed_draw(state: np.ndarray) -> tuple[np.int64, np.int64]:
     """A signed 32-bit integer and an independent 7-bit layer from one 64-bit draw."""
     r = next_u64(state)
     hz = np.int64(r >> np.uint64(32))
@@ -94,8 +95,8 @@ def normal(state: np.ndarray) -> float:
     hz, iz = _signed_draw(state)
     while True:
         if abs(hz) < _ZIG_K[iz]:
-            return hz * _ZIG_W[iz]
-        x = hz * _ZIG_W[iz]
+            return float(hz * _ZIG_W[iz])
+        x = float(hz * _ZIG_W[iz])
         if iz == 0:  # the tail beyond r, by Marsaglia's exponential method
             while True:
                 x = -math.log(uniform(state)) / _ZIG_R

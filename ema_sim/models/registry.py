@@ -34,7 +34,8 @@ def model_class(name: str) -> type[ActuatorModel]:
     if key not in _MODELS:
         raise UnknownNameError("model", name, _MODELS)
     module, cls = _MODELS[key].split(":")
-    return getattr(import_module(module), cls)
+    found: type[ActuatorModel] = getattr(import_module(module), cls)
+    return found
 
 
 def create(name: str, channel: str = "left_wing", **kwargs: Any) -> ActuatorModel:

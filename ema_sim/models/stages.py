@@ -132,7 +132,7 @@ def quantize(u: float, step: float) -> float:
     """
     if step <= 0.0:
         return u
-    return step * np.floor(u / step + 0.5)
+    return step * float(np.floor(u / step + 0.5))
 
 
 @nb.njit(cache=True)

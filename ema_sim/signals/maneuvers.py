@@ -66,7 +66,7 @@ class Step(Maneuver):
 
     def _signal(self, t: FloatArray) -> FloatArray:
         up = (t >= self.lead_s) & ((t < self.lead_s + self.hold_s) | (not self.back))
-        return self.start_deg + self.amp_deg * up
+        return np.asarray(self.start_deg + self.amp_deg * up, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -414,7 +414,7 @@ class Staircase(Maneuver):
 
     def _signal(self, t: FloatArray) -> FloatArray:
         idx = np.clip((t / self.hold_s).astype(int), 0, self.levels_deg.size - 1)
-        return self.levels_deg[idx]
+        return np.asarray(self.levels_deg[idx], dtype=float)
 
 
 @dataclass(frozen=True)

@@ -159,7 +159,7 @@ def build_plan(test: str | None = None, *, maneuver: str | None = None, load: st
         raise SpecError("give a test or a maneuver")
     fields: dict[str, str] = {}
     if test is None:
-        name = MANEUVER_TESTS.get(parse_maneuver(maneuver or "").kind, "custom")  # type: ignore[arg-type]
+        name = MANEUVER_TESTS.get(parse_maneuver(maneuver or "").kind, "custom")
     else:
         name, fields = split(test, "test")
         if name not in PRESETS:

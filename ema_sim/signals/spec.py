@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import MISSING, Field, dataclass, field, fields
-from typing import Any, TypeVar, get_type_hints
+from typing import Any, ClassVar, TypeVar, get_type_hints
 
 from ema_sim.errors import SpecError, UnknownNameError
 
@@ -25,8 +25,8 @@ def param(default: Any, *, low: float | None = None, high: float | None = None, 
 class Spec:
     """Base of every spec dataclass: a ``kind`` name and typed, bounded fields."""
 
-    kind = "?"
-    family = "spec"
+    kind: ClassVar[str] = "?"
+    family: ClassVar[str] = "spec"
 
     def spec(self) -> str:
         """The canonical spec string (round-trips through :func:`parse`)."""

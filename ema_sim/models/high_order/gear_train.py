@@ -37,7 +37,7 @@ dead_zone_segment = band_side
 
 @jit
 def gear_train_fig32(d: float, v_rel: float, half_backlash_in: float, k_series_lbf_per_in: float,
-                     damping_lbf_s_per_in: float, segment: int) -> tuple:
+                     damping_lbf_s_per_in: float, segment: int) -> tuple[float, float]:
     """Figure 32: dead zone (backlash) → gear stiffness in series with backup-structure stiffness.
 
     ``segment`` picks the branch (−1, 0, +1; see :func:`dead_zone_segment`), so a continuous
@@ -80,7 +80,7 @@ def three_segment_breakpoints(f1: float, f2: float, k1: float, k2: float, k3: fl
 
 @jit
 def three_segment_force(d: float, f1: float, f2: float, d1: float, d2: float, k1: float, k2: float,
-                        k3: float) -> tuple:
+                        k3: float) -> tuple[float, float, int]:
     """Force from deflection on the odd-symmetric three-segment curve: (force, tangent stiffness, segment)."""
     a = abs(d)
     if a <= d1:

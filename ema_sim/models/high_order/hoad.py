@@ -110,7 +110,7 @@ def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UI
     float
         The position feedback the FMU reads (deg).
     """
-    deg = lvdt_in * p[K.deg_per_in]
+    deg = float(lvdt_in * p[K.deg_per_in])
     if p[K.quantization_v] <= 0.0 and p[K.feedback_noise_v] <= 0.0:
         return deg
     c0, c1 = p[K.feedback_cal_c0_deg], p[K.feedback_cal_c1_deg_per_v]

@@ -228,7 +228,8 @@ class HighOrderParams:
             The validated copy.
         """
         info = pm.metas(self)
-        out = replace(self, **{k: pm.coerce(k, info[k], v, "replace", FAMILY) for k, v in changes.items()})
+        coerced: dict[str, Any] = {k: pm.coerce(k, info[k], v, "replace", FAMILY) for k, v in changes.items()}
+        out = replace(self, **coerced)
         out.validate()
         return out
 

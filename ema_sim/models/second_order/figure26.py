@@ -234,7 +234,7 @@ def compliance_time_constant_s(p: FloatArray) -> float:
     if c <= 0.0 or p[P.hysteresis_h_lb_per_in] <= 0.0:
         return 0.0
     k_lb_per_in = 1000.0 / (c * DEG2RAD * p[P.moment_arm_in] * p[P.moment_arm_in])
-    return p[P.hysteresis_h_lb_per_in] / (TWO_PI * p[P.hysteresis_freq_hz]) / k_lb_per_in
+    return float(p[P.hysteresis_h_lb_per_in] / (TWO_PI * p[P.hysteresis_freq_hz]) / k_lb_per_in)
 
 
 @jit
