@@ -263,13 +263,38 @@ def kernel_vector(params: Any, layout: Slots, extra: Mapping[str, float] | None 
 
 # ------------------------------------------------------------------------------ loading and checking
 def coerce(name: str, m: Meta, value: Any, origin: str, family: str) -> Value:
-    """A number (or ``m.size`` numbers) from a YAML or override value; one error naming the parameter."""
+    """A parameter's value as a float (or ``m.size`` floats) from YAML or an override; one error naming it.
+
+    A string is refused even when it reads as a number: YAML 1.1 reads ``5.0e6`` (no exponent sign) as a
+    string, and a ROS node would too.
+
+    Parameters
+    ----------
+    name : str
+        The parameter.
+    m : Meta
+        Its metadata.
+    value : object
+        The value given.
+    origin : str
+        Where it comes from, for messages.
+    family : str
+        The family's name in messages.
+
+    Returns
+    -------
+    float or tuple of float
+        The value.
+    """
+    bad = ConfigError(f"{origin}: {family} parameter {name} must be a number, got {value!r}")
     try:
         if m.size == 1:
+            if isinstance(value, str | bytes):
+                raise bad
             return float(value)
         items = tuple(float(x) for x in np.asarray(value, dtype=float).ravel())
     except (TypeError, ValueError):
-        raise ConfigError(f"{origin}: {family} parameter {name} must be a number, got {value!r}") from None
+        raise bad from None
     if len(items) != m.size:
         raise ConfigError(f"{origin}: {family} parameter {name} needs {m.size} values, got {len(items)}")
     return items
