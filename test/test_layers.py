@@ -51,13 +51,10 @@ def _owner(module: str) -> str:
 
 
 def _violations(package: str, path: Path) -> list[str]:
-    out = []
-    for name in sorted(_imports(path)):
-        if name.split(".")[0] in FOREIGN:
-            out.append(name)
-        elif name.startswith("ema_sim.") and _owner(name) != package and _owner(name) not in ALLOWED[package]:
-            out.append(name)
-    return out
+    def above(name: str) -> bool:
+        return name.startswith("ema_sim.") and _owner(name) not in {package, *ALLOWED[package]}
+
+    return [name for name in sorted(_imports(path)) if name.split(".")[0] in FOREIGN or above(name)]
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))
