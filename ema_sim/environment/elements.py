@@ -29,11 +29,28 @@ class Element(ABC):
 
     @abstractmethod
     def step(self, x: Signal) -> Signal:
-        """Output of this frame for input ``x``."""
+        """Output of this frame for input ``x``.
+
+        Parameters
+        ----------
+        x : float or numpy.ndarray
+            The input, one value per channel for an array.
+
+        Returns
+        -------
+        float or numpy.ndarray
+            The output, shaped as the input.
+        """
 
     @abstractmethod
     def reset(self, x: Signal) -> None:
-        """Steady state at ``x`` (no transient when the input stays there)."""
+        """Steady state at ``x`` (no transient when the input stays there).
+
+        Parameters
+        ----------
+        x : float or numpy.ndarray
+            The input, one value per channel for an array.
+        """
 
     @property
     def active(self) -> bool:
@@ -51,6 +68,15 @@ class TransportDelay(Element):
     Whole frames come from a ring of past inputs; a fractional remainder is linear interpolation
     between the two neighbouring frames (first-order Lagrange), so the phase lag at low frequency is
     exactly ω·delay whatever the frame rate.
+
+    Parameters
+    ----------
+    delay_s : float
+        The delay (s, ≥ 0).
+    frame_s : float
+        The frame (s).
+    initial : float or numpy.ndarray
+        The steady input it starts at.
     """
 
     name = "delay"
@@ -95,6 +121,15 @@ class FirstOrderLag(Element):
 
     ``y_k = y_{k-1} + (1 − e^{−2π·f·T})·(x_k − y_{k-1})``: the standard digital first-order filter of a
     flight computer running at frame ``T``; unity gain at DC.
+
+    Parameters
+    ----------
+    corner_hz : float
+        Corner frequency (0: off).
+    frame_s : float
+        The frame (s).
+    initial : float or numpy.ndarray
+        The steady input it starts at.
     """
 
     name = "lag"
@@ -122,7 +157,17 @@ class FirstOrderLag(Element):
 
 
 class Quantizer(Element):
-    """A converter: mid-tread quantization to ``step_v`` and saturation at ±``full_scale_v``."""
+    """A converter: mid-tread quantization to ``step_v`` and saturation at ±``full_scale_v``.
+
+    The quantizer is :func:`ema_sim.models.stages.quantize`, the one the models use.
+
+    Parameters
+    ----------
+    step_v : float
+        Resolution (V; 0: off).
+    full_scale_v : float
+        Saturation (V).
+    """
 
     name = "quantization"
 
@@ -158,7 +203,17 @@ NOISE_BLOCK = 1024
 
 
 class Noise(Element):
-    """Additive white Gaussian noise of ``rms_v``, reproducible from ``seed`` and ``stream``."""
+    """Additive white Gaussian noise of ``rms_v``, reproducible from ``seed`` and ``stream``.
+
+    Parameters
+    ----------
+    rms_v : float
+        Noise rms (V; 0: off).
+    seed : int
+        The profile's seed.
+    stream : sequence of int
+        Which stream (channel, direction), so every path's noise is independent.
+    """
 
     name = "noise"
 
@@ -205,7 +260,13 @@ class Noise(Element):
 
 
 class SignalPath(Element):
-    """Elements in order; the identity when empty."""
+    """Elements in order; the identity when empty.
+
+    Parameters
+    ----------
+    elements : sequence of Element
+        The elements in the order the signal meets them (inactive ones are dropped).
+    """
 
     name = "path"
 
@@ -217,7 +278,13 @@ class SignalPath(Element):
         return bool(self.elements)
 
     def reset(self, x: Signal) -> None:
-        """Steady state at ``x``: each element is reset at the output of the ones before it."""
+        """Steady state at ``x``: each element is reset at the output of the ones before it.
+
+        Parameters
+        ----------
+        x : float or numpy.ndarray
+            The input, one value per channel for an array.
+        """
         for element in self.elements:
             element.reset(x)
             if isinstance(element, Quantizer):

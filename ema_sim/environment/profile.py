@@ -106,7 +106,20 @@ class Profile:
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> Profile:
-        """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``)."""
+        """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``).
+
+        Parameters
+        ----------
+        params : mapping
+            The ``ros__parameters`` of a ``testenv`` parameter file.
+        origin : str
+            Where they come from, for messages.
+
+        Returns
+        -------
+        Profile
+            The validated profile.
+        """
         try:
             seed = int(params.get("seed", 0))
             full_scale = float(params.get("full_scale_v", 10.0))
@@ -122,7 +135,18 @@ class Profile:
                    command=paths["command"], feedback=paths["feedback"])
 
     def without(self, *elements: str) -> Profile:
-        """This profile with elements switched off: ``"noise"`` (both paths) or ``"feedback.noise"``."""
+        """This profile with elements switched off: ``"noise"`` (both paths) or ``"feedback.noise"``.
+
+        Parameters
+        ----------
+        *elements : str
+            Element names (:data:`ELEMENTS`), bare or with their path.
+
+        Returns
+        -------
+        Profile
+            The changed copy (``disabled`` lists them).
+        """
         out = self
         for item in elements:
             path, _, element = item.rpartition(".")
@@ -135,11 +159,37 @@ class Profile:
         return out
 
     def with_seed(self, seed: int) -> Profile:
-        """The same profile with another noise seed."""
+        """The same profile with another noise seed.
+
+        Parameters
+        ----------
+        seed : int
+            The seed.
+
+        Returns
+        -------
+        Profile
+            The changed copy.
+        """
         return replace(self, seed=int(seed))
 
     def command_path(self, frame_s: float, stream: int = 0, initial_v: float = 0.0) -> SignalPath:
-        """FMU → EMAC for one channel (``stream`` keeps each channel's noise independent)."""
+        """FMU → EMAC for one channel.
+
+        Parameters
+        ----------
+        frame_s : float
+            The frame (s).
+        stream : int
+            The channel's noise stream (keeps each channel's noise independent).
+        initial_v : float
+            The steady command it starts at (V).
+
+        Returns
+        -------
+        SignalPath
+            Lag, quantization, delay, noise.
+        """
         spec = self.command
         path = SignalPath([
             FirstOrderLag(spec.lag_hz, frame_s),
@@ -151,7 +201,22 @@ class Profile:
         return path
 
     def feedback_path(self, frame_s: float, stream: int = 0, initial_v: float = 0.0) -> SignalPath:
-        """EMAC → FMU for one channel."""
+        """EMAC → FMU for one channel.
+
+        Parameters
+        ----------
+        frame_s : float
+            The frame (s).
+        stream : int
+            The channel's noise stream.
+        initial_v : float
+            The steady feedback it starts at (V).
+
+        Returns
+        -------
+        SignalPath
+            Noise, delay, quantization, lag.
+        """
         spec = self.feedback
         path = SignalPath([
             Noise(spec.noise_rms_v, self.seed, (stream, 1)),
@@ -163,7 +228,18 @@ class Profile:
         return path
 
     def current_delay(self, frame_s: float) -> TransportDelay:
-        """Motor current feedback rides the feedback harness: same transport delay, nothing else."""
+        """Motor current feedback rides the feedback harness: same transport delay, nothing else.
+
+        Parameters
+        ----------
+        frame_s : float
+            The frame (s).
+
+        Returns
+        -------
+        TransportDelay
+            The feedback path's delay.
+        """
         return TransportDelay(self.feedback.delay_s, frame_s)
 
     def describe(self) -> dict[str, str]:
@@ -197,7 +273,20 @@ def _is_profile(path: Path) -> bool:
 
 
 def load_profile(name_or_path: str | Path, *, disable: Iterable[str] = ()) -> Profile:
-    """A profile by name (``none``, ``flight``, ``ail``) or from a parameter file path."""
+    """A profile by name (``none``, ``flight``, ``ail``) or from a parameter file path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        Profile name or a ``testenv`` parameter file.
+    disable : iterable of str
+        Elements to switch off (:meth:`Profile.without`).
+
+    Returns
+    -------
+    Profile
+        The profile.
+    """
     text = str(name_or_path)
     if text == "none":
         profile = Profile.none()

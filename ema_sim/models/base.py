@@ -76,7 +76,18 @@ class Sample:
     flags: NDArray[np.int64]
 
     def active(self, i: int = 0) -> Flags:
-        """The limit flags of instance ``i``."""
+        """The limit flags of instance ``i``.
+
+        Parameters
+        ----------
+        i : int
+            The instance.
+
+        Returns
+        -------
+        Flags
+            The limits active at the sample.
+        """
         return Flags(int(self.flags[i]))
 
 
@@ -98,7 +109,18 @@ class Record:
     flags: NDArray[np.int64]
 
     def columns(self, i: int = 0) -> dict[str, FloatArray]:
-        """Instance ``i`` as named 1-D columns (data-contract names)."""
+        """Instance ``i`` as named 1-D columns (data-contract names).
+
+        Parameters
+        ----------
+        i : int
+            The instance.
+
+        Returns
+        -------
+        dict
+            Column name → values, one per sample.
+        """
         return {
             "time_s": self.time_s,
             "command_deg": self.command_deg[i],
@@ -133,7 +155,17 @@ def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
 class ActuatorModel(ABC):
     """Base of every fidelity: inputs, time, history, validation; families supply the physics.
 
-    Subclasses set the class attributes and implement :meth:`_trim_states` and :meth:`_integrate`.
+    Subclasses set the class attributes and implement :meth:`default_params`, :meth:`_trim_states`
+    and :meth:`_integrate`.
+
+    Parameters
+    ----------
+    channel : str or ChannelConfig
+        The channel (name, or a loaded configuration).
+    n : int
+        Number of independent instances stepped together.
+    rate_hz : float, optional
+        Internal integration rate of a discrete model (its default otherwise).
     """
 
     name: ClassVar[str]
@@ -299,6 +331,20 @@ class ActuatorModel(ABC):
 
         Give either the held ``command_deg`` or the ``position_deg`` to trim at (the command is then
         solved for; a quantized command lands within half a quantization step of it).
+
+        Parameters
+        ----------
+        command_deg : array_like, optional
+            The held command, for every instance or each (deg).
+        hinge_moment_inlb : array_like
+            The held load (in·lb, positive aids positive deflection).
+        position_deg : array_like, optional
+            The LVDT position to trim at instead (deg).
+
+        Returns
+        -------
+        Sample
+            The outputs at time 0.
         """
         hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
         if position_deg is not None:
@@ -318,6 +364,21 @@ class ActuatorModel(ABC):
         The frame's breakpoint is written in place after the kept history (no copy of it), and the
         history is then trimmed by moving its start: the kernel sees exactly the breakpoints
         :meth:`run` would give it, so stepping frame by frame equals one run bit for bit.
+
+        Parameters
+        ----------
+        command_deg : array_like
+            The frame's command, for every instance or each (deg); a non-finite value is held at the
+            last good one and counted in :attr:`rejected_inputs`.
+        hinge_moment_inlb : array_like
+            The frame's load (in·lb).
+        frame_s : float
+            The frame (s).
+
+        Returns
+        -------
+        Sample
+            The outputs at the frame's end.
         """
         return self._sample(self._advance(command_deg, hinge_moment_inlb, frame_s))
 
@@ -326,6 +387,20 @@ class ActuatorModel(ABC):
 
         The same frame as :meth:`step`, without building arrays for one instance: the per-frame path of
         the node layer (flags come back as a float; ``int()`` them).
+
+        Parameters
+        ----------
+        command_deg : float
+            The frame's command (deg).
+        hinge_moment_inlb : float
+            The frame's load (in·lb).
+        frame_s : float
+            The frame (s).
+
+        Returns
+        -------
+        list of float
+            Position, surface, rate, current, bus and flags.
         """
         values: list[float] = self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
         return values
@@ -379,6 +454,26 @@ class ActuatorModel(ABC):
         (default: ``time_s``) where the outputs are read, each from the state at or before it.
         ``end_s`` (default: the last sample) is where the model stops. ``progress`` gets the
         fraction done after each chunk of about a second of simulated time.
+
+        Parameters
+        ----------
+        time_s : array_like
+            Input breakpoints (s), increasing.
+        command_deg : array_like
+            Command at each breakpoint, one row for all instances or one per instance (deg).
+        hinge_moment_inlb : array_like, optional
+            Load at each breakpoint (in·lb; 0 when omitted).
+        sample_times : array_like, optional
+            Where the outputs are read (s).
+        end_s : float, optional
+            Where the model stops (s).
+        progress : callable, optional
+            Called with the fraction done.
+
+        Returns
+        -------
+        Record
+            The outputs at the sample times.
         """
         bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
         out = self._run_block(bp_t, u, hm, samples, end_s, progress)
@@ -409,6 +504,24 @@ class ActuatorModel(ABC):
         """:meth:`run` without building a :class:`Record`: the raw ``(n, samples, N_OUT)`` block.
 
         For callers that simulate many times and need only the outputs (identification).
+
+        Parameters
+        ----------
+        time_s : array_like
+            Input breakpoints (s).
+        command_deg : array_like
+            Command at each breakpoint (deg).
+        hinge_moment_inlb : array_like, optional
+            Load at each breakpoint (in·lb).
+        sample_times : array_like, optional
+            Where the outputs are read (s).
+        end_s : float, optional
+            Where the model stops (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(n, samples, N_OUT)`` in :data:`OUTPUT_FIELDS` order.
         """
         bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
         return self._run_block(bp_t, u, hm, samples, end_s, None)
@@ -560,7 +673,22 @@ def _check_finite(arr: FloatArray, what: str) -> None:
 
 
 def batch_params(params: object | Sequence[object] | None, n: int, default: Callable[[], object]) -> list[Any]:
-    """Normalise a family's ``params`` argument: None, one set for all, or one per instance."""
+    """Normalise a family's ``params`` argument: None, one set for all, or one per instance.
+
+    Parameters
+    ----------
+    params : object, sequence or None
+        The argument as given.
+    n : int
+        Number of instances.
+    default : callable
+        Makes the default set (called once, when ``params`` is None).
+
+    Returns
+    -------
+    list
+        One parameter set per instance.
+    """
     if params is None:
         return [default()] * n
     if isinstance(params, Sequence) and not isinstance(params, str | bytes):

@@ -48,6 +48,16 @@ def make_dopri5(rhs: Rhs) -> Stepper:  # noqa: PLR0915
 
     The stepper is a closure over ``rhs`` rather than taking it as an argument, so numba can cache
     it (a function passed as a value is a run-time pointer and defeats the cache).
+
+    Parameters
+    ----------
+    rhs : callable
+        The compiled right-hand side ``rhs(t, y, p, u, dydt)``.
+
+    Returns
+    -------
+    callable
+        ``dopri5(p, u, y, t, t_end, h, rtol, atol, h_max, limits, mode) -> (next h, steps)``.
     """
 
     def _masked(t: float, y: FloatArray, p: FloatArray, u: FloatArray, limits: FloatArray, mode: IntArray,

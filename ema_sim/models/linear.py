@@ -38,7 +38,35 @@ from ema_sim.models.second_order.params import SecondOrderParams
 def run_lti(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArray, Crate: FloatArray, Drate: FloatArray,
             X: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, delay_s: float, t0: float, dt: float,
             n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
-    """Step ``x ← Ad·x + Bd·[u(t − delay), hm]`` for every instance; samples as the discrete models."""
+    """Step ``x ← Ad·x + Bd·[u(t − delay), hm]`` for every instance; samples as the discrete models.
+
+    Parameters
+    ----------
+    Ad, Bd, Cd, Dd : numpy.ndarray
+        The zero-order-hold discretization at ``dt``.
+    Crate, Drate : numpy.ndarray
+        The position output's rate: ``Crate·x + Drate·u``.
+    X : numpy.ndarray
+        States, one row per instance, advanced in place.
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    bp_u : numpy.ndarray
+        Command at each breakpoint, one row per instance (deg).
+    bp_h : numpy.ndarray
+        Hinge moment at each breakpoint, one row per instance (in·lb).
+    delay_s : float
+        The command delay (s).
+    t0 : float
+        Time of the first step (s).
+    dt : float
+        The step (s).
+    n_steps : int
+        Steps to take.
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    out : numpy.ndarray
+        Output block ``(instances, samples, outputs)``, filled.
+    """
     k_samples = sample_t.shape[0]
     nx = Ad.shape[0]
     xn = np.empty(nx)
@@ -87,6 +115,35 @@ def run_lti_delayed(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArr
 
     Input ``j`` is the command (``source[j] = 0``) or the hinge moment (1) delayed by ``delay[j]``: the
     stepping form of a model with an output delay.
+
+    Parameters
+    ----------
+    Ad, Bd, Cd, Dd : numpy.ndarray
+        The zero-order-hold discretization at ``dt``.
+    Crate, Drate : numpy.ndarray
+        The position output's rate: ``Crate·x + Drate·u``.
+    X : numpy.ndarray
+        States, one row per instance, advanced in place.
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    bp_u : numpy.ndarray
+        Command at each breakpoint, one row per instance (deg).
+    bp_h : numpy.ndarray
+        Hinge moment at each breakpoint, one row per instance (in·lb).
+    source : numpy.ndarray
+        Which input each system input is (0 command, 1 hinge moment).
+    delay : numpy.ndarray
+        Each system input's delay (s).
+    t0 : float
+        Time of the first step (s).
+    dt : float
+        The step (s).
+    n_steps : int
+        Steps to take.
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    out : numpy.ndarray
+        Output block ``(instances, samples, outputs)``, filled.
     """
     k_samples = sample_t.shape[0]
     nx = Ad.shape[0]
@@ -139,6 +196,21 @@ class LinearModel(ActuatorModel):
 
     ``position_delay_s`` delays the position output further (feedback transport); it is stepped as a
     second copy of the system driven by inputs delayed that much more, so it stays exact.
+
+    Parameters
+    ----------
+    system : control.StateSpace
+        Continuous, inputs (command deg, hinge moment in·lb), outputs (position deg, surface deg).
+    delay_s : float
+        Command delay (s).
+    channel : str or ChannelConfig
+        The channel.
+    n : int
+        Number of instances.
+    rate_hz : float, optional
+        Stepping rate (10,000 Hz).
+    position_delay_s : float
+        Further delay of the position output (s).
     """
 
     default_rate_hz = 10_000.0
@@ -202,7 +274,20 @@ class LinearModel(ActuatorModel):
         self._steps = 0
 
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
-        """The command whose steady state (DC gain) is ``position_deg`` under the given load."""
+        """The command whose steady state (DC gain) is ``position_deg`` under the given load.
+
+        Parameters
+        ----------
+        position_deg : numpy.ndarray
+            The wanted position of each instance (deg).
+        hinge_moment_inlb : numpy.ndarray
+            The load of each instance (in·lb).
+
+        Returns
+        -------
+        numpy.ndarray
+            The command of each instance (deg).
+        """
         dc = np.asarray(ct.dcgain(self.system), dtype=float)
         command: FloatArray = (position_deg - dc[0, 1] * hinge_moment_inlb) / dc[0, 0]
         return command
@@ -227,12 +312,38 @@ class LinearModel(ActuatorModel):
         return out
 
     def frequency_response(self, freq_hz: ArrayLike, output: int = 0) -> tuple[FloatArray, FloatArray]:
-        """Gain (dB) and phase (deg) from command to ``output`` (0 position, 1 surface), delays included."""
+        """Gain (dB) and phase (deg) from command to ``output``, delays included.
+
+        Parameters
+        ----------
+        freq_hz : array_like
+            Frequencies (Hz).
+        output : int
+            0 position, 1 surface.
+
+        Returns
+        -------
+        gain_db, phase_deg : numpy.ndarray
+            The response.
+        """
         gain, phase = _db_deg(self.complex_response(freq_hz, output))
         return gain, phase
 
     def complex_response(self, freq_hz: ArrayLike, output: int = 0) -> np.ndarray:
-        """The complex response from the command to ``output``, delays included."""
+        """The complex response from the command to ``output``, delays included.
+
+        Parameters
+        ----------
+        freq_hz : array_like
+            Frequencies (Hz).
+        output : int
+            0 position, 1 surface.
+
+        Returns
+        -------
+        numpy.ndarray
+            One complex value per frequency.
+        """
         f = np.atleast_1d(np.asarray(freq_hz, dtype=float))
         w = 2.0 * np.pi * f
         resp = ct.frequency_response(self.system[output, 0], w)
@@ -254,7 +365,20 @@ def _db_deg(h: np.ndarray) -> tuple[FloatArray, FloatArray]:
 
 
 def second_order_system(wn_rad_s: float, zeta: float) -> ct.StateSpace:
-    """ωn²/(s² + 2ζωn·s + ωn²) from the command; the hinge moment does not enter; surface = position."""
+    """ωn²/(s² + 2ζωn·s + ωn²) from the command; the hinge moment does not enter; surface = position.
+
+    Parameters
+    ----------
+    wn_rad_s : float
+        Natural frequency.
+    zeta : float
+        Damping ratio.
+
+    Returns
+    -------
+    control.StateSpace
+        Two inputs, two outputs.
+    """
     g = ct.ss(ct.tf([wn_rad_s**2], [1.0, 2.0 * zeta * wn_rad_s, wn_rad_s**2]))
     A = np.asarray(g.A, dtype=float)
     B = np.hstack([np.asarray(g.B, dtype=float), np.zeros((A.shape[0], 1))])
@@ -264,7 +388,19 @@ def second_order_system(wn_rad_s: float, zeta: float) -> ct.StateSpace:
 
 
 class Sloac(LinearModel):
-    """SLOAC: LOAC reduced to its second-order transfer function and delay (section 4.2.7)."""
+    """SLOAC: LOAC reduced to its second-order transfer function and delay (section 4.2.7).
+
+    Parameters
+    ----------
+    channel : str or ChannelConfig
+        The channel.
+    n : int
+        Number of instances.
+    rate_hz : float, optional
+        Stepping rate (10,000 Hz).
+    **overrides : float
+        Second-order parameters that replace the channel's.
+    """
 
     name = "sloac"
     title = "Simplified low-order actuator continuous model (SLOAC)"
@@ -311,6 +447,21 @@ class Hoalm(LinearModel):
     ``load_inlb`` is the hinge moment it is linearized at (the report found it under-predicted the
     wing gain at low load and the phase loss at every load); ``bound`` picks the compliance bound.
     Steps at 10,000 Hz like the discrete model it comes from (table 5).
+
+    Parameters
+    ----------
+    channel : str or ChannelConfig
+        The channel.
+    n : int
+        Number of instances.
+    rate_hz : float, optional
+        Stepping rate (10,000 Hz).
+    load_inlb : float
+        The hinge moment it is linearized at (in·lb).
+    bound : str or float
+        Figure 35's compliance bound.
+    **overrides : float
+        High-order parameters that replace the channel's.
     """
 
     name = "hoalm"
@@ -387,7 +538,22 @@ LOES_FIELDS = ("wn_rad_s", "zeta", "delay_s", "dc_gain_ratio")
 
 
 def loes_system(wn_rad_s: float, zeta: float, dc_gain_ratio: float) -> ct.StateSpace:
-    """``K·ωn²/(s² + 2ζωn·s + ωn²)`` from the command to both outputs; the hinge moment does not enter."""
+    """``K·ωn²/(s² + 2ζωn·s + ωn²)`` from the command to both outputs; the hinge moment does not enter.
+
+    Parameters
+    ----------
+    wn_rad_s : float
+        Natural frequency.
+    zeta : float
+        Damping ratio.
+    dc_gain_ratio : float
+        Steady-state gain K.
+
+    Returns
+    -------
+    control.StateSpace
+        Two inputs, two outputs.
+    """
     g = ct.ss(ct.tf([dc_gain_ratio * wn_rad_s**2], [1.0, 2.0 * zeta * wn_rad_s, wn_rad_s**2]))
     A = np.asarray(g.A, dtype=float)
     B = np.hstack([np.asarray(g.B, dtype=float), np.zeros((A.shape[0], 1))])
@@ -402,6 +568,17 @@ class Loes(LinearModel):
     The coefficients are the channel's ``loes`` section, written by the fit in
     :mod:`ema_sim.analysis.loes` (``ema loes --write``), so building the model costs nothing. It is the
     command-to-position equivalent: the surface output equals the position and the load does not enter.
+
+    Parameters
+    ----------
+    channel : str or ChannelConfig
+        The channel.
+    n : int
+        Number of instances.
+    rate_hz : float, optional
+        Stepping rate (10,000 Hz).
+    **overrides : float
+        LOES coefficients that replace the channel's.
     """
 
     name = "loes"

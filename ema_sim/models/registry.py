@@ -24,12 +24,29 @@ _MODELS: dict[str, str] = {
 
 
 def model_names() -> list[str]:
-    """The names ``create`` accepts, in table 5's order."""
+    """The names ``create`` accepts, in table 5's order.
+
+    Returns
+    -------
+    list of str
+        Registry names.
+    """
     return list(_MODELS)
 
 
 def model_class(name: str) -> type[ActuatorModel]:
-    """The class registered under ``name``."""
+    """The class registered under ``name``.
+
+    Parameters
+    ----------
+    name : str
+        Registry name (case and surrounding spaces ignored).
+
+    Returns
+    -------
+    type
+        The model class.
+    """
     key = name.strip().lower()
     if key not in _MODELS:
         raise UnknownNameError("model", name, _MODELS)
@@ -39,5 +56,20 @@ def model_class(name: str) -> type[ActuatorModel]:
 
 
 def create(name: str, channel: str = "left_wing", **kwargs: Any) -> ActuatorModel:
-    """Build model ``name`` for ``channel`` (``n``, ``rate_hz`` and parameter overrides pass through)."""
+    """Build model ``name`` for ``channel``.
+
+    Parameters
+    ----------
+    name : str
+        Registry name (:func:`model_names`).
+    channel : str
+        Channel name.
+    **kwargs : object
+        ``n``, ``rate_hz``, options and parameter overrides, passed to the class.
+
+    Returns
+    -------
+    ActuatorModel
+        The model, trimmed at zero.
+    """
     return model_class(name)(channel, **kwargs)
