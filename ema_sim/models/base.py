@@ -665,6 +665,30 @@ class ActuatorModel(ABC):
         )
 
 
+class Tolerances:
+    """The adaptive integrator's tolerances of a continuous model (LOAC, HOAC1), mixed in before its family.
+
+    Parameters
+    ----------
+    *args : object
+        The family's arguments.
+    rtol : float, optional
+        Relative tolerance (:attr:`default_rtol`).
+    atol : float, optional
+        Absolute tolerance (:attr:`default_atol`).
+    **kwargs : object
+        The family's keyword arguments.
+    """
+
+    default_rtol: ClassVar[float] = 1e-9
+    default_atol: ClassVar[float] = 1e-11
+
+    def __init__(self, *args: Any, rtol: float | None = None, atol: float | None = None, **kwargs: Any) -> None:
+        self.rtol = self.default_rtol if rtol is None else float(rtol)
+        self.atol = self.default_atol if atol is None else float(atol)
+        super().__init__(*args, **kwargs)
+
+
 def _check_finite(arr: FloatArray, what: str) -> None:
     bad = ~np.isfinite(arr)
     if bad.any():

@@ -35,86 +35,15 @@ from ema_sim.models.second_order.params import SecondOrderParams
 
 
 @nb.njit(cache=True)
-def run_lti(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArray, Crate: FloatArray, Drate: FloatArray,
-            X: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, delay_s: float, t0: float, dt: float,
-            n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
-    """Step ``x ← Ad·x + Bd·[u(t − delay), hm]`` for every instance; samples as the discrete models.
-
-    Parameters
-    ----------
-    Ad, Bd, Cd, Dd : numpy.ndarray
-        The zero-order-hold discretization at ``dt``.
-    Crate, Drate : numpy.ndarray
-        The position output's rate: ``Crate·x + Drate·u``.
-    X : numpy.ndarray
-        States, one row per instance, advanced in place.
-    bp_t : numpy.ndarray
-        Input breakpoint times (s).
-    bp_u : numpy.ndarray
-        Command at each breakpoint, one row per instance (deg).
-    bp_h : numpy.ndarray
-        Hinge moment at each breakpoint, one row per instance (in·lb).
-    delay_s : float
-        The command delay (s).
-    t0 : float
-        Time of the first step (s).
-    dt : float
-        The step (s).
-    n_steps : int
-        Steps to take.
-    sample_t : numpy.ndarray
-        Sample instants (s).
-    out : numpy.ndarray
-        Output block ``(instances, samples, outputs)``, filled.
-    """
-    k_samples = sample_t.shape[0]
-    nx = Ad.shape[0]
-    xn = np.empty(nx)
-    uin = np.empty(2)
-    for i in range(X.shape[0]):
-        x = X[i]
-        jd = st.zoh_index(bp_t, t0 - delay_s, 0)
-        jh = st.zoh_index(bp_t, t0, 0)
-        js = 0
-        for k in range(n_steps + 1):
-            t = t0 + k * dt
-            jd = st.zoh_index(bp_t, t - delay_s, jd)
-            jh = st.zoh_index(bp_t, t, jh)
-            uin[0] = bp_u[i, jd]
-            uin[1] = bp_h[i, jh]
-            while js < k_samples and (k == n_steps or sample_t[js] < t + dt - st.TIME_EPS_S):
-                row = out[i, js]
-                row[O_POS] = Dd[0, 0] * uin[0] + Dd[0, 1] * uin[1]
-                row[O_SURF] = Dd[1, 0] * uin[0] + Dd[1, 1] * uin[1]
-                row[O_RATE] = Drate[0] * uin[0] + Drate[1] * uin[1]
-                for a in range(nx):
-                    row[O_POS] += Cd[0, a] * x[a]
-                    row[O_SURF] += Cd[1, a] * x[a]
-                    row[O_RATE] += Crate[a] * x[a]
-                row[O_CUR] = np.nan
-                row[O_BUS] = np.nan
-                row[O_FLAGS] = 0.0
-                js += 1
-            if k == n_steps:
-                break
-            for a in range(nx):
-                acc = Bd[a, 0] * uin[0] + Bd[a, 1] * uin[1]
-                for b in range(nx):
-                    acc += Ad[a, b] * x[b]
-                xn[a] = acc
-            for a in range(nx):
-                x[a] = xn[a]
-
-
-@nb.njit(cache=True)
-def run_lti_delayed(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArray, Crate: FloatArray,
-                    Drate: FloatArray, X: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
-                    source: IntArray, delay: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray,
-                    out: FloatArray) -> None:
-    """:func:`run_lti` for inputs that are each the command or the load, each with its own delay.
+def run_lti(Ad: FloatArray, Bd: FloatArray, Cd: FloatArray, Dd: FloatArray, Crate: FloatArray,
+            Drate: FloatArray, X: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
+            source: IntArray, delay: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray,
+            out: FloatArray) -> None:
+    """Step ``x ← Ad·x + Bd·u`` for every instance; samples as the discrete models.
 
     Input ``j`` is the command (``source[j] = 0``) or the hinge moment (1) delayed by ``delay[j]``: the
-    stepping form of a model with an output delay.
+    command with its delay and the load (two inputs), or, for a model with an output delay, both again
+    delayed that much more (four).
 
     Parameters
     ----------
@@ -298,16 +227,8 @@ class LinearModel(ActuatorModel):
         t0 = self._steps * dt
         n_steps = max(int(np.floor((t_end - t0) / dt + 1e-6)), 0)
         out = np.empty((self.n, sample_t.size, N_OUT))
-        if self.position_delay_s > 0.0:
-            run_lti_delayed(
-                self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X,
-                bp_t, bp_u, bp_h, self._source, self._delays, t0, dt, n_steps, sample_t, out,
-            )
-        else:
-            run_lti(
-                self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X,
-                bp_t, bp_u, bp_h, self.delay_s, t0, dt, n_steps, sample_t, out,
-            )
+        run_lti(self._Ad, self._Bd, self._Cd, self._Dd, self._Crate, self._Drate, self._X, bp_t, bp_u, bp_h,
+                self._source, self._delays, t0, dt, n_steps, sample_t, out)
         self._steps += n_steps
         return out
 
@@ -423,21 +344,8 @@ class Sloac(LinearModel):
         )
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:
-        """LOAC's parameters (SLOAC keeps ωn, ζ and the delay).
-
-        Parameters
-        ----------
-        channel : ChannelConfig
-            The channel.
-        **overrides : float
-            Values that replace the channel's.
-
-        Returns
-        -------
-        SecondOrderParams
-            The validated parameters.
-        """
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:  # noqa: D102
+        # LOAC's parameters (SLOAC keeps ωn, ζ and the delay).
         return SecondOrderParams.from_channel(channel, **overrides)
 
 
@@ -491,21 +399,8 @@ class Hoalm(LinearModel):
         super().__init__(system, lin.command_delay_s, ch, n=n, rate_hz=rate_hz, position_delay_s=lin.feedback_delay_s)
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:
-        """HOAD3's parameters, the model it linearizes.
-
-        Parameters
-        ----------
-        channel : ChannelConfig
-            The channel.
-        **overrides : float
-            Values that replace the channel's.
-
-        Returns
-        -------
-        HighOrderParams
-            The validated parameters.
-        """
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:  # noqa: D102
+        # HOAD3's parameters, the model it linearizes.
         return HighOrderParams.from_channel(channel, "hoad3", **overrides)
 
     def describe(self) -> dict[str, Any]:  # noqa: D102
@@ -601,20 +496,6 @@ class Loes(LinearModel):
                          self.params.delay_s, ch, n=n, rate_hz=rate_hz)
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> LoesParams:
-        """The channel's ``loes`` section, then ``overrides``.
-
-        Parameters
-        ----------
-        channel : ChannelConfig
-            The channel.
-        **overrides : float
-            Values that replace the channel's.
-
-        Returns
-        -------
-        LoesParams
-            The validated coefficients.
-        """
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> LoesParams:  # noqa: D102
         return pm.load(LoesParams, channel.section("loes"), origin=channel.channel, family="LOES", section="loes",
                        overrides=overrides)

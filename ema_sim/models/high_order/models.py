@@ -23,7 +23,7 @@ from ema_sim.config import ChannelConfig
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import noise as nz
 from ema_sim.models.arrays import FloatArray
-from ema_sim.models.base import N_OUT, ActuatorModel, batch_params
+from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
 from ema_sim.models.high_order.figure30 import MOTOR_STUCK
 from ema_sim.models.high_order.hoac1 import N_U, U, run_continuous
 from ema_sim.models.high_order.hoad import command_in, run_discrete
@@ -132,21 +132,7 @@ class HighOrderModel(ActuatorModel):
         self.trim()
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:
-        """The parameters a model of this class takes from ``channel`` (its variant's), then ``overrides``.
-
-        Parameters
-        ----------
-        channel : ChannelConfig
-            The channel.
-        **overrides : float
-            Values that replace the channel's.
-
-        Returns
-        -------
-        HighOrderParams
-            The validated parameters.
-        """
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:  # noqa: D102
         return HighOrderParams.from_channel(channel, cls.variant or "hoad3", **overrides)
 
     # ------------------------------------------------------------------ power and brake
@@ -241,34 +227,18 @@ TRIMMED = (X.x_motor_in, X.x_surface_in, X.current_a, X.lvdt_filtered_in, X.bus_
 TRIM_KEYS = ("xm", "xs", "cur", "lf", "vbus", "xi")
 
 
-class Hoac1(HighOrderModel):
+class Hoac1(Tolerances, HighOrderModel):
     """HOAC1: the continuous physics model of figure 30, the reference the discrete ones are judged by.
 
-    Parameters
-    ----------
-    *args : object
-        As :class:`HighOrderModel`.
-    rtol : float, optional
-        Relative tolerance (1e-9).
-    atol : float, optional
-        Absolute tolerance (1e-11).
-    **kwargs : object
-        As :class:`HighOrderModel`.
+    Takes :class:`HighOrderModel`'s arguments and the tolerances ``rtol``, ``atol`` (:class:`Tolerances`).
     """
 
     name = "hoac1"
     title = "High-order actuator continuous model version 1.0 (HOAC1)"
     continuous = True
     variant = "hoac1"
-    default_rtol: ClassVar[float] = 1e-9
-    default_atol: ClassVar[float] = 1e-11
-
-    def __init__(self, *args: Any, rtol: float | None = None, atol: float | None = None, **kwargs: Any) -> None:
-        self.rtol = self.default_rtol if rtol is None else float(rtol)
-        self.atol = self.default_atol if atol is None else float(atol)
-        self.events = 0
-        """Regime changes located so far (a measure of how hard the record was)."""
-        super().__init__(*args, **kwargs)
+    events: int
+    """Regime changes located since the last trim (a measure of how hard the record was)."""
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
         self._Y = np.zeros((self.n, N_CONTINUOUS))

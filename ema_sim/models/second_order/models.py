@@ -19,7 +19,7 @@ import numpy as np
 from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.models.arrays import FloatArray
-from ema_sim.models.base import N_OUT, ActuatorModel, batch_params
+from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
 from ema_sim.models.second_order.figure26 import command_path, compliance_correction, compliance_deflection
 from ema_sim.models.second_order.loac import run_continuous
 from ema_sim.models.second_order.loada import METHOD_FORWARD_EULER, METHOD_LOADF, run_discrete
@@ -74,21 +74,7 @@ class SecondOrderModel(ActuatorModel):
         self.trim()
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:
-        """The parameters a model of this class takes from ``channel`` (then ``overrides``).
-
-        Parameters
-        ----------
-        channel : ChannelConfig
-            The channel.
-        **overrides : float
-            Values that replace the channel's.
-
-        Returns
-        -------
-        SecondOrderParams
-            The validated parameters.
-        """
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:  # noqa: D102
         return SecondOrderParams.from_channel(channel, **overrides)
 
     @property
@@ -161,31 +147,15 @@ class Loadf(Loada):
     method = METHOD_LOADF
 
 
-class Loac(SecondOrderModel):
+class Loac(Tolerances, SecondOrderModel):
     """LOAC: the continuous second-order model, the reference the discrete ones are judged against.
 
-    Parameters
-    ----------
-    *args : object
-        As :class:`SecondOrderModel`.
-    rtol : float, optional
-        Relative tolerance (1e-9).
-    atol : float, optional
-        Absolute tolerance (1e-11).
-    **kwargs : object
-        As :class:`SecondOrderModel`.
+    Takes :class:`SecondOrderModel`'s arguments and the tolerances ``rtol``, ``atol`` (:class:`Tolerances`).
     """
 
     name = "loac"
     title = "Low-order actuator continuous model (LOAC)"
     continuous = True
-    default_rtol: ClassVar[float] = 1e-9
-    default_atol: ClassVar[float] = 1e-11
-
-    def __init__(self, *args: Any, rtol: float | None = None, atol: float | None = None, **kwargs: Any) -> None:
-        self.rtol = self.default_rtol if rtol is None else float(rtol)
-        self.atol = self.default_atol if atol is None else float(atol)
-        super().__init__(*args, **kwargs)
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
         super()._trim_states(command_deg, hinge_moment_inlb)
