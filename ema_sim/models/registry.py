@@ -6,7 +6,9 @@ from importlib import import_module
 from typing import Any
 
 from ema_sim.errors import UnknownNameError
+from ema_sim.config import ChannelConfig
 from ema_sim.models.base import ActuatorModel
+from ema_sim.parameters import ParameterInfo
 
 _MODELS: dict[str, str] = {
     "loac": "ema_sim.models.second_order.models:Loac",
@@ -73,3 +75,24 @@ def create(name: str, channel: str = "left_wing", **kwargs: Any) -> ActuatorMode
         The model, trimmed at zero.
     """
     return model_class(name)(channel, **kwargs)
+
+
+def model_parameters(name: str, channel: str | ChannelConfig | None = None) -> list[ParameterInfo]:
+    """Every parameter of model ``name``: name, YAML path, unit, range, description, switch, kernel slot.
+
+    The one listing identification bounds, Monte Carlo dispersions and ROS parameter descriptors read
+    (:func:`ema_sim.parameters.describe`).
+
+    Parameters
+    ----------
+    name : str
+        Registry name.
+    channel : str or ChannelConfig, optional
+        The channel whose values are listed as each parameter's ``default``.
+
+    Returns
+    -------
+    list of ParameterInfo
+        In declaration order.
+    """
+    return model_class(name).parameters(channel)
