@@ -5,8 +5,8 @@ from __future__ import annotations
 from importlib import import_module
 from typing import Any
 
-from ema_sim.errors import UnknownNameError
 from ema_sim.config import ChannelConfig
+from ema_sim.errors import UnknownNameError
 from ema_sim.models.base import ActuatorModel
 from ema_sim.parameters import ParameterInfo
 
