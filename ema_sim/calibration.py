@@ -25,6 +25,18 @@ compiled = nb.njit(cache=True, fastmath=False)
 fast-math kernel that compiles them first decide their floating-point contraction for every caller."""
 
 
+@nb.njit(cache=True, inline="always")
+def _value(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
+    """The curve in Horner form: the one place it is written (inlined into the compiled functions below)."""
+    return c0 + x * (c1 + x * (c2 + x * c3))
+
+
+@nb.njit(cache=True, inline="always")
+def _slope(c0: float, c1: float, c2: float, c3: float, x: float) -> float:  # noqa: ARG001 - one signature
+    """The curve's slope: the one place it is written."""
+    return c1 + x * (2.0 * c2 + 3.0 * c3 * x)
+
+
 @compiled
 def cubic(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
     """A third-order calibration curve ``c0 + c1·x + c2·x² + c3·x³`` (Horner form).
@@ -41,11 +53,11 @@ def cubic(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
     float
         The curve's value.
     """
-    return c0 + x * (c1 + x * (c2 + x * c3))
+    return _value(c0, c1, c2, c3, x)
 
 
 @compiled
-def cubic_slope(c0: float, c1: float, c2: float, c3: float, x: float) -> float:  # noqa: ARG001 - one signature
+def cubic_slope(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
     """The curve's slope ``dy/dx`` at ``x``.
 
     Parameters
@@ -60,14 +72,16 @@ def cubic_slope(c0: float, c1: float, c2: float, c3: float, x: float) -> float: 
     float
         ``c1 + 2·c2·x + 3·c3·x²``.
     """
-    return c1 + x * (2.0 * c2 + 3.0 * c3 * x)
+    return _slope(c0, c1, c2, c3, x)
 
 
 @compiled
-def cubic_inverse(c0: float, c1: float, c2: float, c3: float, y: float) -> float:
-    """The ``x`` with ``cubic(x) = y``: :data:`NEWTON_STEPS` Newton steps from the linear guess.
+def cubic_inverse(c0: float, c1: float, c2: float, c3: float, y: float, tol: float = 0.0) -> float:
+    """The ``x`` with ``cubic(x) = y``: at most :data:`NEWTON_STEPS` Newton steps from the linear guess.
 
-    The steps stop early only when one changes nothing (so the result is that of every step).
+    The steps stop once one moves ``x`` by no more than ``tol·(1 + |x|)``. With ``tol = 0`` (what
+    :class:`Cubic` and the command path use) only a step that changes nothing stops them, so the result
+    is that of every step; the feedback path, evaluated at every sample, stops at 1e-15.
 
     Parameters
     ----------
@@ -75,6 +89,8 @@ def cubic_inverse(c0: float, c1: float, c2: float, c3: float, y: float) -> float
         The coefficients of a curve monotonic over the range used.
     y : float
         The value to invert.
+    tol : float
+        Relative step below which the iteration stops.
 
     Returns
     -------
@@ -83,9 +99,9 @@ def cubic_inverse(c0: float, c1: float, c2: float, c3: float, y: float) -> float
     """
     x = (y - c0) / c1
     for _ in range(NEWTON_STEPS):
-        dx = (cubic(c0, c1, c2, c3, x) - y) / cubic_slope(c0, c1, c2, c3, x)
+        dx = (_value(c0, c1, c2, c3, x) - y) / _slope(c0, c1, c2, c3, x)
         x = x - dx
-        if dx == 0.0:
+        if abs(dx) <= tol * (1.0 + abs(x)):
             break
     return x
 

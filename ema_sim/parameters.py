@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import itertools
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -156,8 +157,13 @@ def metas(cls: Any) -> dict[str, Meta]:
     Returns
     -------
     dict
-        One entry per field.
+        One entry per field (the same dict every call: do not change it).
     """
+    return _metas(cls if isinstance(cls, type) else type(cls))
+
+
+@functools.cache
+def _metas(cls: type) -> dict[str, Meta]:
     return {f.name: meta_of(f) for f in fields(cls)}
 
 

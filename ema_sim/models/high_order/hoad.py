@@ -84,6 +84,9 @@ def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, b
             slope_out[i, j] = 1.0 / (cubic_slope(c0, c1, c2, c3, deg) * dpi)
 
 
+FEEDBACK_TOL = 1e-15
+"""Relative Newton step at which stage 17's inverse calibration stops (every sample; the command path runs
+its steps to the end)."""
 FASTMATH = {"contract", "arcp", "nsz"}
 """The discrete kernel's floating-point flags (its feedback path is compiled with them, explicitly)."""
 
@@ -115,7 +118,7 @@ def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UI
         return deg
     c0, c1 = p[K.feedback_cal_c0_deg], p[K.feedback_cal_c1_deg_per_v]
     c2, c3 = p[K.feedback_cal_c2_deg_per_v2], p[K.feedback_cal_c3_deg_per_v3]
-    volts = cubic_inverse(c0, c1, c2, c3, deg)
+    volts = cubic_inverse(c0, c1, c2, c3, deg, FEEDBACK_TOL)
     if p[K.feedback_noise_v] > 0.0:
         bw = p[K.noise_bandwidth_hz]
         decay = math.exp(-TWO_PI * bw * max(s - x[X.feedback_noise_time_s], 0.0)) if bw > 0.0 else 0.0

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
@@ -353,3 +354,36 @@ def compliance_gain(p: FloatArray, dt: float) -> float:
     """
     tau_c = compliance_time_constant_s(p)
     return 1.0 - math.exp(-dt / tau_c) if tau_c > 0.0 else 1.0
+
+
+@nb.njit(cache=True)
+def trim(params: FloatArray, command_deg: FloatArray, hinge_moment_inlb: FloatArray, states: FloatArray) -> None:
+    """Every instance's state at rest under a held command and load (no start-up transient).
+
+    The servo sits where stages 2–5 put the command (inside the position limits), the free play on
+    the side the load pushes it, the lags at their inputs.
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance.
+    command_deg : numpy.ndarray
+        The held command of each instance (deg).
+    hinge_moment_inlb : numpy.ndarray
+        The held load of each instance (in·lb).
+    states : numpy.ndarray
+        Filled with each instance's state.
+    """
+    for i in range(params.shape[0]):
+        p = params[i]
+        x = states[i]
+        hm = hinge_moment_inlb[i]
+        uq = command_path(p, command_deg[i])
+        pos = min(max(compliance_correction(uq, hm, p[P.kcp_per_kinlb]), p[P.position_min_deg]),
+                  p[P.position_max_deg])
+        x[:] = 0.0
+        x[X.position_deg] = pos
+        x[X.free_play_deg] = 0.5 * p[P.free_play_deg] * np.sign(hm)
+        x[X.command_lag_deg] = uq
+        x[X.feedback_lag_deg] = pos + compliance_deflection(hm, p[P.lvdt_compliance_deg_per_kinlb])
+        x[X.compliance_deg] = compliance_deflection(hm, p[P.compliance_deg_per_kinlb])

@@ -20,7 +20,7 @@ from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
-from ema_sim.models.second_order.figure26 import command_path, compliance_correction, compliance_deflection
+from ema_sim.models.second_order.figure26 import trim
 from ema_sim.models.second_order.loac import run_continuous
 from ema_sim.models.second_order.loada import METHOD_FORWARD_EULER, METHOD_LOADF, run_discrete
 from ema_sim.models.second_order.params import N_STATE, SECTION, P, SecondOrderParams, X
@@ -102,17 +102,8 @@ class SecondOrderModel(ActuatorModel):
         return (position_deg / kcp - p[:, P.offset_deg]) / (1.0 + p[:, P.kb])
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
-        self._X[:] = 0.0
-        for i in range(self.n):
-            p, hm, x = self._P[i], float(hinge_moment_inlb[i]), self._X[i]
-            uq = command_path(p, float(command_deg[i]))
-            pos = min(max(compliance_correction(uq, hm, p[P.kcp_per_kinlb]), p[P.position_min_deg]),
-                      p[P.position_max_deg])
-            x[X.position_deg] = pos
-            x[X.free_play_deg] = 0.5 * p[P.free_play_deg] * np.sign(hm)
-            x[X.command_lag_deg] = uq
-            x[X.feedback_lag_deg] = pos + compliance_deflection(hm, p[P.lvdt_compliance_deg_per_kinlb])
-            x[X.compliance_deg] = compliance_deflection(hm, p[P.compliance_deg_per_kinlb])
+        trim(self._P, np.ascontiguousarray(command_deg, dtype=float), np.ascontiguousarray(hinge_moment_inlb,
+                                                                                          dtype=float), self._X)
 
 
 class Loada(SecondOrderModel):
