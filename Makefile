@@ -3,8 +3,10 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# The packages `make typecheck` (and so `make test`) checks with mypy --strict (config: pyproject.toml).
+TYPED  := ema_sim/models ema_sim/signals ema_sim/environment
 
-.PHONY: venv test lint demo bench clean
+.PHONY: venv test lint typecheck demo bench clean
 
 venv: $(STAMP)
 
@@ -18,8 +20,12 @@ $(STAMP): requirements.txt setup.py setup.cfg
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
+typecheck: $(STAMP)
+	$(BIN)/mypy $(TYPED)
+
 test: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/mypy $(TYPED)
 	$(BIN)/python -m pytest -q
 
 demo: $(STAMP)
@@ -29,4 +35,4 @@ bench: $(STAMP)
 	$(BIN)/ema bench
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache

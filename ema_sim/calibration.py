@@ -11,11 +11,120 @@ relation (negative slope), the trap behind the hinge-moment sign error of sectio
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
+NEWTON_STEPS = 8
+"""Newton steps of :func:`cubic_inverse` from the linear guess (exact to rounding on a calibration's range)."""
+compiled = nb.njit(cache=True, fastmath=False)
+"""The curve's functions are compiled without fast-math, set explicitly: numba would otherwise let a
+fast-math kernel that compiles them first decide their floating-point contraction for every caller."""
+
+
+@nb.njit(cache=True, inline="always")
+def _value(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
+    """The curve in Horner form: the one place it is written (inlined into the compiled functions below)."""
+    return c0 + x * (c1 + x * (c2 + x * c3))
+
+
+@nb.njit(cache=True, inline="always")
+def _slope(c0: float, c1: float, c2: float, c3: float, x: float) -> float:  # noqa: ARG001 - one signature
+    """The curve's slope: the one place it is written."""
+    return c1 + x * (2.0 * c2 + 3.0 * c3 * x)
+
+
+@compiled
+def cubic(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
+    """A third-order calibration curve ``c0 + c1·x + c2·x² + c3·x³`` (Horner form).
+
+    Parameters
+    ----------
+    c0, c1, c2, c3 : float
+        The coefficients.
+    x : float
+        Where to evaluate it.
+
+    Returns
+    -------
+    float
+        The curve's value.
+    """
+    return _value(c0, c1, c2, c3, x)
+
+
+@compiled
+def cubic_slope(c0: float, c1: float, c2: float, c3: float, x: float) -> float:
+    """The curve's slope ``dy/dx`` at ``x``.
+
+    Parameters
+    ----------
+    c0, c1, c2, c3 : float
+        The coefficients (``c0`` does not enter).
+    x : float
+        Where to evaluate it.
+
+    Returns
+    -------
+    float
+        ``c1 + 2·c2·x + 3·c3·x²``.
+    """
+    return _slope(c0, c1, c2, c3, x)
+
+
+@compiled
+def cubic_inverse(c0: float, c1: float, c2: float, c3: float, y: float, tol: float = 0.0) -> float:
+    """The ``x`` with ``cubic(x) = y``: at most :data:`NEWTON_STEPS` Newton steps from the linear guess.
+
+    The steps stop once one moves ``x`` by no more than ``tol·(1 + |x|)``. With ``tol = 0`` (what
+    :class:`Cubic` and the command path use) only a step that changes nothing stops them, so the result
+    is that of every step; the feedback path, evaluated at every sample, stops at 1e-15.
+
+    Parameters
+    ----------
+    c0, c1, c2, c3 : float
+        The coefficients of a curve monotonic over the range used.
+    y : float
+        The value to invert.
+    tol : float
+        Relative step below which the iteration stops.
+
+    Returns
+    -------
+    float
+        ``x``.
+    """
+    x = (y - c0) / c1
+    for _ in range(NEWTON_STEPS):
+        dx = (_value(c0, c1, c2, c3, x) - y) / _slope(c0, c1, c2, c3, x)
+        x = x - dx
+        if abs(dx) <= tol * (1.0 + abs(x)):
+            break
+    return x
+
+
+@compiled
+def _cubic_map(kind: int, c0: float, c1: float, c2: float, c3: float, x: FloatArray, out: FloatArray) -> None:
+    """One of the three scalar functions on every element (0 value, 1 slope, 2 inverse)."""
+    for j in range(x.shape[0]):
+        if kind == 0:
+            out[j] = cubic(c0, c1, c2, c3, x[j])
+        elif kind == 1:
+            out[j] = cubic_slope(c0, c1, c2, c3, x[j])
+        else:
+            out[j] = cubic_inverse(c0, c1, c2, c3, x[j])
+
+
+def _apply(kind: int, c: Cubic, x: ArrayLike) -> Any:
+    """The compiled scalar function on an array (a 0-d input gives a numpy scalar)."""
+    arr = np.asarray(x, dtype=float)
+    flat = np.ascontiguousarray(arr.reshape(-1))
+    out = np.empty_like(flat)
+    _cubic_map(kind, c.c0, c.c1, c.c2, c.c3, flat, out)
+    return out.reshape(arr.shape)[()]
 
 
 @dataclass(frozen=True)
@@ -51,22 +160,16 @@ class Cubic:
         return 1 if self.c1 >= 0.0 else -1
 
     def __call__(self, x: ArrayLike) -> FloatArray:
-        """Evaluate the curve."""
-        x = np.asarray(x, dtype=float)
-        return self.c0 + x * (self.c1 + x * (self.c2 + x * self.c3))
+        """Evaluate the curve (:func:`cubic`)."""
+        return _apply(0, self, x)  # type: ignore[no-any-return]
 
     def slope(self, x: ArrayLike) -> FloatArray:
-        """dy/dx."""
-        x = np.asarray(x, dtype=float)
-        return self.c1 + x * (2.0 * self.c2 + 3.0 * self.c3 * x)
+        """dy/dx (:func:`cubic_slope`)."""
+        return _apply(1, self, x)  # type: ignore[no-any-return]
 
-    def inverse(self, y: ArrayLike, iterations: int = 8) -> FloatArray:
-        """X such that ``self(x) = y`` (Newton from the linear guess; exact to rounding on the range)."""
-        y = np.asarray(y, dtype=float)
-        x = (y - self.c0) / self.c1
-        for _ in range(iterations):
-            x = x - (self(x) - y) / self.slope(x)
-        return x
+    def inverse(self, y: ArrayLike) -> FloatArray:
+        """X such that ``self(x) = y`` (:func:`cubic_inverse`)."""
+        return _apply(2, self, y)  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)

@@ -114,7 +114,8 @@ def ros_parameters(path: Path) -> dict[str, Any]:
     (entry,) = doc.values()
     if not isinstance(entry, dict) or not isinstance(entry.get("ros__parameters"), dict):
         raise ConfigError(f"{path}: expected <node>: ros__parameters: {{...}}")
-    return entry["ros__parameters"]
+    params: dict[str, Any] = entry["ros__parameters"]
+    return params
 
 
 def finite_parameter(params: Mapping[str, Any], key: str, origin: str) -> float:

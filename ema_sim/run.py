@@ -121,7 +121,7 @@ class RunDescription:
     frame_hz: float = 200.0
     domain_id: int | None = None
     disable: list[str] = field(default_factory=list)
-    """Elements switched off (the test environment's and the model's, :mod:`ema_sim.models.switches`)."""
+    """Elements switched off (the test environment's and the model's, :mod:`ema_sim.switches`)."""
     window: int = 1
     rt_priority: int = 0
     """Real time: every process at this SCHED_FIFO priority, memory locked, CPUs kept from idle halts."""
@@ -141,8 +141,8 @@ class RunDescription:
     def __post_init__(self) -> None:
         from ema_sim.environment import load_profile  # noqa: PLC0415
         from ema_sim.models import model_names  # noqa: PLC0415
-        from ema_sim.models.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
         from ema_sim.signals.plans import channel_list  # noqa: PLC0415
+        from ema_sim.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
 
         if self.emac_box is not None:
             self.emac = "box" if self.emac_box else "channels"
@@ -236,7 +236,7 @@ class RunDescription:
     # ----------------------------------------------------------------- parameters
     def parameters(self) -> dict[str, dict[str, Any]]:
         """Node name → its parameters (``ros__parameters``) for this run."""
-        from ema_sim.models.switches import environment_elements  # noqa: PLC0415
+        from ema_sim.switches import environment_elements  # noqa: PLC0415
 
         peers = self.node_names()
         common = {"peers": peers}

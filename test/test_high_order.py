@@ -13,17 +13,11 @@ from ema_sim.analysis.model_error import figure40
 from ema_sim.config import load_channel
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import Flags, create
-from ema_sim.models import gear_train as gt
 from ema_sim.models import noise as nz
-from ema_sim.models.high_order import (
-    K_T_D1,
-    K_T_F1,
-    K_T_K1,
-    HighOrderParams,
-    Hoac1,
-    Hoad3,
-    equilibrium,
-)
+from ema_sim.models.high_order import HighOrderParams, Hoac1, Hoad3, K, equilibrium
+from ema_sim.models.high_order import gear_train as gt
+
+K_T_D1, K_T_F1, K_T_K1 = K.total_d1_in, K.total_f1_lbf, K.total_k1_lbf_per_in  # kernel slots, renamed with units
 
 ARM_IN = 1.7317
 DEG_PER_IN = math.degrees(1.0) / ARM_IN

@@ -10,7 +10,7 @@ same order and with the same objects, so both give the same numbers for the same
 4. every :class:`~ema_sim.emac.EmacChannel` (the node's channel logic around the registry model) steps
    one frame, in channel order, with the EMAC box's crosstalk meter, giving the feedback at *(k+1)T*.
 
-Environment elements are switched off by name (:mod:`ema_sim.models.switches`): the test environment's ``delay``,
+Environment elements are switched off by name (:mod:`ema_sim.switches`): the test environment's ``delay``,
 ``lag``, ``quantization``, ``noise`` (or one path's, ``command.delay``...), and in the actuator model
 ``dead_band`` (the PWM dead band); ``quantization`` and ``noise`` also switch off the model's own 5 mV
 stage and measured noise (HOAD2/HOAD3; LOADA's 0.020° D/A stage), which stand for the same converters
@@ -37,7 +37,7 @@ from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings
 from ema_sim.environment import Profile, SignalPath, load_profile
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
-from ema_sim.models.switches import element_names, environment_elements, model_overrides
+from ema_sim.switches import element_names, environment_elements, model_overrides
 
 FloatArray = NDArray[np.float64]
 SIGNALS: tuple[str, ...] = (

@@ -7,10 +7,11 @@ and the offline aircraft-in-the-loop harness share these classes.
 """
 
 from ema_sim.environment.elements import Element, FirstOrderLag, Noise, Quantizer, SignalPath, TransportDelay
-from ema_sim.environment.profile import ELEMENTS, PathSpec, Profile, load_profile, profile_names
+from ema_sim.environment.profile import ELEMENTS, PATHS, PathSpec, Profile, load_profile, profile_names
 
 __all__ = [
     "ELEMENTS",
+    "PATHS",
     "Element",
     "FirstOrderLag",
     "Noise",

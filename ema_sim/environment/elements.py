@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.models.stages import lag_gain, quantize, quantize_array
+
 Signal = Any
 """A float, or a numpy array with one value per channel."""
 
@@ -27,11 +29,28 @@ class Element(ABC):
 
     @abstractmethod
     def step(self, x: Signal) -> Signal:
-        """Output of this frame for input ``x``."""
+        """Output of this frame for input ``x``.
+
+        Parameters
+        ----------
+        x : float or numpy.ndarray
+            The input, one value per channel for an array.
+
+        Returns
+        -------
+        float or numpy.ndarray
+            The output, shaped as the input.
+        """
 
     @abstractmethod
     def reset(self, x: Signal) -> None:
-        """Steady state at ``x`` (no transient when the input stays there)."""
+        """Steady state at ``x`` (no transient when the input stays there).
+
+        Parameters
+        ----------
+        x : float or numpy.ndarray
+            The input, one value per channel for an array.
+        """
 
     @property
     def active(self) -> bool:
@@ -49,6 +68,15 @@ class TransportDelay(Element):
     Whole frames come from a ring of past inputs; a fractional remainder is linear interpolation
     between the two neighbouring frames (first-order Lagrange), so the phase lag at low frequency is
     exactly ω·delay whatever the frame rate.
+
+    Parameters
+    ----------
+    delay_s : float
+        The delay (s, ≥ 0).
+    frame_s : float
+        The frame (s).
+    initial : float or numpy.ndarray
+        The steady input it starts at.
     """
 
     name = "delay"
@@ -93,6 +121,15 @@ class FirstOrderLag(Element):
 
     ``y_k = y_{k-1} + (1 − e^{−2π·f·T})·(x_k − y_{k-1})``: the standard digital first-order filter of a
     flight computer running at frame ``T``; unity gain at DC.
+
+    Parameters
+    ----------
+    corner_hz : float
+        Corner frequency (0: off).
+    frame_s : float
+        The frame (s).
+    initial : float or numpy.ndarray
+        The steady input it starts at.
     """
 
     name = "lag"
@@ -101,7 +138,7 @@ class FirstOrderLag(Element):
         if not (math.isfinite(corner_hz) and corner_hz >= 0.0):
             raise ValueError(f"corner_hz must be a non-negative number, got {corner_hz!r}")
         self.corner_hz = float(corner_hz)
-        self.gain = 1.0 if corner_hz == 0.0 else 1.0 - math.exp(-2.0 * math.pi * corner_hz * frame_s)
+        self.gain = lag_gain(self.corner_hz, frame_s)
         self._y: Signal = _copy(initial)
 
     @property
@@ -120,7 +157,17 @@ class FirstOrderLag(Element):
 
 
 class Quantizer(Element):
-    """A converter: mid-tread quantization to ``step_v`` and saturation at ±``full_scale_v``."""
+    """A converter: mid-tread quantization to ``step_v`` and saturation at ±``full_scale_v``.
+
+    The quantizer is :func:`ema_sim.models.stages.quantize`, the one the models use.
+
+    Parameters
+    ----------
+    step_v : float
+        Resolution (V; 0: off).
+    full_scale_v : float
+        Saturation (V).
+    """
 
     name = "quantization"
 
@@ -140,11 +187,11 @@ class Quantizer(Element):
     def step(self, x: Signal) -> Signal:  # noqa: D102
         if self.step_v == 0.0:
             return x
-        if type(x) is float and math.isfinite(x):  # one channel: the same arithmetic without numpy
-            q = self.step_v * math.floor(x / self.step_v + 0.5)
-            return min(max(q, -self.full_scale_v), self.full_scale_v)
-        q = self.step_v * np.floor(np.asarray(x) / self.step_v + 0.5)
-        q = np.clip(q, -self.full_scale_v, self.full_scale_v)
+        if type(x) is float:  # one channel
+            return min(max(quantize(x, self.step_v), -self.full_scale_v), self.full_scale_v)
+        arr = np.asarray(x, dtype=float)
+        flat = quantize_array(np.ascontiguousarray(arr.reshape(-1)), self.step_v)
+        q = np.clip(flat.reshape(arr.shape), -self.full_scale_v, self.full_scale_v)
         return float(q) if np.ndim(q) == 0 else q
 
     def describe(self) -> str:  # noqa: D102
@@ -156,7 +203,17 @@ NOISE_BLOCK = 1024
 
 
 class Noise(Element):
-    """Additive white Gaussian noise of ``rms_v``, reproducible from ``seed`` and ``stream``."""
+    """Additive white Gaussian noise of ``rms_v``, reproducible from ``seed`` and ``stream``.
+
+    Parameters
+    ----------
+    rms_v : float
+        Noise rms (V; 0: off).
+    seed : int
+        The profile's seed.
+    stream : sequence of int
+        Which stream (channel, direction), so every path's noise is independent.
+    """
 
     name = "noise"
 
@@ -203,7 +260,13 @@ class Noise(Element):
 
 
 class SignalPath(Element):
-    """Elements in order; the identity when empty."""
+    """Elements in order; the identity when empty.
+
+    Parameters
+    ----------
+    elements : sequence of Element
+        The elements in the order the signal meets them (inactive ones are dropped).
+    """
 
     name = "path"
 
@@ -215,7 +278,13 @@ class SignalPath(Element):
         return bool(self.elements)
 
     def reset(self, x: Signal) -> None:
-        """Steady state at ``x``: each element is reset at the output of the ones before it."""
+        """Steady state at ``x``: each element is reset at the output of the ones before it.
+
+        Parameters
+        ----------
+        x : float or numpy.ndarray
+            The input, one value per channel for an array.
+        """
         for element in self.elements:
             element.reset(x)
             if isinstance(element, Quantizer):

@@ -11,56 +11,81 @@ Profiles are ROS 2 parameter files for the ``testenv`` node: ``config/flight.yam
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from ema_sim import parameters as pm
 from ema_sim.config import config_dir, ros_parameters
 from ema_sim.environment.elements import FirstOrderLag, Noise, Quantizer, SignalPath, TransportDelay
 from ema_sim.errors import ConfigError, UnknownNameError
 
-ELEMENTS: tuple[str, ...] = ("lag", "quantization", "delay", "noise")
-"""Element names, for :meth:`Profile.without` (``"delay"``, or one path: ``"command.delay"``)."""
 PATHS: tuple[str, ...] = ("command", "feedback")
 BUILTIN = ("none",)
-_KEYS = {"lag": "lag_hz", "quantization": "quantization_v", "delay": "delay_s", "noise": "noise_rms_v"}
+FAMILY = "test-environment"
 
 
+@pm.documented
 @dataclass(frozen=True)
 class PathSpec:
-    """Parameters of one direction; a zero switches its element off."""
+    """Parameters of one direction; each declares the element a zero switches off."""
 
-    lag_hz: float = 0.0
-    quantization_v: float = 0.0
-    delay_s: float = 0.0
-    noise_rms_v: float = 0.0
+    lag_hz: float = pm.param("Hz", "FMU first-order lag filter corner (4.3: 50 Hz)", min=0.0, off=0.0, element="lag",
+                             default=0.0)
+    quantization_v: float = pm.param("V", "FMU D/A or A/D quantization (4.3: 5 mV)", min=0.0, off=0.0,
+                                     element="quantization", default=0.0)
+    delay_s: float = pm.param("s", "transport delay of the harness (4.3: 30 ms FMU to first motion in the AIL)",
+                              min=0.0, off=0.0, element="delay", default=0.0)
+    noise_rms_v: float = pm.param("V", "harness and interface noise rms (4.3, measured, not published)", min=0.0,
+                                  off=0.0, element="noise", default=0.0)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], origin: str) -> PathSpec:
-        """Validate a ``command:`` or ``feedback:`` mapping."""
-        known = {f.name for f in fields(cls)}
-        out: dict[str, float] = {}
-        for key, value in values.items():
-            if key not in known:
-                raise ConfigError(f"{origin}: unknown parameter {key!r} (known: {', '.join(sorted(known))})")
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"{origin}: {key} must be a number, got {value!r}") from None
-            if not (math.isfinite(number) and number >= 0.0):
-                raise ConfigError(f"{origin}: {key} must be a finite number ≥ 0, got {value!r}")
-            out[key] = number
-        return cls(**out)
+        """Validate a ``command:`` or ``feedback:`` mapping.
+
+        Parameters
+        ----------
+        values : mapping
+            Parameter name → value.
+        origin : str
+            Where it comes from, for messages.
+
+        Returns
+        -------
+        PathSpec
+            The validated path.
+        """
+        return pm.load(cls, values, origin=origin, family=FAMILY, section="path")
 
     def without(self, element: str) -> PathSpec:
-        """This path with ``element`` switched off."""
-        return replace(self, **{_KEYS[element]: 0.0})
+        """This path with ``element`` switched off.
+
+        Parameters
+        ----------
+        element : str
+            One of :data:`ELEMENTS`.
+
+        Returns
+        -------
+        PathSpec
+            The changed copy.
+        """
+        return replace(self, **pm.switched_off(PathSpec, [element]))
 
     def as_dict(self) -> dict[str, float]:
-        """Parameter name → value."""
+        """Parameter name → value.
+
+        Returns
+        -------
+        dict
+            Every parameter.
+        """
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+ELEMENTS: tuple[str, ...] = pm.elements(PathSpec)
+"""Element names, for :meth:`Profile.without` (``"delay"``, or one path: ``"command.delay"``)."""
 
 
 @dataclass(frozen=True)
@@ -81,22 +106,47 @@ class Profile:
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> Profile:
-        """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``)."""
+        """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``).
+
+        Parameters
+        ----------
+        params : mapping
+            The ``ros__parameters`` of a ``testenv`` parameter file.
+        origin : str
+            Where they come from, for messages.
+
+        Returns
+        -------
+        Profile
+            The validated profile.
+        """
         try:
             seed = int(params.get("seed", 0))
             full_scale = float(params.get("full_scale_v", 10.0))
         except (TypeError, ValueError) as exc:
             raise ConfigError(f"{origin}: {exc}") from None
-        paths = {}
+        paths: dict[str, PathSpec] = {}
         for name in PATHS:
             section = params.get(name, {})
             if not isinstance(section, Mapping):
                 raise ConfigError(f"{origin}: {name} must be a mapping of element parameters")
             paths[name] = PathSpec.from_mapping(section, f"{origin}: {name}")
-        return cls(name=str(params.get("profile", Path(origin).stem)), full_scale_v=full_scale, seed=seed, **paths)
+        return cls(name=str(params.get("profile", Path(origin).stem)), full_scale_v=full_scale, seed=seed,
+                   command=paths["command"], feedback=paths["feedback"])
 
     def without(self, *elements: str) -> Profile:
-        """This profile with elements switched off: ``"noise"`` (both paths) or ``"feedback.noise"``."""
+        """This profile with elements switched off: ``"noise"`` (both paths) or ``"feedback.noise"``.
+
+        Parameters
+        ----------
+        *elements : str
+            Element names (:data:`ELEMENTS`), bare or with their path.
+
+        Returns
+        -------
+        Profile
+            The changed copy (``disabled`` lists them).
+        """
         out = self
         for item in elements:
             path, _, element = item.rpartition(".")
@@ -109,11 +159,37 @@ class Profile:
         return out
 
     def with_seed(self, seed: int) -> Profile:
-        """The same profile with another noise seed."""
+        """The same profile with another noise seed.
+
+        Parameters
+        ----------
+        seed : int
+            The seed.
+
+        Returns
+        -------
+        Profile
+            The changed copy.
+        """
         return replace(self, seed=int(seed))
 
     def command_path(self, frame_s: float, stream: int = 0, initial_v: float = 0.0) -> SignalPath:
-        """FMU → EMAC for one channel (``stream`` keeps each channel's noise independent)."""
+        """FMU → EMAC for one channel.
+
+        Parameters
+        ----------
+        frame_s : float
+            The frame (s).
+        stream : int
+            The channel's noise stream (keeps each channel's noise independent).
+        initial_v : float
+            The steady command it starts at (V).
+
+        Returns
+        -------
+        SignalPath
+            Lag, quantization, delay, noise.
+        """
         spec = self.command
         path = SignalPath([
             FirstOrderLag(spec.lag_hz, frame_s),
@@ -125,7 +201,22 @@ class Profile:
         return path
 
     def feedback_path(self, frame_s: float, stream: int = 0, initial_v: float = 0.0) -> SignalPath:
-        """EMAC → FMU for one channel."""
+        """EMAC → FMU for one channel.
+
+        Parameters
+        ----------
+        frame_s : float
+            The frame (s).
+        stream : int
+            The channel's noise stream.
+        initial_v : float
+            The steady feedback it starts at (V).
+
+        Returns
+        -------
+        SignalPath
+            Noise, delay, quantization, lag.
+        """
         spec = self.feedback
         path = SignalPath([
             Noise(spec.noise_rms_v, self.seed, (stream, 1)),
@@ -137,7 +228,18 @@ class Profile:
         return path
 
     def current_delay(self, frame_s: float) -> TransportDelay:
-        """Motor current feedback rides the feedback harness: same transport delay, nothing else."""
+        """Motor current feedback rides the feedback harness: same transport delay, nothing else.
+
+        Parameters
+        ----------
+        frame_s : float
+            The frame (s).
+
+        Returns
+        -------
+        TransportDelay
+            The feedback path's delay.
+        """
         return TransportDelay(self.feedback.delay_s, frame_s)
 
     def describe(self) -> dict[str, str]:
@@ -171,7 +273,20 @@ def _is_profile(path: Path) -> bool:
 
 
 def load_profile(name_or_path: str | Path, *, disable: Iterable[str] = ()) -> Profile:
-    """A profile by name (``none``, ``flight``, ``ail``) or from a parameter file path."""
+    """A profile by name (``none``, ``flight``, ``ail``) or from a parameter file path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        Profile name or a ``testenv`` parameter file.
+    disable : iterable of str
+        Elements to switch off (:meth:`Profile.without`).
+
+    Returns
+    -------
+    Profile
+        The profile.
+    """
     text = str(name_or_path)
     if text == "none":
         profile = Profile.none()

@@ -16,6 +16,7 @@ import numpy as np
 
 from ema_sim.identify.problem import Problem
 from ema_sim.models.second_order import SecondOrderParams
+from ema_sim.parameters import metas
 
 
 @dataclass(frozen=True)
@@ -47,23 +48,29 @@ class Free:
         return value if self.log else self.scale
 
 
-# Every continuously fitted parameter of the second-order family, with its physical range.
+def _free(name: str, *, log: bool = False, scale: float = 1.0) -> Free:
+    """A fitted parameter whose bounds are its declared range (:mod:`ema_sim.models.second_order.params`)."""
+    m = metas(SecondOrderParams)[name]
+    return Free(name, m.min, m.max, log=log, scale=scale)
+
+
+# Every continuously fitted parameter of the second-order family; bounds from the parameter metadata.
 FREE: dict[str, Free] = {
     f.field: f
     for f in (
-        Free("wn_rad_s", 5.0, 500.0, log=True, scale=60.0),
-        Free("zeta", 0.05, 3.0, log=True, scale=0.7),
-        Free("delay_s", 0.0, 0.2, scale=0.01),
-        Free("command_lag_hz", 0.2, 2000.0, log=True, scale=20.0),
-        Free("feedback_lag_hz", 0.2, 2000.0, log=True, scale=20.0),
-        Free("kb", -0.5, 0.5, scale=0.01),
-        Free("offset_deg", -5.0, 5.0, scale=0.05),
-        Free("rate_limit_dps", 1.0, 2000.0, log=True, scale=100.0),
-        Free("threshold_deg", 0.0, 2.0, scale=0.05),
-        Free("free_play_deg", 0.0, 3.0, scale=0.1),
-        Free("compliance_deg_per_kinlb", 0.0, 10.0, scale=0.2),
-        Free("lvdt_compliance_deg_per_kinlb", 0.0, 10.0, scale=0.1),
-        Free("hysteresis_h_lb_per_in", 1.0, 1e7, log=True, scale=3000.0),
+        _free("wn_rad_s", log=True, scale=60.0),
+        _free("zeta", log=True, scale=0.7),
+        _free("delay_s", scale=0.01),
+        _free("command_lag_hz", log=True, scale=20.0),
+        _free("feedback_lag_hz", log=True, scale=20.0),
+        _free("kb", scale=0.01),
+        _free("offset_deg", scale=0.05),
+        _free("rate_limit_dps", log=True, scale=100.0),
+        _free("threshold_deg", scale=0.05),
+        _free("free_play_deg", scale=0.1),
+        _free("compliance_deg_per_kinlb", scale=0.2),
+        _free("lvdt_compliance_deg_per_kinlb", scale=0.1),
+        _free("hysteresis_h_lb_per_in", log=True, scale=3000.0),
     )
 }
 

@@ -20,7 +20,7 @@ import logging
 import math
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.models import stages
+from ema_sim.parameters import ParameterInfo, Slots, describe, elements, switched_off
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -75,7 +76,18 @@ class Sample:
     flags: NDArray[np.int64]
 
     def active(self, i: int = 0) -> Flags:
-        """The limit flags of instance ``i``."""
+        """The limit flags of instance ``i``.
+
+        Parameters
+        ----------
+        i : int
+            The instance.
+
+        Returns
+        -------
+        Flags
+            The limits active at the sample.
+        """
         return Flags(int(self.flags[i]))
 
 
@@ -97,7 +109,18 @@ class Record:
     flags: NDArray[np.int64]
 
     def columns(self, i: int = 0) -> dict[str, FloatArray]:
-        """Instance ``i`` as named 1-D columns (data-contract names)."""
+        """Instance ``i`` as named 1-D columns (data-contract names).
+
+        Parameters
+        ----------
+        i : int
+            The instance.
+
+        Returns
+        -------
+        dict
+            Column name → values, one per sample.
+        """
         return {
             "time_s": self.time_s,
             "command_deg": self.command_deg[i],
@@ -132,7 +155,17 @@ def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
 class ActuatorModel(ABC):
     """Base of every fidelity: inputs, time, history, validation; families supply the physics.
 
-    Subclasses set the class attributes and implement :meth:`_trim_states` and :meth:`_integrate`.
+    Subclasses set the class attributes and implement :meth:`default_params`, :meth:`_trim_states`
+    and :meth:`_integrate`.
+
+    Parameters
+    ----------
+    channel : str or ChannelConfig
+        The channel (name, or a loaded configuration).
+    n : int
+        Number of independent instances stepped together.
+    rate_hz : float, optional
+        Internal integration rate of a discrete model (its default otherwise).
     """
 
     name: ClassVar[str]
@@ -144,6 +177,22 @@ class ActuatorModel(ABC):
     """Internal integration rate of a discrete model; 0 for the continuous ones."""
     has_current: ClassVar[bool] = False
     """True when the model knows motor current and bus voltage."""
+    _buf_t: FloatArray
+    _buf_u: FloatArray
+    _buf_h: FloatArray
+    _h_lo: int
+    _h_hi: int
+    """The input history: breakpoint buffers and the live range ``[_h_lo, _h_hi)``."""
+    params_class: ClassVar[type]
+    """Its parameter set: a dataclass declared with :func:`ema_sim.parameters.param`."""
+    params_section: ClassVar[str]
+    """The channel file's section the parameters come from."""
+    params_layout: ClassVar[Slots | None] = None
+    """Its kernel layout (None for the linear models, which have no parameter kernel)."""
+    variant: ClassVar[str | None] = None
+    """Which subsection variant of the section it reads (the high-order family's ``hoad2``, ``hoad3``)."""
+    switchable: ClassVar[bool] = True
+    """False when the model has none of its parameters' switchable elements (the linear models)."""
 
     def __init__(self, channel: str | ChannelConfig = "left_wing", *, n: int = 1, rate_hz: float | None = None) -> None:
         if n < 1:
@@ -181,10 +230,89 @@ class ActuatorModel(ABC):
         Returns an array ``(n, len(sample_t), N_OUT)``; the caller updates ``self._t``.
         """
 
+    @classmethod
+    @abstractmethod
+    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> Any:
+        """The parameters a model of this class takes from ``channel``, then ``overrides`` (validated).
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel.
+        **overrides : float
+            Values that replace the channel's.
+
+        Returns
+        -------
+        object
+            An instance of :attr:`params_class`.
+        """
+
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
-        """The held command whose equilibrium is ``position_deg`` (families with command maps refine)."""
+        """The held command whose equilibrium is ``position_deg`` (families with command maps refine).
+
+        Parameters
+        ----------
+        position_deg : numpy.ndarray
+            The wanted position of each instance (deg).
+        hinge_moment_inlb : numpy.ndarray
+            The load of each instance (in·lb).
+
+        Returns
+        -------
+        numpy.ndarray
+            The command of each instance (deg).
+        """
         del hinge_moment_inlb
         return position_deg
+
+    # ----------------------------------------------------------------- parameters
+    @classmethod
+    def parameters(cls, channel: str | ChannelConfig | None = None) -> list[ParameterInfo]:
+        """Every parameter of this model with its metadata, and a channel's defaults when one is given.
+
+        Parameters
+        ----------
+        channel : str or ChannelConfig, optional
+            The channel whose values are listed as defaults.
+
+        Returns
+        -------
+        list of ParameterInfo
+            In declaration order (see :func:`ema_sim.parameters.describe`).
+        """
+        defaults = None
+        if channel is not None:
+            defaults = cls.default_params(load_channel(channel) if isinstance(channel, str) else channel)
+        return describe(cls.params_class, defaults=defaults, layout=cls.params_layout, section=cls.params_section,
+                        variant=cls.variant)
+
+    @classmethod
+    def elements(cls) -> tuple[str, ...]:
+        """The element names this model switches off by name: its parameters' declared elements.
+
+        Returns
+        -------
+        tuple of str
+            Empty for a model without them (the linear models removed them).
+        """
+        return elements(cls.params_class) if cls.switchable else ()
+
+    @classmethod
+    def element_overrides(cls, names: Iterable[str]) -> dict[str, float]:
+        """The parameter overrides that switch the named elements off (those this model has).
+
+        Parameters
+        ----------
+        names : iterable of str
+            Element names.
+
+        Returns
+        -------
+        dict
+            Parameter name → its switch-off value.
+        """
+        return switched_off(cls.params_class, set(names) & set(cls.elements()))
 
     # ----------------------------------------------------------------- public interface
     @property
@@ -203,6 +331,20 @@ class ActuatorModel(ABC):
 
         Give either the held ``command_deg`` or the ``position_deg`` to trim at (the command is then
         solved for; a quantized command lands within half a quantization step of it).
+
+        Parameters
+        ----------
+        command_deg : array_like, optional
+            The held command, for every instance or each (deg).
+        hinge_moment_inlb : array_like
+            The held load (in·lb, positive aids positive deflection).
+        position_deg : array_like, optional
+            The LVDT position to trim at instead (deg).
+
+        Returns
+        -------
+        Sample
+            The outputs at time 0.
         """
         hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
         if position_deg is not None:
@@ -222,6 +364,21 @@ class ActuatorModel(ABC):
         The frame's breakpoint is written in place after the kept history (no copy of it), and the
         history is then trimmed by moving its start: the kernel sees exactly the breakpoints
         :meth:`run` would give it, so stepping frame by frame equals one run bit for bit.
+
+        Parameters
+        ----------
+        command_deg : array_like
+            The frame's command, for every instance or each (deg); a non-finite value is held at the
+            last good one and counted in :attr:`rejected_inputs`.
+        hinge_moment_inlb : array_like
+            The frame's load (in·lb).
+        frame_s : float
+            The frame (s).
+
+        Returns
+        -------
+        Sample
+            The outputs at the frame's end.
         """
         return self._sample(self._advance(command_deg, hinge_moment_inlb, frame_s))
 
@@ -230,10 +387,26 @@ class ActuatorModel(ABC):
 
         The same frame as :meth:`step`, without building arrays for one instance: the per-frame path of
         the node layer (flags come back as a float; ``int()`` them).
-        """
-        return self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
 
-    def _advance(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike, frame_s: float) -> FloatArray:
+        Parameters
+        ----------
+        command_deg : float
+            The frame's command (deg).
+        hinge_moment_inlb : float
+            The frame's load (in·lb).
+        frame_s : float
+            The frame (s).
+
+        Returns
+        -------
+        list of float
+            Position, surface, rate, current, bus and flags.
+        """
+        values: list[float] = self._advance(command_deg, hinge_moment_inlb, frame_s)[0].tolist()
+        return values
+
+    def _advance(self, command_deg: float | ArrayLike, hinge_moment_inlb: float | ArrayLike,
+                 frame_s: float) -> FloatArray:
         if not (math.isfinite(frame_s) and frame_s > 0.0):
             raise ValueError(f"frame_s must be positive, got {frame_s!r}")
         hi = self._h_hi
@@ -281,6 +454,26 @@ class ActuatorModel(ABC):
         (default: ``time_s``) where the outputs are read, each from the state at or before it.
         ``end_s`` (default: the last sample) is where the model stops. ``progress`` gets the
         fraction done after each chunk of about a second of simulated time.
+
+        Parameters
+        ----------
+        time_s : array_like
+            Input breakpoints (s), increasing.
+        command_deg : array_like
+            Command at each breakpoint, one row for all instances or one per instance (deg).
+        hinge_moment_inlb : array_like, optional
+            Load at each breakpoint (in·lb; 0 when omitted).
+        sample_times : array_like, optional
+            Where the outputs are read (s).
+        end_s : float, optional
+            Where the model stops (s).
+        progress : callable, optional
+            Called with the fraction done.
+
+        Returns
+        -------
+        Record
+            The outputs at the sample times.
         """
         bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
         out = self._run_block(bp_t, u, hm, samples, end_s, progress)
@@ -311,6 +504,24 @@ class ActuatorModel(ABC):
         """:meth:`run` without building a :class:`Record`: the raw ``(n, samples, N_OUT)`` block.
 
         For callers that simulate many times and need only the outputs (identification).
+
+        Parameters
+        ----------
+        time_s : array_like
+            Input breakpoints (s).
+        command_deg : array_like
+            Command at each breakpoint (deg).
+        hinge_moment_inlb : array_like, optional
+            Load at each breakpoint (in·lb).
+        sample_times : array_like, optional
+            Where the outputs are read (s).
+        end_s : float, optional
+            Where the model stops (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(n, samples, N_OUT)`` in :data:`OUTPUT_FIELDS` order.
         """
         bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
         return self._run_block(bp_t, u, hm, samples, end_s, None)
@@ -454,6 +665,30 @@ class ActuatorModel(ABC):
         )
 
 
+class Tolerances:
+    """The adaptive integrator's tolerances of a continuous model (LOAC, HOAC1), mixed in before its family.
+
+    Parameters
+    ----------
+    *args : object
+        The family's arguments.
+    rtol : float, optional
+        Relative tolerance (:attr:`default_rtol`).
+    atol : float, optional
+        Absolute tolerance (:attr:`default_atol`).
+    **kwargs : object
+        The family's keyword arguments.
+    """
+
+    default_rtol: ClassVar[float] = 1e-9
+    default_atol: ClassVar[float] = 1e-11
+
+    def __init__(self, *args: Any, rtol: float | None = None, atol: float | None = None, **kwargs: Any) -> None:
+        self.rtol = self.default_rtol if rtol is None else float(rtol)
+        self.atol = self.default_atol if atol is None else float(atol)
+        super().__init__(*args, **kwargs)
+
+
 def _check_finite(arr: FloatArray, what: str) -> None:
     bad = ~np.isfinite(arr)
     if bad.any():
@@ -462,7 +697,22 @@ def _check_finite(arr: FloatArray, what: str) -> None:
 
 
 def batch_params(params: object | Sequence[object] | None, n: int, default: Callable[[], object]) -> list[Any]:
-    """Normalise a family's ``params`` argument: None, one set for all, or one per instance."""
+    """Normalise a family's ``params`` argument: None, one set for all, or one per instance.
+
+    Parameters
+    ----------
+    params : object, sequence or None
+        The argument as given.
+    n : int
+        Number of instances.
+    default : callable
+        Makes the default set (called once, when ``params`` is None).
+
+    Returns
+    -------
+    list
+        One parameter set per instance.
+    """
     if params is None:
         return [default()] * n
     if isinstance(params, Sequence) and not isinstance(params, str | bytes):

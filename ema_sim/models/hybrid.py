@@ -25,7 +25,14 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
-from ema_sim.models.integrate import make_dopri5
+from ema_sim.models.arrays import FloatArray
+from ema_sim.models.integrate import Rhs, make_dopri5
+
+Guards = Callable[[float, FloatArray, FloatArray, FloatArray, FloatArray], None]
+Transition = Callable[[int, float, FloatArray, FloatArray, FloatArray], None]
+Settle = Callable[[float, FloatArray, FloatArray, FloatArray], None]
+Advance = Callable[[FloatArray, FloatArray, FloatArray, float, float, float, float, float, float], tuple[float, int]]
+"""``advance(p, u, y, t, t_end, h, rtol, atol, h_max) -> (next h, events)``."""
 
 EVENT_TIME_TOL = 1e-12
 """Seconds: how closely an event time is bracketed before the integrator lands just past it."""
@@ -35,16 +42,36 @@ MAX_STALLED_EVENTS = 200
 
 
 def make_hybrid(  # noqa: PLR0915 - one compiled loop
-    rhs: Callable[..., None],
-    guards: Callable[..., None],
-    transition: Callable[..., None],
-    settle: Callable[..., None],
+    rhs: Rhs,
+    guards: Guards,
+    transition: Transition,
+    settle: Settle,
     n_guards: int,
-) -> Callable[..., tuple[float, int]]:
-    """A compiled ``advance(p, u, y, t, t_end, h, rtol, atol, h_max) -> (next h, events)``."""
+) -> Advance:
+    """A compiled ``advance(p, u, y, t, t_end, h, rtol, atol, h_max) -> (next h, events)`` for one model.
+
+    Parameters
+    ----------
+    rhs : callable
+        The regime-held right-hand side ``rhs(t, y, p, u, dydt)``.
+    guards : callable
+        ``guards(t, y, p, u, g)``: fills ``g`` with the distance of every held regime to its boundary.
+    transition : callable
+        ``transition(k, t, y, p, u)``: what crossing guard ``k`` does.
+    settle : callable
+        ``settle(t, y, p, u)``: makes every regime consistent with the state.
+    n_guards : int
+        Length of ``g``.
+
+    Returns
+    -------
+    callable
+        The compiled driver.
+    """
     dopri5 = make_dopri5(rhs)
 
-    def advance(p, u, y, t, t_end, h, rtol, atol, h_max):  # noqa: ANN001, ANN202, PLR0912, PLR0915
+    def advance(p: FloatArray, u: FloatArray, y: FloatArray, t: float, t_end: float, h: float, rtol: float,  # noqa: PLR0912, PLR0915
+                atol: float, h_max: float) -> tuple[float, int]:
         n = y.shape[0]
         y0 = np.empty(n)
         yt = np.empty(n)

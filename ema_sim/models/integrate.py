@@ -18,6 +18,14 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
+from ema_sim.models.arrays import FloatArray, IntArray
+
+Rhs = Callable[[float, FloatArray, FloatArray, FloatArray, FloatArray], None]
+"""A right-hand side ``rhs(t, y, p, u, dydt)``: fills ``dydt`` for state ``y``, parameters ``p``, inputs ``u``."""
+Stepper = Callable[[FloatArray, FloatArray, FloatArray, float, float, float, float, float, float, FloatArray,
+                    IntArray], tuple[float, int]]
+"""``dopri5(p, u, y, t, t_end, h, rtol, atol, h_max, limits, mode) -> (next h, steps)``."""
+
 # Dormand–Prince 5(4) tableau.
 C2, C3, C4, C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
 A21 = 1.0 / 5.0
@@ -35,14 +43,25 @@ EVENT_TOL = 1e-10
 MAX_EVENT_ITERATIONS = 12
 
 
-def make_dopri5(rhs: Callable[..., None]) -> Callable[..., tuple[float, int]]:  # noqa: PLR0915
+def make_dopri5(rhs: Rhs) -> Stepper:  # noqa: PLR0915
     """A compiled Dormand–Prince stepper for one right-hand side ``rhs(t, y, p, u, dydt)``.
 
     The stepper is a closure over ``rhs`` rather than taking it as an argument, so numba can cache
     it (a function passed as a value is a run-time pointer and defeats the cache).
+
+    Parameters
+    ----------
+    rhs : callable
+        The compiled right-hand side ``rhs(t, y, p, u, dydt)``.
+
+    Returns
+    -------
+    callable
+        ``dopri5(p, u, y, t, t_end, h, rtol, atol, h_max, limits, mode) -> (next h, steps)``.
     """
 
-    def _masked(t, y, p, u, limits, mode, dydt):  # noqa: ANN001, ANN202
+    def _masked(t: float, y: FloatArray, p: FloatArray, u: FloatArray, limits: FloatArray, mode: IntArray,
+                dydt: FloatArray) -> None:
         rhs(t, y, p, u, dydt)
         for k in range(limits.shape[0]):
             if mode[k] != 0:
@@ -51,7 +70,8 @@ def make_dopri5(rhs: Callable[..., None]) -> Callable[..., tuple[float, int]]:  
                 if w >= 0:
                     dydt[w] = 0.0
 
-    def release_stops(t, y, p, u, limits, mode, dydt):  # noqa: ANN001, ANN202
+    def release_stops(t: float, y: FloatArray, p: FloatArray, u: FloatArray, limits: FloatArray, mode: IntArray,
+                      dydt: FloatArray) -> None:
         """Free every limited state whose free acceleration points back inside its range."""
         any_stop = False
         for k in range(limits.shape[0]):
@@ -67,7 +87,8 @@ def make_dopri5(rhs: Callable[..., None]) -> Callable[..., tuple[float, int]]:  
                 if d * mode[k] < 0.0:
                     mode[k] = 0
 
-    def dopri5(p, u, y, t, t_end, h, rtol, atol, h_max, limits, mode):  # noqa: ANN001, ANN202, PLR0912, PLR0915
+    def dopri5(p: FloatArray, u: FloatArray, y: FloatArray, t: float, t_end: float, h: float, rtol: float,  # noqa: PLR0912, PLR0915
+               atol: float, h_max: float, limits: FloatArray, mode: IntArray) -> tuple[float, int]:
         """Integrate ``y`` from ``t`` to ``t_end`` with inputs ``u`` held; returns (next h, steps taken).
 
         ``h`` is the step to try first (carried between calls); the returned step is the controller's

@@ -20,7 +20,18 @@ _U53 = 1.0 / 9007199254740992.0  # 2**-53
 
 @jit
 def splitmix64(seed: int) -> np.uint64:
-    """A well-mixed 64-bit word from an integer seed (never zero)."""
+    """A well-mixed 64-bit word from an integer seed (never zero).
+
+    Parameters
+    ----------
+    seed : int
+        Any integer.
+
+    Returns
+    -------
+    numpy.uint64
+        A generator state.
+    """
     z = np.uint64(seed) + np.uint64(0x9E3779B97F4A7C15)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
@@ -32,18 +43,41 @@ def splitmix64(seed: int) -> np.uint64:
 
 @jit
 def next_u64(state: np.ndarray) -> np.uint64:
-    """The next 64-bit output of xorshift64*; advances ``state[0]``."""
+    """The next 64-bit output of xorshift64*; advances ``state[0]``.
+
+    Parameters
+    ----------
+    state : numpy.ndarray
+        The generator's state (one uint64), advanced.
+
+    Returns
+    -------
+    numpy.uint64
+        The output word.
+    """
     x = state[0]
     x ^= x >> np.uint64(12)
     x ^= x << np.uint64(25)
     x ^= x >> np.uint64(27)
     state[0] = x
-    return x * np.uint64(0x2545F4914F6CDD1D)
+    out: np.uint64 = x * np.uint64(0x2545F4914F6CDD1D)
+    return out
 
 
 @jit
 def uniform(state: np.ndarray) -> float:
-    """A uniform draw in (0, 1] from xorshift64*; advances ``state[0]``."""
+    """A uniform draw in (0, 1] from xorshift64*; advances ``state[0]``.
+
+    Parameters
+    ----------
+    state : numpy.ndarray
+        The generator's state (one uint64), advanced.
+
+    Returns
+    -------
+    float
+        The draw.
+    """
     r = next_u64(state)
     return (float(r >> np.uint64(11)) + 1.0) * _U53
 
@@ -79,7 +113,7 @@ _ZIG_R = 3.442619855899
 
 
 @jit
-def _signed_draw(state: np.ndarray) -> tuple:
+def _signed_draw(state: np.ndarray) -> tuple[np.int64, np.int64]:
     """A signed 32-bit integer and an independent 7-bit layer from one 64-bit draw."""
     r = next_u64(state)
     hz = np.int64(r >> np.uint64(32))
@@ -90,12 +124,23 @@ def _signed_draw(state: np.ndarray) -> tuple:
 
 @jit
 def normal(state: np.ndarray) -> float:
-    """A standard normal draw by the ziggurat: one multiply on 98.8 % of draws, exact in the tails."""
+    """A standard normal draw by the ziggurat: one multiply on 98.8 % of draws, exact in the tails.
+
+    Parameters
+    ----------
+    state : numpy.ndarray
+        The generator's state (one uint64), advanced.
+
+    Returns
+    -------
+    float
+        The draw.
+    """
     hz, iz = _signed_draw(state)
     while True:
         if abs(hz) < _ZIG_K[iz]:
-            return hz * _ZIG_W[iz]
-        x = hz * _ZIG_W[iz]
+            return float(hz * _ZIG_W[iz])
+        x = float(hz * _ZIG_W[iz])
         if iz == 0:  # the tail beyond r, by Marsaglia's exponential method
             while True:
                 x = -math.log(uniform(state)) / _ZIG_R
@@ -113,6 +158,22 @@ def band_limited_step(value: float, decay: float, innovation: float, state: np.n
     """One step of first-order noise: ``n ← a·n + σ·√(1 − a²)·w`` with ``a = decay``.
 
     ``innovation = σ·√(1 − a²)`` (0 when the noise is off); the rms stays σ whatever the step.
+
+    Parameters
+    ----------
+    value : float
+        The noise so far.
+    decay : float
+        ``a = exp(−2π·bandwidth·dt)``.
+    innovation : float
+        ``σ·√(1 − a²)``.
+    state : numpy.ndarray
+        The generator's state, advanced.
+
+    Returns
+    -------
+    float
+        The noise after the step.
     """
     if innovation == 0.0:
         return 0.0

@@ -1,9 +1,10 @@
-"""The elements of the report's block diagrams as small numba functions, one per named stage.
+"""The block-diagram elements every family shares, as small numba functions, one per named element.
 
-Every model family composes these in its own fixed pipeline (figure 26 for the second-order family,
-figures 30, 32, 33 and 36 for the high-order family), the way JSBSim's actuator runs one fixed chain
-of stages driven by configuration. A stage whose parameter is zero is the identity, so a family's
-pipeline never changes shape with its configuration.
+Each family composes these in its own fixed pipeline (figure 26 in :mod:`ema_sim.models.second_order`,
+figure 30 in :mod:`ema_sim.models.high_order`), the way JSBSim's actuator runs one fixed chain of
+stages driven by configuration; the test environment (:mod:`ema_sim.environment`) steps the same
+quantizer and lag. A stage whose parameter is zero is the identity, so a pipeline never changes
+shape with its configuration. Every element here is written once and used everywhere it occurs.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ import math
 
 import numba as nb
 import numpy as np
+
+from ema_sim.models.arrays import FloatArray
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -30,11 +33,27 @@ FLAG_BRAKE = 64
 FLAG_STALL = 128
 
 jit = nb.njit(cache=True, inline="always")
+"""Compile an element for inlining into the kernels (it takes the caller's floating-point flags)."""
 
 
 @jit
-def zoh_index(times: np.ndarray, t: float, j: int) -> int:
-    """Index of the latest breakpoint at or before ``t``, searching forward from ``j``."""
+def zoh_index(times: FloatArray, t: float, j: int) -> int:
+    """Index of the latest breakpoint at or before ``t``, searching forward from ``j``.
+
+    Parameters
+    ----------
+    times : numpy.ndarray
+        Breakpoint times, increasing (s).
+    t : float
+        The time asked for (s).
+    j : int
+        Where to start searching (a breakpoint at or before ``t``).
+
+    Returns
+    -------
+    int
+        The breakpoint index.
+    """
     n = times.shape[0]
     while j + 1 < n and times[j + 1] <= t + TIME_EPS_S:
         j += 1
@@ -42,29 +61,120 @@ def zoh_index(times: np.ndarray, t: float, j: int) -> int:
 
 
 @jit
-def transport_delay(times: np.ndarray, values: np.ndarray, t: float, delay_s: float, j: int) -> tuple:
-    """Time delay: the zero-order-held input as it was ``delay_s`` ago; returns (value, index)."""
+def transport_delay(times: FloatArray, values: FloatArray, t: float, delay_s: float, j: int) -> tuple[float, int]:
+    """Time delay: the zero-order-held input as it was ``delay_s`` ago.
+
+    Parameters
+    ----------
+    times : numpy.ndarray
+        Breakpoint times (s).
+    values : numpy.ndarray
+        The input at each breakpoint.
+    t : float
+        Now (s).
+    delay_s : float
+        The delay (s).
+    j : int
+        Where to start searching.
+
+    Returns
+    -------
+    value : float
+        The delayed input.
+    index : int
+        Its breakpoint (the next search's start).
+    """
     j = zoh_index(times, t - delay_s, j)
     return values[j], j
 
 
 @jit
-def command_error(u: float, kb: float, offset_deg: float) -> float:
-    """Command error of section 3.1.2.2: ``(1 + Kb)·u + offset``."""
-    return (1.0 + kb) * u + offset_deg
+def band_side(x: float, half_width: float) -> int:
+    """Which side of the band ±half_width ``x`` is on: −1 below, 0 inside, +1 above.
+
+    The one classification behind every symmetric switching element: a saturation's segment, a
+    dead zone's side, a backlash's contact.
+
+    Parameters
+    ----------
+    x : float
+        The input.
+    half_width : float
+        Half width of the band (≥ 0).
+
+    Returns
+    -------
+    int
+        −1, 0 or +1.
+    """
+    if x > half_width:
+        return 1
+    if x < -half_width:
+        return -1
+    return 0
 
 
 @jit
 def quantize(u: float, step: float) -> float:
-    """Mid-tread quantizer (D/A resolution); identity when ``step`` is 0."""
+    """Mid-tread quantizer (D/A and A/D resolution); identity when ``step`` is 0.
+
+    Parameters
+    ----------
+    u : float
+        The input (a non-finite input passes through).
+    step : float
+        The resolution (0: off).
+
+    Returns
+    -------
+    float
+        ``step·floor(u/step + ½)``.
+    """
     if step <= 0.0:
         return u
-    return step * math.floor(u / step + 0.5)
+    return step * float(np.floor(u / step + 0.5))
+
+
+@nb.njit(cache=True)
+def quantize_array(u: FloatArray, step: float) -> FloatArray:
+    """:func:`quantize` on every element of an array (the test environment's vector path).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The inputs (C-contiguous).
+    step : float
+        The resolution (0: off).
+
+    Returns
+    -------
+    numpy.ndarray
+        The quantized values, same shape.
+    """
+    out = np.empty_like(u)
+    flat_in = u.ravel()
+    flat_out = out.ravel()
+    for j in range(flat_in.shape[0]):
+        flat_out[j] = quantize(flat_in[j], step)
+    return out
 
 
 @jit
 def lag_gain(corner_hz: float, dt: float) -> float:
-    """Exact zero-order-hold gain of a first-order lag over ``dt``; 1 (pass-through) when off."""
+    """Exact zero-order-hold gain of a first-order lag over ``dt``; 1 (pass-through) when off.
+
+    Parameters
+    ----------
+    corner_hz : float
+        Corner frequency (0: off).
+    dt : float
+        The step (s).
+
+    Returns
+    -------
+    float
+        ``1 − exp(−2π·f·dt)``.
+    """
     if corner_hz <= 0.0:
         return 1.0
     return 1.0 - math.exp(-TWO_PI * corner_hz * dt)
@@ -72,71 +182,72 @@ def lag_gain(corner_hz: float, dt: float) -> float:
 
 @jit
 def first_order_lag(y: float, u: float, gain: float) -> float:
-    """One step of a first-order lag ``y ← y + gain·(u − y)`` (see :func:`lag_gain`)."""
+    """One step of a first-order lag ``y ← y + gain·(u − y)`` (see :func:`lag_gain`).
+
+    Parameters
+    ----------
+    y : float
+        The lag's output so far.
+    u : float
+        Its input over the step.
+    gain : float
+        :func:`lag_gain` of the step.
+
+    Returns
+    -------
+    float
+        The new output.
+    """
     return y + gain * (u - y)
 
 
 @jit
-def compliance_correction(u: float, hinge_moment_inlb: float, kcp_per_kinlb: float) -> float:
-    """Compliance correction gain K_CP of section 3.1.2.4 on the command.
+def dead_zone(e: float, half_width: float) -> tuple[float, int]:
+    """Dead zone: zero inside ±half_width, shifted identity outside.
 
-    ``K_CP = 1 + kcp·(aiding load)/1000``: a hinge moment that aids the commanded direction raises
-    the gain, an opposing one lowers it.
+    Parameters
+    ----------
+    e : float
+        The input.
+    half_width : float
+        Half width of the zone (≥ 0).
+
+    Returns
+    -------
+    output : float
+        The dead-zone output.
+    side : int
+        Which side of the zone the input is on (:func:`band_side`).
     """
-    if kcp_per_kinlb == 0.0 or u == 0.0:
-        return u
-    aiding = hinge_moment_inlb if u > 0.0 else -hinge_moment_inlb
-    return u * (1.0 + kcp_per_kinlb * aiding * 1e-3)
+    side = band_side(e, half_width)
+    if side > 0:
+        return e - half_width, side
+    if side < 0:
+        return e + half_width, side
+    return 0.0, 0
 
 
 @jit
-def dead_zone(e: float, half_width: float) -> float:
-    """Dead zone: zero inside ±half_width, shifted identity outside."""
-    if e > half_width:
-        return e - half_width
-    if e < -half_width:
-        return e + half_width
-    return 0.0
-
-
-@jit
-def load_rate_limits(rl_dps: float, k2_dps_per_lb: float, hinge_moment_inlb: float, marm_in: float) -> tuple:
-    """Rate limits with load (section 3.1.2.1): ``rl + K2·hm/marm`` in each direction, never below 0.
-
-    A hinge moment aiding positive motion raises the positive limit and lowers the negative one.
-    Returns (positive limit, negative-direction magnitude).
-    """
-    f_lb = hinge_moment_inlb / marm_in
-    up = rl_dps + k2_dps_per_lb * f_lb
-    down = rl_dps - k2_dps_per_lb * f_lb
-    return max(up, 0.0), max(down, 0.0)
-
-
-@jit
-def rate_limited_second_order(
-    u: float, x: float, v: float, wn: float, zeta: float, up: float, down: float
-) -> tuple:
-    """Basic second order (figure 21) with the rate limit on the velocity command (Lallman form).
-
-    ``ẍ = 2ζωn·(sat(ωn/(2ζ)·(u − x)) − ẋ)``: unsaturated it is ωn²(u − x) − 2ζωn·ẋ; saturated the
-    steady rate is the limit. Returns (acceleration, rate-limited flag).
-    """
-    vc = wn / (2.0 * zeta) * (u - x)
-    limited = 0
-    if vc > up:
-        vc = up
-        limited = 1
-    elif vc < -down:
-        vc = -down
-        limited = 1
-    return 2.0 * zeta * wn * (vc - v), limited
-
-
-@jit
-def limited_integrator(x: float, v: float, lo: float, hi: float) -> tuple:
+def limited_integrator(x: float, v: float, lo: float, hi: float) -> tuple[float, float, int]:
     """Clamp a position state to [lo, hi] and stop its velocity at the stop (no wind-up).
 
-    Returns (x, v, at-stop flag).
+    Parameters
+    ----------
+    x : float
+        The position state.
+    v : float
+        Its velocity.
+    lo, hi : float
+        The stops.
+
+    Returns
+    -------
+    x : float
+        The clamped position.
+    v : float
+        The velocity, stopped at a stop.
+    at_stop : int
+        1 on a stop, else 0.
     """
     if x >= hi:
         return hi, min(v, 0.0), 1
@@ -146,12 +257,44 @@ def limited_integrator(x: float, v: float, lo: float, hi: float) -> tuple:
 
 
 @jit
-def free_play_accel(hinge_moment_inlb: float, inertia_inlbs2: float) -> float:
-    """Free play subsystem input (figure 29): hinge moment over surface inertia, in deg/s²."""
-    return hinge_moment_inlb / inertia_inlbs2 * RAD2DEG
+def euler_pair(x: float, v: float, a: float, dt: float, backward: bool) -> tuple[float, float]:
+    """One Euler step of a double integrator ``ẋ = v, v̇ = a``.
+
+    Forward: both take the values at the start of the step. Backward (flight 1's FORTRAN): the
+    velocity first, then the position from the new velocity.
+
+    Parameters
+    ----------
+    x : float
+        Position.
+    v : float
+        Velocity.
+    a : float
+        Acceleration over the step.
+    dt : float
+        The step (s).
+    backward : bool
+        Backward rather than forward Euler.
+
+    Returns
+    -------
+    x : float
+        The new position.
+    v : float
+        The new velocity.
+    """
+    if backward:
+        v += dt * a
+        x += dt * v
+        return x, v
+    x += dt * v
+    v += dt * a
+    return x, v
 
 
-@jit
-def compliance_deflection(hinge_moment_inlb: float, deg_per_kinlb: float) -> float:
-    """Surface deflection outside the servo loop, linear in hinge moment (deg)."""
-    return deg_per_kinlb * hinge_moment_inlb * 1e-3
+__all__ = [
+    "DEG2RAD", "FLAG_BRAKE", "FLAG_CURRENT", "FLAG_FREE_PLAY", "FLAG_POSITION", "FLAG_PWM_DEAD_BAND", "FLAG_RATE",
+    "FLAG_STALL", "FLAG_THRESHOLD", "RAD2DEG", "TIME_EPS_S", "TWO_PI", "band_side", "dead_zone",
+    "euler_pair", "first_order_lag", "jit", "lag_gain", "limited_integrator", "quantize", "quantize_array",
+    "transport_delay", "zoh_index",
+]

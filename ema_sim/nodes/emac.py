@@ -37,11 +37,11 @@ from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, Inp
 from ema_sim.emac.channel import about
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
-from ema_sim.models.switches import element_names, model_overrides
 from ema_sim.nodes.common import DurationHistogram, SuiteNode, run
 from ema_sim.nodes.params import Spec, config_specs, names_list, nested, unit_of
 from ema_sim.nodes.ports import Ports
 from ema_sim.signals.plans import channel_list
+from ema_sim.switches import element_names, model_overrides
 
 NS = 1_000_000_000
 KNOWN = frozenset(CHANNELS)

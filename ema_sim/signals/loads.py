@@ -33,7 +33,20 @@ class Load(Spec, ABC):
         return 0.0
 
     def hinge_moment_inlb(self, t: ArrayLike, command_deg: ArrayLike) -> FloatArray:
-        """The load at times ``t`` while the command is ``command_deg``."""
+        """The load at times ``t`` while the command is ``command_deg``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times from the start of the load (s).
+        command_deg : array_like
+            The command at those times (deg; loads that oppose or follow the motion read it).
+
+        Returns
+        -------
+        numpy.ndarray
+            Hinge moment (in·lb, positive aids positive deflection).
+        """
         t = np.asarray(t, dtype=float)
         return np.broadcast_to(self._load(t, np.asarray(command_deg, dtype=float)), t.shape).astype(float)
 
@@ -152,7 +165,18 @@ LOADS: dict[str, type[Load]] = {
 
 
 def parse_load(text: str) -> Load:
-    """A load from its spec string, e.g. ``steps:step_inlb=222.5,max_inlb=1780``."""
+    """A load from its spec string, e.g. ``steps:step_inlb=222.5,max_inlb=1780``.
+
+    Parameters
+    ----------
+    text : str
+        ``kind:field=value,...`` (``ema maneuvers`` lists them).
+
+    Returns
+    -------
+    Load
+        The checked load.
+    """
     return parse(text, LOADS, "load")
 
 

@@ -36,7 +36,18 @@ class Maneuver(Spec, ABC):
         """Natural length of the signal."""
 
     def command_deg(self, t: ArrayLike) -> FloatArray:
-        """The command at times ``t`` (seconds from the start of the maneuver)."""
+        """The command at times ``t``.
+
+        Parameters
+        ----------
+        t : array_like
+            Seconds from the start of the maneuver.
+
+        Returns
+        -------
+        numpy.ndarray
+            Command (deg), held at its last value after :attr:`duration_s`.
+        """
         t = np.asarray(t, dtype=float)
         return self._signal(np.clip(t, 0.0, self.duration_s))
 
@@ -66,7 +77,7 @@ class Step(Maneuver):
 
     def _signal(self, t: FloatArray) -> FloatArray:
         up = (t >= self.lead_s) & ((t < self.lead_s + self.hold_s) | (not self.back))
-        return self.start_deg + self.amp_deg * up
+        return np.asarray(self.start_deg + self.amp_deg * up, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -148,7 +159,18 @@ class Sweep(Maneuver):
         return self.lead_s + self.sweep_s
 
     def phase_rad(self, t: FloatArray) -> FloatArray:
-        """Instantaneous phase of the sweep after the lead-in."""
+        """Instantaneous phase of the sweep after the lead-in.
+
+        Parameters
+        ----------
+        t : numpy.ndarray
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            Phase (rad).
+        """
         tt = np.clip(_after(t, self.lead_s), 0.0, self.sweep_s)
         if self.log:
             k = math.log(self.f1_hz / self.f0_hz) / self.sweep_s
@@ -157,7 +179,18 @@ class Sweep(Maneuver):
         return 2.0 * np.pi * (self.f0_hz * tt + 0.5 * rate * tt * tt)
 
     def frequency_hz(self, t: ArrayLike) -> FloatArray:
-        """Instantaneous frequency at times ``t``."""
+        """Instantaneous frequency at times ``t``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            Frequency (Hz).
+        """
         tt = np.clip(_after(np.asarray(t, float), self.lead_s), 0.0, self.sweep_s)
         if self.log:
             return self.f0_hz * (self.f1_hz / self.f0_hz) ** (tt / self.sweep_s)
@@ -331,7 +364,18 @@ class StaticThreshold(Maneuver):
         return self.lead_s + self.cycles / self.freq_hz
 
     def amplitude_deg(self, t: ArrayLike) -> FloatArray:
-        """The envelope at times ``t``."""
+        """The envelope at times ``t``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            Amplitude (deg).
+        """
         tt = _after(np.asarray(t, float), self.lead_s)
         return self.amp_max_deg * np.clip(tt * self.freq_hz / self.cycles, 0.0, 1.0)
 
@@ -357,7 +401,18 @@ class DynamicThreshold(Maneuver):
         return self.lead_s + self.ramp_s
 
     def amplitude_deg(self, t: ArrayLike) -> FloatArray:
-        """The envelope at times ``t``."""
+        """The envelope at times ``t``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            Amplitude (deg).
+        """
         tt = _after(np.asarray(t, float), self.lead_s)
         return self.amp0_deg + (self.amp1_deg - self.amp0_deg) * np.clip(tt / self.ramp_s, 0.0, 1.0)
 
@@ -414,7 +469,7 @@ class Staircase(Maneuver):
 
     def _signal(self, t: FloatArray) -> FloatArray:
         idx = np.clip((t / self.hold_s).astype(int), 0, self.levels_deg.size - 1)
-        return self.levels_deg[idx]
+        return np.asarray(self.levels_deg[idx], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -469,7 +524,18 @@ MANEUVERS: dict[str, type[Maneuver]] = {
 
 
 def parse_maneuver(text: str) -> Maneuver:
-    """A maneuver from its spec string, e.g. ``sine:freq_hz=5,amp_deg=0.4``."""
+    """A maneuver from its spec string, e.g. ``sine:freq_hz=5,amp_deg=0.4``.
+
+    Parameters
+    ----------
+    text : str
+        ``kind:field=value,...`` (``ema maneuvers`` lists them).
+
+    Returns
+    -------
+    Maneuver
+        The checked maneuver.
+    """
     return parse(text, MANEUVERS, "maneuver")
 
 

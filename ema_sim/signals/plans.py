@@ -104,13 +104,39 @@ class TestPlan:
     dynamic: bool
 
     def command_deg(self, channel: str, t: ArrayLike) -> FloatArray:
-        """Command of ``channel`` at times ``t`` (0° for a channel the test does not drive)."""
+        """Command of ``channel`` at times ``t`` (0° for a channel the test does not drive).
+
+        Parameters
+        ----------
+        channel : str
+            Channel name.
+        t : array_like
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            Command (deg).
+        """
         t = np.asarray(t, dtype=float)
         plan = self.channels.get(channel)
         return np.zeros_like(t) if plan is None else plan.maneuver.command_deg(t)
 
     def hinge_moment_inlb(self, channel: str, t: ArrayLike) -> FloatArray:
-        """Load of ``channel`` at times ``t``."""
+        """Load of ``channel`` at times ``t``.
+
+        Parameters
+        ----------
+        channel : str
+            Channel name.
+        t : array_like
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            Hinge moment (in·lb).
+        """
         t = np.asarray(t, dtype=float)
         plan = self.channels.get(channel)
         return np.zeros_like(t) if plan is None else plan.load.hinge_moment_inlb(t, plan.maneuver.command_deg(t))
@@ -134,7 +160,18 @@ class TestPlan:
 
 
 def channel_list(names: Sequence[str]) -> list[str]:
-    """Channel names from repeatable, comma-separated arguments (``all``: the five)."""
+    """Channel names from repeatable, comma-separated arguments (``all``: the five).
+
+    Parameters
+    ----------
+    names : sequence of str
+        The arguments.
+
+    Returns
+    -------
+    list of str
+        Channel names, each once, in the order given.
+    """
     out: list[str] = []
     for name in names:
         for item in (n.strip() for n in name.split(",")):
@@ -153,13 +190,31 @@ def build_plan(test: str | None = None, *, maneuver: str | None = None, load: st
     """A plan from a test spec (``steps``, ``static_crosstalk:observed=right_wing``...) and/or a maneuver.
 
     ``maneuver`` and ``load`` override the test's defaults for the driven channels; without ``test``
-    the maneuver's kind names the test. ``channels`` are the driven channels (``all`` for five).
+    the maneuver's kind names the test.
+
+    Parameters
+    ----------
+    test : str, optional
+        Test spec (``ema tests`` lists them).
+    maneuver : str, optional
+        Maneuver spec for the driven channels.
+    load : str, optional
+        Load spec for the driven channels.
+    channels : sequence of str
+        The driven channels (``all`` for five).
+    duration_s : float, optional
+        Length of the plan (s); the test's own otherwise.
+
+    Returns
+    -------
+    TestPlan
+        Each channel's maneuver and load.
     """
     if test is None and maneuver is None:
         raise SpecError("give a test or a maneuver")
     fields: dict[str, str] = {}
     if test is None:
-        name = MANEUVER_TESTS.get(parse_maneuver(maneuver or "").kind, "custom")  # type: ignore[arg-type]
+        name = MANEUVER_TESTS.get(parse_maneuver(maneuver or "").kind, "custom")
     else:
         name, fields = split(test, "test")
         if name not in PRESETS:
@@ -239,5 +294,16 @@ def test_help() -> str:
 
 
 def as_json(plan: TestPlan) -> dict[str, Any]:
-    """The plan's metadata as plain JSON."""
+    """The plan's metadata as plain JSON.
+
+    Parameters
+    ----------
+    plan : TestPlan
+        The plan.
+
+    Returns
+    -------
+    dict
+        Its metadata.
+    """
     return dict(plan.metadata())

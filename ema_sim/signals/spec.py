@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import MISSING, Field, dataclass, field, fields
-from typing import Any, TypeVar, get_type_hints
+from typing import Any, ClassVar, TypeVar, get_type_hints
 
 from ema_sim.errors import SpecError, UnknownNameError
 
@@ -17,7 +17,26 @@ T = TypeVar("T")
 
 def param(default: Any, *, low: float | None = None, high: float | None = None, strict: bool = False,
           doc: str = "") -> Any:
-    """A spec field with bounds: ``low`` ≤ value (``<`` when ``strict``), value ≤ ``high``."""
+    """A spec field with bounds: ``low`` ≤ value (``<`` when ``strict``), value ≤ ``high``.
+
+    Parameters
+    ----------
+    default : object
+        The field's default.
+    low : float, optional
+        Lower bound.
+    high : float, optional
+        Upper bound.
+    strict : bool
+        ``low`` itself excluded.
+    doc : str
+        What the field is.
+
+    Returns
+    -------
+    dataclasses.Field
+        The field.
+    """
     return field(default=default, metadata={"low": low, "high": high, "strict": strict, "doc": doc})
 
 
@@ -25,8 +44,8 @@ def param(default: Any, *, low: float | None = None, high: float | None = None, 
 class Spec:
     """Base of every spec dataclass: a ``kind`` name and typed, bounded fields."""
 
-    kind = "?"
-    family = "spec"
+    kind: ClassVar[str] = "?"
+    family: ClassVar[str] = "spec"
 
     def spec(self) -> str:
         """The canonical spec string (round-trips through :func:`parse`)."""
@@ -86,7 +105,22 @@ def _convert(family: str, kind: str, f: Field[Any], hint: Any, raw: str) -> Any:
 
 
 def split(text: str, family: str) -> tuple[str, dict[str, str]]:
-    """``"kind:a=1,b=2"`` → ``("kind", {"a": "1", "b": "2"})``."""
+    """``"kind:a=1,b=2"`` → ``("kind", {"a": "1", "b": "2"})``.
+
+    Parameters
+    ----------
+    text : str
+        The spec.
+    family : str
+        What it is, for messages (``maneuver``, ``load``, ``test``).
+
+    Returns
+    -------
+    kind : str
+        The kind, lower case.
+    fields : dict
+        Field name → its text.
+    """
     text = text.strip()
     if not text:
         raise SpecError(f"empty {family} spec")
@@ -105,7 +139,22 @@ def split(text: str, family: str) -> tuple[str, dict[str, str]]:
 
 
 def parse(text: str, registry: dict[str, type[T]], family: str) -> T:
-    """Build the dataclass registered for the spec's kind, converting and checking every field."""
+    """Build the dataclass registered for the spec's kind, converting and checking every field.
+
+    Parameters
+    ----------
+    text : str
+        The spec.
+    registry : dict
+        Kind → dataclass.
+    family : str
+        What it is, for messages.
+
+    Returns
+    -------
+    object
+        The dataclass instance.
+    """
     kind, raw = split(text, family)
     if kind not in registry:
         raise UnknownNameError(family, kind, registry)
@@ -124,7 +173,18 @@ def parse(text: str, registry: dict[str, type[T]], family: str) -> T:
 
 
 def describe(registry: dict[str, type[Spec]]) -> list[str]:
-    """One line per kind: its spec with defaults and its docstring's first line."""
+    """One line per kind: its spec with defaults and its docstring's first line.
+
+    Parameters
+    ----------
+    registry : dict
+        Kind → spec dataclass.
+
+    Returns
+    -------
+    list of str
+        Two lines per kind.
+    """
     lines = []
     for kind, cls in registry.items():
         defaults = ",".join(f"{f.name}={_fmt(f.default)}" for f in fields(cls))

@@ -1,0 +1,293 @@
+"""HOAD2 and HOAD3: figure 30 discretized at 10,000 Hz with the flight/test elements (table 5, 4.2.5).
+
+Stages 1–3 (command delay, 5 mV quantization through the command calibration, command noise) and
+16–17 (feedback delay, noise and quantization through the feedback calibration) around the figure-30
+chain of :mod:`.figure30`. Mechanics are symplectic Euler (stable for the stiff gear train), the
+motor current and the bus voltage exact over each step with the bridge voltage held, as the EMAC's
+sampled loops would be.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+from ema_sim.calibration import cubic, cubic_inverse, cubic_slope
+from ema_sim.models import noise as nz
+from ema_sim.models.arrays import FloatArray, UIntArray
+from ema_sim.models.base import O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF
+from ema_sim.models.high_order.figure30 import (
+    bus_current,
+    bus_voltage_step,
+    drive_flags,
+    drive_gains,
+    friction_step,
+    gear_train,
+    integrating,
+    motor_current_step,
+    servo_drive,
+)
+from ema_sim.models.high_order.params import K, X
+from ema_sim.models.stages import (
+    FLAG_BRAKE,
+    FLAG_FREE_PLAY,
+    FLAG_POSITION,
+    TIME_EPS_S,
+    TWO_PI,
+    quantize,
+    zoh_index,
+)
+
+
+@nb.njit(cache=True)
+def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, bp_u: FloatArray, x_out: FloatArray,
+               slope_out: FloatArray) -> None:
+    """Stage 2 on every breakpoint of every instance: degrees → volts (command curve) → 5 mV → degrees → in.
+
+    ``slope_out`` gets the inches per volt at the quantized command (for the command noise); with
+    neither quantization nor command noise the command passes straight through and the slope is 0.
+    The curve, its inverse and its slope are :mod:`ema_sim.calibration`'s compiled functions, the
+    ones :class:`~ema_sim.calibration.Cubic` evaluates, so the result is the same to the last bit.
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance (:data:`~ema_sim.models.high_order.params.K`).
+    c0, c1, c2, c3 : float
+        The channel's command calibration (degrees → volts).
+    bp_u : numpy.ndarray
+        Command at each breakpoint, one row per instance (deg).
+    x_out : numpy.ndarray
+        Filled with the command in screw inches.
+    slope_out : numpy.ndarray
+        Filled with the inches per volt there.
+    """
+    quant_any = False
+    noise_any = False
+    for i in range(params.shape[0]):
+        quant_any = quant_any or params[i, K.quantization_v] > 0.0
+        noise_any = noise_any or params[i, K.command_noise_v] > 0.0
+    for i in range(params.shape[0]):
+        dpi = params[i, K.deg_per_in]
+        quant = params[i, K.quantization_v]
+        for j in range(bp_u.shape[1]):
+            u = bp_u[i, j]
+            if not quant_any and not noise_any:
+                x_out[i, j] = u / dpi
+                slope_out[i, j] = 0.0
+                continue
+            deg = u
+            if quant > 0.0:
+                deg = cubic_inverse(c0, c1, c2, c3, quantize(cubic(c0, c1, c2, c3, u), quant))
+            x_out[i, j] = deg / dpi
+            slope_out[i, j] = 1.0 / (cubic_slope(c0, c1, c2, c3, deg) * dpi)
+
+
+FEEDBACK_TOL = 1e-15
+"""Relative Newton step at which stage 17's inverse calibration stops (every sample; the command path runs
+its steps to the end)."""
+FASTMATH = {"contract", "arcp", "nsz"}
+"""The discrete kernel's floating-point flags (its feedback path is compiled with them, explicitly)."""
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UIntArray) -> float:
+    """Stages 16–17 at a sample instant ``s``: LVDT degrees → volts (+ noise) → 5 mV → degrees.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    lvdt_in : float
+        The delayed filtered LVDT (in).
+    s : float
+        The sample instant (s).
+    x : numpy.ndarray
+        The instance's state (its feedback-noise columns advance).
+    rng : numpy.ndarray
+        The instance's generator state.
+
+    Returns
+    -------
+    float
+        The position feedback the FMU reads (deg).
+    """
+    deg = float(lvdt_in * p[K.deg_per_in])
+    if p[K.quantization_v] <= 0.0 and p[K.feedback_noise_v] <= 0.0:
+        return deg
+    c0, c1 = p[K.feedback_cal_c0_deg], p[K.feedback_cal_c1_deg_per_v]
+    c2, c3 = p[K.feedback_cal_c2_deg_per_v2], p[K.feedback_cal_c3_deg_per_v3]
+    volts = cubic_inverse(c0, c1, c2, c3, deg, FEEDBACK_TOL)
+    if p[K.feedback_noise_v] > 0.0:
+        bw = p[K.noise_bandwidth_hz]
+        decay = math.exp(-TWO_PI * bw * max(s - x[X.feedback_noise_time_s], 0.0)) if bw > 0.0 else 0.0
+        innovation = p[K.feedback_noise_v] * math.sqrt(1.0 - decay * decay)
+        x[X.feedback_noise_v] = nz.band_limited_step(x[X.feedback_noise_v], decay, innovation, rng)
+        x[X.feedback_noise_time_s] = s
+        volts += x[X.feedback_noise_v]
+    return cubic(c0, c1, c2, c3, quantize(volts, p[K.quantization_v]))
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffers: FloatArray, power: FloatArray,  # noqa: PLR0912, PLR0915 - one compiled loop
+                 bp_t: FloatArray, cmd_in: FloatArray, cmd_slope: FloatArray, bp_h: FloatArray, t0: float, dt: float,
+                 n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
+    """HOAD2/HOAD3 fixed-step kernel: every instance through ``n_steps`` steps from ``t0``.
+
+    A sample at time s reads the state of the last step at or before s.
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance.
+    states : numpy.ndarray
+        States (:data:`~ema_sim.models.high_order.params.X`), one row per instance, advanced in place.
+    rngs : numpy.ndarray
+        Each instance's noise generator state.
+    buffers : numpy.ndarray
+        Each instance's feedback-delay ring of filtered LVDT values.
+    power : numpy.ndarray
+        Each instance's motor power (1 on, 0 off).
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    cmd_in : numpy.ndarray
+        The command after stage 2 at each breakpoint (in), one row per instance.
+    cmd_slope : numpy.ndarray
+        Its inches per volt, for the command noise.
+    bp_h : numpy.ndarray
+        Hinge moment at each breakpoint (in·lb), one row per instance.
+    t0 : float
+        Time of the first step (s).
+    dt : float
+        The step (s).
+    n_steps : int
+        Steps to take.
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    out : numpy.ndarray
+        Output block ``(instances, samples, outputs)``, filled.
+    """
+    k_samples = sample_t.shape[0]
+    for i in range(params.shape[0]):
+        p = params[i]
+        x = states[i]
+        rng = rngs[i]
+        buf = buffers[i]
+        nbuf = buf.shape[0]
+        gains = drive_gains(p)
+        ki_dt = p[K.position_integral_per_s2] * dt
+        r = p[K.stator_resistance_ohm]
+        ke = p[K.back_emf_v_per_in_s]
+        kf = p[K.force_per_amp_lbf_per_a]
+        arm = p[K.crank_arm_in]
+        vsup = p[K.bus_supply_v]
+        rsrc = p[K.bus_source_resistance_ohm]
+        xmin = p[K.position_min_in]
+        xmax = p[K.position_max_in]
+        delay = p[K.command_delay_s]
+        dt_m = dt / p[K.motor_mass_lbs2_per_in]
+        dt_s = dt / p[K.surface_mass_lbs2_per_in]
+        inv_arm = 1.0 / arm
+        inv_r = 1.0 / r
+        decay_i = math.exp(-r * dt / p[K.inductance_h])
+        g_lf = 1.0 - math.exp(-p[K.lvdt_filter_rad_s] * dt)
+        decay_bus = math.exp(-dt / (rsrc * p[K.bus_capacitance_f]))
+        a_cmd = math.exp(-TWO_PI * p[K.noise_bandwidth_hz] * dt) if p[K.noise_bandwidth_hz] > 0.0 else 0.0
+        w_cmd = p[K.command_noise_v] * math.sqrt(1.0 - a_cmd * a_cmd)
+        n_delay = min(round(p[K.feedback_delay_s] / dt), nbuf - 1)
+        on = power[i] > 0.5
+        brake = 0.0 if on else p[K.brake_holding_lbf]
+        fc = p[K.coulomb_friction_lbf] + brake
+        fs = p[K.stiction_lbf] + brake
+        fh = p[K.hinge_friction_lbf]
+        xm = x[X.x_motor_in]
+        vm = x[X.v_motor_in_s]
+        xs = x[X.x_surface_in]
+        vs = x[X.v_surface_in_s]
+        cur = x[X.current_a]
+        lf = x[X.lvdt_filtered_in]
+        vbus = x[X.bus_v]
+        ncmd = x[X.command_noise_v]
+        xi = x[X.integral_in_s]
+        flags = int(x[X.flags])
+        head = int(x[X.delay_head])
+        jd = zoh_index(bp_t, t0 - delay, 0)
+        jh = zoh_index(bp_t, t0, 0)
+        js = 0
+        for k in range(n_steps + 1):
+            t = t0 + k * dt
+            while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                row = out[i, js]
+                lagged = buf[head - n_delay if head >= n_delay else head - n_delay + nbuf]
+                row[O_POS] = feedback_deg(p, lagged, sample_t[js], x, rng)
+                row[O_SURF] = xs * p[K.deg_per_in]
+                row[O_RATE] = vm * p[K.deg_per_in]
+                row[O_CUR] = cur
+                row[O_BUS] = vbus if on else 0.0
+                row[O_FLAGS] = flags
+                js += 1
+            if k == n_steps:
+                break
+            jd = zoh_index(bp_t, t - delay, jd)
+            jh = zoh_index(bp_t, t, jh)
+            hm = bp_h[i, jh]
+            flags = 0
+            # stages 1–3: delayed, quantized command with noise (volts → inches at its calibration slope)
+            ncmd = nz.band_limited_step(ncmd, a_cmd, w_cmd, rng)
+            xc = cmd_in[i, jd] + ncmd * cmd_slope[i, jd]
+            if xc > xmax:
+                xc = xmax
+                flags |= FLAG_POSITION
+            elif xc < xmin:
+                xc = xmin
+                flags |= FLAG_POSITION
+            # stages 12, 15: gear train, LVDT and its filter
+            fk, c, lvdt, free = gear_train(p, xm, xs)
+            if free:
+                flags |= FLAG_FREE_PLAY
+            lf += g_lf * (lvdt - lf)
+            head += 1
+            if head == nbuf:
+                head = 0
+            buf[head] = lf
+            # stages 4–8: controller electronics, current loop, PWM, motor
+            if on:
+                err = xc - lf
+                _, _, _, v, sv, si, sp = servo_drive(gains, xc, lf, xi, vm, cur, vbus, 0, 0, 0, True)
+                cur = motor_current_step(v, cur, vm, inv_r, ke, decay_i)
+                if integrating(sv, si, sp):
+                    xi += ki_dt * err
+            else:
+                v = 0.0
+                cur = 0.0
+                sv = si = 0
+                sp = 1
+                flags |= FLAG_BRAKE
+            # stages 10–11, 13–14: motor and screw with friction (symplectic Euler), surface
+            vm = friction_step(vm, kf * cur - fk + c * vs, fc, fs, dt_m, c * dt_m)
+            xm += vm * dt
+            if xm >= xmax:
+                xm = xmax
+                vm = min(vm, 0.0)
+                flags |= FLAG_POSITION
+            elif xm <= xmin:
+                xm = xmin
+                vm = max(vm, 0.0)
+                flags |= FLAG_POSITION
+            flags |= drive_flags(sv, si, sp, vm)
+            vs = friction_step(vs, fk + c * vm + hm * inv_arm, fh, fh, dt_s, c * dt_s)
+            xs += vs * dt
+            # stage 9: the bus
+            vbus = bus_voltage_step(vbus, bus_current(v, cur, vbus), vsup, rsrc, decay_bus)
+        x[X.x_motor_in] = xm
+        x[X.v_motor_in_s] = vm
+        x[X.x_surface_in] = xs
+        x[X.v_surface_in_s] = vs
+        x[X.current_a] = cur
+        x[X.lvdt_filtered_in] = lf
+        x[X.bus_v] = vbus
+        x[X.command_noise_v] = ncmd
+        x[X.integral_in_s] = xi
+        x[X.flags] = flags
+        x[X.delay_head] = head

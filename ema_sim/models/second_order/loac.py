@@ -1,0 +1,158 @@
+"""LOAC: figure 26 in continuous time, adaptive Dormand–Prince with the stops located (table 5).
+
+The reference the discrete models are judged against (table 6): :func:`figure26.derivatives` under
+:func:`ema_sim.models.integrate.make_dopri5` at a tight tolerance, the position and free-play stops
+located exactly, the integration broken at every input change.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ema_sim.models.arrays import FloatArray, IntArray
+from ema_sim.models.integrate import make_dopri5
+from ema_sim.models.second_order.figure26 import command_path, derivatives, sample
+from ema_sim.models.second_order.params import P, X
+from ema_sim.models.stages import TIME_EPS_S, zoh_index
+
+
+@nb.njit(cache=True)
+def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray) -> None:  # noqa: ARG001 - the integrator's signature
+    """Figure 26's right-hand side in the integrators' signature.
+
+    Parameters
+    ----------
+    t : float
+        Time (s; the model is time-invariant).
+    y : numpy.ndarray
+        State (:data:`~ema_sim.models.second_order.params.X`).
+    p : numpy.ndarray
+        Kernel parameters.
+    u : numpy.ndarray
+        ``[command after stages 1–3 (deg), hinge moment (in·lb)]``.
+    dydt : numpy.ndarray
+        Filled with the derivatives.
+    """
+    derivatives(p, y, u[0], u[1], dydt)
+
+
+_loac_dopri5 = make_dopri5(rhs)
+
+
+@nb.njit(cache=True)
+def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, jh: int, sample_t: FloatArray,
+               js: int, k_samples: int) -> float:
+    """Where an integration step must stop: the next delayed command, hinge moment or sample instant.
+
+    Parameters
+    ----------
+    t_end : float
+        End of the run (s).
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    m : int
+        Number of breakpoints.
+    jd : int
+        The delayed command's breakpoint now.
+    delay_s : float
+        The command delay (s).
+    jh : int
+        The hinge moment's breakpoint now.
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    js : int
+        The next sample.
+    k_samples : int
+        Number of samples.
+
+    Returns
+    -------
+    float
+        The time to stop at (s).
+    """
+    t_next = t_end
+    if jd + 1 < m:
+        t_next = min(t_next, bp_t[jd + 1] + delay_s)
+    if jh + 1 < m:
+        t_next = min(t_next, bp_t[jh + 1])
+    if js < k_samples:
+        t_next = min(t_next, sample_t[js])
+    return t_next
+
+
+@nb.njit(cache=True)
+def run_continuous(params: FloatArray, states: FloatArray, modes: IntArray, steps: FloatArray, bp_t: FloatArray,
+                   bp_u: FloatArray, bp_h: FloatArray, t0: float, t_end: float, sample_t: FloatArray, rtol: float,
+                   atol: float, out: FloatArray) -> None:
+    """LOAC kernel: integrate every instance from ``t0`` to ``t_end``, breaking at each input change.
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance.
+    states : numpy.ndarray
+        States, one row per instance, advanced in place.
+    modes : numpy.ndarray
+        Each instance's stop modes (position, free play), updated in place.
+    steps : numpy.ndarray
+        Each instance's step size, updated in place (s).
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    bp_u : numpy.ndarray
+        Command at each breakpoint, one row per instance (deg).
+    bp_h : numpy.ndarray
+        Hinge moment at each breakpoint, one row per instance (in·lb).
+    t0 : float
+        Start (s).
+    t_end : float
+        End (s).
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    rtol : float
+        Relative tolerance.
+    atol : float
+        Absolute tolerance.
+    out : numpy.ndarray
+        Output block ``(instances, samples, outputs)``, filled.
+    """
+    k_samples = sample_t.shape[0]
+    m = bp_t.shape[0]
+    limits = np.empty((2, 4))
+    u = np.empty(2)
+    for i in range(params.shape[0]):
+        p = params[i]
+        y = states[i]
+        mode = modes[i]
+        half = 0.5 * p[P.free_play_deg]
+        limits[0, 0] = X.position_deg
+        limits[0, 1] = X.rate_dps
+        limits[0, 2] = p[P.position_min_deg]
+        limits[0, 3] = p[P.position_max_deg]
+        limits[1, 0] = X.free_play_deg
+        limits[1, 1] = X.free_play_rate_dps
+        limits[1, 2] = -half
+        limits[1, 3] = half
+        if half <= 0.0:
+            mode[1] = 2
+            y[X.free_play_deg] = 0.0
+            y[X.free_play_rate_dps] = 0.0
+        h_max = 1.0 / (4.0 * p[P.wn_rad_s])
+        t = t0
+        jd = zoh_index(bp_t, t - p[P.delay_s], 0)
+        jh = zoh_index(bp_t, t, 0)
+        js = 0
+        while True:
+            while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
+                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], out[i, js])
+                js += 1
+            if t >= t_end - TIME_EPS_S:
+                break
+            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples)
+            u[0] = command_path(p, bp_u[i, jd])
+            u[1] = bp_h[i, jh]
+            if t_next > t + TIME_EPS_S:
+                steps[i], _ = _loac_dopri5(p, u, y, t, t_next, steps[i], rtol, atol, h_max, limits, mode)
+            t = t_next
+            jd = zoh_index(bp_t, t - p[P.delay_s], jd)
+            jh = zoh_index(bp_t, t, jh)

@@ -1,0 +1,145 @@
+"""LOADA and LOADF: figure 26 stepped by Euler at a fixed rate (table 5, section 4.2.4).
+
+* LOADA, the auto-coded model: forward Euler at ``rate_hz`` (800 Hz).
+* LOADF, flight 1's hand-coded FORTRAN, with the faults section 4.2.4 names: backward-Euler
+  integrators, the position feedback taken one frame ahead of where it belongs, and 200 Hz. It
+  responds to a step sooner than LOAC does, the lead that over-predicted flight 1's margins.
+
+Each step runs the stages in diagram order, each lag by its exact zero-order-hold gain.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numba as nb
+
+from ema_sim.models.arrays import FloatArray
+from ema_sim.models.second_order.figure26 import (
+    command_path,
+    compliance_deflection,
+    compliance_gain,
+    lvdt,
+    servo,
+    write_outputs,
+)
+from ema_sim.models.second_order.figure29 import free_play_accel, free_play_euler
+from ema_sim.models.second_order.params import P, X
+from ema_sim.models.stages import (
+    TIME_EPS_S,
+    euler_pair,
+    first_order_lag,
+    lag_gain,
+    limited_integrator,
+    transport_delay,
+    zoh_index,
+)
+
+METHOD_FORWARD_EULER = 0
+"""LOADA."""
+METHOD_LOADF = 1
+"""LOADF: backward Euler, the loop closed on the position one frame ahead."""
+
+
+Kernel = Callable[[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, float, int, FloatArray,
+                   FloatArray], None]
+"""``kernel(params, states, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)``."""
+
+
+def make_euler(backward: bool) -> Kernel:
+    """The fixed-step kernel of one method, compiled with ``backward`` a constant (no per-step test of it).
+
+    Parameters
+    ----------
+    backward : bool
+        LOADF's backward Euler with the look-ahead feedback, rather than LOADA's forward Euler.
+
+    Returns
+    -------
+    callable
+        The compiled kernel (see :func:`run_discrete` for its arguments).
+    """
+
+    def kernel(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
+               t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
+        k_samples = sample_t.shape[0]
+        for i in range(params.shape[0]):
+            p = params[i]
+            x = states[i]
+            jd = 0
+            jh = 0
+            js = 0
+            g_cmd = lag_gain(p[P.command_lag_hz], dt)
+            g_fb = lag_gain(p[P.feedback_lag_hz], dt)
+            g_c = compliance_gain(p, dt)
+            half = 0.5 * p[P.free_play_deg]
+            fp_acc_per_inlb = free_play_accel(1.0, p[P.surface_inertia_inlbs2])
+            hm = bp_h[i, zoh_index(bp_t, t0, 0)]
+            _, flags, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], hm)
+            for k in range(n_steps + 1):
+                t = t0 + k * dt
+                while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                    write_outputs(p, x, x[X.feedback_lag_deg], hm, flags, out[i, js])
+                    js += 1
+                if k == n_steps:
+                    break
+                # stages 1-4: delayed command, command error, quantizer, command lag
+                u_del, jd = transport_delay(bp_t, bp_u[i], t, p[P.delay_s], jd)
+                jh = zoh_index(bp_t, t, jh)
+                hm = bp_h[i, jh]
+                x[X.command_lag_deg] = first_order_lag(x[X.command_lag_deg], command_path(p, u_del), g_cmd)
+                # stages 5-9: the servo on the position (LOADF: one frame ahead), limited integrators
+                pos, rate = x[X.position_deg], x[X.rate_dps]
+                a, flags, _ = servo(p, x[X.command_lag_deg], pos + dt * rate if backward else pos, rate, hm)
+                pos, rate = euler_pair(pos, rate, a, dt, backward)
+                x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
+                                                                           p[P.position_max_deg])
+                # stage 12: free play
+                x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
+                    x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
+                # stages 10-11: LVDT and its feedback lag (gain 1 when off); 13: compliance
+                fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
+                x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm), g_fb)
+                target = compliance_deflection(hm, p[P.compliance_deg_per_kinlb])
+                x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], target, g_c)
+
+    return nb.njit(cache=True)(kernel)
+
+
+KERNELS: dict[int, Kernel] = {METHOD_FORWARD_EULER: make_euler(False), METHOD_LOADF: make_euler(True)}
+"""The compiled kernel of each method."""
+
+
+def run_discrete(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
+                 t0: float, dt: float, n_steps: int, sample_t: FloatArray, method: int, out: FloatArray) -> None:
+    """Fixed-step LOADA/LOADF kernel: every instance through ``n_steps`` steps from ``t0``.
+
+    A sample at time s reads the state of the last step at or before s (a DAU sampling a
+    zero-order-held discrete output).
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance (:data:`~ema_sim.models.second_order.params.P`).
+    states : numpy.ndarray
+        States, one row per instance, advanced in place.
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    bp_u : numpy.ndarray
+        Command at each breakpoint, one row per instance (deg).
+    bp_h : numpy.ndarray
+        Hinge moment at each breakpoint, one row per instance (in·lb).
+    t0 : float
+        Time of the first step (s).
+    dt : float
+        The step (s).
+    n_steps : int
+        Steps to take.
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    method : int
+        :data:`METHOD_FORWARD_EULER` (LOADA) or :data:`METHOD_LOADF`.
+    out : numpy.ndarray
+        Output block ``(instances, samples, outputs)``, filled.
+    """
+    KERNELS[method](params, states, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)

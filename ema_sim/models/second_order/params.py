@@ -1,0 +1,174 @@
+"""Parameters of the second-order family (section 3.1, figures 21, 26, 29), each declared once.
+
+The dataclass fields are the YAML keys of a channel's ``second_order`` section; their metadata
+(:mod:`ema_sim.parameters`) gives unit, range, description, switch-off value and kernel slot. The
+kernel reads the values unconverted, one slot per field in declaration order: :data:`P`. The ranges
+of the fitted parameters are the bounds identification searches in.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from typing import ClassVar
+
+from ema_sim import parameters as pm
+from ema_sim.config import ChannelConfig
+from ema_sim.errors import UnknownNameError
+from ema_sim.models.base import FloatArray
+
+FAMILY = "second-order"
+SECTION = "second_order"
+INF = math.inf
+
+
+@pm.documented
+@dataclass(frozen=True)
+class SecondOrderParams:
+    """Every parameter of the figure-26 pipeline, in the units its name carries (config ``second_order``)."""
+
+    wn_rad_s: float = pm.param("rad/s", "natural frequency ωn of the basic second order (figure 21)",
+                               min=5.0, max=500.0, kernel="wn_rad_s")
+    zeta: float = pm.param("-", "damping ratio ζ (figure 21)", min=0.05, max=3.0, kernel="zeta")
+    rate_limit_dps: float = pm.param(
+        "deg/s", "unloaded rate limit rl on the velocity command (3.1.2.1)", min=1.0, max=2000.0, off=INF,
+        kernel="rate_limit_dps")
+    k2_dps_per_lb: float = pm.param("deg/s/lbf", "rate-limit slope K2 with the load hm/marm (3.1.2.1)", min=0.0,
+                                    off=0.0, kernel="k2_dps_per_lb")
+    moment_arm_in: float = pm.param("in", "moment arm marm (the servo crank arm) of the rate limit's load term",
+                                    min=0.0, min_exclusive=True, channel="crank_arm_in", kernel="moment_arm_in")
+    position_min_deg: float = pm.param("deg", "lower position limit on the states (3.1.2.1)",
+                                       channel="position_min_deg", kernel="position_min_deg")
+    position_max_deg: float = pm.param("deg", "upper position limit on the states (3.1.2.1)",
+                                       channel="position_max_deg", kernel="position_max_deg")
+    kb: float = pm.param("-", "command error slope: (1 + Kb)·u + offset (3.1.2.2)", min=-0.5, max=0.5, off=0.0,
+                         kernel="kb")
+    offset_deg: float = pm.param("deg", "command error bias (3.1.2.2)", min=-5.0, max=5.0, off=0.0,
+                                 kernel="offset_deg")
+    quantization_deg: float = pm.param("deg", "command quantization, the D/A resolution (3.1.2.2)", min=0.0,
+                                       off=0.0, element="quantization", kernel="quantization_deg")
+    free_play_deg: float = pm.param(
+        "deg", "free play width, ±half in the limited double integrator (3.1.2.3, figure 29)", min=0.0, max=3.0,
+        off=0.0, channel="free_play_deg", kernel="free_play_deg", uncertainty=(0.171, 0.200),
+        uncertainty_source="section 2.4: 0.171° and 0.179° on vehicle 1, ≈ 0.200° on vehicles 2 and 3")
+    surface_inertia_inlbs2: float = pm.param(
+        "in·lb·s²", "surface inertia Is of the free-play subsystem (table A2)", min=0.0, min_exclusive=True,
+        channel="surface_inertia_inlbs2", kernel="surface_inertia_inlbs2")
+    kcp_per_kinlb: float = pm.param("1/(1000 in·lb)", "compliance correction K_CP = 1 + kcp·(aiding load)/1000 "
+                                    "(3.1.2.4)", off=0.0, kernel="kcp_per_kinlb")
+    delay_s: float = pm.param("s", "time delay, command to first motion (2.3)", min=0.0, max=0.2, off=0.0,
+                              kernel="delay_s")
+    command_lag_hz: float = pm.param("Hz", "first-order lag on the command", min=0.2, max=2000.0, off=0.0,
+                                     kernel="command_lag_hz")
+    feedback_lag_hz: float = pm.param("Hz", "first-order lag on the LVDT feedback", min=0.2, max=2000.0, off=0.0,
+                                      kernel="feedback_lag_hz")
+    threshold_deg: float = pm.param("deg", "dead zone (half width) on the servo error (2.1)", min=0.0, max=2.0,
+                                    off=0.0, kernel="threshold_deg")
+    compliance_deg_per_kinlb: float = pm.param(
+        "deg/(1000 in·lb)", "surface deflection outside the servo loop, linear in hinge moment (2.8)", min=0.0,
+        max=10.0, off=0.0, kernel="compliance_deg_per_kinlb")
+    lvdt_compliance_deg_per_kinlb: float = pm.param(
+        "deg/(1000 in·lb)", "deflection inside the servo loop the LVDT reads and the loop does not remove (2.8)",
+        min=0.0, max=10.0, off=0.0, default=0.0, kernel="lvdt_compliance_deg_per_kinlb")
+    hysteresis_h_lb_per_in: float = pm.param(
+        "lbf/in", "hysteretic damping h of the compliance, viscous equivalent h/ω (3.2.2, figure 36)", min=1.0,
+        max=1e7, off=0.0, default=0.0, kernel="hysteresis_h_lb_per_in")
+    hysteresis_freq_hz: float = pm.param("Hz", "the frequency ω/2π of h/ω (the load's)", min=0.0,
+                                         min_exclusive=True, default=0.0125, kernel="hysteresis_freq_hz")
+
+    RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("position_min_deg", "<", "position_max_deg"),)
+
+    @classmethod
+    def from_channel(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:
+        """Defaults of a channel's ``second_order`` section and its physical data, then overrides.
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel whose section and physical data give the defaults.
+        **overrides : float
+            Parameter values that replace the channel's.
+
+        Returns
+        -------
+        SecondOrderParams
+            The validated parameters.
+        """
+        base = {n: getattr(channel, m.channel) for n, m in pm.metas(cls).items() if m.channel}
+        return pm.load(cls, channel.section(SECTION), origin=channel.channel, family=FAMILY, section=SECTION,
+                       overrides=overrides, base=base)
+
+    @classmethod
+    def basic(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:
+        """The basic second order of figure 21: the channel's ωn and ζ, every switchable stage off.
+
+        Parameters
+        ----------
+        channel : ChannelConfig
+            The channel whose ωn, ζ and physical data are used.
+        **overrides : float
+            Stages to switch on (or values to change).
+
+        Returns
+        -------
+        SecondOrderParams
+            The validated parameters.
+        """
+        base = cls.from_channel(channel)
+        info = pm.metas(cls)
+        for key in overrides:
+            if key not in info:
+                raise UnknownNameError(f"{FAMILY} parameter", key, info)
+        off = pm.switched_off(cls)
+        return base.replace(**{**off, **{k: float(v) for k, v in overrides.items()}})
+
+    def validate(self) -> None:
+        """Reject values no actuator can have (one message naming the parameter)."""
+        pm.validate(self, FAMILY)
+
+    def replace(self, **changes: float) -> SecondOrderParams:
+        """A copy with some parameters changed (validated).
+
+        Parameters
+        ----------
+        **changes : float
+            Parameter name → new value.
+
+        Returns
+        -------
+        SecondOrderParams
+            The validated copy.
+        """
+        out = replace(self, **changes)
+        out.validate()
+        return out
+
+    def as_dict(self) -> dict[str, float]:
+        """Name → value.
+
+        Returns
+        -------
+        dict
+            Every parameter.
+        """
+        return asdict(self)
+
+    def vector(self) -> FloatArray:
+        """The parameters in kernel order (the :data:`P` slots).
+
+        Returns
+        -------
+        numpy.ndarray
+            One float per slot.
+        """
+        return pm.kernel_vector(self, P)
+
+
+P = pm.kernel_layout(SecondOrderParams)
+"""Kernel slots, generated from the declared kernel names (``p[P.wn_rad_s]``)."""
+
+X = pm.slots("SecondOrderState", ("position_deg", "rate_dps", "free_play_deg", "free_play_rate_dps",
+                                  "command_lag_deg", "feedback_lag_deg", "compliance_deg"))
+"""State columns shared by every implementation."""
+N_STATE = len(X)
+

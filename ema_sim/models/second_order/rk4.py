@@ -1,0 +1,163 @@
+"""The identification simulator: figure 26 by fixed-step RK4 that never steps across an event.
+
+Steps are at most ``h_max`` and never straddle an input breakpoint (delayed or not), a sample, or a
+switch of the rate limit or dead zone (located by bisection on :func:`figure26.servo`'s smooth
+piece, the same classification the dynamics use); the free play is solved exactly
+(:func:`figure29.free_play_exact`). Fast, accurate far below sensor noise and smooth in its
+parameters, so identification can fit it.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ema_sim.models.arrays import FloatArray
+from ema_sim.models.second_order.figure26 import command_path, sample, servo, servo_input
+from ema_sim.models.second_order.figure29 import free_play_exact
+from ema_sim.models.second_order.loac import next_event, rhs
+from ema_sim.models.second_order.params import P, X
+from ema_sim.models.stages import TIME_EPS_S, limited_integrator, zoh_index
+
+SWITCH_TOL_S = 1e-10
+"""How closely a switch of the rate limit or dead zone is located inside an RK4 step."""
+
+
+@nb.njit(cache=True)
+def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray) -> int:
+    """Which smooth piece of the right-hand side ``y`` is on (rate limit side × dead-zone side).
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    u : numpy.ndarray
+        ``[command after stages 1–3, hinge moment]``.
+
+    Returns
+    -------
+    int
+        The piece (see :func:`~ema_sim.models.second_order.figure26.servo`).
+    """
+    _, _, piece = servo(p, servo_input(p, y, u[0]), y[X.position_deg], y[X.rate_dps], u[1])
+    return piece
+
+
+@nb.njit(cache=True)
+def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArray, k2: FloatArray, k3: FloatArray,
+             k4: FloatArray, yt: FloatArray, out: FloatArray) -> None:
+    """One RK4 step of the actuator states from ``y`` into ``out``; free play solved exactly.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State at the start of the step.
+    u : numpy.ndarray
+        ``[command after stages 1–3, hinge moment]``, held.
+    h : float
+        The step (s).
+    k1, k2, k3, k4, yt : numpy.ndarray
+        Work arrays, one state long.
+    out : numpy.ndarray
+        The state at the end of the step.
+    """
+    n = y.shape[0]
+    rhs(0.0, y, p, u, k1)
+    for a in range(n):
+        yt[a] = y[a] + 0.5 * h * k1[a]
+    rhs(0.0, yt, p, u, k2)
+    for a in range(n):
+        yt[a] = y[a] + 0.5 * h * k2[a]
+    rhs(0.0, yt, p, u, k3)
+    for a in range(n):
+        yt[a] = y[a] + h * k3[a]
+    rhs(0.0, yt, p, u, k4)
+    for a in range(n):
+        out[a] = y[a] + h / 6.0 * (k1[a] + 2.0 * k2[a] + 2.0 * k3[a] + k4[a])
+    out[X.free_play_deg] = y[X.free_play_deg]
+    out[X.free_play_rate_dps] = y[X.free_play_rate_dps]
+    free_play_exact(p, out, u[1], h)
+    out[X.position_deg], out[X.rate_dps], _ = limited_integrator(out[X.position_deg], out[X.rate_dps],
+                                                                 p[P.position_min_deg], p[P.position_max_deg])
+
+
+@nb.njit(cache=True, parallel=True)
+def run_rk4(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t0: float,
+            t_end: float, h_max: float, sample_t: FloatArray, out: FloatArray) -> None:
+    """Second-order kernel for identification; instances run in parallel threads.
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance.
+    states : numpy.ndarray
+        States, one row per instance, advanced in place.
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    bp_u : numpy.ndarray
+        Command at each breakpoint, one row per instance (deg).
+    bp_h : numpy.ndarray
+        Hinge moment at each breakpoint, one row per instance (in·lb).
+    t0 : float
+        Start (s).
+    t_end : float
+        End (s).
+    h_max : float
+        Longest RK4 step (s).
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    out : numpy.ndarray
+        Output block ``(instances, samples, outputs)``, filled.
+    """
+    k_samples = sample_t.shape[0]
+    m = bp_t.shape[0]
+    for i in nb.prange(params.shape[0]):
+        p = params[i]
+        y = states[i]
+        n = y.shape[0]
+        u = np.empty(2)
+        k1 = np.empty(n)
+        k2 = np.empty(n)
+        k3 = np.empty(n)
+        k4 = np.empty(n)
+        yt = np.empty(n)
+        y1 = np.empty(n)
+        t = t0
+        jd = zoh_index(bp_t, t - p[P.delay_s], 0)
+        jh = zoh_index(bp_t, t, 0)
+        js = 0
+        while True:
+            while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
+                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], out[i, js])
+                js += 1
+            if t >= t_end - TIME_EPS_S:
+                break
+            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples)
+            u[0] = command_path(p, bp_u[i, jd])
+            u[1] = bp_h[i, jh]
+            while t_next - t > TIME_EPS_S:
+                h = min(h_max, t_next - t)
+                s0 = smooth_piece(p, y, u)
+                rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1)
+                if smooth_piece(p, y1, u) != s0 and h > SWITCH_TOL_S:
+                    lo = 0.0  # the step to the switch: last length still on s0's piece
+                    hi = h
+                    while hi - lo > SWITCH_TOL_S:
+                        mid = 0.5 * (lo + hi)
+                        rk4_step(p, y, u, mid, k1, k2, k3, k4, yt, y1)
+                        if smooth_piece(p, y1, u) == s0:
+                            lo = mid
+                        else:
+                            hi = mid
+                    h = hi
+                    rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1)
+                for a in range(n):
+                    y[a] = y1[a]
+                t += h
+            t = t_next
+            jd = zoh_index(bp_t, t - p[P.delay_s], jd)
+            jh = zoh_index(bp_t, t, jh)
