@@ -19,7 +19,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any, NamedTuple
 
 from ema_msgs_py.contract import Scaling, scaling_of
@@ -27,6 +27,7 @@ from ema_sim.emac.crosstalk import Crosstalk
 from ema_sim.emac.failures import Failure, HardOver, Stall, Zero, parse_failure
 from ema_sim.errors import ConfigError
 from ema_sim.models.base import ActuatorModel, Flags, Sample
+from ema_sim.parameters import param
 
 
 class InputStatus(enum.Enum):
@@ -37,33 +38,26 @@ class InputStatus(enum.Enum):
     REJECTED = "rejected"
 
 
-def _about(description: str, low: float | None = None, high: float | None = None, *,
-           dynamic: bool = False) -> dict[str, Any]:
-    """A setting's field metadata: what it is, its range, whether a running node can change it."""
-    return {"description": description, "low": low, "high": high, "dynamic": dynamic}
-
-
-def about(cls: type) -> list[tuple[Any, dict[str, Any]]]:
-    """Each field of a settings dataclass with its metadata (:func:`_about`)."""
-    return [(f, dict(f.metadata)) for f in fields(cls)]
+RUN_TIME: frozenset[str] = frozenset({"watchdog_timeout_s", "motor_power_on", "hinge_moment_limit_inlb", "failure"})
+"""Settings a running EMAC node applies from its next frame (the others are read-only once it runs)."""
 
 
 @dataclass(frozen=True)
 class EmacSettings:
-    """EMAC node parameters (``config/emac.yaml``, section ``emac``); units in the names, the rest in metadata."""
+    """EMAC node parameters (``config/emac.yaml``, section ``emac``), each declared once with its metadata."""
 
-    frame_hz: float = field(default=200.0, metadata=_about("FMU frame rate: feedback once per frame", 1.0, 1e5))
-    watchdog_timeout_s: float = field(default=0.05, metadata=_about(
-        "commands older than this engage the brake (watchdog)", 1e-4, 3600.0, dynamic=True))
-    initial_position_deg: float = field(default=0.0, metadata=_about(
-        "trim position at start-up (brake engaged until the first command)", -90.0, 90.0))
-    motor_power_on: bool = field(default=True, metadata=_about(
-        "150 V motor power; off engages the brake (section 1.4)", dynamic=True))
-    hinge_moment_limit_inlb: float = field(default=20000.0, metadata=_about(
-        "hinge moments beyond this are clamped (and counted)", 1.0, 1e7, dynamic=True))
-    failure: str = field(default="none", metadata=_about(
-        "failure mode: none, stuck, hard_over:direction=±1, zero, power_loss, stall:load_factor=X", dynamic=True))
-    seed: int = field(default=0, metadata=_about("crosstalk noise seed", 0, 2**62))
+    frame_hz: float = param("Hz", "FMU frame rate: feedback once per frame (table 5)", default=200.0, min=1.0,
+                            max=1e5)
+    watchdog_timeout_s: float = param("s", "commands older than this engage the brake (watchdog)", default=0.05,
+                                      min=1e-4, max=3600.0)
+    initial_position_deg: float = param("deg", "trim position at start-up (brake engaged until the first command)",
+                                        default=0.0, min=-90.0, max=90.0)
+    motor_power_on: bool = param("-", "150 V motor power; off engages the brake (section 1.4)", default=True)
+    hinge_moment_limit_inlb: float = param("in·lb", "hinge moments beyond this are clamped (and counted)",
+                                           default=20000.0, min=1.0, max=1e7)
+    failure: str = param("-", "failure mode: none, stuck, hard_over:direction=±1, zero, power_loss, "
+                         "stall:load_factor=X", default="none")
+    seed: int = param("-", "crosstalk noise seed", default=0, min=0, max=2**62)
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "emac") -> EmacSettings:

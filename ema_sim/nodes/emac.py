@@ -23,6 +23,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from functools import cache
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -34,12 +35,14 @@ from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
-from ema_sim.emac.channel import about
+from ema_sim.emac.channel import RUN_TIME
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
+from ema_sim.models.registry import model_parameters
 from ema_sim.nodes.common import DurationHistogram, SuiteNode, run
-from ema_sim.nodes.params import Spec, config_specs, names_list, nested, unit_of
+from ema_sim.nodes.params import Spec, config_specs, names_list, nested
 from ema_sim.nodes.ports import Ports
+from ema_sim.parameters import ParameterInfo, metas
 from ema_sim.signals.plans import channel_list
 from ema_sim.switches import element_names, model_overrides
 
@@ -71,10 +74,10 @@ def emac_specs(base: dict[str, Any]) -> list[Spec]:
     """``emac.*``: the channel logic's settings (:class:`EmacSettings` metadata; defaults from ``config/emac.yaml``)."""
     defaults = EmacSettings.from_parameters({k: v for k, v in base.items() if not isinstance(v, dict)}, "emac.yaml")
     out = []
-    for f, meta in about(EmacSettings):
-        name = f"emac.{f.name}"
-        out.append(Spec(name, getattr(defaults, f.name), meta["description"], unit_of(name), meta["low"],
-                        meta["high"], read_only=not meta["dynamic"]))
+    for name, m in metas(EmacSettings).items():
+        low, high = (m.min if math.isfinite(m.min) else None), (m.max if math.isfinite(m.max) else None)
+        out.append(Spec(f"emac.{name}", getattr(defaults, name), m.description, "" if m.unit == "-" else m.unit,
+                        low, high, read_only=name not in RUN_TIME))
     out.append(Spec("emac.lockstep_wait_s", float(base.get("lockstep_wait_s", 5.0)),
                     "lockstep: wall time to wait for a frame's inputs while their publishers live", "s", 0.0, 3600.0,
                     read_only=False))
@@ -85,11 +88,46 @@ def emac_specs(base: dict[str, Any]) -> list[Spec]:
 
 
 def channel_specs(channel: str, prefix: str = "") -> list[Spec]:
-    """A channel's physical and model parameters (``config/<channel>.yaml``), read-only: the model is built once."""
+    """A channel's physical and model parameters (``config/<channel>.yaml``), read-only: the model is built once.
+
+    A model parameter's description, unit and range come from its one declaration (the parameter sets'
+    metadata, :func:`ema_sim.models.registry.model_parameters`); the channel's other data (calibration
+    curves, names) say what they are and where they come from, the unit from the name.
+    """
     path = config_dir() / f"{channel}.yaml"
-    return config_specs(ros_parameters(path), path.name, f"{prefix}." if prefix else "",
-                        describe=lambda name: f"{channel}: {name.removeprefix(prefix + '.') if prefix else name} "
-                                              f"(config/{channel}.yaml; the model is built once: read-only)")
+    known = _model_parameters()
+    out = []
+    for spec in config_specs(ros_parameters(path), path.name):
+        info = known.get(spec.name)
+        where = f"config/{channel}.yaml; the model is built once: read-only"
+        name = f"{prefix}.{spec.name}" if prefix else spec.name
+        if info is None:
+            out.append(Spec(name, spec.default, f"{channel}: {spec.name} ({where})", spec.unit))
+            continue
+        low, high = _range(info)
+        unit = "" if info.unit in ("", "-") else info.unit
+        out.append(Spec(name, spec.default, f"{info.description} ({where})", unit, low, high))
+    return out
+
+
+@cache
+def _model_parameters() -> dict[str, ParameterInfo]:
+    """YAML path → the metadata of every model parameter of every registered model."""
+    out: dict[str, ParameterInfo] = {}
+    for name in model_names():
+        for info in model_parameters(name):
+            out.setdefault(info.path, info)
+    return out
+
+
+def _range(info: ParameterInfo) -> tuple[float | None, float | None]:
+    """A number's declared range as a ROS range (inclusive; widened to take its switch-off value)."""
+    if info.size != 1:
+        return None, None
+    low, high = info.min, info.max
+    if info.off is not None:
+        low, high = min(low, info.off), max(high, info.off)
+    return (low if math.isfinite(low) else None), (high if math.isfinite(high) else None)
 
 
 class Stream:

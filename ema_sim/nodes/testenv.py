@@ -20,23 +20,25 @@ from rcl_interfaces.msg import ParameterType
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.environment import Profile, SignalPath, TransportDelay, load_profile
-from ema_sim.environment.profile import PATHS
+from ema_sim.environment.profile import PATHS, PathSpec
 from ema_sim.nodes.common import SuiteNode, run
-from ema_sim.nodes.params import Spec, names_list, nested, unit_of
+from ema_sim.nodes.params import Spec, names_list, nested
 from ema_sim.nodes.ports import Ports
-
-ELEMENT_TEXT = {"lag_hz": "first-order lag corner (0: off)", "quantization_v": "quantum (0: off)",
-                "delay_s": "transport delay (0: off)", "noise_rms_v": "white noise, rms (0: off)"}
-"""What each element parameter of a path is (the profile files' names)."""
+from ema_sim.parameters import metas
 
 
 def profile_specs(profile: Profile) -> list[Spec]:
-    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them), read-only."""
+    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them), read-only.
+
+    Each path element's description, unit and range come from its declaration (:class:`PathSpec`'s metadata).
+    """
     out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62),
            Spec("full_scale_v", profile.full_scale_v, "converters' full scale", "V", 0.1, 1000.0)]
     for path in PATHS:
-        for key, value in getattr(profile, path).as_dict().items():
-            out.append(Spec(f"{path}.{key}", value, f"{path} path: {ELEMENT_TEXT[key]}", unit_of(key), 0.0, 1e6))
+        for key, m in metas(PathSpec).items():
+            high = m.max if math.isfinite(m.max) else None
+            out.append(Spec(f"{path}.{key}", getattr(getattr(profile, path), key), f"{path} path: {m.description}",
+                            m.unit, min(m.min, m.off if m.off is not None else m.min), high))
     return out
 
 
