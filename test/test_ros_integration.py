@@ -206,7 +206,13 @@ def check_declared(client, node):
     assert not d["emac.failure"].read_only
     assert d["second_order.wn_rad_s"].read_only
     assert d["emac.frame_hz"].read_only
-    assert "rad/s" in d["second_order.wn_rad_s"].description
+    from ema_sim.models.registry import model_parameters  # noqa: PLC0415
+
+    wn = next(p for p in model_parameters("loada") if p.path == "second_order.wn_rad_s")  # the one declaration
+    assert d["second_order.wn_rad_s"].description.startswith(wn.description)
+    assert f"[{wn.unit}]" in d["second_order.wn_rad_s"].description
+    rng = d["second_order.wn_rad_s"].floating_point_range[0]
+    assert (rng.from_value, rng.to_value) == (wn.min, wn.max)
 
 
 def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it_takes_effect(client, tmp_path):
