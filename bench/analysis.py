@@ -30,8 +30,9 @@ def sweep_analysis() -> Result:
     t0 = time.perf_counter()
     ra = analyze_record(data)
     once = time.perf_counter() - t0
-    fit = ra.frequency[0].fit
-    detail = (f"{len(data):,} samples, {len(ra.frequency)} responses; best {wall * 1e3:.0f} ms, last "
+    responses = ra.results["frequency_response"]
+    fit = responses[0].fit
+    detail = (f"{len(data):,} samples, {len(responses)} responses; best {wall * 1e3:.0f} ms, last "
               f"{once * 1e3:.0f} ms; fit ωn {fit.wn_rad_s.value:.2f} rad/s, ζ {fit.zeta.value:.3f}")
     return Result(wall, "s", wall <= 0.3, detail)
 

@@ -26,7 +26,7 @@ def analytic_bandwidth(wn, zeta):
 def test_sweep_fit_recovers_the_truth(wn, zeta, delay):
     data = measured("sloac", SWEEP, wn_rad_s=wn, zeta=zeta, delay_s=delay, seed=1)
     ra = analyze_record(data)
-    fr = next(f for f in ra.frequency if f.response.output == "position_deg")
+    fr = next(f for f in ra.results["frequency_response"] if f.response.output == "position_deg")
     assert fr.kind == "sweep"
     fit = fr.fit
     assert fit.wn_rad_s.value == pytest.approx(wn, rel=0.01)
@@ -46,7 +46,7 @@ def test_sweep_fit_recovers_the_truth(wn, zeta, delay):
 def test_schroeder_fit_is_sharper_still():
     data = measured("sloac", SCHROEDER, wn_rad_s=48.0, zeta=0.55, delay_s=0.005, seed=2)
     ra = analyze_record(data)
-    fr = next(f for f in ra.frequency if f.response.output == "position_deg")
+    fr = next(f for f in ra.results["frequency_response"] if f.response.output == "position_deg")
     assert fr.kind == "schroeder"
     assert "harmonics of 1/20 s over 2 whole period" in fr.response.method
     assert fr.fit.wn_rad_s.value == pytest.approx(48.0, rel=0.005)
@@ -57,14 +57,15 @@ def test_schroeder_fit_is_sharper_still():
 def test_noisy_output_says_where_the_coherence_drops():
     data = measured("loada", SWEEP.replace("amp_deg=1", "amp_deg=0.4"), noise_deg=0.15, seed=3)
     ra = analyze_record(data, Options(at_hz=(1.0, 5.0, 16.0)))
-    fr = ra.frequency[0]
+    fr = ra.results["frequency_response"][0]
     above, note = fr.low_coherence_above_hz, fr.coherence_note
     assert above is not None
     assert 5.0 < above < 18.0
     assert note.startswith("coherence < 0.8 above")
     assert [bool(row.get("note")) for row in fr.at] == [False, False, True]
     # The fit keeps to the coherent points and still lands near the low-noise estimate.
-    quiet = analyze_record(measured("loada", SWEEP.replace("amp_deg=1", "amp_deg=0.4"), seed=3)).frequency[0].fit
+    quiet_ra = analyze_record(measured("loada", SWEEP.replace("amp_deg=1", "amp_deg=0.4"), seed=3))
+    quiet = quiet_ra.results["frequency_response"][0].fit
     assert fr.fit.wn_rad_s.value == pytest.approx(quiet.wn_rad_s.value, rel=0.05)
     assert fr.fit.wn_rad_s.sigma > 3 * quiet.wn_rad_s.sigma
 
@@ -72,10 +73,10 @@ def test_noisy_output_says_where_the_coherence_drops():
 def test_model_overlay_of_the_generating_model_is_the_measurement():
     data = measured("loada", SWEEP, noise_deg=0.0)
     ra = analyze_record(data, Options(model="loada"))
-    fr = ra.frequency[0]
+    fr = ra.results["frequency_response"][0]
     assert fr.overlay is not None
     assert np.allclose(fr.overlay.h, fr.response.h, rtol=1e-6)
-    other = analyze_record(data, Options(model="loadf")).frequency[0].overlay
+    other = analyze_record(data, Options(model="loadf")).results["frequency_response"][0].overlay
     assert not np.allclose(other.h, fr.response.h, rtol=1e-2)  # LOADF leads: a different curve
 
 
@@ -91,7 +92,7 @@ def test_non_uniform_200hz_record_is_resampled_and_still_fits():
                   command_v=None, position_v=None)
     ra = analyze_record(sub)
     assert any("samples taken as uniform at 200 Hz" in n for n in ra.notes)
-    fit = ra.frequency[0].fit
+    fit = ra.results["frequency_response"][0].fit
     assert fit.wn_rad_s.value == pytest.approx(56.5, rel=0.02)
     assert fit.zeta.value == pytest.approx(0.65, rel=0.03)
     assert fit.delay_s.value == pytest.approx(0.004, abs=5e-4)
@@ -106,7 +107,7 @@ def test_record_with_a_gap_is_resampled_with_the_command_held():
     assert any("resampled at 1000 Hz, command held" in n for n in ra.notes)
     assert ra.data.time_s.size == data.time_s.size
     assert np.array_equal(np.unique(ra.data.command_deg), [0.0, 1.0])
-    assert ra.steps[0].fit.wn_rad_s.value == pytest.approx(57.8, rel=0.02)
+    assert ra.results["steps"][0].fit.wn_rad_s.value == pytest.approx(57.8, rel=0.02)
 
 
 def test_zoh_factor_is_half_a_sample_of_delay():
@@ -134,7 +135,7 @@ def test_hand_calculation_inverts_its_own_formulas():
 @pytest.mark.parametrize("freq", [2.0, 7.5])
 def test_sine_dwell_gain_and_phase(freq):
     ra = analyze_record(measured("sloac", f"sine:freq_hz={freq:g},amp_deg=0.4,cycles=30", seed=6))
-    (dwell,) = [d for d in ra.sine_dwell if d["output"] == "position_deg"]
+    (dwell,) = [d for d in ra.results["sine_dwell"] if d.output == "position_deg"]
     h = sof.response(np.array([freq]), 56.5, 0.65, 0.004)[0]
-    assert dwell["gain_db"] == pytest.approx(20 * np.log10(abs(h)), abs=0.05)
-    assert dwell["phase_deg"] == pytest.approx(np.degrees(np.angle(h)), abs=0.5)
+    assert dwell.gain_db == pytest.approx(20 * np.log10(abs(h)), abs=0.05)
+    assert dwell.phase_deg == pytest.approx(np.degrees(np.angle(h)), abs=0.5)

@@ -7,6 +7,7 @@ import pytest
 from analysis_data import measured
 
 from ema_sim.analysis import series
+from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.analysis.recognize import recognize
 from ema_sim.io.csv import MeasuredData
 from ema_sim.signals import parse_maneuver
@@ -65,6 +66,8 @@ def test_metadata_relabels_a_compatible_reading_and_keeps_a_contradicted_one():
     rec = recognize(contra)
     assert rec.segments[0].kind == "square"
     assert any("no such test found" in n for n in rec.notes)
+    ra = analyze_record(contra)
+    assert ra.not_computed["sweep (the metadata's maneuver)"].startswith("commanded by the metadata (sweep)")
 
 
 def test_unparseable_metadata_is_a_note_not_an_error():

@@ -21,7 +21,7 @@ LOAD_STEPS = "steps:step_inlb=222.5,max_inlb=1780,hold_s=2"
 @pytest.mark.parametrize(("kb", "offset"), [(0.006, -0.03), (-0.004, 0.02)])
 def test_staircase_gives_the_command_error(kb, offset):
     ra = analyze_record(measured("loada", STAIRCASE, kb=kb, offset_deg=offset, quantization_deg=0.0, seed=7))
-    (cal,) = ra.calibration
+    (cal,) = ra.results["command_error"]
     # Direct: settled surface minus command recovers the model's own command-error stage.
     assert cal.direct.kb == pytest.approx(kb, abs=5e-5)
     assert cal.direct.offset_deg == pytest.approx(offset, abs=1e-3)
@@ -43,7 +43,7 @@ def test_staircase_gives_the_command_error(kb, offset):
 
 def test_staircase_without_volts_gives_the_direct_error_only():
     data = replace(measured("loada", STAIRCASE, kb=0.006, quantization_deg=0.0), command_v=None, position_v=None)
-    (cal,) = analyze_record(data).calibration
+    (cal,) = analyze_record(data).results["command_error"]
     assert cal.curve_error is None
     assert cal.error.kb == pytest.approx(0.006, abs=5e-5)
     assert "no command_v/position_v" in cal.notes[0]
@@ -55,7 +55,7 @@ def test_staircase_without_volts_gives_the_direct_error_only():
 def test_load_staircase_gives_both_compliance_curves(command, kcp, compliance, free_play):
     ra = analyze_record(measured("loada", f"hold:value_deg={command:g},hold_s=67", LOAD_STEPS, kcp_per_kinlb=kcp,
                                  compliance_deg_per_kinlb=compliance, free_play_deg=free_play, seed=8))
-    (c,) = ra.compliance
+    (c,) = ra.results["compliance"]
     lvdt_truth = command * kcp  # K_CP scales the command with the aiding load: °/1000 in·lb
     total_truth = lvdt_truth + compliance
     assert c.lvdt.slope_deg_per_kinlb == pytest.approx(lvdt_truth, rel=0.03)
@@ -75,7 +75,7 @@ def test_load_staircase_gives_both_compliance_curves(command, kcp, compliance, f
 
 def test_compliance_without_a_surface_sensor_is_lvdt_only():
     data = replace(measured("loada", "hold:value_deg=15,hold_s=67", LOAD_STEPS, kcp_per_kinlb=0.008), surface_deg=None)
-    (c,) = analyze_record(data).compliance
+    (c,) = analyze_record(data).results["compliance"]
     assert c.total is None
     assert c.share_outside is None
     assert "no external surface angle" in c.notes[0]
@@ -115,7 +115,7 @@ def test_hysteresis_loop_reproduces_rw13():
     """The report's rw13: ±1780 in·lb at 0.0785 rad/s, A = 4.88 in·lb, Pk = 0.02155 in."""
     ra = analyze_record(hysteretic_record(3344.84, 0.02155, 0.0785))
     assert [s.kind for s in ra.recognition.segments] == ["load_sine"]
-    (h,) = ra.hysteresis
+    (h,) = ra.results["hysteresis"]
     assert len(h.cycles) == 3
     assert 2 * np.pi * h.freq_hz == pytest.approx(0.0785, rel=1e-3)
     assert h.area_inlb == pytest.approx(4.88, rel=0.02)
@@ -125,14 +125,14 @@ def test_hysteresis_loop_reproduces_rw13():
 
 def test_hysteresis_loop_is_frequency_invariant():
     """Section 3.2.2: the loop of hysteretic damping does not change with frequency (0.785 rad/s)."""
-    (h,) = analyze_record(hysteretic_record(1500.0, 0.03, 0.785)).hysteresis
+    (h,) = analyze_record(hysteretic_record(1500.0, 0.03, 0.785)).results["hysteresis"]
     assert h.h_lb_per_in == pytest.approx(1500.0, rel=0.03)
 
 
 def test_second_order_model_has_no_hysteretic_damping():
     ra = analyze_record(measured("loada", "hold:value_deg=0,hold_s=122", "sine:amp_inlb=1780,freq_hz=0.025,cycles=3",
                                  compliance_deg_per_kinlb=0.5, seed=10))
-    (h,) = ra.hysteresis
+    (h,) = ra.results["hysteresis"]
     assert h.peak_in == pytest.approx(np.radians(0.5 * 1.78 + 0.1) * 1.7317, rel=0.05)
     assert h.h_lb_per_in < 0.02 * 3344.84
 
@@ -142,7 +142,7 @@ def test_second_order_model_has_no_hysteretic_damping():
 def test_load_reversal_gives_the_free_play(width):
     ra = analyze_record(measured("loada", "hold:value_deg=0,hold_s=11", "reversal:inlb=50,period_s=2,reversals=4",
                                  free_play_deg=width, seed=11))
-    (fp,) = ra.free_play
+    (fp,) = ra.results["free_play"]
     assert len(fp.reversals) >= 4
     assert fp.width_deg == pytest.approx(width, abs=0.004)
 
@@ -150,10 +150,10 @@ def test_load_reversal_gives_the_free_play(width):
 def test_free_play_with_compliance_takes_the_elastic_part_out():
     data = measured("loada", "hold:value_deg=0,hold_s=11", "reversal:inlb=200,period_s=2,reversals=4",
                     compliance_deg_per_kinlb=0.5, seed=12)
-    raw = analyze_record(data).free_play[0]
+    raw = analyze_record(data).results["free_play"][0]
     assert raw.width_deg == pytest.approx(0.2 + 0.5 * 0.4, abs=0.005)
     assert "includes the elastic deflection" in raw.notes[-1]
-    net = analyze_record(data, Options(compliance_deg_per_kinlb=0.5)).free_play[0]
+    net = analyze_record(data, Options(compliance_deg_per_kinlb=0.5)).results["free_play"][0]
     assert net.width_deg == pytest.approx(0.2, abs=0.005)
 
 
@@ -167,7 +167,7 @@ def test_free_play_needs_the_surface():
 def test_static_threshold_is_the_dead_zone(dead_zone):
     ra = analyze_record(measured("loada", "static_threshold:amp_max_deg=0.3,cycles=6", threshold_deg=dead_zone,
                                  quantization_deg=0.0, seed=13))
-    (s,) = ra.static_threshold
+    (s,) = ra.results["static_threshold"]
     assert s.onset_deg == pytest.approx(dead_zone, rel=0.12)
     assert s.follow_deg == pytest.approx(2 * dead_zone, rel=0.3)
     assert s.as_dict()["onset_v"] == pytest.approx(s.onset_deg * 0.23577, rel=1e-3)
@@ -177,7 +177,7 @@ def test_static_threshold_is_the_dead_zone(dead_zone):
 def test_dynamic_threshold_onset_is_the_dead_zone(dead_zone):
     ra = analyze_record(measured("loada", "dynamic_threshold:amp0_deg=0,amp1_deg=0.3,ramp_s=30",
                                  threshold_deg=dead_zone, quantization_deg=0.0, seed=14))
-    (d,) = ra.dynamic_threshold
+    (d,) = ra.results["dynamic_threshold"]
     assert d.freq_hz == pytest.approx(5.0)
     assert d.onset_deg == pytest.approx(dead_zone, rel=0.2)
     assert d.follow_deg > d.onset_deg
@@ -192,21 +192,21 @@ def test_static_crosstalk_against_the_threshold():
     """Section 2.2.1: 0.02 V (≈ 0.086°) of noise on the held right wing, below its threshold."""
     data = measured("loada", "hold:value_deg=0,hold_s=10", channel="right_wing", noise_deg=0.002, seed=15)
     noisy = replace(data, position_deg=data.position_deg + square_noise(data.time_s, 0.08, 4.0))
-    (c,) = analyze_record(noisy).crosstalk
+    (c,) = analyze_record(noisy).results["crosstalk"]
     assert c.peak_to_peak_deg == pytest.approx(0.08 + 6 * 0.002, abs=0.008)
     assert c.excess_rms_deg == pytest.approx(0.04, rel=0.05)
     assert c.dominant_hz == pytest.approx(4.0, rel=0.02)
     assert c.below_threshold
     assert c.threshold_deg == pytest.approx(0.0075 * load_channel("right_wing").deg_per_in)
     louder = replace(data, position_deg=data.position_deg + square_noise(data.time_s, 0.4, 4.0))
-    assert not analyze_record(louder).crosstalk[0].below_threshold
+    assert not analyze_record(louder).results["crosstalk"][0].below_threshold
 
 
 def test_dynamic_crosstalk_rides_on_the_triangle():
     data = measured("loada", "triangle:freq_hz=0.5,amp_deg=2.15,cycles=5", noise_deg=0.002, seed=16)
-    quiet = analyze_record(data).crosstalk[0]
+    quiet = analyze_record(data).results["crosstalk"][0]
     noisy = replace(data, position_deg=data.position_deg + square_noise(data.time_s, 0.06, 7.0))
-    c = analyze_record(noisy).crosstalk[0]
+    c = analyze_record(noisy).results["crosstalk"][0]
     assert c.kind.startswith("dynamic")
     assert quiet.excess_rms_deg < 0.004
     assert c.excess_rms_deg == pytest.approx(0.03, rel=0.15)
@@ -224,11 +224,11 @@ def test_dither_frequency_and_size(freq, pp):
     data = measured("loada", "hold:value_deg=2,hold_s=20", noise_deg=0.003, seed=17)
     dithering = replace(data, position_deg=data.position_deg + limit_cycle(data.time_s, pp, freq))
     ra = analyze_record(dithering)
-    (d,) = ra.dither
+    (d,) = ra.results["dither"]
     assert d.detected
     assert d.freq_hz == pytest.approx(freq, rel=0.005)
     assert d.peak_to_peak_deg == pytest.approx(pp, rel=0.06)
-    quiet = analyze_record(data).dither[0]
+    quiet = analyze_record(data).results["dither"][0]
     assert not quiet.detected
     assert quiet.statement.startswith("no limit cycle")
 
@@ -246,7 +246,7 @@ def test_regeneration_bus_peak_against_185_volts(spike, within):
         bump = spike * (0.5 + 0.5 * k / len(edges)) * np.exp(-np.clip(t - t[i] - 0.02, 0, None) / 0.005)
         bus += np.where(t >= t[i] + 0.02, bump, 0.0)
     ra = analyze_record(replace(data, bus_v=bus))
-    g = ra.regeneration
+    g = ra.results["regeneration"][0]
     assert [s.kind for s in ra.recognition.segments] == ["regen"]
     assert g.nominal_v == pytest.approx(150.0, abs=0.5)
     assert g.peak_v == pytest.approx(150 + spike, abs=1.5)
@@ -262,18 +262,18 @@ def test_records_of_one_channel_share_their_threshold_and_compliance():
     rev = measured("loada", "hold:value_deg=0,hold_s=11", "reversal:inlb=200,period_s=2,reversals=4",
                    compliance_deg_per_kinlb=0.5)
     r_thr, r_hold, r_comp, r_rev = analyze_records([thr, noisy, comp, rev])
-    (c,) = r_hold.crosstalk
-    assert c.threshold_deg == pytest.approx(r_thr.static_threshold[0].onset_deg)
+    (c,) = r_hold.results["crosstalk"]
+    assert c.threshold_deg == pytest.approx(r_thr.results["static_threshold"][0].onset_deg)
     assert "static threshold measured in" in c.threshold_source
     assert not c.below_threshold  # 0.09° of noise against a 0.048° threshold
-    (fp,) = r_rev.free_play
+    (fp,) = r_rev.results["free_play"]
     assert fp.width_deg == pytest.approx(0.2, abs=0.005)
-    assert fp.compliance_deg_per_kinlb == pytest.approx(r_comp.compliance[0].total.slope_deg_per_kinlb)
+    assert fp.compliance_deg_per_kinlb == pytest.approx(r_comp.results["compliance"][0].total.slope_deg_per_kinlb)
 
 
 def test_a_quantized_still_output_has_no_limit_cycle():
     data = measured("loada", "hold:value_deg=3,hold_s=10", noise_deg=0.0)
     still = replace(data, position_deg=np.round(data.position_deg / 0.02125) * 0.02125)
-    (d,) = analyze_record(still).dither
+    (d,) = analyze_record(still).results["dither"]
     assert not d.detected
     assert d.statement == "no limit cycle: the output does not move (peak to peak < 0.0001°)"

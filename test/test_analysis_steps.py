@@ -8,6 +8,7 @@ from analysis_data import delayed, measured
 
 from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.analysis.second_order_fit import response
+from ema_sim.analysis.steps import slew_rates
 
 STEPS = "steps:amps_deg=0.5/1/20"
 
@@ -19,8 +20,8 @@ def overshoot_pct(zeta):
 @pytest.mark.parametrize(("wn", "zeta", "delay", "seed"), [(56.5, 0.65, 0.004, 1), (70.0, 0.5, 0.006, 2)])
 def test_small_steps_fit_the_truth_and_large_ones_are_rate_limited(wn, zeta, delay, seed):
     ra = analyze_record(measured("loac", STEPS, wn_rad_s=wn, zeta=zeta, delay_s=delay, seed=seed))
-    small = [s for s in ra.steps if abs(s.command_step_deg) < 5]
-    large = [s for s in ra.steps if abs(s.command_step_deg) > 5]
+    small = [s for s in ra.results["steps"] if abs(s.command_step_deg) < 5]
+    large = [s for s in ra.results["steps"] if abs(s.command_step_deg) > 5]
     assert len(small) == 4
     assert len(large) == 2
     for s in small:
@@ -39,14 +40,14 @@ def test_small_steps_fit_the_truth_and_large_ones_are_rate_limited(wn, zeta, del
         assert s.fit is None
         assert "rate within 5 %" in s.rate_reason
     # Table 1's unloaded slew rate is the model's rate limit.
-    assert ra.slew.large_dps == pytest.approx(115.8, rel=0.005)
-    assert ra.slew.small_steps_deg == [0.5, 1.0]
-    assert ra.slew.large_steps_deg == [20.0]
+    assert slew_rates(ra.results["steps"]).large_dps == pytest.approx(115.8, rel=0.005)
+    assert slew_rates(ra.results["steps"]).small_steps_deg == [0.5, 1.0]
+    assert slew_rates(ra.results["steps"]).large_steps_deg == [20.0]
     # Linear peak rate of a 1° step: max of the impulse response.
     tt = np.linspace(0, 0.2, 20001)
     wd = wn * np.sqrt(1 - zeta**2)
     peak = np.max(wn**2 / wd * np.exp(-zeta * wn * tt) * np.sin(wd * tt))
-    assert ra.slew.small_dps == pytest.approx(peak, rel=0.03)
+    assert slew_rates(ra.results["steps"]).small_dps == pytest.approx(peak, rel=0.03)
 
 
 def test_rise_time_matches_the_second_order_response():
@@ -57,7 +58,7 @@ def test_rise_time_matches_the_second_order_response():
     wd = wn * np.sqrt(1 - z * z)
     y = 1 - np.exp(-z * wn * t) * (np.cos(wd * t) + z * wn / wd * np.sin(wd * t))
     rise = t[np.argmax(y >= 0.9)] - t[np.argmax(y >= 0.1)]
-    assert ra.steps[0].rise_s == pytest.approx(rise, abs=0.0015)
+    assert ra.results["steps"][0].rise_s == pytest.approx(rise, abs=0.0015)
     assert abs(response(np.array([0.0]), wn, z)[0]) == pytest.approx(1.0)
 
 
@@ -68,7 +69,7 @@ def test_timing_of_a_square_wave_gives_both_legs(delay, feedback_delay):
     late = replace(data, position_deg=delayed(data.time_s, data.position_deg, feedback_delay))
     ra = analyze_record(late)
     assert [s.kind for s in ra.recognition.segments] == ["square"]
-    tm = ra.timing
+    tm = ra.results["timing"][0]
     assert tm.motion_signal == "surface_deg"
     assert len(tm.edges) == 10
     assert tm.command_to_motion_s == pytest.approx(delay, abs=3e-4)
@@ -78,7 +79,7 @@ def test_timing_of_a_square_wave_gives_both_legs(delay, feedback_delay):
 
 def test_timing_without_a_surface_sensor_says_what_it_cannot_measure():
     data = replace(measured("loac", "square:freq_hz=1,amp_deg=4.3,cycles=3"), surface_deg=None)
-    tm = analyze_record(data).timing
+    tm = analyze_record(data).results["timing"][0]
     assert tm.motion_signal == "position_deg"
     assert tm.motion_to_feedback_s is None
     assert "no external surface angle" in tm.notes[0]

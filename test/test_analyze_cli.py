@@ -18,7 +18,7 @@ RECORD_KEYS = {
     "data", "channel", "samples", "sample_hz", "duration_s", "outputs", "metadata", "noise_deg", "tests",
     "frequency_response", "sine_dwell", "steps", "slew_rates", "second_order_fits", "timing", "command_error",
     "static_threshold", "dynamic_threshold", "crosstalk", "dither", "compliance", "hysteresis", "free_play",
-    "regeneration", "not_computed", "notes",
+    "regeneration", "not_computed", "notes", "resolution_deg", "noise", "command", "unit", "profiled_moves",
 }
 
 
@@ -73,8 +73,9 @@ def test_json_and_report_of_several_records(csvs, tmp_path, capsys):
     # The report: Markdown that links every plot, and the plots exist.
     md = (rep / "report.md").read_text()
     links = [line.split("](")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
-    assert "r0_bode0.png" in links
-    assert {"r1_steps.png", "r1_timing.png", "r2_compliance.png", "r3_command_error.png", "spread.png"} <= set(links)
+    assert "r0_frequency_response0.png" in links
+    assert {"r1_steps0.png", "r1_steps3.png", "r1_timing0.png", "r2_compliance0.png", "r3_command_error0.png",
+            "spread.png"} <= set(links)
     for name in links:
         png = rep / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -198,8 +199,8 @@ def test_every_plot_is_drawn(tmp_path):
     rep = tmp_path / "rep"
     assert main(["analyze", *files, "--report", str(rep), "--model", "loada"]) == 0
     names = {p.name for p in rep.glob("*.png")}
-    for key in ("r0_dither", "r0_crosstalk", "r1_static_threshold", "r2_dynamic_threshold", "r3_free_play",
-                "r4_hysteresis", "r5_bode0", "r6_regeneration"):
+    for key in ("r0_dither0", "r0_crosstalk0", "r1_static_threshold0", "r2_dynamic_threshold0", "r3_free_play0",
+                "r4_hysteresis0", "r5_frequency_response0", "r6_regeneration0"):
         assert f"{key}.png" in names
     md = (rep / "report.md").read_text()
     assert "limit cycle at 3 Hz" in md

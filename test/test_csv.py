@@ -1,10 +1,13 @@
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ema_sim.cli import main
+from ema_sim.commands.identify import load_measured
 from ema_sim.errors import DataError
-from ema_sim.io.csv import parse_csv, read_csv, write_csv
+from ema_sim.io.csv import RigFormat, parse_columns, parse_csv, read_csv, write_csv
 
 
 def contract_rows(n=120):
@@ -63,3 +66,78 @@ def test_unreadable_files_are_one_clear_error(tmp_path):
     with pytest.raises(DataError, match="not UTF-8"):
         read_csv(binary)
     assert isinstance(Path(tmp_path), Path)
+
+
+# ---------------------------------------------------------------------------------------------- rig files
+def rig_text(sep="\t", header=("t", "demand", "pos"), rows=150, pos_scale=1.0):
+    lines = [sep.join(header)]
+    for k in range(rows):
+        lines.append(sep.join([str(12 * k + (k % 3)), f"{np.sin(k / 10):.2f}", f"{pos_scale * np.sin(k / 10):.2f}"]))
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("sep", ["\t", ","])
+def test_a_rig_file_as_it_comes_tab_or_comma_time_in_ms_named_columns(sep):
+    fmt = RigFormat(parse_columns("time_ms=t,command_deg=demand,position_deg=pos"))
+    d = parse_csv(rig_text(sep), "rig.txt", fmt)
+    assert d.time_s[:3] == pytest.approx([0.0, 0.013, 0.026])
+    assert d.command_deg[10] == pytest.approx(round(np.sin(1.0), 2))
+    assert d.unit == "deg"
+    assert d.metadata["columns"] == "time_ms=t, command_deg=demand, position_deg=pos"
+
+
+def test_linear_positions_are_kept_and_named_or_turned_into_degrees_through_the_crank_arm():
+    cols = parse_columns("time_ms=t,command_mm=demand,position_mm=pos")
+    kept = parse_csv(rig_text(), "rig.txt", RigFormat(cols))
+    assert kept.unit == "mm"
+    assert kept.position_deg[10] == pytest.approx(round(np.sin(1.0), 2))
+    deg = parse_csv(rig_text(), "rig.txt", RigFormat(cols, crank_arm_in=2.0))
+    assert deg.unit == "deg"
+    assert deg.position_deg[10] == pytest.approx(np.degrees(round(np.sin(1.0), 2) / 25.4 / 2.0))
+    assert deg.metadata["crank_arm_in"] == "2"
+
+
+@pytest.mark.parametrize(("text", "fmt", "message"), [
+    (rig_text(), "time_ms=t,command_deg=demand,position_deg=actual", "line 1: no column 'actual' for position_deg"),
+    (rig_text().replace("\n13\t", "\n13\tx", 1), "time_ms=t,command_deg=demand,position_deg=pos",
+     "line 3, column 'demand' (command_deg): not a number"),
+    (rig_text().replace("\n26\t", "\n0\t", 1), "time_ms=t,command_deg=demand,position_deg=pos",
+     "data row 3, column 't': time does not increase (13 then 0)"),
+    (rig_text(), "time_ms=t,command_deg=demand,position_mm=pos", "positions in deg and mm at once"),
+])
+def test_rig_file_errors_name_the_line_and_the_rigs_own_column(text, fmt, message):
+    with pytest.raises(DataError, match=re.escape(message)):
+        parse_csv(text, "rig.txt", RigFormat(parse_columns(fmt)))
+
+
+@pytest.mark.parametrize(("option", "message"), [
+    ("time_ms=t,speed=v", "unknown column 'speed'"),
+    ("time_ms", "expected name=column pairs"),
+    ("time_ms=t,time_ms=u", "'time_ms' given twice"),
+])
+def test_a_bad_columns_option_is_one_clear_error(option, message):
+    with pytest.raises(DataError, match=re.escape(message)):
+        parse_columns(option)
+
+
+@pytest.mark.parametrize("command", ["analyze", "identify"])
+def test_rig_options_and_an_unknown_channel_are_one_line_and_status_2_on_both_commands(tmp_path, capsys, command):
+    path = tmp_path / "rig.txt"
+    path.write_text(rig_text())
+    assert main([command, str(path), "--channel", "bogus"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"ema {command}: error: unknown channel 'bogus'; known: cowl_door, left_rudder, left_wing, "
+                   "right_rudder, right_wing")
+    assert main([command, str(path), "--columns", "time_ms=t,speed=pos"]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert main([command, str(path), "--columns", "time_ms=t,command_deg=demand,position_deg=nope"]) == 2
+    assert "no column 'nope' for position_deg" in capsys.readouterr().err
+
+
+def test_identify_reads_the_rig_file_through_the_same_loader(tmp_path):
+    path = tmp_path / "rig.txt"
+    path.write_text(rig_text(",", pos_scale=1.0))
+    data = load_measured(path, None, RigFormat(parse_columns("time_ms=t,command_mm=demand,position_mm=pos"),
+                                              crank_arm_in=1.7317))
+    assert data.unit == "deg"
+    assert data.time_s[1] == pytest.approx(0.013)

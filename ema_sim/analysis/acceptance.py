@@ -29,7 +29,21 @@ LOW_BUS_V = 125.0
 
 @dataclass(frozen=True)
 class Figure:
-    """One measured figure against its requirement."""
+    """One measured figure against its requirement.
+
+    Parameters
+    ----------
+    name : str
+        What is measured.
+    value : float
+        The value.
+    unit : str
+        Its unit.
+    requirement : str
+        The requirement of table 1 or A2, as text.
+    passed : bool
+        Whether the measured value meets it.
+    """
 
     name: str
     value: float
@@ -38,7 +52,13 @@ class Figure:
     passed: bool
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         return {"name": self.name, "value": self.value, "unit": self.unit, "requirement": self.requirement,
                 "passed": self.passed}
 
@@ -55,7 +75,24 @@ def _frames(duration_s: float) -> np.ndarray:
 
 def slew_rate_in_s(name: str = "hoac1", channel: str = "left_wing", *, opposing_lbf: float = 0.0,
                    supply_v: float | None = None) -> float:
-    """Steady rate while rate-limited through a 20° step against an opposing load (in/s at the screw)."""
+    """Steady rate while rate-limited through a 20° step against an opposing load (in/s at the screw).
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+    opposing_lbf : float
+        Force opposing the motion at the screw, lbf.
+    supply_v : float or None
+        Bus supply, V.
+
+    Returns
+    -------
+    float
+        Slew rate at the actuator, in/s.
+    """
     kwargs = {} if supply_v is None else {"bus_supply_v": supply_v}
     model = _model(name, channel, **kwargs)
     arm = model.channel.crank_arm_in
@@ -75,6 +112,26 @@ def stall_force_lbf(name: str = "hoac1", channel: str = "left_wing", *, supply_v
     """The largest opposing load under which a 5° step still advances (≥ 0.5° in 0.4 s), lbf.
 
     Eight loads at a time between ``lo`` and ``hi`` (one batch run), narrowed to ``resolution``.
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+    supply_v : float
+        Bus supply, V.
+    lo : float
+        Lowest force of the search, lbf.
+    hi : float
+        Highest force of the search, lbf.
+    resolution : float
+        Bisection stops within this many lbf.
+
+    Returns
+    -------
+    float
+        The stall force, lbf.
     """
     while hi - lo > resolution:
         loads = np.linspace(lo, hi, 8)
@@ -93,7 +150,22 @@ def stall_force_lbf(name: str = "hoac1", channel: str = "left_wing", *, supply_v
 
 
 def bandwidth_hz(name: str = "hoac1", channel: str = "left_wing", amp_deg: float = 1.0) -> float:
-    """−3 dB frequency of command to position, unloaded with the inertial load (sine dwells)."""
+    """−3 dB frequency of command to position, unloaded with the inertial load (sine dwells).
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+    amp_deg : float
+        Amplitude, deg.
+
+    Returns
+    -------
+    float
+        The −3 dB frequency of the ±1° response, Hz.
+    """
     f = np.array([5.0, 6.0, 7.0, 7.5, 8.0, 9.0, 10.0, 11.0, 12.0, 14.0])
     fr = sine_dwell(_model(name, channel, n=f.size), f, amp_deg, settle_cycles=2, measure_cycles=2,
                     min_settle_s=0.15)
@@ -103,7 +175,8 @@ def bandwidth_hz(name: str = "hoac1", channel: str = "left_wing", amp_deg: float
 def _unpowered_static(name: str, channel: str, forces_lbf: list[float]) -> tuple[np.ndarray, np.ndarray, Any]:
     """Brake on (unpowered): slowly applied loads; LVDT (output against the housing) and surface, in."""
     model = _model(name, channel, n=len(forces_lbf))
-    model.set_power(False)
+    powered: Any = model  # the high-order models have a power switch; the base interface does not
+    powered.set_power(False)
     model.trim(0.0, 0.0)
     arm = model.channel.crank_arm_in
     t = _frames(1.2)
@@ -119,6 +192,18 @@ def backlash_and_stiffness(name: str = "hoac1", channel: str = "left_wing") -> d
 
     ``actuator`` stiffness is the output against the actuator housing (as the acceptance test holds
     it); ``installed`` includes the backup structure (the surface against the airframe).
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+
+    Returns
+    -------
+    dict
+        Backlash (in) and static stiffness (lbf/in), with and without the backup structure.
     """
     lvdt, surface, _ = _unpowered_static(name, channel, [-50.0, 50.0, 1000.0, 2000.0])
     k_act = 1000.0 / (lvdt[3] - lvdt[2])
@@ -127,13 +212,41 @@ def backlash_and_stiffness(name: str = "hoac1", channel: str = "left_wing") -> d
 
 
 def brake_holds(name: str = "hoac1", channel: str = "left_wing", force_lbf: float = 4000.0) -> bool:
-    """Unpowered, the brake holds ``force_lbf`` without the motor turning."""
+    """Unpowered, the brake holds ``force_lbf`` without the motor turning.
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+    force_lbf : float
+        Force at the screw, lbf.
+
+    Returns
+    -------
+    bool
+        Whether the brake holds the force.
+    """
     _, _, rec = _unpowered_static(name, channel, [force_lbf])
     return bool(np.max(np.abs(rec.rate_dps[0])) == 0.0 and np.all(rec.flags[0] & Flags.BRAKE))
 
 
 def regeneration_peak_v(name: str = "hoac1", channel: str = "left_wing") -> tuple[float, float]:
-    """Section 2.5: a 5 % full-scale square wave stepped from 0.1 to 5 Hz; (peak, lowest) bus voltage."""
+    """Section 2.5: a 5 % full-scale square wave stepped from 0.1 to 5 Hz; (peak, lowest) bus voltage.
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+
+    Returns
+    -------
+    tuple
+        Peak and lowest bus voltage, V.
+    """
     segments = [np.zeros(40)]
     for f in (0.1, 0.5, 1.0, 2.0, 5.0):
         tt = np.arange(round(1.0 / f / FRAME_S)) * FRAME_S
@@ -147,7 +260,20 @@ def regeneration_peak_v(name: str = "hoac1", channel: str = "left_wing") -> tupl
 
 
 def acceptance(name: str = "hoac1", channel: str = "left_wing") -> list[Figure]:
-    """Every table 1 / table A2 figure of ``channel``'s actuator, measured on model ``name``."""
+    """Every table 1 / table A2 figure of ``channel``'s actuator, measured on model ``name``.
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``ema models``).
+    channel : str
+        The channel (``left_wing``...).
+
+    Returns
+    -------
+    list
+        The figures in table order.
+    """
     surface = create(name, channel).channel.surface
     rated, rate = RATED_LOAD_LBF[surface], RATED_RATE_IN_S[surface]
     slew = slew_rate_in_s(name, channel)
@@ -173,7 +299,18 @@ def acceptance(name: str = "hoac1", channel: str = "left_wing") -> list[Figure]:
 
 
 def format_acceptance(figures: list[Figure]) -> str:
-    """A Markdown table."""
+    """A Markdown table.
+
+    Parameters
+    ----------
+    figures : list
+        The figures (:func:`acceptance`).
+
+    Returns
+    -------
+    str
+        The table as text.
+    """
     lines = ["| figure | measured | requirement | |", "| --- | --- | --- | --- |"]
     for f in figures:
         if f.unit == "":

@@ -15,16 +15,25 @@ and degrees) and external surface angle are averaged. Two estimates of the comma
 
 The four-corner Monte Carlo bounds (:func:`ema_sim.calibration.four_corner_bounds`) take the largest
 |Kb| and |offset| of the calibrations at hand.
+
+The test is recognised from a command that steps (or moves, under a drive's profile) through at
+least five held levels, mostly one way (:func:`read_staircase`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from typing_extensions import override
 
+from ema_sim.analysis import figure
+from ema_sim.analysis.markdown import bullets, image, num, table
+from ema_sim.analysis.section2 import RecordAnalysis, Section2Test
+from ema_sim.analysis.segments import EdgeRun, MoveRun, Reading
 from ema_sim.analysis.series import Hold, settled
 from ema_sim.calibration import CommandError, Cubic, command_error, four_corner_bounds
 from ema_sim.io.csv import MeasuredData
@@ -34,7 +43,37 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Calibration:
-    """The command error found on one staircase."""
+    """The command error found on one staircase.
+
+    Parameters
+    ----------
+    levels : dict
+        Settled value of each recorded column at each held level, in staircase order.
+    direct : CommandError
+        Kb and offset of the line through settled output minus command.
+    direct_sigma : tuple
+        Standard errors of that Kb and offset.
+    direct_reference : str
+        The output the direct line is measured on.
+    command_curve : Cubic or None
+        Third-order command curve, degrees → volts.
+    command_curve_rms_v : float or None
+        RMS of its fit, V.
+    feedback_curve : Cubic or None
+        Third-order feedback curve, volts → degrees.
+    feedback_curve_rms_deg : float or None
+        RMS of its fit, deg.
+    feedback_reference : str or None
+        The output the feedback curve is fitted against.
+    curve_error : CommandError or None
+        Kb and offset from the two curves (section 3.1.2.2).
+    nominal_deg : numpy.ndarray
+        Nominal angles the bounds are given at, deg.
+    bounds_deg : tuple
+        Four-corner lower and upper bounds at those angles, deg.
+    notes : list
+        What could not be computed, and why.
+    """
 
     levels: dict[str, list[float]]
     """Settled value of each recorded column at each held level, in staircase order."""
@@ -57,7 +96,13 @@ class Calibration:
         return self.curve_error or self.direct
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         def curve(c: Cubic | None) -> list[float] | None:
             return c.coefficients() if c else None
 
@@ -88,7 +133,20 @@ def _rms(x: FloatArray) -> float:
 
 
 def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
-    """Command error of a staircase whose held levels are ``holds`` (see the module docstring)."""
+    """Command error of a staircase whose held levels are ``holds`` (see the module docstring).
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    holds : list
+        The held levels, in order.
+
+    Returns
+    -------
+    Calibration
+        The command error, both ways.
+    """
     notes: list[str] = []
     cols = [c for c in ("command_deg", "command_v", "position_v", "position_deg", "surface_deg")
             if getattr(data, c) is not None]
@@ -132,9 +190,124 @@ def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
 
 
 def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> dict[str, Any]:
-    """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1)."""
+    """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1).
+
+    Parameters
+    ----------
+    errors : list
+        The calibrations' command errors.
+    lo_deg : float
+        Lowest nominal angle, deg.
+    hi_deg : float
+        Highest nominal angle, deg.
+
+    Returns
+    -------
+    dict
+        Calibrations pooled, largest |Kb| and |offset|, and the bounds over the nominal angles.
+    """
     nominal = np.linspace(lo_deg, hi_deg, 81)
     lo, hi = four_corner_bounds(errors, nominal)
     return {"calibrations": len(errors), "kb_max_abs": max(abs(e.kb) for e in errors),
             "offset_max_abs_deg": max(abs(e.offset_deg) for e in errors), "nominal_deg": nominal.tolist(),
             "lower_deg": lo.tolist(), "upper_deg": hi.tolist()}
+
+
+def read_staircase(run: EdgeRun | MoveRun) -> Reading | None:
+    """At least 6 edges (or moves) over at least 5 held levels, held ≥ 0.8 s, mostly one way: a calibration.
+
+    Parameters
+    ----------
+    run : EdgeRun or MoveRun
+        Consecutive steps, or profiled moves, of the command.
+
+    Returns
+    -------
+    Reading or None
+        ``staircase``, or None.
+    """
+    if not (run.n >= 6 and run.distinct_levels >= 5 and float(np.median(run.holds_s)) >= 0.8
+            and run.same_direction >= 0.6):
+        return None
+    how = "edges" if isinstance(run, EdgeRun) else "profiled moves"
+    return Reading("staircase", f"{run.n} {how} over {run.distinct_levels} held levels, mostly one way "
+                                "(calibration staircase)")
+
+
+class CommandErrorTest(Section2Test[Calibration]):
+    """Command error of every calibration staircase."""
+
+    key = "command_error"
+    title = "Command error (section 3.1.2.2)"
+    kinds = ("staircase",)
+    absent = "no calibration staircase recognised"
+
+    @override
+    def run(self, ra: RecordAnalysis) -> list[Calibration]:
+        return [fit_calibration(ra.data, list(seg.holds)) for seg in ra.segments(*self.kinds)]
+
+    @override
+    def result_json(self, r: Calibration) -> dict[str, Any]:
+        return r.as_dict()
+
+    @override
+    def markdown(self, ra: RecordAnalysis, results: list[Calibration],
+                 images: list[str | None]) -> list[str]:
+        lines: list[str] = []
+        for c, img in zip(results, images, strict=True):
+            rows = []
+            if c.curve_error:
+                rows.append(["calibration curves", f"{c.curve_error.kb:+.5f}", f"{c.curve_error.offset_deg:+.4f}",
+                             f"command curve RMS {num(c.command_curve_rms_v, '.2g')} V, feedback curve RMS "
+                             f"{num(c.feedback_curve_rms_deg, '.2g')}° (against {c.feedback_reference})"])
+            rows.append(["direct (settled − command)", f"{c.direct.kb:+.5f} ± {c.direct_sigma[0]:.1g}",
+                         f"{c.direct.offset_deg:+.4f} ± {c.direct_sigma[1]:.1g}", f"against {c.direct_reference}"])
+            lines += table(["method", "Kb", "offset, °", "fit"], rows)
+            if c.command_curve and c.feedback_curve:
+                lines += [f"Command curve (deg → V): {', '.join(f'{x:.6g}' for x in c.command_curve.coefficients())};"
+                          f" feedback curve (V → deg): "
+                          f"{', '.join(f'{x:.6g}' for x in c.feedback_curve.coefficients())}.", ""]
+            lines += [f"Four-corner bounds at ±{max(abs(c.nominal_deg)):.0f}°: {c.bounds_deg[0][-1]:+.4f}° to "
+                      f"{c.bounds_deg[1][-1]:+.4f}°.", ""]
+            lines += bullets(c.notes)
+            lines += image(img, "command error")
+        return lines
+
+    @override
+    def summary(self, ra: RecordAnalysis, r: Calibration) -> list[str]:
+        return [f"command error: Kb {r.error.kb:+.5f}, offset {r.error.offset_deg:+.4f}°"]
+
+    @override
+    def plot(self, ra: RecordAnalysis, r: Calibration, path: Path) -> bool:
+        fig, ax = figure.pyplot().subplots(1, 2, figsize=(11, 4))
+        cmd = np.array(r.levels["command_deg"])
+        meas = np.array(r.levels[r.direct_reference])
+        ax[0].plot(cmd, meas - cmd, "o", ms=4, label=f"settled {r.direct_reference} − command")
+        ax[0].plot(r.nominal_deg, r.direct(r.nominal_deg) - r.nominal_deg, "-", lw=1, label="direct line")
+        if r.curve_error:
+            ax[0].plot(r.nominal_deg, r.curve_error(r.nominal_deg) - r.nominal_deg, "-", lw=1.5,
+                       label=f"curves: Kb {r.curve_error.kb:+.5f}, offset {r.curve_error.offset_deg:+.4f}°")
+        ax[0].fill_between(r.nominal_deg, r.bounds_deg[0], r.bounds_deg[1], color="0.9", label="four-corner bounds")
+        ax[0].set_xlabel("nominal command, deg")
+        ax[0].set_ylabel("error, deg")
+        ax[0].legend(fontsize=8)
+        ax[0].grid(lw=0.3)
+        if r.command_curve and r.feedback_curve and "command_v" in r.levels and "position_v" in r.levels:
+            cv, pv = np.array(r.levels["command_v"]), np.array(r.levels["position_v"])
+            ax[1].plot(cmd, 1e3 * (cv - r.command_curve(cmd)), "o-", ms=4, lw=0.8,
+                       label=f"command curve, deg → V (RMS {1e3 * (r.command_curve_rms_v or 0):.2g} mV)")
+            ax[1].plot(meas, 1e3 * (meas - r.feedback_curve(pv)) * abs(float(r.command_curve.c1)), "s-", ms=3, lw=0.8,
+                       label=f"feedback curve, V → deg (RMS {1e3 * (r.feedback_curve_rms_deg or 0):.2g} m°), in mV")
+            ax[1].set_xlabel("degrees")
+            ax[1].set_ylabel("third-order fit residual, mV")
+            ax[1].set_title("calibration curves: what the third-order fits leave", fontsize=9)
+            ax[1].legend(fontsize=8)
+            ax[1].grid(lw=0.3)
+        else:
+            ax[1].axis("off")
+        ax[0].set_title("command error (figure 27)")
+        figure.save(fig, path)
+        return True
+
+
+TEST = CommandErrorTest()

@@ -30,7 +30,17 @@ RW13_OMEGA_RAD_S = (0.0785, 0.785)
 
 @dataclass(frozen=True)
 class HysteresisLoop:
-    """One steady cycle of force (lbf) against deflection (in) at the actuator."""
+    """One steady cycle of force (lbf) against deflection (in) at the actuator.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Load frequency, rad/s.
+    force_lbf : np.ndarray
+        Force at the screw, lbf.
+    deflection_in : np.ndarray
+        Deflection at the actuator, in.
+    """
 
     omega_rad_s: float
     force_lbf: np.ndarray
@@ -58,6 +68,24 @@ def rw13_loop(omega_rad_s: float = RW13_OMEGA_RAD_S[0], *, hysteresis: bool = Tr
 
     "Removed" is the brake holding the unpowered motor, so only the coupling (figure 36) and the
     load act; the damper's ω is the load's. Two cycles run; the second is the loop.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Load frequency, rad/s.
+    hysteresis : bool
+        Hysteretic damping in the model.
+    channel : str
+        The channel (``left_wing``...).
+    load_inlb : float
+        Load amplitude, in·lb.
+    points_per_cycle : int
+        Samples per load cycle.
+
+    Returns
+    -------
+    HysteresisLoop
+        The loop and its figures.
     """
     model = Hoad3(channel, noise=False, quantization_v=0.0, hysteresis=hysteresis, hysteresis_freq_rad_s=omega_rad_s)
     model.set_power(False)
@@ -73,7 +101,24 @@ def rw13_loop(omega_rad_s: float = RW13_OMEGA_RAD_S[0], *, hysteresis: bool = Tr
 
 def frequency_effect(freq_hz: np.ndarray, channel: str = "right_wing", amp_deg: float = 1.0,
                      output: str = "position_deg") -> tuple[FrequencyResponse, FrequencyResponse]:
-    """Figure 37: HOAD3's response with and without hysteretic damping, ω of h/ω at each dwell's frequency."""
+    """Figure 37: HOAD3's response with and without hysteretic damping, ω of h/ω at each dwell's frequency.
+
+    Parameters
+    ----------
+    freq_hz : np.ndarray
+        Frequency, Hz.
+    channel : str
+        The channel (``left_wing``...).
+    amp_deg : float
+        Amplitude, deg.
+    output : str
+        Name of the output.
+
+    Returns
+    -------
+    tuple
+        Largest change of gain (dB) and phase (deg).
+    """
     f = np.asarray(freq_hz, dtype=float)
     base = HighOrderParams.from_channel(load_channel(channel), "hoad3")
     with_h = Hoad3(channel, n=f.size, noise=False, hysteresis=True,

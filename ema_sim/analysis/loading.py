@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ema_sim.errors import DataError, EmaError
-from ema_sim.io.csv import MeasuredData, read_csv
+from ema_sim.io.csv import MeasuredData, RigFormat, read_csv, read_rig
 
 BAG_SUFFIXES = (".mcap", ".db3")
 
@@ -25,22 +25,46 @@ def _bag_reader() -> Callable[..., MeasuredData] | None:
 
 
 def looks_like_bag(path: Path) -> bool:
-    """A rosbag2 directory (``metadata.yaml`` or MCAP/SQLite files inside) or a bag file."""
+    """A rosbag2 directory (``metadata.yaml`` or MCAP/SQLite files inside) or a bag file.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        Where to read or write.
+
+    Returns
+    -------
+    bool
+        True for a bag.
+    """
     if path.is_dir():
         return (path / "metadata.yaml").is_file() or any(p.suffix in BAG_SUFFIXES for p in path.iterdir())
     return path.suffix in BAG_SUFFIXES
 
 
-def load_record(path: str | Path, channel: str | None = None) -> MeasuredData:
-    """Read ``path`` for analysis; ``channel`` picks one channel of a multi-channel bag.
+def load_record(path: str | Path, channel: str | None = None, rig: RigFormat | None = None) -> MeasuredData:
+    """Read a record for analysis.
 
-    A single-channel CSV whose metadata names another channel than ``channel`` is an error.
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A CSV, a rig's own file or a bag.
+    channel : str, optional
+        Picks one channel of a multi-channel bag; a single-channel CSV whose metadata names another
+        channel is an error.
+    rig : RigFormat, optional
+        A rig file's delimiter, column names and units.
+
+    Returns
+    -------
+    MeasuredData
+        The record.
     """
     path = Path(path)
     reader = _bag_reader()
     if reader is not None:
         try:
-            return reader(path, channel=channel)
+            return reader(path, channel=channel, rig=rig) if rig is not None else reader(path, channel=channel)
         except EmaError:
             raise
         except Exception as exc:  # untrusted input: any failure of the reader is the data's
@@ -52,7 +76,7 @@ def load_record(path: str | Path, channel: str | None = None) -> MeasuredData:
                         "(ema_sim.io.load_data), which this build does not have: export the bag to CSV or install it")
     if path.is_dir():
         raise DataError(f"{path}: a directory that is not a rosbag2 bag (no metadata.yaml or .mcap file)")
-    data = read_csv(path)
+    data = read_rig(path, rig) if rig is not None else read_csv(path)
     meta_channel = data.metadata.get("channel")
     if channel and meta_channel and meta_channel != channel:
         raise DataError(f"{path}: holds channel {meta_channel!r}, not {channel!r}")

@@ -29,7 +29,21 @@ DEFAULT_AMP_DEG = 1.0
 
 @dataclass(frozen=True)
 class LoesFit:
-    """A fitted LOES: coefficients, the data it was fitted to, and its mismatch cost."""
+    """A fitted LOES: coefficients, the data it was fitted to, and its mismatch cost.
+
+    Parameters
+    ----------
+    channel : str
+        The channel (``left_wing``...).
+    coefficients : dict
+        The coefficients ωn, ζ, τ and K as the channel's ``loes`` section stores them.
+    cost : float
+        J = (20/n)·Σ[(ΔG dB)² + 0.01745·(Δφ deg)²] over the fit band.
+    data : FrequencyResponse
+        The HOAD3 sine-dwell response fitted.
+    fit : TransferFunctionFit
+        The transfer-function fit.
+    """
 
     channel: str
     coefficients: dict[str, float]
@@ -39,14 +53,26 @@ class LoesFit:
     fit: TransferFunctionFit
 
     def model_db_deg(self) -> tuple[np.ndarray, np.ndarray]:
-        """The fitted model's gain (dB) and phase (deg) at the dwell frequencies."""
+        """The fitted model's gain (dB) and phase (deg) at the dwell frequencies.
+
+        Returns
+        -------
+        tuple
+            Gain (dB) and phase (deg) at the dwell frequencies.
+        """
         h = self.fit.response(self.data.freq_hz)
         phase = np.degrees(np.unwrap(np.angle(h)))
         phase += 360.0 * np.round((self.data.phase_deg[0] - phase[0]) / 360.0)
         return 20.0 * np.log10(np.abs(h)), phase
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Plain values for JSON.
+        """
         gain, phase = self.model_db_deg()
         return {
             "channel": self.channel, **self.coefficients, "cost_j": self.cost,
@@ -57,7 +83,18 @@ class LoesFit:
 
 
 def fit_band(channel: str) -> tuple[np.ndarray, float]:
-    """The dwell frequencies and amplitude of a channel's LOES fit (its ``loes`` section, or the defaults)."""
+    """The dwell frequencies and amplitude of a channel's LOES fit (its ``loes`` section, or the defaults).
+
+    Parameters
+    ----------
+    channel : str
+        The channel (``left_wing``...).
+
+    Returns
+    -------
+    tuple
+        Lowest and highest frequency, Hz.
+    """
     sec = load_channel(channel).section("loes")
     f0 = float(sec.get("fit_min_hz", DEFAULT_BAND_HZ[0]))
     f1 = float(sec.get("fit_max_hz", DEFAULT_BAND_HZ[1]))
@@ -67,7 +104,26 @@ def fit_band(channel: str) -> tuple[np.ndarray, float]:
 
 def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_deg: float | None = None,
                    *, load_inlb: float = 0.0, **model_kwargs: Any) -> FrequencyResponse:
-    """HOAD3's command-to-position response from sine dwells, one batch instance per frequency."""
+    """HOAD3's command-to-position response from sine dwells, one batch instance per frequency.
+
+    Parameters
+    ----------
+    channel : str
+        The channel (``left_wing``...).
+    freq_hz : np.ndarray or None
+        Frequency, Hz.
+    amp_deg : float or None
+        Amplitude, deg.
+    load_inlb : float
+        Hinge moment the dwells run under, in·lb.
+    **model_kwargs : Any
+        Passed to the model.
+
+    Returns
+    -------
+    FrequencyResponse
+        HOAD3's response at the dwell frequencies.
+    """
     band, amp = fit_band(channel)
     f = band if freq_hz is None else np.asarray(freq_hz, dtype=float)
     kwargs = {"noise": False, **model_kwargs}
@@ -77,7 +133,26 @@ def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None
 
 def fit_loes(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_deg: float | None = None,
              *, load_inlb: float = 0.0, **model_kwargs: Any) -> LoesFit:
-    """Dwell HOAD3 and fit ``K·ωn²/(s² + 2ζωn·s + ωn²)·e^{−sτ}`` to it (section 3.4)."""
+    """Dwell HOAD3 and fit ``K·ωn²/(s² + 2ζωn·s + ωn²)·e^{−sτ}`` to it (section 3.4).
+
+    Parameters
+    ----------
+    channel : str
+        The channel (``left_wing``...).
+    freq_hz : np.ndarray or None
+        Frequency, Hz.
+    amp_deg : float or None
+        Amplitude, deg.
+    load_inlb : float
+        Hinge moment the dwells run under, in·lb.
+    **model_kwargs : Any
+        Passed to the model.
+
+    Returns
+    -------
+    LoesFit
+        The fit.
+    """
     data = hoad3_response(channel, freq_hz, amp_deg, load_inlb=load_inlb, **model_kwargs)
     fit = fit_transfer_function(data.freq_hz, data.complex, 0, 2)
     return LoesFit(channel, second_order_coefficients(fit), fit.cost, data, fit)
@@ -87,7 +162,20 @@ _NUMBER = r"[-+0-9.eE]+"
 
 
 def write_loes(fit: LoesFit, path: Path | None = None) -> Path:
-    """Put a fit's coefficients and cost into the ``loes`` section of the channel's YAML, comments kept."""
+    """Put a fit's coefficients and cost into the ``loes`` section of the channel's YAML, comments kept.
+
+    Parameters
+    ----------
+    fit : LoesFit
+        The fit to store.
+    path : pathlib.Path or None
+        Where to read or write.
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+    """
     path = path or config_dir() / f"{fit.channel}.yaml"
     text = path.read_text(encoding="utf-8")
     block = re.search(r"^    loes:\n((?:      .*\n?)+)", text, flags=re.MULTILINE)

@@ -1,15 +1,19 @@
 """Which section-2 tests a record holds, and where: from its signals, checked against its metadata.
 
-A rig's CSV may carry no metadata, so every test is recognised from the signals first:
+A rig's CSV may carry no metadata, so every test is recognised from the signals first. The record
+is cut into stretches of four shapes and each test's readers (:mod:`ema_sim.analysis.registry`) are
+asked, most specific first, what each stretch is:
 
-* **edges** of the held digital command (jumps of ≥ 0.05° between holds of ≥ 40 ms) grouped into
-  runs: a *staircase* (≥ 6 edges, ≥ 5 levels, holds ≥ 0.8 s, mostly one direction: calibration), a
-  *square* wave (alternating equal jumps at a steady rate: timing), a square wave whose holds shrink
-  (*regen*, the regeneration sweep), or *steps*;
-* **moving** stretches of the command (not held, not edges), by their turning points: one tone of
-  steady period (a *sine* dwell or a *triangle*; growing amplitude: *static_threshold* below 1 Hz,
-  *dynamic_threshold* above), a period that shrinks steadily (*sweep*), a slow monotone *ramp*, or an
-  irregular broadband signal (*schroeder* when it repeats, else *broadband*);
+* **edges** of the held command: jumps between holds of ≥ 40 ms, a jump counting when it is larger
+  than twice the band a hold may wander in (and three counts of a command logged in counts), the
+  transition taking at most 20 ms; runs of them are a *staircase* (calibration), a *square* wave
+  (timing), a square wave whose holds shrink (*regen*), or *steps*;
+* **moves**: holds joined by longer monotone transitions that cruise at a constant speed or dwell
+  (a drive's trapezoid demands): a *profile* (or a *staircase* of them);
+* **moving** stretches of the command (neither held nor claimed above), by their turning points: a
+  tone of steady period (a *sine* dwell or a *triangle*; growing amplitude: *static_threshold* below
+  1 Hz, *dynamic_threshold* above), a period that shrinks steadily (*sweep*), a slow monotone *ramp*,
+  or an irregular broadband signal (*schroeder* when it repeats, else *broadband*);
 * **held command** for ≥ 5 s: with a varying hinge moment, a load staircase (*load_steps*:
   compliance), two opposite load levels (*load_reversal*: free play) or a sinusoidal load
   (*load_sine*: hysteresis); with a constant load, a *hold* (crosstalk, dither).
@@ -21,17 +25,25 @@ every segment says what it was recognised from.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from itertools import pairwise
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.analysis import series
-from ema_sim.analysis.noise import autocorrelation
-from ema_sim.analysis.series import Edge, Hold
-from ema_sim.analysis.sine_fit import fit_sine
+from ema_sim.analysis.moves import find_moves
+from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
+from ema_sim.analysis.registry import EDGE_READERS, HELD_READERS, MOVE_READERS, MOVING_READERS
+from ema_sim.analysis.segments import (
+    EdgeRun,
+    HeldStretch,
+    MoveRun,
+    MovingStretch,
+    Reading,
+    Recognition,
+    Segment,
+)
+from ema_sim.analysis.series import Edge
 from ema_sim.errors import EmaError
 from ema_sim.io.csv import MeasuredData
 from ema_sim.signals import Load, Maneuver, parse_load, parse_maneuver
@@ -45,7 +57,8 @@ MIN_EDGE_HOLD_S = 0.04
 LONG_HOLD_S = 0.3
 MIN_MOVING_S = 1.0
 HELD_TEST_S = 5.0
-MIN_LOAD_SWING_INLB = 20.0
+MAX_STEP_S = 0.02
+"""A step's transition (a recorded command through a lag) takes at most this long; a move takes longer."""
 
 MANEUVER_KINDS = {
     "step": "steps", "steps": "steps", "square": "square", "regen": "regen", "staircase": "staircase",
@@ -59,39 +72,15 @@ COMPATIBLE = {("broadband", "schroeder"), ("broadband", "sweep"), ("sine", "tria
 """(signal reading, metadata kind) pairs a signal can mistake for each other."""
 
 
-@dataclass(frozen=True)
-class Segment:
-    """Samples ``[start, stop)`` of one test of kind ``kind``."""
-
-    kind: str
-    start: int
-    stop: int
-    evidence: str
-    params: dict[str, float] = field(default_factory=dict)
-    edges: tuple[Edge, ...] = ()
-    holds: tuple[Hold, ...] = ()
-
-    def as_dict(self, t: FloatArray) -> dict[str, Any]:
-        """Plain values for JSON."""
-        return {"kind": self.kind, "start_s": float(t[self.start]), "end_s": float(t[self.stop - 1]),
-                "evidence": self.evidence, "params": self.params}
+def _read(readers: tuple[Any, ...], stretch: Any) -> Reading:
+    """The first reader's answer (the last reader of a tuple always answers)."""
+    for reader in readers:
+        reading = reader(stretch)
+        if reading is not None:
+            return reading  # type: ignore[no-any-return]
+    raise AssertionError("the last reader answers every stretch")
 
 
-@dataclass(frozen=True)
-class Recognition:
-    """The segments of a record, in time order, and what the metadata said."""
-
-    segments: list[Segment]
-    maneuver: Maneuver | None
-    load: Load | None
-    notes: list[str] = field(default_factory=list)
-
-    def of(self, *kinds: str) -> list[Segment]:
-        """Segments of the given kinds."""
-        return [s for s in self.segments if s.kind in kinds]
-
-
-# ---------------------------------------------------------------------------------------------- edges
 def _group_edges(edges: list[Edge]) -> list[list[Edge]]:
     groups: list[list[Edge]] = []
     for e in edges:
@@ -102,129 +91,47 @@ def _group_edges(edges: list[Edge]) -> list[list[Edge]]:
     return groups
 
 
-def _classify_edges(group: list[Edge], dt: float) -> tuple[str, str, dict[str, float]]:
-    jumps = np.array([e.jump for e in group])
-    levels = [group[0].before.value] + [e.after.value for e in group]
-    distinct = np.unique(np.round(levels, 6)).size
-    holds_s = np.array([e.after.length * dt for e in group])
-    n = len(group)
-    same_dir = float(np.mean(np.sign(jumps[1:]) == np.sign(jumps[:-1]))) if n > 1 else 0.0
-    if n >= 6 and distinct >= 5 and np.median(holds_s) >= 0.8 and same_dir >= 0.6:
-        return "staircase", f"{n} edges over {distinct} held levels, mostly one way (calibration staircase)", {}
-    mags = np.abs(jumps[1:]) if n > 3 else np.abs(jumps)
-    alternating = n >= 3 and bool(np.all(np.sign(jumps[1:]) != np.sign(jumps[:-1])))
-    if alternating and np.ptp(mags) <= 0.1 * np.median(mags) and distinct <= 3:
-        inner = holds_s[:-1] if n > 2 else holds_s
-        cv = float(np.std(inner) / np.mean(inner))
-        amp = float(np.median(mags) / 2.0)
-        if cv < 0.15:
-            freq = 0.5 / float(np.median(inner))
-            return "square", f"square wave {freq:.3g} Hz, ±{amp:.3g}°, {n} edges", {"freq_hz": freq, "amp_deg": amp}
-        if inner[-1] < 0.5 * inner[0]:
-            f0, f1 = 0.5 / float(inner[0]), 0.5 / float(inner[-1])
-            return "regen", f"square wave swept {f0:.3g}-{f1:.3g} Hz, ±{amp:.3g}°", {"f0_hz": f0, "f1_hz": f1}
-    return "steps", f"{n} step edge(s) of {', '.join(f'{j:+.3g}°' for j in jumps[:6])}{'...' if n > 6 else ''}", {}
+def edge_threshold(u: FloatArray) -> tuple[float, float]:
+    """How far the command may wander in a hold, and the smallest jump between two holds that is an edge.
+
+    A hold stays within ``HOLD_BAND`` tolerances of its level, so two holds whose levels differ by
+    twice that cannot be one hold; a command logged in counts also needs three counts (a slow ramp
+    through its counts is a staircase of one-count jumps, no steps).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The command.
+
+    Returns
+    -------
+    tuple of float
+        The hold tolerance and the edge threshold, deg.
+    """
+    tol = series.hold_tolerance(u)
+    counts = detect_resolution(u, COMMAND_COUNTS_SPANNED) or 0.0
+    scale = max(1.0, float(np.max(np.abs(u)))) if u.size else 1.0
+    return tol, max(2.0 * series.HOLD_BAND * tol, 3.0 * counts, 1e-6 * scale)
 
 
-# ---------------------------------------------------------------------------------------------- moving
-def _spearman(x: FloatArray) -> float:
-    r = np.argsort(np.argsort(x)).astype(float)
-    i = np.arange(x.size, dtype=float)
-    return float(np.corrcoef(i, r)[0, 1]) if x.size > 2 else 0.0
-
-
-def _period_by_autocorrelation(u: FloatArray, dt: float) -> tuple[float, float] | None:
-    """Lag (≥ 1 s, ≤ 60 % of the record) of the highest unbiased autocorrelation, refined parabolically."""
-    n = u.size
-    lo = round(1.0 / dt)
-    hi = int(0.6 * n)
-    if hi < lo + 2:
-        return None
-    rho = autocorrelation(u, hi)
-    # The biased estimator shrinks by (1 − k/N); undo it so a repeat late in the record counts fully.
-    k = np.arange(rho.size)
-    rho = rho / (1.0 - k / n)
-    i = lo + int(np.argmax(rho[lo:hi]))
-    lag = float(i)
-    if lo < i < hi - 1:
-        den = rho[i - 1] - 2 * rho[i] + rho[i + 1]
-        if den < 0:
-            lag += 0.5 * (rho[i - 1] - rho[i + 1]) / den
-    return float(lag * dt), float(rho[i])
-
-
-def _classify_moving(t: FloatArray, u: FloatArray) -> tuple[str, str, dict[str, float]]:  # noqa: PLR0911 - per kind
-    dt = float(np.median(np.diff(t)))
-    turns = series.extrema(u)
-    span = float(t[-1] - t[0])
-    if turns.size <= 3:
-        rate = np.abs(np.diff(u)) / dt
-        fast = float(np.percentile(rate, 99)) if rate.size else 0.0
-        if fast < 1.0:
-            return "ramp", f"slow monotone command (≤ {fast:.3g} °/s, {turns.size} turning point(s))", {}
-        return "broadband", "moving command with few turning points", {}
-    half = np.diff(t[turns])
-    swing = np.abs(np.diff(u[turns]))
-    cv = float(np.std(half) / np.mean(half))
-    if turns.size >= 6 and cv < 0.15:
-        freq = 0.5 / float(np.median(half))
-        k = min(3, swing.size // 3)
-        growth = float(np.median(swing[-k:]) / max(np.median(swing[:k]), 1e-12))
-        if growth > 1.5:
-            kind = "static_threshold" if freq < 1.0 else "dynamic_threshold"
-            return kind, f"{freq:.3g} Hz tone whose amplitude grows {growth:.2g}×", {"freq_hz": freq}
-        tone = fit_sine(t, u, freq)
-        r2 = tone.r2 if tone else 0.0
-        freq = tone.freq_hz if tone else freq
-        kind = "sine" if r2 > 0.99 else "triangle"
-        return kind, f"steady {freq:.4g} Hz {'sine' if kind == 'sine' else 'triangle'} (sine R² {r2:.3f})", \
-            {"freq_hz": freq, "amp_deg": float(np.median(swing) / 2)}
-    if turns.size >= 12:
-        rho = _spearman(half)
-        f0, f1 = 0.5 / float(np.median(half[:3])), 0.5 / float(np.median(half[-3:]))
-        if rho < -0.9 and f1 / f0 > 3.0:
-            return "sweep", f"sine sweep {f0:.3g}-{f1:.3g} Hz (period shrinks steadily)", {"f0_hz": f0, "f1_hz": f1}
-    per = _period_by_autocorrelation(u, dt)
-    if per is not None and per[1] > 0.9 and span >= 1.9 * per[0]:
-        return "schroeder", f"broadband command repeating every {per[0]:.4g} s (autocorrelation {per[1]:.3f})", \
-            {"period_s": per[0]}
-    return "broadband", f"broadband command ({turns.size} irregular turning points)", {}
-
-
-# ---------------------------------------------------------------------------------------------- held
-def _classify_held(t: FloatArray, hm: FloatArray | None, start: int, stop: int) -> tuple[str, str, tuple[Hold, ...]]:
-    if hm is None:
-        return "hold", "command held, no hinge moment recorded", ()
-    seg = hm[start:stop]
-    swing = float(np.ptp(seg))
-    if swing < MIN_LOAD_SWING_INLB:
-        return "hold", f"command held, load constant ({swing:.3g} in·lb swing)", ()
-    dt = float(np.median(np.diff(t)))
-    hs = [Hold(h.start + start, h.stop + start, h.value)
-          for h in series.holds(seg, round(LONG_HOLD_S / dt), max(series.hold_tolerance(seg), 1e-3 * swing))]
-    covered = sum(h.length for h in hs) / max(stop - start, 1)
-    levels = np.unique(np.round([h.value / (0.01 * swing) for h in hs]))
-    signs = [np.sign(h.value) if abs(h.value) > 0.05 * swing else 0.0 for h in hs]
-    reversals = sum(1 for a, b in pairwise(signs) if a * b < 0)
-    if covered >= 0.7 and reversals >= 2 and levels.size <= 3:
-        nonzero = [h.value for h in hs if abs(h.value) > 0.05 * swing]
-        return "load_reversal", f"command held; load reversing {reversals} times between {min(nonzero):.3g} " \
-                                f"and {max(nonzero):.3g} in·lb", tuple(hs)
-    if covered >= 0.7 and levels.size >= 3:
-        return "load_steps", f"command held; load staircase over {levels.size} levels ({swing:.4g} in·lb swing)", \
-            tuple(hs)
-    return "load_sine", f"command held; load moving continuously ({swing:.4g} in·lb swing)", ()
-
-
-# ---------------------------------------------------------------------------------------------- main
-def _spec(data: MeasuredData, key: str) -> tuple[Maneuver | Load | None, str | None]:
-    text = data.metadata.get(key)
+def _maneuver(data: MeasuredData) -> tuple[Maneuver | None, str | None]:
+    text = data.metadata.get("maneuver")
     if not text:
         return None, None
     try:
-        return (parse_maneuver(text) if key == "maneuver" else parse_load(text)), None
+        return parse_maneuver(text), None
     except EmaError as exc:
-        return None, f"metadata {key} {text!r} not understood ({exc})"
+        return None, f"metadata maneuver {text!r} not understood ({exc})"
+
+
+def _load(data: MeasuredData) -> tuple[Load | None, str | None]:
+    text = data.metadata.get("load")
+    if not text:
+        return None, None
+    try:
+        return parse_load(text), None
+    except EmaError as exc:
+        return None, f"metadata load {text!r} not understood ({exc})"
 
 
 def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -233,58 +140,108 @@ def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     return list(zip(d[::2].tolist(), d[1::2].tolist(), strict=True))
 
 
+def _edge_segments(t: FloatArray, u: FloatArray, tol: float, min_jump: float, claimed: NDArray[np.bool_]
+                   ) -> list[Segment]:
+    """Runs of command edges, each read by the edge readers."""
+    dt = float(np.median(np.diff(t)))
+    out = []
+    edges = series.edges(u, dt, min_hold_s=MIN_EDGE_HOLD_S, min_jump=min_jump, max_gap_s=MAX_STEP_S, tol=tol)
+    for group in _group_edges(edges):
+        r = _read(EDGE_READERS, EdgeRun(tuple(group), dt))
+        start, stop = group[0].before.start, group[-1].after.stop
+        claimed[start:stop] = True
+        holds = tuple([group[0].before] + [e.after for e in group])
+        out.append(Segment(r.kind, start, stop, f"signal: {r.evidence}", r.params, tuple(group), holds))
+    return out
+
+
+def _move_segments(t: FloatArray, u: FloatArray, tol: float, min_jump: float, claimed: NDArray[np.bool_]
+                   ) -> list[Segment]:
+    """Runs of profiled moves (not already claimed as edges), each read by the move readers."""
+    dt = float(np.median(np.diff(t)))
+    out = []
+    short_holds = series.holds(u, max(2, round(MIN_EDGE_HOLD_S / dt)), tol)
+    for run in find_moves(t, u, short_holds, min_jump=min_jump, max_gap=round(MAX_STEP_S / dt) + 1,
+                          counts=detect_resolution(u, COMMAND_COUNTS_SPANNED) or 0.0, tol=tol):
+        start, stop = run[0].before.start, run[-1].after.stop
+        if claimed[start:stop].any():
+            continue
+        r = _read(MOVE_READERS, MoveRun(tuple(run), dt))
+        claimed[start:stop] = True
+        holds = tuple([run[0].before] + [m.after for m in run])
+        out.append(Segment(r.kind, start, stop, f"signal: {r.evidence}", r.params, holds=holds, moves=tuple(run)))
+    return out
+
+
+def _moving_segments(t: FloatArray, u: FloatArray, tol: float, held: NDArray[np.bool_],
+                     claimed: NDArray[np.bool_]) -> list[Segment]:
+    """Stretches where the command keeps moving, each read by the moving readers."""
+    dt = float(np.median(np.diff(t)))
+    spans = _runs(~held & ~claimed)
+    # Merge moving stretches split by short pauses (a quantized command sits still near its peaks).
+    merged: list[tuple[int, int]] = []
+    for a, b in spans:
+        if merged and a - merged[-1][1] < round(1.0 / dt) and not claimed[merged[-1][1]:a].any():
+            merged[-1] = (merged[-1][0], b)
+        else:
+            merged.append((a, b))
+    out = []
+    for lo, hi in merged:
+        # Leading and trailing samples where the command has not yet left (or has come back to) the level it
+        # starts (ends) at belong to no test; a slow start that creeps away a count at a time is moving.
+        a, b = lo, hi
+        before = max(lo - 1, 0)
+        left = np.flatnonzero(np.abs(u[before:hi] - u[before]) > tol)
+        back = np.flatnonzero(np.abs(u[before:hi] - u[hi - 1]) > tol)
+        if left.size and back.size:
+            a, b = before + max(int(left[0]) - 1, 0) + 1, before + int(back[-1]) + 2
+        if (b - a) * dt < MIN_MOVING_S:
+            continue
+        r = _read(MOVING_READERS, MovingStretch(t[a:b], u[a:b]))
+        out.append(Segment(r.kind, a, b, f"signal: {r.evidence}", r.params))
+    return out
+
+
 def recognize(data: MeasuredData) -> Recognition:
-    """Segments of ``data`` (uniformly sampled) with the evidence for each; see the module docstring."""
+    """Segments of a uniformly sampled record, with the evidence for each; see the module docstring.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record on a uniform grid.
+
+    Returns
+    -------
+    Recognition
+        The segments in time order, the metadata's maneuver and load, and notes.
+    """
     t, u = data.time_s, data.command_deg
     dt = float(np.median(np.diff(t)))
     notes: list[str] = []
-    maneuver, note_m = _spec(data, "maneuver")
-    load, note_l = _spec(data, "load")
+    maneuver, note_m = _maneuver(data)
+    load, note_l = _load(data)
     notes += [n for n in (note_m, note_l) if n]
-    tol = series.hold_tolerance(u)
-    edges = series.edges(u, dt, min_hold_s=MIN_EDGE_HOLD_S, min_jump=max(0.05, 20.0 * tol), tol=tol)
-    segments: list[Segment] = []
-    stepped = np.zeros(u.size, dtype=bool)
-    for group in _group_edges(edges):
-        kind, why, params = _classify_edges(group, dt)
-        start, stop = group[0].before.start, group[-1].after.stop
-        stepped[start:stop] = True
-        holds = tuple([group[0].before] + [e.after for e in group])
-        segments.append(Segment(kind, start, stop, f"signal: {why}", params, tuple(group), holds))
+    tol, min_jump = edge_threshold(u)
+    claimed = np.zeros(u.size, dtype=bool)
+    segments = _edge_segments(t, u, tol, min_jump, claimed)
+    segments += _move_segments(t, u, tol, min_jump, claimed)
     long_holds = series.holds(u, round(LONG_HOLD_S / dt), tol)
     held = np.zeros(u.size, dtype=bool)
     for h in long_holds:
         held[h.start:h.stop] = True
-    moving = ~held & ~stepped
-    spans = _runs(moving)
-    # Merge moving stretches split by short pauses (a quantized command sits still near its peaks).
-    merged: list[tuple[int, int]] = []
-    for a, b in spans:
-        if merged and a - merged[-1][1] < round(1.0 / dt) and not stepped[merged[-1][1]:a].any():
-            merged[-1] = (merged[-1][0], b)
-        else:
-            merged.append((a, b))
-    for lo, hi in merged:
-        # Leading and trailing samples where the command sits still belong to no test.
-        a, b = lo, hi
-        before = max(lo - 1, 0)
-        changes = np.flatnonzero(np.abs(np.diff(u[before:hi])) > tol)
-        if changes.size:
-            a, b = before + int(changes[0]) + 1, before + int(changes[-1]) + 2
-        if (b - a) * dt < MIN_MOVING_S:
-            continue
-        kind, why, params = _classify_moving(t[a:b], u[a:b])
-        segments.append(Segment(kind, a, b, f"signal: {why}", params))
+    segments += _moving_segments(t, u, tol, held, claimed)
     for h in long_holds:
-        if (h.stop - h.start) * dt >= HELD_TEST_S:
-            kind, why, hs = _classify_held(t, data.hinge_moment_inlb, h.start, h.stop)
-            segments.append(Segment(kind, h.start, h.stop, f"signal: {why}", {"command_deg": h.value}, holds=hs))
+        if (h.stop - h.start) * dt >= HELD_TEST_S and not claimed[h.start:h.stop].all():
+            stretch = HeldStretch(t, data.hinge_moment_inlb, h.start, h.stop, h.value)
+            r = _read(HELD_READERS, stretch)
+            segments.append(Segment(r.kind, h.start, h.stop, f"signal: {r.evidence}", {"command_deg": h.value},
+                                    holds=stretch.load_holds if r.kind != "hold" else ()))
     segments.sort(key=lambda s: s.start)
     segments = _metadata_window(segments, t, maneuver)
     segments = _reconcile(segments, maneuver, load, notes)
     if not segments:
         notes.append("no section-2 test recognised in the signals")
-    return Recognition(segments, maneuver, load, notes)
+    return Recognition(segments, maneuver, load, notes, tol, min_jump)
 
 
 def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver | None) -> list[Segment]:
@@ -295,12 +252,13 @@ def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver 
     inside the spec's window but short of it, the segment takes the whole window.
     A contradicted reading is left alone for the reconciliation to report.
     """
-    if maneuver is None or not hasattr(maneuver, "lead_s"):
+    lead = getattr(maneuver, "lead_s", None)
+    if maneuver is None or lead is None:
         return segments
     kind = MANEUVER_KINDS.get(maneuver.kind, maneuver.kind)
     if kind not in MOVING_KINDS:
         return segments
-    start_s, stop_s = float(maneuver.lead_s), float(maneuver.duration_s)  # type: ignore[attr-defined]
+    start_s, stop_s = float(lead), float(maneuver.duration_s)
     a = int(np.searchsorted(t, t[0] + start_s, side="left"))
     b = min(int(np.searchsorted(t, t[0] + stop_s, side="right")), t.size)
     if b - a < 2 or t[b - 1] - t[a] < MIN_MOVING_S:
@@ -308,7 +266,7 @@ def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver 
     inside = [seg for seg in segments if seg.kind in MOVING_KINDS and seg.start < b and seg.stop > a]
     agreeing = [seg for seg in inside if seg.kind == kind or (seg.kind, kind) in COMPATIBLE]
     covered = sum(min(seg.stop, b) - max(seg.start, a) for seg in agreeing)
-    if not agreeing or len(agreeing) < len(inside) or covered >= 0.99 * (b - a):
+    if not agreeing or len(agreeing) < len(inside) or covered >= (b - a) - 1:
         return segments
     seen = ", ".join(f"{seg.kind} {t[seg.start]:.3g}–{t[seg.stop - 1]:.3g} s" for seg in agreeing)
     window = Segment(agreeing[0].kind, a, b, f"signal: {seen}; widened to the metadata's {maneuver.kind} window "
@@ -327,7 +285,7 @@ def _expected(maneuver: Maneuver | None) -> list[str]:
 def _spec_params(maneuver: Maneuver, kind: str) -> dict[str, float]:
     parts: list[Maneuver] = [maneuver]
     if maneuver.kind == "pid":
-        parts = [m for _, m in maneuver._parts]
+        parts = [m for _, m in getattr(maneuver, "_parts", ())]
     out: dict[str, float] = {}
     for m in parts:
         mk = MANEUVER_KINDS.get(m.kind, m.kind)
@@ -363,7 +321,7 @@ def _reconcile(segments: list[Segment], maneuver: Maneuver | None, load: Load | 
             params.update(_spec_params(maneuver, kind))
         if load is not None and kind in ("load_sine",) and isinstance(getattr(load, "freq_hz", None), float):
             params["freq_hz"] = float(load.freq_hz)  # type: ignore[attr-defined]
-        out.append(Segment(kind, s.start, s.stop, ev, params, s.edges, s.holds))
+        out.append(Segment(kind, s.start, s.stop, ev, params, s.edges, s.holds, s.moves))
     satisfied = {k: {k} for k in expected}
     satisfied["hold"] = set(HELD_KINDS)
     if maneuver is not None and not any(seg.kind in satisfied[k] for k in expected for seg in out):

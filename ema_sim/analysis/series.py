@@ -27,24 +27,50 @@ HELD = ("command_deg", "command_v")
 
 
 def is_uniform(time_s: FloatArray) -> bool:
-    """True when every sample interval is within 1 % of the median interval."""
+    """True when every sample interval is within 1 % of the median interval.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times, s.
+
+    Returns
+    -------
+    bool
+        Whether the intervals are uniform.
+    """
     dt = np.diff(time_s)
     med = float(np.median(dt))
     return bool(np.all(np.abs(dt - med) <= UNIFORM_TOLERANCE * med))
 
 
-JITTER_LIMIT = 0.25
-"""Intervals within 25 % of the median (no gap, no burst) are regular sampling with jittery time stamps."""
+JITTER_LIMIT = 0.5
+"""Stamps within half a sample of the least-squares line through them: regular sampling, no sample missing."""
 
 
-def uniform_record(data: MeasuredData) -> MeasuredData:
-    """``data`` on a uniform grid (unchanged when it already is uniform).
+def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> MeasuredData:
+    """The record on a uniform grid (unchanged when it already is uniform).
 
-    Time stamps that only jitter (every interval within 25 % of the median) belong to regular
-    sampling: they are replaced by the least-squares line through them and the samples are kept as
-    they are (resampling would delay the held command by up to a sample against the outputs). Records
-    with gaps or mixed rates are resampled at the median rate: held columns (the command) by
-    zero-order hold, as the contract defines the command, measured columns by linear interpolation.
+    Time stamps that only jitter belong to regular sampling: when every stamp lies within half a
+    sample of the least-squares line through them (a missing sample or a burst shifts the later
+    stamps by a whole sample), they are replaced by that line and the samples are kept as they are
+    (resampling would delay the held command by up to a sample against the outputs, and blur an
+    output logged in counts). Records with gaps or mixed rates are resampled at the median rate:
+    held columns (the command) by zero-order hold, as the contract defines the command, measured
+    columns by linear interpolation.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        A record as read.
+    command_sampled : bool
+        The command was sampled from a running demand rather than held: a resampled command is then
+        interpolated like the outputs, not held.
+
+    Returns
+    -------
+    MeasuredData
+        The record on a uniform grid; ``metadata["resampled"]`` says what was done.
     """
     t = data.time_s
     if is_uniform(t):
@@ -52,14 +78,15 @@ def uniform_record(data: MeasuredData) -> MeasuredData:
     dt_all = np.diff(t)
     med = float(np.median(dt_all))
     meta = dict(data.metadata)
-    if np.all(np.abs(dt_all - med) <= JITTER_LIMIT * med):
-        k = np.arange(t.size, dtype=float)
-        slope, icpt = np.polyfit(k, t, 1)
-        jitter = float(np.max(np.abs(t - (icpt + slope * k))))
+    k = np.arange(t.size, dtype=float)
+    slope, icpt = np.polyfit(k, t, 1)
+    jitter = float(np.max(np.abs(t - (icpt + slope * k))))
+    if jitter < JITTER_LIMIT * slope:
         meta["resampled"] = (f"time stamps jitter by up to {1e3 * jitter:.3g} ms: samples taken as uniform at "
                              f"{1.0 / slope:.6g} Hz (least-squares line through the stamps), not resampled")
         return replace(data, time_s=icpt + slope * k, metadata=meta)
     dt = med
+    held = () if command_sampled else (*HELD, "fmu_command_deg")
     n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
     grid = t[0] + dt * np.arange(n)
     idx = np.clip(np.searchsorted(t, grid + 1e-12, side="right") - 1, 0, t.size - 1)
@@ -68,21 +95,44 @@ def uniform_record(data: MeasuredData) -> MeasuredData:
         value = getattr(data, f.name)
         if not isinstance(value, np.ndarray) or f.name == "time_s":
             continue
-        changes[f.name] = value[idx] if f.name in HELD else np.interp(grid, t, value)
+        changes[f.name] = value[idx] if f.name in held else np.interp(grid, t, value)
+    changes["extra"] = {k: v[idx] if k in held else np.interp(grid, t, v) for k, v in data.extra.items()}
     meta["resampled"] = (f"time stamps not uniform (intervals {1e3 * dt_all.min():.3g}-{1e3 * dt_all.max():.3g} ms): "
-                         f"resampled at {1.0 / dt:.6g} Hz, command held, outputs interpolated")
+                         f"resampled at {1.0 / dt:.6g} Hz, command "
+                         f"{'interpolated (sampled)' if command_sampled else 'held'}, outputs interpolated")
     changes["metadata"] = meta
     return replace(data, **changes)  # type: ignore[arg-type]
 
 
 def sample_period(data: MeasuredData) -> float:
-    """Median sample interval, s."""
+    """Median sample interval, s.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+
+    Returns
+    -------
+    float
+        The interval, s.
+    """
     return float(np.median(np.diff(data.time_s)))
 
 
 @dataclass(frozen=True)
 class Hold:
-    """Samples ``[start, stop)`` over which a signal keeps ``value``."""
+    """Samples ``[start, stop)`` over which a signal keeps ``value``.
+
+    Parameters
+    ----------
+    start : int
+        First sample.
+    stop : int
+        One past the last sample.
+    value : float
+        The held level (median).
+    """
 
     start: int
     stop: int
@@ -94,16 +144,42 @@ class Hold:
         return self.stop - self.start
 
 
+def _d2_noise(x: FloatArray) -> float:
+    """Standard deviation of white noise on ``x`` from the MAD of its second differences."""
+    d2 = np.abs(np.diff(x, 2))
+    return 1.4826 * float(np.median(d2)) / np.sqrt(6.0) if d2.size else 0.0
+
+
 def hold_tolerance(x: FloatArray) -> float:
     """How much a held signal may wander and still count as held.
 
     A digital command is exact (a rounding allowance of 1e-6 of its scale); a recorded analog signal
-    gets five times its sample-to-sample noise, estimated robustly from second differences.
+    gets five times its noise while it is held. The noise is first estimated robustly from the second
+    differences of the whole signal, then again from the samples that sit still within that first
+    tolerance only: a demand that spends most of its time on ramps sampled at jittery instants must
+    not lend its ramps' scatter to its holds.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+
+    Returns
+    -------
+    float
+        The tolerance, in the signal's unit.
     """
     scale = max(1.0, float(np.max(np.abs(x))) if x.size else 1.0)
-    d2 = np.abs(np.diff(x, 2))
-    noise = 1.4826 * float(np.median(d2)) / np.sqrt(6.0) if d2.size else 0.0
-    return max(1e-6 * scale, 5.0 * noise)
+    floor = 1e-6 * scale
+    first = max(floor, 5.0 * _d2_noise(x))
+    if x.size < 4:
+        return first
+    still = np.abs(np.diff(x)) <= first
+    both = still[:-1] & still[1:]  # second differences whose two steps are both still
+    if both.sum() < 10:
+        return first
+    d2 = np.abs(np.diff(x, 2))[both]
+    return float(max(floor, 5.0 * 1.4826 * float(np.median(d2)) / np.sqrt(6.0)))
 
 
 HOLD_BAND = 3.0
@@ -117,7 +193,22 @@ def _spread(x: FloatArray) -> float:
 
 
 def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hold]:
-    """Runs of at least ``min_samples`` samples whose consecutive changes are within ``tol``."""
+    """Runs of at least ``min_samples`` samples whose consecutive changes are within ``tol``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+    min_samples : int
+        Shortest hold, samples.
+    tol : float or None
+        Hold tolerance (default: the signal's own).
+
+    Returns
+    -------
+    list
+        The holds, in time order.
+    """
     if x.size < 2:
         return []
     tol = hold_tolerance(x) if tol is None else tol
@@ -147,10 +238,20 @@ def holds(x: FloatArray, min_samples: int, tol: float | None = None) -> list[Hol
 
 @dataclass(frozen=True)
 class Edge:
-    """A jump of a held signal: from hold ``before`` to hold ``after``."""
+    """A jump of a held signal: from hold ``before`` to hold ``after``.
+
+    Parameters
+    ----------
+    index : int
+        First sample that left the old level (for a command through a lag, the start of its transition).
+    before : Hold
+        The hold before.
+    after : Hold
+        The hold after.
+    """
 
     index: int
-    """First sample at the new level."""
+    """First sample that left the old level (for a command through a lag, the start of its transition)."""
     before: Hold
     after: Hold
 
@@ -164,26 +265,77 @@ def edges(x: FloatArray, dt: float, *, min_hold_s: float = 0.04, min_jump: float
           max_gap_s: float = 0.02, tol: float | None = None) -> list[Edge]:
     """Jumps of at least ``min_jump`` between two holds of at least ``min_hold_s`` each.
 
-    ``max_gap_s`` allows a recorded (analog) command a short transition between the two levels.
+    ``max_gap_s`` allows a recorded (analog) command a short transition between the two levels;
+    the edge is then at the transition's first sample.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The held signal.
+    dt : float
+        Sample interval, s.
+    min_hold_s : float
+        Shortest hold on either side, s.
+    min_jump : float
+        Smallest jump between the two holds.
+    max_gap_s : float
+        Longest transition between the holds, s.
+    tol : float, optional
+        Hold tolerance (default: :func:`hold_tolerance`).
+
+    Returns
+    -------
+    list of Edge
+        In time order.
     """
     hs = holds(x, max(2, round(min_hold_s / dt)), tol)
     out = []
     max_gap = round(max_gap_s / dt) + 1
     for a, b in pairwise(hs):
         if b.start - a.stop <= max_gap and abs(b.value - a.value) >= min_jump:
-            out.append(Edge(b.start if b.start > a.stop else a.stop, a, b))
+            out.append(Edge(a.stop, a, b))
     return out
 
 
 def settled(y: FloatArray, start: int, stop: int, fraction: float = 0.5) -> tuple[float, float]:
-    """Mean and standard deviation of ``y`` over the last ``fraction`` of ``[start, stop)``."""
+    """Mean and standard deviation of ``y`` over the last ``fraction`` of ``[start, stop)``.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal.
+    start : int
+        First sample.
+    stop : int
+        One past the last sample.
+    fraction : float
+        Share of the stretch at its end to average.
+
+    Returns
+    -------
+    tuple
+        Mean and standard deviation.
+    """
     first = stop - max(1, int((stop - start) * fraction))
     seg = y[first:stop]
     return float(np.mean(seg)), float(np.std(seg))
 
 
 def moving_average(y: FloatArray, n: int) -> FloatArray:
-    """Centred moving average over ``n`` samples (edges use the samples available)."""
+    """Centred moving average over ``n`` samples (edges use the samples available).
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal.
+    n : int
+        Window length, samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        The averaged signal.
+    """
     n = max(1, int(n))
     if n == 1:
         return y.astype(float, copy=True)
@@ -192,21 +344,47 @@ def moving_average(y: FloatArray, n: int) -> FloatArray:
     idx = np.arange(y.size)
     lo = np.clip(idx - half, 0, y.size)
     hi = np.clip(idx - half + n, 0, y.size)
-    return (c[hi] - c[lo]) / (hi - lo)
+    return np.asarray((c[hi] - c[lo]) / (hi - lo), dtype=float)
 
 
 def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
-    """Smoothed derivative (Savitzky-Golay, quadratic, over ``window_s``)."""
+    """Smoothed derivative (Savitzky-Golay, quadratic, over ``window_s``).
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        The signal.
+    dt : float
+        Sample interval, s.
+    window_s : float
+        Window length, s.
+
+    Returns
+    -------
+    numpy.ndarray
+        The derivative.
+    """
     from scipy.signal import savgol_filter  # noqa: PLC0415
 
-    n = max(5, round(window_s / dt) | 1)
+    n = max(3, round(window_s / dt) | 1)
     if y.size < n:
-        return np.gradient(y, dt)
-    return savgol_filter(y, n, 2, deriv=1, delta=dt)
+        return np.asarray(np.gradient(y, dt), dtype=float)
+    return np.asarray(savgol_filter(y, n, 2, deriv=1, delta=dt), dtype=float)
 
 
 def extrema(x: FloatArray) -> NDArray[np.int64]:
-    """Indices of the turning points of ``x`` (plateaus count once, at their middle)."""
+    """Indices of the turning points of ``x`` (plateaus count once, at their middle).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+
+    Returns
+    -------
+    numpy.ndarray
+        Indices of the turning points.
+    """
     d = np.diff(x)
     nz = np.flatnonzero(d != 0.0)
     if nz.size < 2:
@@ -220,7 +398,17 @@ def extrema(x: FloatArray) -> NDArray[np.int64]:
 
 
 def require_length(data: MeasuredData, seconds: float, what: str) -> None:
-    """Raise a DataError when the record is shorter than ``seconds``."""
+    """Raise a DataError when the record is shorter than ``seconds``.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    seconds : float
+        The shortest record, s.
+    what : str
+        What needs it.
+    """
     span = float(data.time_s[-1] - data.time_s[0])
     if span < seconds:
         raise DataError(f"{data.source or 'data'}: {what} needs at least {seconds:g} s of data, got {span:g} s")

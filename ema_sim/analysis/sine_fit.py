@@ -18,7 +18,21 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Sine:
-    """``offset + amplitude·sin(2π·freq·t + phase)``."""
+    """``offset + amplitude·sin(2π·freq·t + phase)``.
+
+    Parameters
+    ----------
+    freq_hz : float
+        Frequency, Hz.
+    amplitude : float
+        Amplitude.
+    phase_rad : float
+        Phase, rad.
+    offset : float
+        Offset.
+    r2 : float
+        Share of the variance the sine explains.
+    """
 
     freq_hz: float
     amplitude: float
@@ -33,7 +47,22 @@ class Sine:
 
 
 def sine_at(t: FloatArray, y: FloatArray, freq_hz: float) -> Sine:
-    """Amplitude, phase and offset of the tone at ``freq_hz`` (linear least squares)."""
+    """Amplitude, phase and offset of the tone at ``freq_hz`` (linear least squares).
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    y : numpy.ndarray
+        The signal.
+    freq_hz : float
+        Frequency, Hz.
+
+    Returns
+    -------
+    Sine
+        The tone.
+    """
     w = 2 * np.pi * freq_hz * t
     X = np.column_stack([np.sin(w), np.cos(w), np.ones_like(t)])
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
@@ -45,7 +74,24 @@ def sine_at(t: FloatArray, y: FloatArray, freq_hz: float) -> Sine:
 
 
 def dominant_frequency(t: FloatArray, y: FloatArray, f_min: float = 0.0, f_max: float | None = None) -> float | None:
-    """Frequency of the largest spectral peak of ``y`` in ``[f_min, f_max]``."""
+    """Frequency of the largest spectral peak of ``y`` in ``[f_min, f_max]``.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    y : numpy.ndarray
+        The signal.
+    f_min : float
+        Lowest frequency searched, Hz.
+    f_max : float or None
+        Highest frequency searched, Hz (None: Nyquist).
+
+    Returns
+    -------
+    float or None
+        Its frequency, Hz (None when the band is empty).
+    """
     dt = float(np.median(np.diff(t)))
     n = y.size
     nfft = 1 << int(np.ceil(np.log2(4 * n)))
@@ -59,7 +105,26 @@ def dominant_frequency(t: FloatArray, y: FloatArray, f_min: float = 0.0, f_max: 
 
 def fit_sine(t: FloatArray, y: FloatArray, freq_hz: float | None = None, f_min: float = 0.0,
              f_max: float | None = None) -> Sine | None:
-    """The dominant tone of ``y`` (or the tone near ``freq_hz``), frequency refined by least squares."""
+    """The dominant tone of ``y`` (or the tone near ``freq_hz``), frequency refined by least squares.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    y : numpy.ndarray
+        The signal.
+    freq_hz : float or None
+        Frequency to refine from (default: the largest spectral peak), Hz.
+    f_min : float
+        Lowest frequency searched, Hz.
+    f_max : float or None
+        Highest frequency searched, Hz (None: Nyquist).
+
+    Returns
+    -------
+    Sine or None
+        The tone (None for a flat or too short signal).
+    """
     if t.size < 8 or np.ptp(y) == 0.0:
         return None
     f0 = freq_hz or dominant_frequency(t, y, f_min, f_max)

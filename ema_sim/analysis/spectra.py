@@ -32,7 +32,23 @@ MAX_COHERENCE = 0.9999
 
 @dataclass(frozen=True)
 class CrossSpectra:
-    """One window length: ``gxx`` (F,), ``gyy`` and ``gxy`` (outputs, F), on FFT bins ``freq_hz``."""
+    """One window length: ``gxx`` (F,), ``gyy`` and ``gxy`` (outputs, F), on FFT bins ``freq_hz``.
+
+    Parameters
+    ----------
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    gxx : numpy.ndarray
+        Command auto-spectrum.
+    gyy : numpy.ndarray
+        Output auto-spectrum.
+    gxy : numpy.ndarray
+        Cross-spectrum.
+    averages : float
+        Effective number of independent averages (overlap accounted for).
+    window_s : float
+        Window length, s.
+    """
 
     freq_hz: FloatArray
     gxx: FloatArray
@@ -44,7 +60,22 @@ class CrossSpectra:
 
 
 def effective_averages(n_segments: int, nperseg: int, step: int) -> float:
-    """Welch's equivalent number of independent segments for overlapping Hann windows."""
+    """Welch's equivalent number of independent segments for overlapping Hann windows.
+
+    Parameters
+    ----------
+    n_segments : int
+        Segments averaged.
+    nperseg : int
+        Samples per segment.
+    step : int
+        Samples between segment starts.
+
+    Returns
+    -------
+    float
+        Effective number of independent averages.
+    """
     w = np.hanning(nperseg)
     denom = float(np.sum(w * w))
     total = 1.0
@@ -58,7 +89,26 @@ def effective_averages(n_segments: int, nperseg: int, step: int) -> float:
 
 
 def welch(x: FloatArray, ys: FloatArray, fs: float, window_s: float, overlap: float = OVERLAP) -> CrossSpectra:
-    """Hann-windowed, mean-removed, overlapped segment averages of ``x`` against each row of ``ys``."""
+    """Hann-windowed, mean-removed, overlapped segment averages of ``x`` against each row of ``ys``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The command.
+    ys : numpy.ndarray
+        The outputs, one per row.
+    fs : float
+        Sample rate, Hz.
+    window_s : float
+        Window length, s.
+    overlap : float
+        Overlap of consecutive segments.
+
+    Returns
+    -------
+    CrossSpectra
+        The spectra.
+    """
     ys = np.atleast_2d(ys)
     n = x.size
     nperseg = min(n, max(8, round(window_s * fs)))
@@ -83,18 +133,48 @@ def welch(x: FloatArray, ys: FloatArray, fs: float, window_s: float, overlap: fl
     gxx[0] *= 0.5
     gyy[:, 0] *= 0.5
     gxy[:, 0] *= 0.5
-    freq = np.fft.rfftfreq(nperseg, 1.0 / fs)
+    freq = np.asarray(np.fft.rfftfreq(nperseg, 1.0 / fs), dtype=float)
     return CrossSpectra(freq, gxx, gyy, gxy, effective_averages(n_seg, nperseg, step), nperseg / fs)
 
 
 def log_grid(f_lo: float, f_hi: float, per_decade: int = 60) -> FloatArray:
-    """Logarithmically spaced frequencies from ``f_lo`` to ``f_hi``."""
+    """Logarithmically spaced frequencies from ``f_lo`` to ``f_hi``.
+
+    Parameters
+    ----------
+    f_lo : float
+        Lowest frequency, Hz.
+    f_hi : float
+        Highest frequency, Hz.
+    per_decade : int
+        Points per decade.
+
+    Returns
+    -------
+    numpy.ndarray
+        The frequencies, Hz.
+    """
     n = max(2, int(np.ceil(np.log10(f_hi / f_lo) * per_decade)) + 1)
     return np.geomspace(f_lo, f_hi, n)
 
 
 def coherence(gxx: FloatArray, gyy: FloatArray, gxy: ComplexArray) -> FloatArray:
-    """Magnitude-squared coherence |Gxy|²/(Gxx·Gyy), 0 where a spectrum vanishes."""
+    """Magnitude-squared coherence |Gxy|²/(Gxx·Gyy), 0 where a spectrum vanishes.
+
+    Parameters
+    ----------
+    gxx : numpy.ndarray
+        Command auto-spectrum.
+    gyy : numpy.ndarray
+        Output auto-spectrum.
+    gxy : numpy.ndarray
+        Cross-spectrum.
+
+    Returns
+    -------
+    numpy.ndarray
+        The coherence γ², between 0 and 1.
+    """
     den = gxx * gyy
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(den > 0.0, np.abs(gxy) ** 2 / np.where(den > 0.0, den, 1.0), 0.0)
@@ -102,9 +182,22 @@ def coherence(gxx: FloatArray, gyy: FloatArray, gxy: ComplexArray) -> FloatArray
 
 
 def random_error(coh: FloatArray, averages: FloatArray | float) -> FloatArray:
-    """Normalised random error of a frequency-response estimate: √(1−γ²) / (|γ|·√(2ν))."""
+    """Normalised random error of a frequency-response estimate: √(1−γ²) / (|γ|·√(2ν)).
+
+    Parameters
+    ----------
+    coh : numpy.ndarray
+        Coherence.
+    averages : numpy.ndarray or float
+        Effective number of averages.
+
+    Returns
+    -------
+    numpy.ndarray
+        The normalised random error.
+    """
     g = np.clip(coh, 1e-6, MAX_COHERENCE)
-    return np.sqrt(1.0 - g) / (np.sqrt(g) * np.sqrt(2.0 * np.asarray(averages, dtype=float)))
+    return np.asarray(np.sqrt(1.0 - g) / (np.sqrt(g) * np.sqrt(2.0 * np.asarray(averages, dtype=float))), dtype=float)
 
 
 def _on_grid(sp: CrossSpectra, grid: FloatArray) -> tuple[FloatArray, FloatArray, ComplexArray, FloatArray]:
@@ -134,7 +227,23 @@ def _on_grid(sp: CrossSpectra, grid: FloatArray) -> tuple[FloatArray, FloatArray
 
 @dataclass(frozen=True)
 class CompositeSpectra:
-    """Spectra on ``freq_hz`` combined over ``windows_s``; one row per output in every array."""
+    """Spectra on ``freq_hz`` combined over ``windows_s``; one row per output in every array.
+
+    Parameters
+    ----------
+    freq_hz : numpy.ndarray
+        Frequency, Hz.
+    gxx : numpy.ndarray
+        (outputs, F): the command's spectrum, weighted as each output's estimate weights the windows.
+    gyy : numpy.ndarray
+        Output auto-spectrum.
+    gxy : numpy.ndarray
+        Cross-spectrum.
+    averages : numpy.ndarray
+        (outputs, F): effective averages behind each composite estimate.
+    windows_s : tuple
+        Window lengths, s.
+    """
 
     freq_hz: FloatArray
     gxx: FloatArray
@@ -147,7 +256,22 @@ class CompositeSpectra:
 
 
 def default_windows(span_s: float, f_max_hz: float, count: int = 5) -> tuple[float, ...]:
-    """Window lengths from half the record down, halving, but never below 20 periods of ``f_max_hz``."""
+    """Window lengths from half the record down, halving, but never below 20 periods of ``f_max_hz``.
+
+    Parameters
+    ----------
+    span_s : float
+        Record length, s.
+    f_max_hz : float
+        Top frequency, Hz.
+    count : int
+        Number of windows.
+
+    Returns
+    -------
+    tuple
+        Window lengths, s.
+    """
     longest = span_s / 2.0
     shortest = max(20.0 / f_max_hz, longest / 2 ** (count - 1))
     out = [longest]
@@ -158,7 +282,26 @@ def default_windows(span_s: float, f_max_hz: float, count: int = 5) -> tuple[flo
 
 def composite(x: FloatArray, ys: FloatArray, fs: float, grid: FloatArray,
               windows_s: tuple[float, ...]) -> CompositeSpectra:
-    """Composite-window spectra of ``x`` against each row of ``ys`` on ``grid`` (see the module docstring)."""
+    """Composite-window spectra of ``x`` against each row of ``ys`` on ``grid`` (see the module docstring).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The command.
+    ys : numpy.ndarray
+        The outputs, one per row.
+    fs : float
+        Sample rate, Hz.
+    grid : numpy.ndarray
+        Frequency grid, Hz.
+    windows_s : tuple
+        Window lengths, s.
+
+    Returns
+    -------
+    CompositeSpectra
+        The combined spectra.
+    """
     ys = np.atleast_2d(ys)
     n_out = ys.shape[0]
     sw = np.zeros((n_out, grid.size))
@@ -180,13 +323,32 @@ def composite(x: FloatArray, ys: FloatArray, fs: float, grid: FloatArray,
             sxy[i] += w * gxy[i]
             snu[i] = np.maximum(snu[i], np.where(valid, nu, 0.0))
     safe = np.where(sw > 0, sw, 1.0)
-    return CompositeSpectra(grid, sxx / safe, syy / safe, sxy / safe, snu, tuple(windows_s))
+    return CompositeSpectra(grid, sxx / safe, syy / safe, np.asarray(sxy / safe, dtype=complex), snu, tuple(windows_s))
 
 
 def dft_at(x: FloatArray, fs: float, f0_hz: float, df_hz: float, m: int) -> ComplexArray:
-    """``Σₙ x[n]·exp(−2πj·fₖ·n/fs)`` at ``fₖ = f0 + k·df``, k < m, by the chirp-z transform."""
+    """``Σₙ x[n]·exp(−2πj·fₖ·n/fs)`` at ``fₖ = f0 + k·df``, k < m, by the chirp-z transform.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The signal.
+    fs : float
+        Sample rate, Hz.
+    f0_hz : float
+        First frequency, Hz.
+    df_hz : float
+        Frequency step, Hz.
+    m : int
+        Number of frequencies.
+
+    Returns
+    -------
+    numpy.ndarray
+        The DFT at each frequency.
+    """
     from scipy.signal import czt  # noqa: PLC0415
 
     w = np.exp(-2j * np.pi * df_hz / fs)
     a = np.exp(2j * np.pi * f0_hz / fs)
-    return czt(np.asarray(x, dtype=float), m, w, a)
+    return np.asarray(czt(np.asarray(x, dtype=float), m, w, a), dtype=complex)

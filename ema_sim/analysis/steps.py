@@ -7,37 +7,100 @@ Steps of 0.5°, 1° and 20° give the small- and large-amplitude slew rates. For
   a band of ±max(2 %, 4σ/|A|) about the final value, counted from the edge, and overshoot;
 * peak rate from a Savitzky-Golay derivative (11 ms, quadratic), and the plateau rate, the slope of a
   line through the samples whose rate is within 5 % of the peak (not biased up by noise as a peak is);
-* rate limiting: a step is rate-limited when its rate holds within 5 % of its peak for ≥ 25 ms, when
-  its peak reaches 80 % of the channel's rated slew (table 1), or when its peak falls 15 % short of
-  what a second order fitted to a smaller step predicts. Rate-limited steps give the large-amplitude
+* rate limiting: a step is rate-limited when its rate holds within 5 % of its peak for more than
+  60 % of its 10-90 % rise (and at least 3 samples: a linear second order stays there for 0.64/ωn,
+  at most 53 % of its rise for any ζ ≥ 0.2, while a step on its rate limit rises at that rate almost
+  throughout), when its peak reaches 80 % of the channel's rated slew (table 1), or when its peak
+  falls 15 % short of what a second order fitted to a smaller step predicts. Rate-limited steps give the large-amplitude
   slew rate and no linear fit; the others get :func:`ema_sim.analysis.second_order_fit.fit_step` and
   the hand calculation from rise and settling time beside it.
+
+Each step's quality: ``saturated`` when rate-limited, ``not_determined`` when the step is within ten
+times the noise, else its fit's. A step set recognised from the metadata (a suite bag's
+``steps:amps_deg=…``) whose steps the command does not show as edges lists each missing step under
+``not_computed`` with the reason. The test runs on the ``steps`` and ``square`` segments; ``steps`` is
+what :func:`read_steps` calls any run of edges no other test claims.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from typing_extensions import override
 
-from ema_sim.analysis.second_order_fit import SecondOrderFit, fit_step, hand_calculation
+from ema_sim.analysis import figure
+from ema_sim.analysis.markdown import image, num, quality, table
+from ema_sim.analysis.quality import Quality
+from ema_sim.analysis.second_order_fit import SecondOrderFit, fit_step, hand_calculation, simulate
+from ema_sim.analysis.section2 import RecordAnalysis, Section2Test
+from ema_sim.analysis.segments import EdgeRun, Reading
 from ema_sim.analysis.series import Edge, derivative, moving_average, settled
 from ema_sim.analysis.timing import first_motion
 
 FloatArray = NDArray[np.float64]
 
 PRE_S = 0.1
-PLATEAU_S = 0.025
+PLATEAU_SHARE = 0.6
 RATED_FRACTION = 0.8
 SHORTFALL = 0.85
 
 
 @dataclass(frozen=True)
 class StepResponse:
-    """Metrics (and fit) of one step."""
+    """Metrics (and fit) of one step.
+
+    Parameters
+    ----------
+    time_s : float
+        Time of the command edge, s.
+    command_from_deg : float
+        Command before the edge, deg.
+    command_to_deg : float
+        Command after it, deg.
+    output : str
+        Name of the output.
+    initial_deg : float
+        Output before the edge, deg.
+    final_deg : float
+        Settled output after it, deg.
+    noise_deg : float
+        Noise on the output before the edge, deg.
+    delay_s : float or None
+        First motion after the edge, s.
+    rise_s : float or None
+        10-90 % rise time, s.
+    settling_s : float or None
+        2 % settling time, s.
+    settling_band : float
+        Settling band, share of the step.
+    overshoot_pct : float or None
+        Overshoot, %.
+    peak_rate_dps : float
+        Peak rate, deg/s.
+    plateau_s : float
+        Time within 5 % of the peak rate, s.
+    plateau_rate_dps : float or None
+        Slope of a line through the samples whose rate is within 5 % of the peak (the slew rate).
+    rate_limited : bool
+        Whether the step is rate-limited.
+    rate_reason : str
+        The evidence.
+    fit : SecondOrderFit or None
+        Its second-order fit.
+    fit_note : str
+        Why there is no fit, or ``fitted``.
+    start : int
+        First sample of the step's window.
+    stop : int
+        One past its last sample.
+    edge : int
+        Sample of the command edge.
+    """
 
     time_s: float
     command_from_deg: float
@@ -61,6 +124,26 @@ class StepResponse:
     fit_note: str
     start: int
     stop: int
+    edge: int = 0
+    """Sample of the command edge."""
+
+    @property
+    def quality(self) -> Quality:
+        """``saturated`` when rate-limited, ``not_determined`` when unfitted in the noise, else the fit's."""
+        if self.rate_limited:
+            return "saturated"
+        if self.fit is None:
+            return "not_determined" if "noise" in self.fit_note else "ok"
+        return self.fit.quality
+
+    @property
+    def quality_note(self) -> str:
+        """Why the quality is what it is."""
+        if self.rate_limited:
+            return self.rate_reason
+        if self.fit is None:
+            return self.fit_note if self.quality != "ok" else ""
+        return self.fit.quality_note
 
     @property
     def command_step_deg(self) -> float:
@@ -78,7 +161,13 @@ class StepResponse:
         return f"step {self.command_step_deg:+.2f}° at {self.time_s:.3f} s"
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            The step's metrics, rate-limit evidence, fit and quality.
+        """
         return {
             "time_s": self.time_s, "command_from_deg": self.command_from_deg, "command_to_deg": self.command_to_deg,
             "command_step_deg": self.command_step_deg, "output": self.output, "initial_deg": self.initial_deg,
@@ -88,7 +177,7 @@ class StepResponse:
             "peak_rate_dps": self.peak_rate_dps, "rate_plateau_s": self.plateau_s,
             "plateau_rate_dps": self.plateau_rate_dps, "rate_limited": self.rate_limited,
             "rate_limit_evidence": self.rate_reason, "fit": self.fit.as_dict() if self.fit else None,
-            "fit_note": self.fit_note,
+            "fit_note": self.fit_note, "quality": self.quality, "quality_note": self.quality_note,
         }
 
 
@@ -156,8 +245,36 @@ def _predicted_peak_rate(amp: float, wn: float, zeta: float) -> float:
 
 
 def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge], *, output: str,
-                  noise_floor: float, rated_slew_dps: float | None = None, fit: bool = True) -> list[StepResponse]:
-    """Metrics of every step, then fits in order of increasing amplitude (see the module docstring)."""
+                  noise_floor: float, rated_slew_dps: float | None = None, fit: bool = True,
+                  sampled: bool = False) -> list[StepResponse]:
+    """Metrics of every step, then fits in order of increasing amplitude (see the module docstring).
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Time, s (uniform).
+    u : numpy.ndarray
+        Command, deg.
+    y : numpy.ndarray
+        The output the steps are measured on.
+    edges : list of Edge
+        The command edges.
+    output : str
+        The output's name.
+    noise_floor : float
+        Its noise floor.
+    rated_slew_dps : float, optional
+        The channel's rated slew rate (table 1), when the record is of one of its channels.
+    fit : bool
+        Fit a second order to every step that is not rate-limited.
+    sampled : bool
+        The command was sampled from a running demand, not held.
+
+    Returns
+    -------
+    list of StepResponse
+        One per edge, in the edges' order.
+    """
     dt = float(np.median(np.diff(t)))
     rows = [(e, _metrics(t, y, e, dt, noise_floor)) for e in edges]
     order = sorted(range(len(rows)), key=lambda i: abs(rows[i][1]["y1"] - rows[i][1]["y0"]))
@@ -167,8 +284,9 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
         e, m = rows[i]
         amp = m["y1"] - m["y0"]
         reasons = []
-        if m["plateau"] >= PLATEAU_S:
-            reasons.append(f"rate within 5 % of its {m['peak']:.1f} °/s peak for {1e3 * m['plateau']:.0f} ms")
+        if m["rise"] and m["plateau"] >= PLATEAU_SHARE * m["rise"] and m["plateau"] >= 3 * dt - 1e-12:
+            reasons.append(f"rate within 5 % of its {m['peak']:.1f} °/s peak for {1e3 * m['plateau']:.0f} ms of its "
+                           f"{1e3 * m['rise']:.0f} ms rise")
         if rated_slew_dps and m["peak"] >= RATED_FRACTION * rated_slew_dps:
             reasons.append(f"peak rate {m['peak']:.1f} °/s ≥ {RATED_FRACTION:.0%} of the rated {rated_slew_dps:g} °/s")
         if reference is not None:
@@ -191,7 +309,7 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
             z0 = hand.zeta if hand else 0.7
             step_fit = fit_step(t[sl], u[sl], y[sl], test=f"step {e.jump:+.2f}° at {t[e.index]:.3f} s",
                                 output_name=output, wn0=min(max(wn0, 5.0), 1000.0), zeta0=min(max(z0, 0.1), 2.0),
-                                delay0=m["delay"] or 0.005, hand=hand)
+                                delay0=m["delay"] or 0.005, hand=hand, sampled=sampled)
             note = "fitted"
             if reference is None:
                 reference = step_fit
@@ -201,13 +319,26 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
             settling_s=m["settling"], settling_band=m["band"], overshoot_pct=m["overshoot"], peak_rate_dps=m["peak"],
             plateau_s=m["plateau"], plateau_rate_dps=m["plateau_rate"], rate_limited=limited,
             rate_reason="; ".join(reasons), fit=step_fit, fit_note=note, start=m["start"], stop=m["stop"],
+            edge=e.index,
         )
     return [results[i] for i in range(len(rows))]
 
 
 @dataclass(frozen=True)
 class SlewRates:
-    """Small- and large-amplitude slew rates (section 2.7)."""
+    """Small- and large-amplitude slew rates (section 2.7).
+
+    Parameters
+    ----------
+    small_dps : float or None
+        Peak rate of the steps that are not rate-limited, deg/s.
+    small_steps_deg : list
+        Their sizes, deg.
+    large_dps : float or None
+        Plateau rate of the longest rate-limited step, deg/s.
+    large_steps_deg : list
+        The rate-limited steps' sizes, deg.
+    """
 
     small_dps: float | None
     small_steps_deg: list[float]
@@ -215,7 +346,13 @@ class SlewRates:
     large_steps_deg: list[float]
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Small- and large-amplitude slew rates, the steps they come from, and their definition.
+        """
         return {"small_amplitude_dps": self.small_dps, "small_amplitude_steps_deg": self.small_steps_deg,
                 "large_amplitude_dps": self.large_dps, "large_amplitude_steps_deg": self.large_steps_deg,
                 "definition": "small: peak rate of the steps that are not rate-limited; large: slope of the "
@@ -231,7 +368,18 @@ def _longest_plateau_rate(large: list[StepResponse]) -> float | None:
 
 
 def slew_rates(steps: list[StepResponse]) -> SlewRates:
-    """Peak rates of the linear steps (small amplitude) and of the rate-limited ones (large amplitude)."""
+    """Peak rates of the linear steps (small amplitude) and of the rate-limited ones (large amplitude).
+
+    Parameters
+    ----------
+    steps : list of StepResponse
+        The steps of a record.
+
+    Returns
+    -------
+    SlewRates
+        Both slew rates.
+    """
     small = [s for s in steps if not s.rate_limited]
     large = [s for s in steps if s.rate_limited]
     return SlewRates(
@@ -239,3 +387,148 @@ def slew_rates(steps: list[StepResponse]) -> SlewRates:
         _longest_plateau_rate(large),
         sorted({round(abs(s.command_step_deg), 4) for s in large}),
     )
+
+
+def read_steps(run: EdgeRun) -> Reading:
+    """Any run of command edges no other test claims: a step set.
+
+    Parameters
+    ----------
+    run : EdgeRun
+        Consecutive command edges.
+
+    Returns
+    -------
+    Reading
+        ``steps``.
+    """
+    jumps = ", ".join(f"{j:+.3g}°" for j in run.jumps[:6])
+    return Reading("steps", f"{run.n} step edge(s) of {jumps}{'...' if run.n > 6 else ''}")
+
+
+def _commanded_edges(ra: RecordAnalysis) -> list[tuple[float, float]]:
+    """(time, jump) of every step the metadata's maneuver commands (none without a maneuver)."""
+    m = ra.recognition.maneuver
+    if m is None or m.kind not in ("step", "steps", "square"):
+        return []
+    t = ra.data.time_s
+    spec = m.command_deg(t - t[0])
+    idx = np.flatnonzero(np.diff(spec) != 0.0) + 1
+    return [(float(t[i]), float(spec[i] - spec[i - 1])) for i in idx]
+
+
+def _missing_steps(ra: RecordAnalysis, found: list[StepResponse]) -> None:
+    """List under ``not_computed`` every commanded step the command does not show as an edge."""
+    rec = ra.recognition
+    for when, jump in _commanded_edges(ra):
+        seen = any(abs(s.time_s - when) <= 0.2 and np.sign(s.command_step_deg) == np.sign(jump)
+                   and abs(abs(s.command_step_deg) - abs(jump)) <= 0.5 * abs(jump) for s in found)
+        if not seen:
+            ra.not_computed[f"steps: {jump:+g}° at {when:.3f} s"] = (
+                "commanded by the metadata's maneuver but not found in the command as an edge between two holds "
+                f"(the command counts as held within {rec.command_tolerance_deg:.2g}° and as stepping from "
+                f"{rec.edge_threshold_deg:.3g}°)")
+
+
+class Steps(Section2Test[StepResponse]):
+    """Step metrics, fits and slew rates of every edge of the step and square-wave segments."""
+
+    key = "steps"
+    title = "Steps"
+    kinds = ("steps", "square")
+    absent = "no step or square-wave command recognised"
+
+    @override
+    def run(self, ra: RecordAnalysis) -> list[StepResponse]:
+        edges = [e for s in ra.segments(*self.kinds) for e in s.edges]
+        out: list[StepResponse] = []
+        if edges:
+            name, y = ra.primary(("position_deg", "surface_deg"))
+            d = ra.data
+            rated = ra.channel.slew_rate_dps if d.unit == "deg" and ra.channel.channel == d.metadata.get(
+                "channel") else None
+            out = analyze_steps(d.time_s, d.command_deg, y, edges, output=name, noise_floor=ra.noise_deg[name],
+                                rated_slew_dps=rated, sampled=ra.command.assumed_sampled)
+        _missing_steps(ra, out)
+        return out
+
+    @override
+    def as_json(self, results: list[StepResponse]) -> dict[str, Any]:
+        return {self.key: [s.as_dict() for s in results],
+                "slew_rates": slew_rates(results).as_dict() if results else None}
+
+    @override
+    def result_json(self, r: StepResponse) -> dict[str, Any]:
+        return r.as_dict()
+
+    @override
+    def fits(self, r: StepResponse) -> list[SecondOrderFit]:
+        return [r.fit] if r.fit is not None else []
+
+    @override
+    def markdown(self, ra: RecordAnalysis, results: list[StepResponse],
+                 images: list[str | None]) -> list[str]:
+        u = ra.unit
+        lines = table(["step", "first motion, ms", "rise 10-90 %, ms", "settling, ms", "overshoot, %",
+                       f"peak rate, {u.strip()}/s", "rate-limited", "quality"],
+                      [[s.label, num(None if s.delay_s is None else 1e3 * s.delay_s, ".2f"),
+                        num(None if s.rise_s is None else 1e3 * s.rise_s, ".1f"),
+                        num(None if s.settling_s is None else 1e3 * s.settling_s, ".0f"),
+                        num(s.overshoot_pct, ".1f"), f"{s.peak_rate_dps:.1f}",
+                        ("yes: " + s.rate_reason) if s.rate_limited else "no",
+                        quality(s.quality, "" if s.rate_limited else s.quality_note)] for s in results])
+        if ra.command.assumed_sampled:
+            lines += [f"The command is sampled, not held: first motions are against the sample at which the change "
+                      f"was logged; the demand changed up to {1e3 * ra.sample_s():.3g} ms earlier.", ""]
+        sr = slew_rates(results)
+        lines += [f"Slew rate: small amplitude {num(sr.small_dps, '.1f', f' {u.strip()}/s')} (steps "
+                  f"{', '.join(f'{a:g}{u}' for a in sr.small_steps_deg) or '—'}), large amplitude "
+                  f"{num(sr.large_dps, '.1f', f' {u.strip()}/s')} (steps "
+                  f"{', '.join(f'{a:g}{u}' for a in sr.large_steps_deg) or '—'}; table 1: 115.8 °/s).", ""]
+        for s, img in zip(results, images, strict=True):
+            lines += image(img, s.label)
+        return lines
+
+    @override
+    def summary(self, ra: RecordAnalysis, r: StepResponse) -> list[str]:
+        f = r.fit
+        extra = (f"; fit ωn {f.wn_rad_s.value:.2f} ± {f.wn_rad_s.sigma:.2g}, ζ {f.zeta.value:.3f}, delay "
+                 f"{1e3 * f.delay_s.value:.2f} ms" if f else f"; {r.fit_note}")
+        flag = "" if r.quality in ("ok", "saturated") else f" [{r.quality}: {r.quality_note}]"
+        return [f"{r.label}: peak rate {r.peak_rate_dps:.1f} °/s{extra}{flag}"]
+
+    @override
+    def plot(self, ra: RecordAnalysis, r: StepResponse, path: Path) -> bool:
+        d = ra.data
+        y = getattr(d, r.output)
+        dt = ra.sample_s()
+        settle = r.settling_s if r.settling_s else 0.4
+        stop = min(r.stop, r.edge + max(round(1.5 * settle / dt), round(0.3 / dt), 12))
+        sl = slice(r.start, stop)
+        tt = 1e3 * (d.time_s[sl] - r.time_s)
+        fig, ax = figure.pyplot().subplots(2, 1, figsize=(7, 5.2), sharex=True,
+                                           gridspec_kw={"height_ratios": [3, 1.3]})
+        ax[0].step(tt, d.command_deg[sl], where="post", color=figure.COLORS["command"], lw=0.8, label="command")
+        ax[0].plot(tt, y[sl], ".-", ms=2.5, color=figure.COLORS.get(r.output, "tab:blue"), lw=1.0, label=r.output)
+        if r.fit:
+            f = r.fit
+            model = f.gain.value * simulate(d.command_deg[sl], dt, f.wn_rad_s.value, f.zeta.value, f.delay_s.value) \
+                + (f.bias_deg.value if f.bias_deg else 0.0)
+            ax[0].plot(tt, model, "k--", lw=0.9, label=f"2nd-order fit ({f.quality})")
+            ax[1].plot(tt, y[sl] - model, lw=0.8, color="tab:red")
+            ax[1].set_ylabel("residual, deg")
+        else:
+            ax[1].plot(tt, y[sl] - d.command_deg[sl], lw=0.8, color="tab:red")
+            ax[1].set_ylabel("output − command")
+        title = r.label + (" (rate-limited)" if r.rate_limited else "")
+        ax[0].set_title(title, fontsize=9)
+        ax[0].set_ylabel("deg")
+        ax[1].set_xlabel("ms from the edge")
+        ax[0].legend(fontsize=7)
+        for a in ax:
+            a.grid(lw=0.3)
+        figure.save(fig, path)
+        return True
+
+
+TEST = Steps()

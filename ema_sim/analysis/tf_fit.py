@@ -33,7 +33,21 @@ PHASE_WEIGHT = 0.01745
 
 @dataclass(frozen=True)
 class TransferFunctionFit:
-    """``B(s)/A(s)·e^{−sτ}``; ``num``/``den`` highest power first (``den[0] = 1``), s in rad/s."""
+    """``B(s)/A(s)·e^{−sτ}``; ``num``/``den`` highest power first (``den[0] = 1``), s in rad/s.
+
+    Parameters
+    ----------
+    num : numpy.ndarray
+        Numerator coefficients, highest power first.
+    den : numpy.ndarray
+        Denominator coefficients, highest power first.
+    delay_s : float
+        Pure delay, s.
+    cost : float
+        The LOES mismatch cost J over the fitted points.
+    rms_relative_error : float
+        RMS of ``|model − data| / |data|`` over the fitted points.
+    """
 
     num: FloatArray
     den: FloatArray
@@ -44,13 +58,39 @@ class TransferFunctionFit:
     """RMS of ``|model − data| / |data|`` over the fitted points."""
 
     def response(self, freq_hz: ArrayLike) -> np.ndarray:
-        """The fitted model's complex response at ``freq_hz``."""
+        """The fitted model's complex response at ``freq_hz``.
+
+        Parameters
+        ----------
+        freq_hz : ArrayLike
+            Frequency, Hz.
+
+        Returns
+        -------
+        np.ndarray
+            The complex response.
+        """
         s = 2j * np.pi * np.asarray(freq_hz, dtype=float)
         return np.polyval(self.num, s) / np.polyval(self.den, s) * np.exp(-s * self.delay_s)
 
 
 def loes_cost(freq_hz: ArrayLike, model: ArrayLike, data: ArrayLike) -> float:
-    """``J = (20/n)·Σ[(ΔG)² + 0.01745·(Δφ)²]``, gains in dB and phases in degrees, over the points given."""
+    """``J = (20/n)·Σ[(ΔG)² + 0.01745·(Δφ)²]``, gains in dB and phases in degrees, over the points given.
+
+    Parameters
+    ----------
+    freq_hz : ArrayLike
+        Frequency, Hz.
+    model : ArrayLike
+        The model's response.
+    data : ArrayLike
+        The measured response.
+
+    Returns
+    -------
+    float
+        J.
+    """
     f = np.asarray(freq_hz, dtype=float)
     hm = np.asarray(model, dtype=complex)
     hd = np.asarray(data, dtype=complex)
@@ -77,7 +117,30 @@ def _levy(w: FloatArray, h: np.ndarray, n_num: int, n_den: int, weight: FloatArr
 
 def levy_sk(freq_hz: ArrayLike, response: ArrayLike, n_num: int, n_den: int, *, delay_s: float = 0.0,
             weights: ArrayLike | None = None, iterations: int = 20) -> tuple[FloatArray, FloatArray]:
-    """Levy's fit refined by Sanathanan–Koerner iterations, for a given delay; (num, den) in rad/s."""
+    """Levy's fit refined by Sanathanan–Koerner iterations, for a given delay; (num, den) in rad/s.
+
+    Parameters
+    ----------
+    freq_hz : ArrayLike
+        Frequency, Hz.
+    response : ArrayLike
+        The measured response.
+    n_num : int
+        Numerator order.
+    n_den : int
+        Denominator order.
+    delay_s : float
+        Pure delay, s.
+    weights : ArrayLike or None
+        Weight of each point.
+    iterations : int
+        Sanathanan-Koerner iterations.
+
+    Returns
+    -------
+    tuple
+        Numerator and denominator.
+    """
     f = np.asarray(freq_hz, dtype=float)
     h = np.asarray(response, dtype=complex) * np.exp(2j * np.pi * f * delay_s)
     w_user = np.ones_like(f) if weights is None else np.asarray(weights, dtype=float)
@@ -111,6 +174,28 @@ def fit_transfer_function(
 
     With ``delay_s=None`` the delay is fitted too: Levy/SK over a grid of trial delays up to
     ``max_delay_s`` picks the start, then nonlinear least squares refines everything together.
+
+    Parameters
+    ----------
+    freq_hz : ArrayLike
+        Frequency, Hz.
+    response : ArrayLike
+        The measured response.
+    n_num : int
+        Numerator order.
+    n_den : int
+        Denominator order.
+    delay_s : float or None
+        Pure delay, s.
+    max_delay_s : float
+        Largest delay searched, s.
+    weights : ArrayLike or None
+        Weight of each point.
+
+    Returns
+    -------
+    TransferFunctionFit
+        The fit.
     """
     f = np.asarray(freq_hz, dtype=float).ravel()
     h = np.asarray(response, dtype=complex).ravel()
@@ -160,7 +245,18 @@ def fit_transfer_function(
 
 
 def second_order_coefficients(fit: TransferFunctionFit) -> dict[str, float]:
-    """ωn, ζ, DC gain and delay of a fitted ``b0/(s² + a1·s + a0)·e^{−sτ}``."""
+    """The ωn, ζ, DC gain and delay of a fitted ``b0/(s² + a1·s + a0)·e^{−sτ}``.
+
+    Parameters
+    ----------
+    fit : TransferFunctionFit
+        A second-order fit.
+
+    Returns
+    -------
+    dict
+        The coefficients ωn, ζ, τ and K.
+    """
     if fit.den.size != 3 or fit.num.size != 1:
         raise EmaError("second_order_coefficients needs a fit with 0 zeros and 2 poles")
     a1, a0 = fit.den[1], fit.den[2]

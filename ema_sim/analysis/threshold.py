@@ -14,17 +14,24 @@ the external sensor "matched the waveform of the command in a qualitative manner
   variance the tone explains (R²). Onset: the command amplitude from which the output's tone stays
   above 6 standard errors of the noise; follow: from which R² ≥ 0.9 and the gain is within 3 dB.
 
-Amplitudes are also given in command volts through the channel's command curve slope.
+Amplitudes are also given in command volts through the channel's command curve slope. Both tests
+are recognised from a steady tone whose amplitude grows (:func:`read_growing_tone`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from typing_extensions import override
 
+from ema_sim.analysis import figure
+from ema_sim.analysis.markdown import bullets, image, num, quality
+from ema_sim.analysis.section2 import Quality, RecordAnalysis, Section2Test
+from ema_sim.analysis.segments import MovingStretch, Reading
 from ema_sim.analysis.series import extrema, moving_average
 from ema_sim.analysis.sine_fit import sine_at
 
@@ -45,7 +52,31 @@ def _first_sustained(flags: NDArray[np.bool_]) -> int | None:
 
 @dataclass(frozen=True)
 class StaticThreshold:
-    """Static threshold from slowly growing triangles."""
+    """Static threshold from slowly growing triangles.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    onset_deg : float or None
+        Motion onset (dead-zone half width), deg.
+    follow_deg : float or None
+        Amplitude from which the output follows, deg.
+    volts_per_deg : float
+        Command volts per degree.
+    swing_deg : numpy.ndarray
+        Command swing of each half cycle, deg.
+    output_swing_deg : numpy.ndarray
+        Output swing of each half cycle, deg.
+    gain : float or None
+        Tracking gain above the threshold.
+    notes : list
+        What the test could not find.
+    start_s : float
+        Start of the segment, s.
+    end_s : float
+        End of the segment, s.
+    """
 
     output: str
     onset_deg: float | None
@@ -55,12 +86,22 @@ class StaticThreshold:
     output_swing_deg: FloatArray
     gain: float | None
     notes: list[str] = field(default_factory=list)
+    start_s: float = 0.0
+    end_s: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Onset and follow amplitude in degrees and volts, the gain, every half cycle, quality, notes.
+        """
         v = self.volts_per_deg
+        q, why = _quality_note(self.onset_deg, self.follow_deg)
         return {
             "output": self.output, "onset_deg": self.onset_deg, "follow_amplitude_deg": self.follow_deg,
+            "quality": q, "quality_note": why,
             "onset_v": None if self.onset_deg is None else self.onset_deg * v,
             "follow_amplitude_v": None if self.follow_deg is None else self.follow_deg * v,
             "tracking_gain_above_threshold": self.gain,
@@ -74,7 +115,28 @@ class StaticThreshold:
 
 def static_threshold(t: FloatArray, u: FloatArray, y: FloatArray, noise: float, *, output: str,
                      volts_per_deg: float) -> StaticThreshold | None:
-    """See the module docstring; None when there are fewer than 4 half cycles."""
+    """See the module docstring; None when there are fewer than 4 half cycles.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    u : numpy.ndarray
+        The command, deg.
+    y : numpy.ndarray
+        The output, deg.
+    noise : float
+        The output's noise floor, deg.
+    output : str
+        Name of the output.
+    volts_per_deg : float
+        Command volts per degree.
+
+    Returns
+    -------
+    StaticThreshold or None
+        The threshold, or None with fewer than 4 half cycles.
+    """
     dt = float(np.median(np.diff(t)))
     turns = extrema(u)
     if turns.size < 4:
@@ -104,7 +166,29 @@ def static_threshold(t: FloatArray, u: FloatArray, y: FloatArray, noise: float, 
 
 @dataclass(frozen=True)
 class DynamicThreshold:
-    """Dynamic threshold from a tone of growing amplitude."""
+    """Dynamic threshold from a tone of growing amplitude.
+
+    Parameters
+    ----------
+    output : str
+        Name of the output.
+    freq_hz : float
+        Frequency, Hz.
+    onset_deg : float or None
+        Motion onset, deg.
+    follow_deg : float or None
+        Amplitude from which the output follows, deg.
+    volts_per_deg : float
+        Command volts per degree.
+    command_amp_deg : numpy.ndarray
+        Command amplitude of each window, deg.
+    output_amp_deg : numpy.ndarray
+        Output amplitude of each window, deg.
+    r2 : numpy.ndarray
+        Share of the output's variance the tone explains, per window.
+    notes : list
+        What the test could not find.
+    """
 
     output: str
     freq_hz: float
@@ -117,10 +201,18 @@ class DynamicThreshold:
     notes: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain values for JSON."""
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Onset and follow amplitude in degrees and volts, every window, quality, notes.
+        """
         v = self.volts_per_deg
+        q, why = _quality_note(self.onset_deg, self.follow_deg)
         return {
             "output": self.output, "freq_hz": self.freq_hz, "onset_deg": self.onset_deg,
+            "quality": q, "quality_note": why,
             "follow_amplitude_deg": self.follow_deg, "onset_v": None if self.onset_deg is None else self.onset_deg * v,
             "follow_amplitude_v": None if self.follow_deg is None else self.follow_deg * v,
             "windows": {"command_amplitude_deg": self.command_amp_deg.tolist(),
@@ -133,7 +225,32 @@ class DynamicThreshold:
 
 def dynamic_threshold(t: FloatArray, u: FloatArray, y: FloatArray, freq_hz: float, noise: float, *,
                       output: str, volts_per_deg: float, periods: int = 2) -> DynamicThreshold | None:
-    """See the module docstring; None when the record holds fewer than 4 windows."""
+    """See the module docstring; None when the record holds fewer than 4 windows.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s.
+    u : numpy.ndarray
+        The command, deg.
+    y : numpy.ndarray
+        The output, deg.
+    freq_hz : float
+        Frequency, Hz.
+    noise : float
+        The output's noise floor, deg.
+    output : str
+        Name of the output.
+    volts_per_deg : float
+        Command volts per degree.
+    periods : int
+        Periods per window.
+
+    Returns
+    -------
+    DynamicThreshold or None
+        The threshold, or None with fewer than 4 windows.
+    """
     dt = float(np.median(np.diff(t)))
     n_win = max(8, round(periods / freq_hz / dt))
     step = max(1, round(1.0 / freq_hz / dt))
@@ -164,3 +281,166 @@ def dynamic_threshold(t: FloatArray, u: FloatArray, y: FloatArray, freq_hz: floa
     if onset is not None and on == 0:
         notes.append("the output moved from the first window: the threshold is below the smallest amplitude")
     return DynamicThreshold(output, freq_hz, onset, follow, volts_per_deg, au_a, ay_a, r2_a, notes)
+
+
+def read_growing_tone(m: MovingStretch) -> Reading | None:
+    """A steady tone whose amplitude grows by more than half: a threshold test (static below 1 Hz).
+
+    Parameters
+    ----------
+    m : MovingStretch
+        A moving stretch of the command.
+
+    Returns
+    -------
+    Reading or None
+        ``static_threshold`` or ``dynamic_threshold`` with the tone's frequency, or None.
+    """
+    if not m.steady or m.growth <= 1.5:
+        return None
+    freq = m.tone_hz
+    kind = "static_threshold" if freq < 1.0 else "dynamic_threshold"
+    return Reading(kind, f"{freq:.3g} Hz tone whose amplitude grows {m.growth:.2g}×", {"freq_hz": freq})
+
+
+def _threshold_output(ra: RecordAnalysis) -> tuple[str, FloatArray]:
+    """The external sensor (the LVDT when there is none): thresholds are what the surface follows."""
+    return ra.primary(("surface_deg", "position_deg"))
+
+
+def _quality_note(onset: float | None, follow: float | None) -> tuple[Quality, str]:
+    if onset is None:
+        return "not_determined", "the output never moved clearly"
+    if follow is None:
+        return "not_determined", "the output never followed"
+    return "ok", ""
+
+
+class Static(Section2Test[StaticThreshold]):
+    """Static threshold of each slowly growing triangle."""
+
+    key = "static_threshold"
+    title = "Static threshold (section 2.1.1)"
+    kinds = ("static_threshold",)
+    absent = "no slow triangles of growing amplitude recognised"
+
+    @override
+    def run(self, ra: RecordAnalysis) -> list[StaticThreshold]:
+        data, t = ra.data, ra.data.time_s
+        name, y = _threshold_output(ra)
+        out = []
+        for seg in ra.segments(*self.kinds):
+            sl = slice(seg.start, seg.stop)
+            r = static_threshold(t[sl], data.command_deg[sl], y[sl], ra.noise_deg[name], output=name,
+                                 volts_per_deg=ra.volts_per_deg())
+            if r:
+                out.append(replace(r, start_s=float(t[seg.start]), end_s=float(t[seg.stop - 1])))
+        return out
+
+    @override
+    def result_json(self, r: StaticThreshold) -> dict[str, Any]:
+        return r.as_dict()
+
+    @override
+    def markdown(self, ra: RecordAnalysis, results: list[StaticThreshold],
+                 images: list[str | None]) -> list[str]:
+        lines: list[str] = []
+        for s, img in zip(results, images, strict=True):
+            q, why = _quality_note(s.onset_deg, s.follow_deg)
+            lines += [f"Motion onset {num(s.onset_deg, '.4f', '°')} "
+                      f"({num(None if s.onset_deg is None else s.onset_deg * s.volts_per_deg, '.4f', ' V')}); "
+                      f"follows from {num(s.follow_deg, '.4f', '°')} amplitude; gain above threshold "
+                      f"{num(s.gain, '.3f')} (on {s.output}). Quality: {quality(q, why)}.", ""]
+            lines += bullets(s.notes)
+            lines += image(img, "static threshold")
+        return lines
+
+    @override
+    def summary(self, ra: RecordAnalysis, r: StaticThreshold) -> list[str]:
+        return [f"static threshold: onset {num(r.onset_deg, '.4f', '°')}, follows from {num(r.follow_deg, '.4f', '°')}"]
+
+    @override
+    def plot(self, ra: RecordAnalysis, r: StaticThreshold, path: Path) -> bool:
+        fig, ax = figure.pyplot().subplots(figsize=(7, 4))
+        ax.plot(r.swing_deg / 2, r.output_swing_deg / 2, "o", ms=4, label="half cycles")
+        if r.onset_deg is not None and r.gain:
+            a = np.linspace(0, r.swing_deg.max() / 2, 50)
+            ax.plot(a, np.maximum(r.gain * (a - r.onset_deg), 0), "k--", lw=1, label=f"dead zone {r.onset_deg:.4f}°")
+        ax.set_xlabel("command amplitude (half swing), deg")
+        _finish_threshold_plot(ax, "static threshold")
+        figure.save(fig, path)
+        return True
+
+
+class Dynamic(Section2Test[DynamicThreshold]):
+    """Dynamic threshold of each tone of growing amplitude."""
+
+    key = "dynamic_threshold"
+    title = "Dynamic threshold (section 2.1.2)"
+    kinds = ("dynamic_threshold",)
+    absent = "no tone of growing amplitude recognised"
+
+    @override
+    def run(self, ra: RecordAnalysis) -> list[DynamicThreshold]:
+        data, t = ra.data, ra.data.time_s
+        name, y = _threshold_output(ra)
+        out = []
+        for seg in ra.segments(*self.kinds):
+            f = seg.params.get("freq_hz")
+            if not f:
+                continue
+            sl = slice(seg.start, seg.stop)
+            r = dynamic_threshold(t[sl], data.command_deg[sl], y[sl], f, ra.noise_deg[name], output=name,
+                                  volts_per_deg=ra.volts_per_deg())
+            if r:
+                out.append(r)
+        return out
+
+    @override
+    def result_json(self, r: DynamicThreshold) -> dict[str, Any]:
+        return r.as_dict()
+
+    @override
+    def markdown(self, ra: RecordAnalysis, results: list[DynamicThreshold],
+                 images: list[str | None]) -> list[str]:
+        lines: list[str] = []
+        for s, img in zip(results, images, strict=True):
+            q, why = _quality_note(s.onset_deg, s.follow_deg)
+            lines += [f"{s.freq_hz:g} Hz: motion onset {num(s.onset_deg, '.4f', '°')} amplitude; follows from "
+                      f"{num(s.follow_deg, '.4f', '°')} (on {s.output}). Quality: {quality(q, why)}.", ""]
+            lines += bullets(s.notes)
+            lines += image(img, "dynamic threshold")
+        return lines
+
+    @override
+    def summary(self, ra: RecordAnalysis, r: DynamicThreshold) -> list[str]:
+        return [f"dynamic threshold: onset {num(r.onset_deg, '.4f', '°')}, follows from "
+                f"{num(r.follow_deg, '.4f', '°')}"]
+
+    @override
+    def plot(self, ra: RecordAnalysis, r: DynamicThreshold, path: Path) -> bool:
+        fig, ax = figure.pyplot().subplots(figsize=(7, 4))
+        ax.plot(r.command_amp_deg, r.output_amp_deg, "o", ms=3, label="output amplitude")
+        twin = ax.twinx()
+        twin.plot(r.command_amp_deg, np.clip(r.r2, 0, 1), "-", color="0.6", lw=0.8)
+        twin.set_ylim(0, 1.05)
+        twin.set_ylabel(f"R² of the {r.freq_hz:g} Hz tone in the output (grey)")
+        if r.onset_deg is not None:
+            ax.axvline(r.onset_deg, color="r", ls="--", lw=0.8, label=f"onset {r.onset_deg:.4f}°")
+        ax.set_xlabel("command amplitude, deg")
+        _finish_threshold_plot(ax, f"dynamic threshold, {r.freq_hz:g} Hz")
+        figure.save(fig, path)
+        return True
+
+
+def _finish_threshold_plot(ax: Any, title: str) -> None:
+    lim = ax.get_xlim()
+    ax.plot(lim, lim, ":", color="0.5", lw=0.8, label="1:1")
+    ax.set_ylabel("output amplitude, deg")
+    ax.legend(fontsize=8)
+    ax.grid(lw=0.3)
+    ax.set_title(title)
+
+
+STATIC = Static()
+DYNAMIC = Dynamic()

@@ -27,7 +27,15 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Covariance:
-    """Parameter covariances of one fit: corrected for coloured residuals, and the white-noise one."""
+    """Parameter covariances of one fit: corrected for coloured residuals, and the white-noise one.
+
+    Parameters
+    ----------
+    coloured : numpy.ndarray
+        Covariance corrected for coloured residuals.
+    white : numpy.ndarray
+        Covariance under white residuals.
+    """
 
     coloured: FloatArray
     white: FloatArray
@@ -56,7 +64,7 @@ def _middle(jac: FloatArray, residual: FloatArray) -> FloatArray:
     if nfft % 2 == 0:
         weight[-1] = 1.0
     m = (np.conj(jf) * (w * weight[:, None])).T @ jf
-    return np.real(m) / (n * nfft)
+    return np.asarray(np.real(m) / (n * nfft), dtype=float)
 
 
 def coloured_covariance(jac: FloatArray, residual: FloatArray | Sequence[FloatArray],
@@ -67,6 +75,20 @@ def coloured_covariance(jac: FloatArray, residual: FloatArray | Sequence[FloatAr
     residual vector stacks several independent sequences (gain and phase of a frequency response, say),
     give their ``blocks``; the autocovariance is then taken within each block and cross-block
     correlation is assumed zero.
+
+    Parameters
+    ----------
+    jac : numpy.ndarray
+        ∂(model output)/∂θ at the estimate, one row per residual.
+    residual : numpy.ndarray or Sequence[numpy.ndarray]
+        The residual.
+    blocks : Sequence[slice] or None
+        Independent blocks of the residual (each its own autocovariance).
+
+    Returns
+    -------
+    Covariance
+        Both covariances.
     """
     jac = np.asarray(jac, dtype=float)
     r = np.asarray(residual, dtype=float).ravel()

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ema_sim.commands.common import add_data_args, check_channel, rig_format
 from ema_sim.errors import SpecError
 
 
@@ -22,46 +23,22 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def _summary(ra: Any) -> list[str]:
     """A few lines per record for the terminal."""
-    lines = [f"{ra.data.source}: {len(ra.data)} samples at {ra.data.sample_hz:.6g} Hz, channel {ra.channel.channel}; "
-             f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}"]
-    for fr in ra.frequency:
-        bw = f"{fr.bandwidth_hz:.2f} Hz" if fr.bandwidth_hz else "—"
-        fit = fr.fit
-        fit_s = (f"; ωn {fit.wn_rad_s.value:.2f} ± {fit.wn_rad_s.sigma:.2g} rad/s, ζ {fit.zeta.value:.3f} ± "
-                 f"{fit.zeta.sigma:.2g}, delay {1e3 * fit.delay_s.value:.2f} ± {1e3 * fit.delay_s.sigma:.2g} ms"
-                 if fit else "")
-        lines.append(f"  {fr.kind} → {fr.response.output}: −3 dB {bw}; {fr.coherence_note}{fit_s}")
-    for s in ra.steps:
-        f = s.fit
-        extra = (f"; fit ωn {f.wn_rad_s.value:.2f} ± {f.wn_rad_s.sigma:.2g}, ζ {f.zeta.value:.3f}, delay "
-                 f"{1e3 * f.delay_s.value:.2f} ms" if f else f"; {s.fit_note}")
-        lines.append(f"  {s.label}: peak rate {s.peak_rate_dps:.1f} °/s{extra}")
-    if ra.timing and ra.timing.command_to_motion_s is not None:
-        m2f = ra.timing.motion_to_feedback_s
-        lines.append(f"  timing: command → first motion {1e3 * ra.timing.command_to_motion_s:.2f} ms, motion → "
-                     f"feedback {'—' if m2f is None else f'{1e3 * m2f:.2f} ms'}")
-    for c in ra.calibration:
-        lines.append(f"  command error: Kb {c.error.kb:+.5f}, offset {c.error.offset_deg:+.4f}°")
-    for s in ra.static_threshold:
-        lines.append(f"  static threshold: onset {s.onset_deg}, follows from {s.follow_deg}")
-    for s in ra.dynamic_threshold:
-        lines.append(f"  dynamic threshold: onset {s.onset_deg}, follows from {s.follow_deg}")
-    for c in ra.crosstalk:
-        lines.append(f"  crosstalk: {c.peak_to_peak_deg:.4f}° p-p, {'below' if c.below_threshold else 'ABOVE'} "
-                     f"threshold {c.threshold_deg:.4f}°")
-    for x in ra.dither:
-        lines.append(f"  dither: {x.statement}")
-    for c in ra.compliance:
-        share = "—" if c.share_outside is None else f"{100 * c.share_outside:.1f} %"
-        lines.append(f"  compliance: share outside the servo loop {share}")
-    for h in ra.hysteresis:
-        lines.append(f"  hysteresis: A {h.area_inlb:.4g} in·lb, Pk {h.peak_in:.5f} in, h {h.h_lb_per_in:,.2f} lb/in")
-    for fp in ra.free_play:
-        lines.append(f"  free play: {fp.width_deg:.4f}°")
-    if ra.regeneration:
-        g = ra.regeneration
-        lines.append(f"  regeneration: peak {g.peak_v:.1f} V, margin {g.margin_v:.1f} V to {g.limit_v:g} V")
-    lines += [f"  not computed: {k}: {v}" for k, v in ra.not_computed.items()]
+    from ema_sim.analysis.registry import TESTS  # noqa: PLC0415
+
+    d = ra.data
+    lines = [f"{d.source}: {len(d)} samples at {d.sample_hz:.6g} Hz, channel {ra.channel.channel}; "
+             f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}",
+             f"  command: {ra.command.statement}"]
+    counts = {k: v for k, v in ra.resolution_deg.items() if v}
+    if counts:
+        lines.append("  resolution: " + ", ".join(f"{k} {v:g}" for k, v in counts.items()))
+    for test in TESTS:
+        for r in ra.of(test):
+            lines += [f"  {line}" for line in test.summary(ra, r)]
+    absent = [k for k, v in ra.not_computed.items() if "recognised" in v and not v.startswith("no hinge")]
+    lines += [f"  not computed: {k}: {v}" for k, v in ra.not_computed.items() if k not in absent]
+    if absent:
+        lines.append(f"  not in this record: {', '.join(absent)}")
     return lines
 
 
@@ -71,13 +48,15 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415
 
+    check_channel(args.channel)
+    rig = rig_format(args)
     options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
-                      compliance_deg_per_kinlb=args.compliance, channel=args.channel)
+                      compliance_deg_per_kinlb=args.compliance, channel=args.channel, command=args.command_hold)
     if args.model:
         from ema_sim.models import model_class  # noqa: PLC0415
 
         model_class(args.model)  # an unknown name is one clear error before any work
-    records = analyze_records([load_record(path, args.channel) for path in args.data], options)
+    records = analyze_records([load_record(path, args.channel, rig) for path in args.data], options)
     for ra in records:
         print("\n".join(_summary(ra)))
     if args.json:
@@ -113,4 +92,8 @@ def register(sub: Any) -> None:
                    help="threshold the crosstalk noise is judged against (default: measured, else table A2)")
     p.add_argument("--compliance", type=float, default=None, metavar="DEG_PER_KINLB",
                    help="compliance taken out of free-play jumps (default: measured in the same record)")
+    p.add_argument("--command", dest="command_hold", default="detect", choices=("detect", "held", "sampled"),
+                   help="how the rig logged its command: held between samples (the data contract), sampled from a "
+                        "running demand, or detect it from the record (default)")
+    add_data_args(p)
     p.set_defaults(func=run)

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from ema_sim.errors import SpecError
+
+if TYPE_CHECKING:
+    from ema_sim.io.csv import RigFormat
 
 
 def parse_overrides(items: Sequence[str] | None) -> dict[str, float]:
@@ -27,3 +31,36 @@ def add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--channel", default="left_wing", help="EMAC channel (default left_wing)")
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="override a model parameter (repeatable), e.g. --set delay_s=0")
+
+
+def add_data_args(p: argparse.ArgumentParser) -> None:
+    """``--columns``, ``--delimiter`` and ``--crank-arm-in`` for commands that read a rig's own file."""
+    p.add_argument("--columns", default=None, metavar="NAME=COLUMN,...",
+                   help="map a rig file's columns onto the contract's, with units: e.g. "
+                        "time_ms=t,command_deg=demand,position_deg=pos (position_mm, position_in: linear)")
+    p.add_argument("--delimiter", default=None, choices=("tab", "comma", "semicolon"),
+                   help="a rig file's delimiter (default: sniffed from its header)")
+    p.add_argument("--crank-arm-in", type=float, default=None, metavar="IN",
+                   help="turn linear positions (mm, in) into degrees through this crank arm (default: keep them)")
+
+
+def rig_format(args: argparse.Namespace) -> RigFormat | None:
+    """The rig-file layout the arguments describe (None: a data-contract CSV or a bag)."""
+    from ema_sim.errors import DataError  # noqa: PLC0415
+    from ema_sim.io.csv import RigFormat, parse_columns  # noqa: PLC0415
+
+    if args.crank_arm_in is not None and not args.crank_arm_in > 0:
+        raise DataError(f"--crank-arm-in must be positive, got {args.crank_arm_in:g}")
+    if args.columns is None and args.delimiter is None and args.crank_arm_in is None:
+        return None
+    columns = parse_columns(args.columns) if args.columns else {}
+    return RigFormat(columns, args.delimiter, args.crank_arm_in)
+
+
+def check_channel(name: str | None) -> None:
+    """An unknown ``--channel`` is one clear error (exit 2), never a silent stand-in."""
+    from ema_sim.config import CHANNELS  # noqa: PLC0415
+    from ema_sim.errors import UnknownNameError  # noqa: PLC0415
+
+    if name is not None and name not in CHANNELS:
+        raise UnknownNameError("channel", name, CHANNELS)

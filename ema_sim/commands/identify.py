@@ -7,21 +7,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ema_sim.commands.common import parse_overrides
+from ema_sim.commands.common import add_data_args, check_channel, parse_overrides, rig_format
 
 
-def load_measured(path: Path, channel: str | None) -> Any:
-    """A measured record from a data-contract CSV, or from a rosbag2 when the bag reader is installed."""
+def load_measured(path: Path, channel: str | None, rig: Any = None) -> Any:
+    """A measured record from a data-contract CSV, a rig's own file (``rig``), or a rosbag2."""
     from ema_sim import io as ema_io  # noqa: PLC0415
-    from ema_sim.errors import DataError  # noqa: PLC0415
-    from ema_sim.io.csv import read_csv  # noqa: PLC0415
 
-    loader = getattr(ema_io, "load_data", None)
-    if loader is not None:
-        return loader(path, channel=channel)
-    if path.is_dir() or path.suffix == ".mcap":
-        raise DataError(f"{path}: reading rosbag2 needs ema_sim.io.bag (the node suite)")
-    return read_csv(path)
+    return ema_io.load_data(path, channel=channel, rig=rig)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,7 +23,8 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.identify.report import summary, to_json, write_json, write_report  # noqa: PLC0415
     from ema_sim.identify.stepwise import identify  # noqa: PLC0415
 
-    data = load_measured(args.data, args.channel)
+    check_channel(args.channel)
+    data = load_measured(args.data, args.channel, rig_format(args))
     channel = args.channel or data.metadata.get("channel", "")
     if channel not in CHANNELS:
         channel = "left_wing"
@@ -65,4 +59,5 @@ def register(sub: Any) -> None:
     p.add_argument("--json", type=Path, default=None, help="write the report JSON here")
     p.add_argument("--report", type=Path, default=None, help="write report.md and plots in this directory")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    add_data_args(p)
     p.set_defaults(func=run)

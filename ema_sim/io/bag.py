@@ -430,7 +430,25 @@ def _test_metadata(src: _Source) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class BagInfo:
-    """What a bag holds."""
+    """What a bag holds.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The bag directory.
+    topics : dict
+        Topic → (message type, message count).
+    start_s : float
+        First log time, s.
+    duration_s : float
+        From the first log time to the last, s.
+    metadata : dict
+        The test's parameters.
+    channels : list of str
+        Channels whose EMAC feedback was recorded.
+    complete : bool
+        False when the bag was never closed (read record by record).
+    """
 
     path: Path
     topics: dict[str, tuple[str, int]]
@@ -449,7 +467,18 @@ class BagInfo:
 
 
 def bag_info(path: str | Path) -> BagInfo:
-    """Topics, counts, time span, test metadata and channels of a bag."""
+    """Topics, counts, time span, test metadata and channels of a bag.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+
+    Returns
+    -------
+    BagInfo
+        What it holds.
+    """
     src = _open(path)
     lo, hi = math.inf, -math.inf
     channels: set[str] = set()
@@ -472,7 +501,18 @@ def bag_info(path: str | Path) -> BagInfo:
 
 
 def bag_channels(path: str | Path) -> list[str]:
-    """The channels whose EMAC feedback the bag recorded."""
+    """The channels whose EMAC feedback the bag recorded.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+
+    Returns
+    -------
+    list of str
+        The channels, the contract's order first.
+    """
     return bag_info(path).channels
 
 
@@ -499,7 +539,9 @@ def _scaling(meta: Mapping[str, str], channel: str) -> ct.Scaling:
         return ct.scaling(channel)
     try:
         doc = json.loads(text)
-        return ct.Scaling(channel, tuple(map(float, doc["command_cal_v"])), tuple(map(float, doc["feedback_cal_deg"])))
+        c0, c1, c2, c3 = (float(x) for x in doc["command_cal_v"])
+        f0, f1, f2, f3 = (float(x) for x in doc["feedback_cal_deg"])
+        return ct.Scaling(channel, (c0, c1, c2, c3), (f0, f1, f2, f3))
     except (ValueError, KeyError, TypeError):
         raise DataError(f"calibration.{channel}: malformed calibration in the bag's metadata") from None
 
@@ -516,15 +558,35 @@ def _pick_channel(src: _Source, path: str | Path, meta: Mapping[str, str], chann
     return channel
 
 
+def _on_frames(series: Mapping[int, float], stamps: list[int]) -> FloatArray | None:
+    """A recorded series on the frames: each frame's value, else the last one before it (None if never recorded)."""
+    if not series:
+        return None
+    out = np.array([series.get(s, math.nan) for s in stamps])
+    if not np.isfinite(out).any():
+        return None
+    first = out[np.isfinite(out)][0]
+    last = first
+    for k, v in enumerate(out):
+        if math.isfinite(v):
+            last = v
+        else:
+            out[k] = last
+    return out
+
+
 def _optional_columns(src: _Source, channel: str, stamps: list[int], fb_topic: str) -> dict[str, FloatArray | None]:
-    """Surface angle, applied hinge moment and motor current on the frames, where recorded."""
-    cols: dict[str, FloatArray | None] = {"surface_deg": None, "hinge_moment_inlb": None, "current_a": None}
+    """Surface angle and rate, applied hinge moment, motor current and bus voltage on the frames, where recorded."""
+    cols: dict[str, FloatArray | None] = {"surface_deg": None, "hinge_moment_inlb": None, "current_a": None,
+                                          "bus_v": None, "rate_dps": None}
     has_surface = ct.SURFACE in src.topics
     surface = _joint_series(src, ct.SURFACE, channel, "position") if has_surface else {}
     applied = _joint_series(src, ct.SURFACE, channel, "effort") if has_surface else {}
     load = _joint_series(src, ct.HINGE_MOMENT, channel, "effort") if ct.HINGE_MOMENT in src.topics else {}
     if surface and all(s in surface for s in stamps):
         cols["surface_deg"] = np.array([surface[s] for s in stamps])
+    if has_surface:
+        cols["rate_dps"] = _on_frames(_joint_series(src, ct.SURFACE, channel, "velocity"), stamps)
     if applied or load:
         nxt = dict(itertools.pairwise(stamps))
         hm: list[float] = []
@@ -536,11 +598,43 @@ def _optional_columns(src: _Source, channel: str, stamps: list[int], fb_topic: s
     cur = np.array([current.get(s, math.nan) for s in stamps])
     if np.isfinite(cur).any():
         cols["current_a"] = np.where(np.isfinite(cur), cur, 0.0)
+    if ct.BUS in src.topics:
+        cols["bus_v"] = _on_frames(_joint_series(src, ct.BUS, channel, "position"), stamps)
     return cols
 
 
+def _other_side(src: _Source, channel: str, stamps: list[int], side: str, sc: ct.Scaling) -> dict[str, FloatArray]:
+    """The other side of the test environment on the frames, in degrees (``fmu_command_deg``...)."""
+    other = "fmu" if side == "emac" else "emac"
+    out: dict[str, FloatArray] = {}
+    for what, convert, name in (("command", sc.command_v_to_deg, "command_deg"),
+                                ("feedback", sc.feedback_v_to_deg, "position_deg")):
+        topic = f"/ema/{other}/{what}"
+        if topic not in src.topics:
+            continue
+        volts = _on_frames(_joint_series(src, topic, channel, "position"), stamps)
+        if volts is not None:
+            out[f"{other}_{name}"] = np.array([convert(v) for v in volts])
+    return out
+
+
 def read_joint_topic(path: str | Path, topic: str, field_name: str = "position") -> dict[str, dict[int, float]]:
-    """Every name of a ``JointState`` topic → {stamp_ns: value of ``field_name``} (e.g. ``/ema/fmu/vehicle``)."""
+    """Every name of a ``JointState`` topic → {stamp_ns: value of ``field_name``} (e.g. ``/ema/fmu/vehicle``).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+    topic : str
+        A ``sensor_msgs/JointState`` topic.
+    field_name : str
+        ``position``, ``velocity`` or ``effort``.
+
+    Returns
+    -------
+    dict
+        Name → {stamp in ns: value}.
+    """
     src = _open(path)
     if topic not in src.topics:
         raise DataError(f"{src.path}: no topic {topic} (topics: {', '.join(sorted(src.topics)) or 'none'})")
@@ -553,12 +647,26 @@ def read_joint_topic(path: str | Path, topic: str, field_name: str = "position")
 
 
 def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac") -> MeasuredData:
-    """One channel of a suite bag as data-contract columns, in degrees.
+    """One channel of a suite bag as data-contract columns, in degrees, with every other signal it recorded.
 
-    ``side="emac"`` (default) reads what the actuator saw and reported, the EMAC side of the test
-    environment; ``side="fmu"`` what the flight computer sent and read. Rows are the frames with
-    both a command and a feedback; the command holds over its frame, position and surface are at the
-    frame's start, the hinge moment is the one applied over the frame.
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag directory (or its ``.mcap`` file).
+    channel : str, optional
+        The channel to read (default: the test's, else the only one).
+    side : {"emac", "fmu"}
+        ``emac`` (default) reads what the actuator saw and reported, the EMAC side of the test
+        environment; ``fmu`` what the flight computer sent and read.
+
+    Returns
+    -------
+    MeasuredData
+        Rows are the frames with both a command and a feedback; the command holds over its frame,
+        position and surface are at the frame's start, the hinge moment is the one applied over the
+        frame. Besides the contract's columns: ``bus_v`` (``/ema/sensor/bus``), ``rate_dps`` (the
+        surface topic's velocity) and, in ``extra``, the other side's command and feedback
+        (``fmu_command_deg``, ``fmu_position_deg`` on the EMAC side).
     """
     if side not in SIDES:
         raise DataError(f"side must be one of {', '.join(SIDES)}, got {side!r}")
@@ -590,13 +698,19 @@ def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac"
     t0 = int(t[0])
     meta = {**meta, "source": "rosbag2", "side": side, "channel": channel,
             "bag_complete": str(src.complete).lower(), "start_stamp_s": f"{t0 * 1e-9:.9f}"}
+    cols = _optional_columns(src, channel, stamps, fb_topic)
     return MeasuredData(
-        time_s=(t - t0) * 1e-9,
+        time_s=np.asarray((t - t0) * 1e-9, dtype=float),
         command_deg=np.array([sc.command_v_to_deg(v) for v in cv]),
         position_deg=np.array([sc.feedback_v_to_deg(v) for v in pv]),
+        surface_deg=cols["surface_deg"],
+        hinge_moment_inlb=cols["hinge_moment_inlb"],
+        current_a=cols["current_a"],
         command_v=cv,
         position_v=pv,
         metadata=meta,
         source=str(src.path),
-        **_optional_columns(src, channel, stamps, fb_topic),
+        bus_v=cols["bus_v"],
+        rate_dps=cols["rate_dps"],
+        extra=_other_side(src, channel, stamps, side, sc),
     )

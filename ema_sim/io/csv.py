@@ -1,7 +1,16 @@
-"""The measured-data CSV of ``../shared/data-contract.md``: strict reading, faithful writing.
+"""The measured-data CSV of ``../shared/data-contract.md``: strict reading, faithful writing, rig files.
 
 Reading checks every rule of the contract and fails with one :class:`~ema_sim.errors.DataError`
 that names the file line and the column; it never returns partial data.
+
+Rig files as they come (:class:`RigFormat`, :func:`read_rig`): tab or comma separated (sniffed from
+the header), columns under the rig's own names mapped onto the contract's by an option such as
+``time_ms=t,command_deg=demand,position_deg=pos`` (:func:`parse_columns`), time in seconds or
+milliseconds, positions in degrees or in a linear unit (``_mm``, ``_in``). Linear positions are
+turned into surface degrees through the crank arm when one is given (``deg = x/arm`` in radians, the
+arc at the crank), else kept as logged: the record's :attr:`MeasuredData.unit` then names the unit
+and the report says so. Every rule of the contract still holds, and every error names the file's
+line and the rig's own column.
 """
 
 from __future__ import annotations
@@ -21,6 +30,11 @@ from ema_sim.errors import DataError
 FloatArray = NDArray[np.float64]
 
 REQUIRED = ("time_s", "command_deg")
+TIME_UNITS = {"s": 1.0, "ms": 1e-3}
+LINEAR_UNITS_IN = {"mm": 1.0 / 25.4, "in": 1.0}
+"""Inches per unit of each linear unit a rig may log positions in."""
+POSITIONAL = ("command", "position", "surface")
+DELIMITERS = {"tab": "\t", "comma": ",", "semicolon": ";"}
 OUTPUTS = ("position_deg", "surface_deg")
 OPTIONAL = ("hinge_moment_inlb", "current_a", "command_v", "position_v", "bus_v", "rate_dps")
 """Recognised optional columns; ``bus_v`` (150 V bus, for regeneration) and ``rate_dps`` (surface rate)
@@ -31,7 +45,39 @@ MIN_ROWS = 100
 
 @dataclass(frozen=True)
 class MeasuredData:
-    """One record of actuator data: the contract's columns as arrays, plus its metadata."""
+    """One record of actuator data: the contract's columns as arrays, plus its metadata.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times, s.
+    command_deg : numpy.ndarray
+        Surface command, deg.
+    position_deg : numpy.ndarray or None
+        LVDT position feedback, deg.
+    surface_deg : numpy.ndarray or None
+        External surface angle, deg.
+    hinge_moment_inlb : numpy.ndarray or None
+        Hinge moment, in·lb (positive aids positive deflection).
+    current_a : numpy.ndarray or None
+        Motor current, A.
+    command_v : numpy.ndarray or None
+        The command's ±10 V signal.
+    position_v : numpy.ndarray or None
+        The LVDT's ±10 V signal.
+    metadata : dict
+        ``# key: value`` lines of a CSV, a bag's test parameters.
+    source : str
+        Where the record was read from.
+    bus_v : numpy.ndarray or None
+        Motor bus voltage (section 2.5), when the rig or model records it.
+    rate_dps : numpy.ndarray or None
+        Surface rate, when recorded.
+    unit : str
+        Unit of the command and outputs: ``deg``, or a rig's linear unit (``mm``, ``in``) kept as logged.
+    extra : dict
+        Further recorded signals outside the contract's columns (a bag's FMU-side command and feedback).
+    """
 
     time_s: FloatArray
     command_deg: FloatArray
@@ -47,6 +93,10 @@ class MeasuredData:
     """Motor bus voltage (section 2.5), when the rig or model records it."""
     rate_dps: FloatArray | None = None
     """Surface rate, when recorded."""
+    unit: str = "deg"
+    """Unit of the command and outputs: ``deg``, or a rig's linear unit (``mm``, ``in``) kept as logged."""
+    extra: dict[str, FloatArray] = field(default_factory=dict)
+    """Further recorded signals outside the contract's columns (a bag's FMU-side command and feedback)."""
 
     @property
     def outputs(self) -> list[str]:
@@ -59,11 +109,22 @@ class MeasuredData:
         return self.hinge_moment_inlb if self.hinge_moment_inlb is not None else np.zeros_like(self.time_s)
 
     def column(self, name: str) -> FloatArray:
-        """A present column by name."""
+        """A present column by name.
+
+        Parameters
+        ----------
+        name : str
+            The column (``position_deg``...).
+
+        Returns
+        -------
+        numpy.ndarray
+            Its values.
+        """
         value = getattr(self, name, None)
         if value is None:
             raise DataError(f"{self.source or 'data'}: no column {name!r}")
-        return value
+        return np.asarray(value, dtype=float)
 
     @property
     def sample_hz(self) -> float:
@@ -84,24 +145,136 @@ def _parse_metadata(line: str, lineno: int, source: str) -> tuple[str, str] | No
     return key.strip(), value.strip()
 
 
-def read_csv(path: str | Path) -> MeasuredData:
-    """Read and validate a measured-data CSV (see the module docstring)."""
-    path = Path(path)
+@dataclass(frozen=True)
+class RigFormat:
+    """How a rig's own file maps onto the contract: its columns, its delimiter, its linear positions.
+
+    Parameters
+    ----------
+    columns : dict
+        Contract name with its unit (``time_ms``, ``position_mm``...) → the file's column name.
+    delimiter : str or None
+        ``tab``, ``comma`` or ``semicolon``; None: sniffed from the header row.
+    crank_arm_in : float or None
+        Linear positions are turned into degrees through this crank arm; None: kept as logged.
+    """
+
+    columns: dict[str, str] = field(default_factory=dict)
+    """Contract name with its unit (``time_ms``, ``position_mm``...) → the file's column name."""
+    delimiter: str | None = None
+    """``tab``, ``comma`` or ``semicolon``; None: sniffed from the header row."""
+    crank_arm_in: float | None = None
+    """Linear positions are turned into degrees through this crank arm; None: kept as logged."""
+
+    def target(self, name: str) -> tuple[str, str, float]:
+        """A mapped name's contract column, unit and factor to the contract's unit.
+
+        Parameters
+        ----------
+        name : str
+            ``time_ms``, ``command_mm``, ``position_deg``, ``hinge_moment_inlb``...
+
+        Returns
+        -------
+        tuple
+            The contract column (``time_s``...), the unit kept (``deg``, ``mm``, ``in``; ``""`` for the
+            others) and the factor the file's values are multiplied by.
+        """
+        base, _, unit = name.rpartition("_")
+        if base == "time" and unit in TIME_UNITS:
+            return "time_s", "", TIME_UNITS[unit]
+        if base in POSITIONAL and unit == "deg":
+            return f"{base}_deg", "deg", 1.0
+        if base in POSITIONAL and unit in LINEAR_UNITS_IN:
+            if self.crank_arm_in:
+                return f"{base}_deg", "deg", float(np.degrees(LINEAR_UNITS_IN[unit] / self.crank_arm_in))
+            return f"{base}_deg", unit, 1.0
+        if name in OPTIONAL:
+            return name, "", 1.0
+        accepted = ["time_s", "time_ms", *(f"{p}_{u}" for p in POSITIONAL for u in ("deg", "mm", "in")), *OPTIONAL]
+        raise DataError(f"--columns: unknown column {name!r}; accepted: {', '.join(accepted)}")
+
+
+def parse_columns(text: str) -> dict[str, str]:
+    """``time_ms=t,command_deg=demand,position_deg=pos`` as a mapping (contract name → the file's name).
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated ``name=column`` pairs.
+
+    Returns
+    -------
+    dict
+        The mapping, checked (every name known, none twice).
+    """
+    out: dict[str, str] = {}
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        name, sep, column = part.partition("=")
+        name, column = name.strip(), column.strip()
+        if not sep or not name or not column:
+            raise DataError(f"--columns: expected name=column pairs separated by commas, got {part!r}")
+        RigFormat().target(name)  # an unknown name is one clear error
+        if name in out:
+            raise DataError(f"--columns: {name!r} given twice")
+        out[name] = column
+    if not out:
+        raise DataError("--columns: no name=column pair given")
+    return out
+
+
+def _read_text(path: Path) -> str:
     source = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise DataError(f"{source}: no such file") from None
     except UnicodeDecodeError as exc:
         raise DataError(f"{source}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except OSError as exc:
         raise DataError(f"{source}: cannot read ({exc.strerror})") from None
-    return parse_csv(text, source)
 
 
-def parse_csv(text: str, source: str = "<csv>") -> MeasuredData:  # noqa: PLR0912 - one check per contract rule
-    """Validate CSV text against the contract."""
-    lines = text.splitlines()
+def read_csv(path: str | Path) -> MeasuredData:
+    """Read and validate a measured-data CSV (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The file.
+
+    Returns
+    -------
+    MeasuredData
+        Every column of the contract the file has.
+    """
+    path = Path(path)
+    return parse_csv(_read_text(path), str(path))
+
+
+def read_rig(path: str | Path, fmt: RigFormat) -> MeasuredData:
+    """Read a rig's own file: its delimiter, its column names, its units (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The file.
+    fmt : RigFormat
+        How its columns map onto the contract.
+
+    Returns
+    -------
+    MeasuredData
+        In the contract's units, or with ``unit`` naming the linear unit kept.
+    """
+    path = Path(path)
+    return parse_csv(_read_text(path), str(path), fmt)
+
+
+def _header(lines: list[str], source: str) -> tuple[dict[str, str], int]:
+    """Metadata lines before the header, and the header's index."""
     metadata: dict[str, str] = {}
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
@@ -112,32 +285,96 @@ def parse_csv(text: str, source: str = "<csv>") -> MeasuredData:  # noqa: PLR091
         first += 1
     if first >= len(lines):
         raise DataError(f"{source}: no header row")
-    reader = csv.reader(io.StringIO("\n".join(lines[first:])))
+    return metadata, first
+
+
+def _delimiter(header_line: str, fmt: RigFormat | None) -> str:
+    if fmt is None:
+        return ","
+    if fmt.delimiter is not None:
+        if fmt.delimiter not in DELIMITERS:
+            raise DataError(f"--delimiter: expected one of {', '.join(DELIMITERS)}, got {fmt.delimiter!r}")
+        return DELIMITERS[fmt.delimiter]
+    for sep in ("\t", ",", ";"):
+        if sep in header_line:
+            return sep
+    return ","
+
+
+def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
+             ) -> tuple[dict[str, tuple[int, str, float]], str]:
+    """Contract column → (index in the file, the file's name, factor); and the positions' unit."""
+    wanted: dict[str, tuple[int, str, float]] = {}
+    units: set[str] = set()
+    if fmt is not None:
+        for name, column in fmt.columns.items():
+            if column not in header:
+                raise DataError(f"{source}: line {line}: no column {column!r} for {name} "
+                                f"(columns: {', '.join(header)})")
+            target, unit, factor = fmt.target(name)
+            if target in wanted:
+                raise DataError(f"--columns: two columns map to {target}")
+            wanted[target] = (header.index(column), column, factor)
+            if unit:
+                units.add(unit)
+    for name in KNOWN:
+        if name not in wanted and name in header:
+            wanted[name] = (header.index(name), name, 1.0)
+            if name.endswith("_deg"):
+                units.add("deg")
+    for name in REQUIRED:
+        if name not in wanted:
+            raise DataError(f"{source}: line {line}: missing required column {name!r}")
+    if not any(name in wanted for name in OUTPUTS):
+        raise DataError(f"{source}: line {line}: needs a 'position_deg' or 'surface_deg' column")
+    if len(units) > 1:
+        raise DataError(f"{source}: positions in {' and '.join(sorted(units))} at once: map them to one unit "
+                        "(or give --crank-arm-in to turn the linear ones into degrees)")
+    return wanted, units.pop() if units else "deg"
+
+
+def parse_csv(text: str, source: str = "<csv>", fmt: RigFormat | None = None) -> MeasuredData:
+    """Validate CSV text against the contract (a rig's own layout when ``fmt`` is given).
+
+    Parameters
+    ----------
+    text : str
+        The file's text.
+    source : str
+        Its name, for the messages.
+    fmt : RigFormat, optional
+        A rig's delimiter, column names and units.
+
+    Returns
+    -------
+    MeasuredData
+        The record.
+    """
+    lines = text.splitlines()
+    metadata, first = _header(lines, source)
+    sep = _delimiter(lines[first], fmt)
+    reader = csv.reader(io.StringIO("\n".join(lines[first:])), delimiter=sep)
     header = [h.strip() for h in next(reader)]
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
         raise DataError(f"{source}: line {first + 1}: column {dup!r} appears twice")
-    for name in REQUIRED:
-        if name not in header:
-            raise DataError(f"{source}: line {first + 1}: missing required column {name!r}")
-    if not any(name in header for name in OUTPUTS):
-        raise DataError(f"{source}: line {first + 1}: needs a 'position_deg' or 'surface_deg' column")
-    wanted = {name: header.index(name) for name in KNOWN if name in header}
+    wanted, unit = _mapping(header, fmt, source, first + 1)
     values: dict[str, list[float]] = {name: [] for name in wanted}
     for offset, row in enumerate(reader, start=first + 2):
         if not row or all(not cell.strip() for cell in row):
             continue
         if len(row) != len(header):
             raise DataError(f"{source}: line {offset}: {len(row)} cells, header has {len(header)}")
-        for name, idx in wanted.items():
+        for name, (idx, column, factor) in wanted.items():
             cell = row[idx].strip()
+            label = repr(column) if column == name else f"{column!r} ({name})"
             try:
                 value = float(cell)
             except ValueError:
-                raise DataError(f"{source}: line {offset}, column {name!r}: not a number: {cell!r}") from None
+                raise DataError(f"{source}: line {offset}, column {label}: not a number: {cell!r}") from None
             if not math.isfinite(value):
-                raise DataError(f"{source}: line {offset}, column {name!r}: {cell!r} is not a finite number")
-            values[name].append(value)
+                raise DataError(f"{source}: line {offset}, column {label}: {cell!r} is not a finite number")
+            values[name].append(value * factor)
     n = len(values["time_s"])
     if n < MIN_ROWS:
         raise DataError(f"{source}: {n} data rows; the contract needs at least {MIN_ROWS}")
@@ -145,17 +382,33 @@ def parse_csv(text: str, source: str = "<csv>") -> MeasuredData:  # noqa: PLR091
     dt = np.diff(arrays["time_s"])
     if np.any(dt <= 0.0):
         bad = int(np.argmax(dt <= 0.0)) + 1
+        column = wanted["time_s"][1]
+        scale = wanted["time_s"][2]
         raise DataError(
-            f"{source}: data row {bad + 1}, column 'time_s': time does not increase "
-            f"({arrays['time_s'][bad - 1]:g} then {arrays['time_s'][bad]:g})"
+            f"{source}: data row {bad + 1}, column {column!r}: time does not increase "
+            f"({values['time_s'][bad - 1] / scale:g} then {values['time_s'][bad] / scale:g})"
         )
-    return MeasuredData(metadata=metadata, source=source, **arrays)
+    if fmt is not None:
+        metadata.setdefault("columns", ", ".join(f"{name}={column}" for name, column in fmt.columns.items()))
+        if fmt.crank_arm_in:
+            metadata.setdefault("crank_arm_in", f"{fmt.crank_arm_in:g}")
+    return MeasuredData(metadata=metadata, source=source, unit=unit, **arrays)  # type: ignore[arg-type]
 
 
 def write_csv(
     path: str | Path, columns: Mapping[str, FloatArray], metadata: Mapping[str, object] | None = None
 ) -> None:
-    """Write columns (``time_s`` first) with ``# key: value`` metadata lines before the header."""
+    """Write columns (``time_s`` first) with ``# key: value`` metadata lines before the header.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The file (its folder is created when missing).
+    columns : mapping
+        Column name → values.
+    metadata : mapping, optional
+        Written as ``# key: value`` lines.
+    """
     names = list(columns)
     if "time_s" in names:
         names.remove("time_s")
