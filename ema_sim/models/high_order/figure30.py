@@ -303,31 +303,9 @@ def current_loop(i_command_a: float, i_a: float, v_tach_in_s: float, kc_v_per_a:
     return kc_v_per_a * (i_command_a - i_a) + r_ohm * i_command_a + ke_v_per_in_s * v_tach_in_s
 
 
-DriveGains = tuple[float, float, float, float, float, float, float, float, float]
-"""Stages 4–7's parameters: Kp, slew limit, Kv, current limit, Kc, R, Ke, PWM dead band, duty limit."""
-
-
 @jit
-def drive_gains(p: FloatArray) -> DriveGains:
-    """Stages 4–7's parameters from the kernel vector, once per instance (see :data:`DriveGains`).
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters (:data:`~ema_sim.models.high_order.params.K`).
-
-    Returns
-    -------
-    tuple of float
-        The nine parameters of :func:`servo_drive`.
-    """
-    return (p[K.position_gain_per_s], p[K.rate_limit_in_s], p[K.velocity_gain_a_per_in_s], p[K.current_limit_a],
-            p[K.current_gain_v_per_a], p[K.stator_resistance_ohm], p[K.back_emf_v_per_in_s], p[K.pwm_dead_band_v],
-            p[K.pwm_max_duty_ratio])
-
-
-@jit
-def servo_drive(gains: DriveGains, x_command_in: float, lvdt_in: float, integral_in_s: float, v_motor_in_s: float,
+def servo_drive(kp: float, vmax: float, kv: float, imax: float, kc: float, r: float, ke: float, vdb: float,
+                duty: float, x_command_in: float, lvdt_in: float, integral_in_s: float, v_motor_in_s: float,
                 current_a: float, bus_v: float, rate_segment: int, current_segment: int, pwm_region: int,
                 classify: bool) -> tuple[float, float, float, float, int, int, int]:
     """Stages 4–7 in order: the position loop, the velocity loop, the current loop and the PWM.
@@ -338,8 +316,24 @@ def servo_drive(gains: DriveGains, x_command_in: float, lvdt_in: float, integral
 
     Parameters
     ----------
-    gains : tuple of float
-        :func:`drive_gains` of the instance.
+    kp : float
+        Position gain (1/s).
+    vmax : float
+        Slew limit on the velocity demand (in/s).
+    kv : float
+        Velocity gain (A per in/s).
+    imax : float
+        Current limit (A).
+    kc : float
+        Current gain (V/A).
+    r : float
+        Stator resistance (Ω).
+    ke : float
+        Back-EMF per screw rate (V per in/s).
+    vdb : float
+        PWM dead band (V).
+    duty : float
+        PWM duty limit.
     x_command_in : float
         The command after stages 1–3 (in).
     lvdt_in : float
@@ -370,7 +364,6 @@ def servo_drive(gains: DriveGains, x_command_in: float, lvdt_in: float, integral
     rate_segment, current_segment, pwm_region : int
         The segments used.
     """
-    kp, vmax, kv, imax, kc, r, ke, vdb, duty = gains
     vc_raw = position_loop(x_command_in, lvdt_in, kp, integral_in_s)
     if classify:
         rate_segment = saturation_segment(vc_raw, vmax)

@@ -26,7 +26,6 @@ from ema_sim.models.high_order.figure30 import (
     bus_current,
     bus_voltage_rate,
     drive_flags,
-    drive_gains,
     integrating,
     motor_current_rate,
     pwm_guards,
@@ -37,7 +36,7 @@ from ema_sim.models.high_order.figure30 import (
 )
 from ema_sim.models.high_order.params import K, X
 from ema_sim.models.hybrid import make_hybrid
-from ema_sim.models.stages import FLAG_BRAKE, FLAG_FREE_PLAY, FLAG_POSITION, TIME_EPS_S, zoh_index
+from ema_sim.models.stages import FLAG_BRAKE, FLAG_FREE_PLAY, FLAG_POSITION, TIME_EPS_S, jit, zoh_index
 from ema_sim.parameters import slots
 
 U = slots("Hoac1Inputs", ("command_in", "hinge_moment_inlb", "power", "rate_segment", "current_segment",
@@ -45,6 +44,18 @@ U = slots("Hoac1Inputs", ("command_in", "hinge_moment_inlb", "power", "rate_segm
 """The continuous model's inputs and held regimes (its ``u`` vector)."""
 N_U = len(U)
 N_GUARDS = 11
+
+
+@jit
+def _servo_drive(p: FloatArray, y: FloatArray, u: FloatArray, classify: bool) -> tuple[float, float, float, float, int,
+                                                                                        int, int]:
+    """Figure 30's stages 4–7 on the continuous state, regimes held or classified."""
+    return servo_drive(
+        p[K.position_gain_per_s], p[K.rate_limit_in_s], p[K.velocity_gain_a_per_in_s], p[K.current_limit_a],
+        p[K.current_gain_v_per_a], p[K.stator_resistance_ohm], p[K.back_emf_v_per_in_s], p[K.pwm_dead_band_v],
+        p[K.pwm_max_duty_ratio], u[U.command_in], y[X.lvdt_filtered_in], y[X.integral_in_s], y[X.v_motor_in_s],
+        y[X.current_a], y[X.bus_v], int(u[U.rate_segment]), int(u[U.current_segment]), int(u[U.pwm_region]),
+        classify)
 
 
 @nb.njit(cache=True)
@@ -65,9 +76,7 @@ def drive(p: FloatArray, y: FloatArray, u: FloatArray) -> tuple[float, float, fl
     velocity_demand, current_demand, voltage_demand, voltage : float
         The raw demands of stages 4–6 and the bridge voltage.
     """
-    vc_raw, ic_raw, vd, v, _, _, _ = servo_drive(
-        drive_gains(p), u[U.command_in], y[X.lvdt_filtered_in], y[X.integral_in_s], y[X.v_motor_in_s], y[X.current_a],
-        y[X.bus_v], int(u[U.rate_segment]), int(u[U.current_segment]), int(u[U.pwm_region]), False)
+    vc_raw, ic_raw, vd, v, _, _, _ = _servo_drive(p, y, u, False)
     return vc_raw, ic_raw, vd, v
 
 
@@ -325,9 +334,7 @@ def settle(t: float, y: FloatArray, p: FloatArray, u: FloatArray) -> None:  # no
         Inputs and held regimes, updated.
     """
     if u[U.power] > 0.5:
-        _, _, _, _, sv, si, sp = servo_drive(
-            drive_gains(p), u[U.command_in], y[X.lvdt_filtered_in], y[X.integral_in_s], y[X.v_motor_in_s],
-            y[X.current_a], y[X.bus_v], 0, 0, 0, True)
+        _, _, _, _, sv, si, sp = _servo_drive(p, y, u, True)
         u[U.rate_segment] = sv
         u[U.current_segment] = si
         u[U.pwm_region] = sp

@@ -21,7 +21,6 @@ from ema_sim.models.high_order.figure30 import (
     bus_current,
     bus_voltage_step,
     drive_flags,
-    drive_gains,
     friction_step,
     gear_train,
     integrating,
@@ -175,7 +174,9 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         rng = rngs[i]
         buf = buffers[i]
         nbuf = buf.shape[0]
-        gains = drive_gains(p)
+        kp, vmax, kv = p[K.position_gain_per_s], p[K.rate_limit_in_s], p[K.velocity_gain_a_per_in_s]
+        imax, kc = p[K.current_limit_a], p[K.current_gain_v_per_a]
+        vdb, duty = p[K.pwm_dead_band_v], p[K.pwm_max_duty_ratio]
         ki_dt = p[K.position_integral_per_s2] * dt
         r = p[K.stator_resistance_ohm]
         ke = p[K.back_emf_v_per_in_s]
@@ -254,7 +255,8 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
             # stages 4–8: controller electronics, current loop, PWM, motor
             if on:
                 err = xc - lf
-                _, _, _, v, sv, si, sp = servo_drive(gains, xc, lf, xi, vm, cur, vbus, 0, 0, 0, True)
+                _, _, _, v, sv, si, sp = servo_drive(kp, vmax, kv, imax, kc, r, ke, vdb, duty, xc, lf, xi, vm, cur,
+                                                     vbus, 0, 0, 0, True)
                 cur = motor_current_step(v, cur, vm, inv_r, ke, decay_i)
                 if integrating(sv, si, sp):
                     xi += ki_dt * err
