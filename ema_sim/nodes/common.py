@@ -58,8 +58,9 @@ class SuiteNode(Node):
         self.done = False
         self.peers: set[str] = set(self.params.declare([Spec(
             "peers", [], "suite nodes to see in the graph (and be matched with) before calling itself ready",
-            kind=ParameterType.PARAMETER_STRING_ARRAY)], "peers")["peers"]) - {name}
-        """Suite nodes that must be in the graph before this one calls itself ready."""
+            kind=ParameterType.PARAMETER_STRING_ARRAY)], "peers")["peers"]) - {self.get_name()}
+        """Suite nodes that must be in the graph before this one calls itself ready: the others, by the name this
+        node has in the graph (a process's ``-r __node:=`` renames the ``name`` its class defaults to)."""
         self.auto_ready = True
         """Announce readiness as soon as matched (the maneuver node announces itself when it starts)."""
         self._last_log: dict[str, float] = {}
