@@ -93,13 +93,13 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
         try:
-            return Client(scheduler, timeout="20s"), None
+            return Client(scheduler, timeout="20s"), None  # type: ignore[no-untyped-call]
         except OSError as exc:
             raise EmaError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
     n = workers or cores()
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
-    return Client(cluster), cluster
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,  # type: ignore[no-untyped-call]
+                           dashboard_address=":0", silence_logs=logging.ERROR)  # any free port
+    return Client(cluster), cluster  # type: ignore[no-untyped-call]
 
 
 def run_tasks(c: Campaign, out: Path, *, runs: int, seed: int, scheduler: str | None = None,
@@ -155,7 +155,7 @@ def run_tasks(c: Campaign, out: Path, *, runs: int, seed: int, scheduler: str | 
         futures = [client.submit(run_block, text, seed, a, b, pure=False, key=f"{c.name}-{seed}-{a:09d}-{b:09d}")
                    for a, b in todo]
         seen: set[str] = set()
-        for fut in as_completed(futures):
+        for fut in as_completed(futures):  # type: ignore[no-untyped-call]
             block: Block = fut.result()
             output.write_block(out, block)
             seen.add(block.worker)

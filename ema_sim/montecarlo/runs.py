@@ -232,7 +232,8 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
     if issubclass(cls, LinearModel):
         if own or "bound" in rows:
             raise ConfigError(f"{c.model} is one linear system for every instance: disperse a time-domain model")
-        return cls(ch, n=n_rows * repeat, **kwargs, **c.fixed)  # type: ignore[call-arg]
+        linear: Any = cls  # each linear model has its own keywords
+        return linear(ch, n=n_rows * repeat, **kwargs, **c.fixed)
     base = cls.default_params(ch, **c.fixed)
     params = [base if not own else base.replace(**{n: float(rows[n][i]) for n in own}) for i in range(n_rows)]
     kwargs["params"] = [p for p in params for _ in range(repeat)]

@@ -147,4 +147,4 @@ def finite(values: np.ndarray) -> np.ndarray:
     numpy.ndarray
         Its finite values.
     """
-    return values[np.isfinite(values)]
+    return np.asarray(values[np.isfinite(values)])
