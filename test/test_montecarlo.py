@@ -6,7 +6,6 @@ by the tests of this module; the local runs start their own ``LocalCluster`` as 
 
 import json
 import math
-import os
 import signal
 import socket
 import subprocess
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from distributed import Client
 
 from ema_sim.cli import main
 from ema_sim.errors import ConfigError, UnknownNameError
@@ -58,8 +58,6 @@ def _free_port():
 @pytest.fixture(scope="module")
 def scheduler():
     """A real Dask cluster on localhost: ``dask scheduler`` and two single-threaded ``dask worker`` processes."""
-    from distributed import Client
-
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
@@ -101,7 +99,9 @@ def test_dispersions_read_the_metadata_and_refuse_what_it_forbids():
     c = parse_campaign(HOAD3, "hoad3-steps")
     vals = sample(c.dispersions, 7, range(400))
     r = vals["stator_resistance_ohm"]
-    assert r.min() >= 0.78 and r.max() <= 0.98 and r.max() - r.min() > 0.15  # table A2: 0.88 ± 0.10 Ω
+    assert r.min() >= 0.78
+    assert r.max() <= 0.98
+    assert r.max() - r.min() > 0.15  # table A2: 0.88 ± 0.10 Ω
     assert set(np.unique(vals["step.load.inlb"])) == {0.0, 100.0, 300.0}
     rho = np.corrcoef(vals["position_gain_per_s"], vals["lvdt_filter_hz"])[0, 1]
     assert 0.35 < rho < 0.65
@@ -135,7 +135,8 @@ def test_rows_do_not_depend_on_the_batch():
     split = [run_block(c.to_json(), 11, a, b) for a, b in ((0, 1), (1, 4), (4, 6))]
     for key, col in whole.columns.items():
         assert np.array_equal(col, np.concatenate([s.columns[key] for s in split]), equal_nan=True), key
-    assert whole.nominal == split[0].nominal and not split[1].nominal
+    assert whole.nominal == split[0].nominal
+    assert not split[1].nominal
     assert np.all(whole.columns["rms_error_deg"] > 0.0)
 
 
@@ -151,7 +152,8 @@ def test_bad_campaigns_are_one_line_and_exit_2(tmp_path, capsys):
     for arg, message in cases.items():
         assert main(["montecarlo", arg, "--runs", "2", "--out", str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and message in err[0], err
+        assert len(err) == 1
+        assert message in err[0], err
 
 
 # ------------------------------------------------------------------------------------------ the engine
@@ -162,10 +164,14 @@ def test_a_cluster_gives_the_local_rows_bit_for_bit(tmp_path, scheduler):
                  "--scheduler", scheduler]) == 0
     local, remote = read_runs(tmp_path / "local"), read_runs(tmp_path / "cluster")
     _same_rows(local, remote)
-    assert list(local["run"]) == list(range(12)) and len(finished(tmp_path / "cluster")) == 6
+    assert list(local["run"]) == list(range(12))
+    assert len(finished(tmp_path / "cluster")) == 6
     summary = json.loads((tmp_path / "cluster" / "summary.json").read_text(), parse_constant=pytest.fail)
-    assert len(summary["workers"]) == 2 and all(w.startswith("tcp://127.0.0.1:") for w in summary["workers"])
-    assert summary["runs"] == 12 and summary["seed"] == 5 and summary["complete"]
+    assert len(summary["workers"]) == 2
+    assert all(w.startswith("tcp://127.0.0.1:") for w in summary["workers"])
+    assert summary["runs"] == 12
+    assert summary["seed"] == 5
+    assert summary["complete"]
     assert summary["metrics"]["overshoot_pct"]["count"] == 12
     assert {"envelope_step_position_deg.png", "histograms.png", "sensitivity.png"} <= set(summary["plots"])
 
@@ -209,8 +215,8 @@ def test_second_order_bounds_meet_the_analytic_corners(tmp_path, scheduler):
     f = doc["findings"]["bandwidth_3db_hz"]
     assert f["campaign_min"] == pytest.approx(f["analytic_min (ωn low, ζ high)"], rel=2e-3)
     assert f["campaign_max"] == pytest.approx(f["analytic_max (ωn high, ζ low)"], rel=2e-3)
-    assert doc["nominal"]["step.overshoot_pct"] == pytest.approx(100 * math.exp(-math.pi * 0.65 / math.sqrt(1 - 0.65**2)),
-                                                                 abs=0.05)
+    overshoot = 100 * math.exp(-math.pi * 0.65 / math.sqrt(1 - 0.65**2))  # the channel's ζ, no delay effect
+    assert doc["nominal"]["step.overshoot_pct"] == pytest.approx(overshoot, abs=0.05)
 
 
 def test_command_error_bounds_are_the_four_corner_lines(tmp_path, scheduler):
@@ -234,10 +240,11 @@ def test_compliance_bounds_loes_at_the_mean_curve_is_ema_loes(tmp_path, schedule
     assert main(["loes", "--channel", "left_wing"]) == 0
     printed = capsys.readouterr().out
     nom = f["nominal_loes"]
-    assert (f"wn {nom['loes_wn_rad_s']:.4g} rad/s, zeta {nom['loes_zeta']:.4g}, delay {nom['loes_delay_s'] * 1e3:.3f} ms, "
-            f"DC gain {nom['loes_gain']:.4g}") in printed
+    assert (f"wn {nom['loes_wn_rad_s']:.4g} rad/s, zeta {nom['loes_zeta']:.4g}, "
+            f"delay {nom['loes_delay_s'] * 1e3:.3f} ms, DC gain {nom['loes_gain']:.4g}") in printed
     rows = read_runs(tmp_path / "cb")
-    assert np.all(np.isfinite(rows["loes_wn_rad_s"])) and np.all(np.abs(rows["bound"]) <= 1.0)
+    assert np.all(np.isfinite(rows["loes_wn_rad_s"]))
+    assert np.all(np.abs(rows["bound"]) <= 1.0)
 
 
 def test_ail_dither_needs_the_noise(tmp_path, scheduler):
@@ -249,5 +256,6 @@ def test_ail_dither_needs_the_noise(tmp_path, scheduler):
     rows = read_runs(tmp_path / "ail")
     assert list(rows["environment.noise_rms_v"]) == [0.0, 0.003]
     assert list(rows["wings_dithering"]) == [0.0, 2.0]  # section 4.3: no noise, no dither (the study's finding)
-    assert doc["findings"]["probability"] == 0.5 and doc["findings"]["wing_runs"] == 4
+    assert doc["findings"]["probability"] == 0.5
+    assert doc["findings"]["wing_runs"] == 4
     assert 0.05 < doc["findings"]["pp_deg_dithering"]["p50"] < 0.3
