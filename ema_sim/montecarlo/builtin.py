@@ -369,7 +369,7 @@ def findings_compliance(c: Campaign, out: Path) -> dict[str, Any]:
     from ema_sim.analysis.loes import fit_loes  # noqa: PLC0415
     from ema_sim.montecarlo.summary import merged_envelopes  # noqa: PLC0415
 
-    _, nominal, _, _ = merged_envelopes(out)
+    _, nominal, _, _, _ = merged_envelopes(out)
     ref = fit_loes(c.channel).coefficients
     pairs = {"loes_wn_rad_s": "wn_rad_s", "loes_zeta": "zeta", "loes_delay_s": "delay_s", "loes_gain": "dc_gain_ratio"}
     nom = {k: nominal.get(k, math.nan) for k in pairs}

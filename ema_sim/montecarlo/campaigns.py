@@ -85,7 +85,7 @@ def run_campaign(c: Campaign, out: str | Path, *, runs: int, seed: int, schedule
     pngs: list[str] = []
     doc = summarize(out, c, seed=seed, runs=runs, engine=engine, findings=found)
     if plot:
-        envelopes, nominal, _, _ = merged_envelopes(out)
+        envelopes, nominal, _, _, _ = merged_envelopes(out)
         for name, env in envelopes.items():
             path = out / f"envelope_{name.replace('.', '_')}.png"
             plots.envelope_plot(f"{c.name}: {name}", env, path)

@@ -331,32 +331,54 @@ def peak_rate(data: RecordData) -> dict[str, FloatArray]:
     return {"peak_rate_dps": np.max(np.abs(data.rate_dps), axis=1)}
 
 
-def _step_row(t: FloatArray, u: FloatArray, y: FloatArray) -> tuple[float, float, float]:
-    """Overshoot (%), 10-90 % rise and 2 % settling time of the first command step of one row."""
-    moved = np.nonzero(np.abs(u - u[0]) > 1e-12)[0]
-    if moved.size == 0:
-        return math.nan, math.nan, math.nan
-    k0 = int(moved[0])
-    target = u[k0]
-    after = np.nonzero(np.abs(u[k0:] - target) > 1e-12)[0]
-    k1 = k0 + int(after[0]) if after.size else u.size
-    size = target - u[0]
-    tt, yy = t[k0:k1] - t[k0], (y[k0:k1] - u[0]) / size  # normalised: 0 → 1
-    overshoot = max(float(np.max(yy)) - 1.0, 0.0) * 100.0
-    r10, r90 = np.nonzero(yy >= 0.1)[0], np.nonzero(yy >= 0.9)[0]
-    rise = float(tt[r90[0]] - tt[r10[0]]) if r10.size and r90.size else math.nan
-    outside = np.nonzero(np.abs(yy - 1.0) > STEP_BAND)[0]
-    if outside.size == 0:
-        settle = 0.0
-    elif outside[-1] + 1 < tt.size:
-        settle = float(tt[outside[-1] + 1])
-    else:
-        settle = math.nan  # still outside the band when the hold ends
-    return overshoot, rise, settle
+@nb.njit(cache=True)
+def _step_rows(t: FloatArray, u: FloatArray, y: FloatArray, band: float) -> FloatArray:  # pragma: no cover - compiled
+    """Overshoot (%), 10-90 % rise and settling time of the first command step of every row (NaN: none)."""
+    n, k = u.shape
+    out = np.full((n, 3), np.nan)
+    for i in range(n):
+        k0 = -1
+        for s in range(k):
+            if abs(u[i, s] - u[i, 0]) > 1e-12:
+                k0 = s
+                break
+        if k0 < 0:
+            continue
+        target = u[i, k0]
+        k1 = k
+        for s in range(k0, k):
+            if abs(u[i, s] - target) > 1e-12:
+                k1 = s
+                break
+        size = target - u[i, 0]
+        top = -np.inf
+        r10 = -1
+        r90 = -1
+        last_out = -1
+        for s in range(k0, k1):
+            v = (y[i, s] - u[i, 0]) / size
+            top = max(top, v)
+            if r10 < 0 and v >= 0.1:
+                r10 = s
+            if r90 < 0 and v >= 0.9:
+                r90 = s
+            if abs(v - 1.0) > band:
+                last_out = s
+        out[i, 0] = max(top - 1.0, 0.0) * 100.0
+        if r10 >= 0 and r90 >= 0:
+            out[i, 1] = t[r90] - t[r10]
+        if last_out < 0:
+            out[i, 2] = 0.0
+        elif last_out + 1 < k1:
+            out[i, 2] = t[last_out + 1] - t[k0]
+    return out
 
 
 def step(data: RecordData) -> dict[str, FloatArray]:
     """Overshoot, rise time and settling time of the first command step, measured on the output.
+
+    The step runs from the command's first change to its next one (or the record's end); the output is
+    normalised to 0 before and 1 at the new command.
 
     Parameters
     ----------
@@ -366,11 +388,11 @@ def step(data: RecordData) -> dict[str, FloatArray]:
     Returns
     -------
     dict
-        ``overshoot_pct``, ``rise_time_s`` and ``settling_time_s`` (NaN where the output has not
-        settled when the command next changes).
+        ``overshoot_pct``, ``rise_time_s`` (10-90 %) and ``settling_time_s`` (last entry into ±2 %; NaN
+        where the output has not settled when the command next changes).
     """
-    rows = [_step_row(data.time_s, u, y) for u, y in zip(data.command_deg, data.output_deg, strict=True)]
-    arr = np.array(rows, dtype=float).reshape(-1, 3)
+    u = np.ascontiguousarray(np.broadcast_to(data.command_deg, data.output_deg.shape))
+    arr = _step_rows(np.ascontiguousarray(data.time_s), u, np.ascontiguousarray(data.output_deg), STEP_BAND)
     return {"overshoot_pct": arr[:, 0], "rise_time_s": arr[:, 1], "settling_time_s": arr[:, 2]}
 
 

@@ -117,7 +117,7 @@ def write_block(out: Path, block: Block) -> None:
         if e.nominal is not None:
             arrays[f"{name}|nominal"] = e.nominal
     meta = {"start": block.start, "stop": block.stop, "worker": block.worker, "seconds": block.seconds,
-            "nominal": block.nominal,
+            "peak_rss_mb": block.peak_rss_mb, "nominal": block.nominal,
             "envelopes": {n: {"count": e.count, "x_label": e.x_label, "y_label": e.y_label}
                           for n, e in block.envelopes.items()}}
     arrays["meta"] = np.array(json.dumps(meta))

@@ -115,6 +115,8 @@ class Block:
         Address of the worker that ran it.
     seconds : float
         Its wall time on the worker.
+    peak_rss_mb : float
+        The worker process's peak resident memory after it, MiB.
     """
 
     start: int
@@ -124,6 +126,7 @@ class Block:
     envelopes: dict[str, Envelope] = field(default_factory=dict)
     worker: str = "local"
     seconds: float = 0.0
+    peak_rss_mb: float = 0.0
 
 
 @functools.lru_cache(maxsize=8)
@@ -171,7 +174,20 @@ def run_block(campaign_json: str, seed: int, start: int, stop: int) -> Block:
     else:
         metrics, nominal, envelopes = _model_runs(c, seed, runs, values, with_nominal=start == 0)
     columns.update(metrics)
-    return Block(start, stop, columns, nominal, envelopes, _worker_address(), time.perf_counter() - t0)
+    return Block(start, stop, columns, nominal, envelopes, _worker_address(), time.perf_counter() - t0, peak_rss_mb())
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory so far, MiB (Linux reports KiB).
+
+    Returns
+    -------
+    float
+        MiB.
+    """
+    import resource  # noqa: PLC0415
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 # ------------------------------------------------------------------------------------------ model runs

@@ -16,10 +16,10 @@ import numpy as np
 from ema_sim.montecarlo import output
 from ema_sim.montecarlo.campaign import Campaign
 from ema_sim.montecarlo.engine import EngineResult
-from ema_sim.montecarlo.runs import Envelope
+from ema_sim.montecarlo.runs import Envelope, peak_rss_mb
 
 
-def merged_envelopes(out: Path) -> tuple[dict[str, Envelope], dict[str, float], list[str], float]:
+def merged_envelopes(out: Path) -> tuple[dict[str, Envelope], dict[str, float], list[str], float, float]:
     """Every task's envelopes merged, the nominal run's metrics, the workers and the task time.
 
     Parameters
@@ -37,21 +37,25 @@ def merged_envelopes(out: Path) -> tuple[dict[str, Envelope], dict[str, float], 
         Addresses of every worker that ran a finished task.
     task_s : float
         Sum of the tasks' times on their workers.
+    worker_rss_mb : float
+        The largest peak resident memory a worker reported, MiB.
     """
     envelopes: dict[str, Envelope] = {}
     nominal: dict[str, float] = {}
     workers: set[str] = set()
     task_s = 0.0
+    rss = 0.0
     for meta, envs in output.part_meta(out):
         workers.add(str(meta["worker"]))
         task_s += float(meta["seconds"])
+        rss = max(rss, float(meta.get("peak_rss_mb", 0.0)))
         nominal.update(meta.get("nominal") or {})
         for name, e in envs.items():
             if name in envelopes:
                 envelopes[name].merge(e)
             else:
                 envelopes[name] = e
-    return envelopes, nominal, sorted(workers), task_s
+    return envelopes, nominal, sorted(workers), task_s, rss
 
 
 def summarize(out: Path, c: Campaign, *, seed: int, runs: int, engine: EngineResult,
@@ -80,7 +84,7 @@ def summarize(out: Path, c: Campaign, *, seed: int, runs: int, engine: EngineRes
     dict
         ``runs``, ``seed``, ``campaign``, ``workers``, ``wall_s``, statistics and the rest.
     """
-    _, nominal, workers, task_s = merged_envelopes(out)
+    _, nominal, workers, task_s, worker_rss = merged_envelopes(out)
     names = output.column_names(out)
     params = [n for n in names if n in c.parameters]
     metrics = [n for n in names if n != "run" and n not in c.parameters]
@@ -104,6 +108,7 @@ def summarize(out: Path, c: Campaign, *, seed: int, runs: int, engine: EngineRes
         "wall_s": engine.wall_s,
         "compute_s": engine.compute_s,
         "task_s": task_s,
+        "memory": {"worker_peak_rss_mb": worker_rss, "client_peak_rss_mb": peak_rss_mb()},
         "tasks": {"run": engine.tasks, "already_done": engine.skipped, "batch": c.batch},
         "dispersions": [d.describe() for d in c.dispersions],
         "parameters": {p: output.statistics(v) for p, v in param_values.items()},
