@@ -332,7 +332,7 @@ def peak_rate(data: RecordData) -> dict[str, FloatArray]:
 
 
 @nb.njit(cache=True)
-def _step_rows(t: FloatArray, u: FloatArray, y: FloatArray, band: float) -> FloatArray:  # pragma: no cover - compiled
+def _step_rows(t: FloatArray, u: FloatArray, y: FloatArray, band: float) -> FloatArray:  # noqa: PLR0912 - one compiled loop
     """Overshoot (%), 10-90 % rise and settling time of the first command step of every row (NaN: none)."""
     n, k = u.shape
     out = np.full((n, 3), np.nan)
