@@ -259,3 +259,22 @@ def test_ail_dither_needs_the_noise(tmp_path, scheduler):
     assert doc["findings"]["probability"] == 0.5
     assert doc["findings"]["wing_runs"] == 4
     assert 0.05 < doc["findings"]["pp_deg_dithering"]["p50"] < 0.3
+
+
+def test_bounds_come_from_ema_analyze_json(tmp_path):
+    doc = {"tool": "ema analyze", "second_order_spread": {"position_deg": {
+        "wn_rad_s": {"min": 52.0, "max": 61.0}, "zeta": {"min": 0.6, "max": 0.71}, "delay_s": {"min": 0.0035,
+                                                                                                "max": 0.0052}}},
+        "command_error_bounds": {"kb_max_abs": 0.004, "offset_max_abs_deg": 0.03}}
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps(doc), encoding="utf-8")
+    doc["second_order_spread"]["position_deg"]["wn_rad_s"] = {"min": 50.0, "max": 58.0}
+    doc["command_error_bounds"]["kb_max_abs"] = -0.005
+    b.write_text(json.dumps(doc), encoding="utf-8")
+    c = load_campaign("second-order-bounds", analysis=[a, b])
+    box = {n: (lo, hi) for d in c.dispersions for n, lo, hi in zip(d.names, d.low, d.high, strict=True)}
+    assert box == {"wn_rad_s": (50.0, 61.0), "zeta": (0.6, 0.71), "delay_s": (0.0035, 0.0052)}
+    ce = load_campaign("command-error", analysis=[a, b])
+    assert ce.dispersions[0].low.tolist() == [-0.005, -0.03]
+    assert ce.dispersions[0].high.tolist() == [0.005, 0.03]
+    assert json.loads(c.to_json())["dispersions"][0]["uniform"] == [[50.0, 61.0]]  # resolved into the manifest
