@@ -256,9 +256,11 @@ def test_ail_dither_needs_the_noise(tmp_path, scheduler):
     rows = read_runs(tmp_path / "ail")
     assert list(rows["environment.noise_rms_v"]) == [0.0, 0.003]
     assert list(rows["wings_dithering"]) == [0.0, 2.0]  # section 4.3: no noise, no dither (the study's finding)
-    assert doc["findings"]["probability"] == 0.5
-    assert doc["findings"]["wing_runs"] == 4
-    assert 0.05 < doc["findings"]["pp_deg_dithering"]["p50"] < 0.3
+    f = doc["findings"]
+    assert f["dither"]["probability"] == 0.5
+    assert f["none"]["count"] == 2
+    assert f["wing_runs"] == 4
+    assert 0.05 < f["pp_deg_dither"]["p50"] < 0.3
 
 
 def test_bounds_come_from_ema_analyze_json(tmp_path):

@@ -389,8 +389,16 @@ def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return centre - half, centre + half
 
 
+LARGE_OSCILLATION_DEG = 0.5
+"""Peak to peak above which a limit cycle is not the AIL dither (≈ 0.1°, 4.3) but the loop near instability."""
+
+
 def findings_ail(c: Campaign, out: Path) -> dict[str, Any]:
     """Probability of dither over wing-runs, its size, and each dispersed element's effect.
+
+    A wing-run is one of three: **dither** (the :mod:`ema_sim.ail.measure` verdict with a peak to peak of at
+    most :data:`LARGE_OSCILLATION_DEG`), a **large oscillation** (a limit cycle above it: the vehicle loop
+    near instability, not section 4.3's dither) or **none**.
 
     Parameters
     ----------
@@ -402,31 +410,38 @@ def findings_ail(c: Campaign, out: Path) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``probability`` (with a 95 % Wilson interval), peak to peak and frequency of the dithering
-        wings, and per parameter the probability in the lower and upper third of its range.
+        Each category's probability (with a 95 % Wilson interval), peak to peak and frequency of the
+        dithering wings, and per parameter each category's probability in the lower and upper third of its
+        range.
     """
     from ema_sim.ail.params import WINGS  # noqa: PLC0415
 
-    dither = np.concatenate([output.read_column(out, f"{w}.dither") for w in WINGS])
+    verdict = np.concatenate([output.read_column(out, f"{w}.dither") for w in WINGS]) > 0.5
     pp = np.concatenate([output.read_column(out, f"{w}.pp_deg") for w in WINGS])
     freq = np.concatenate([output.read_column(out, f"{w}.freq_hz") for w in WINGS])
-    k, n = int(np.nansum(dither)), int(np.isfinite(dither).sum())
-    on = dither > 0.5
+    large = verdict & (pp > LARGE_OSCILLATION_DEG)
+    cats = {"dither": verdict & ~large, "large_oscillation": large, "none": ~verdict}
+    n = int(pp.size)
     box = _box(c)
-    effect = {}
+    effect: dict[str, Any] = {}
     for p in c.parameters:
         x = np.tile(output.read_column(out, p), len(WINGS))
         lo, hi = box[p]
-        low = x <= lo + (hi - lo) / 3.0
-        high = x >= hi - (hi - lo) / 3.0
-        effect[p] = {"p_dither_lower_third": float(np.mean(on[low])) if low.any() else None,
-                     "p_dither_upper_third": float(np.mean(on[high])) if high.any() else None,
-                     "pp_median_lower_third_deg": float(np.median(pp[low])) if low.any() else None,
-                     "pp_median_upper_third_deg": float(np.median(pp[high])) if high.any() else None}
-    return {"wing_runs": n, "dithering": k, "probability": k / n if n else None,
-            "probability_95": list(_wilson(k, n)),
-            "pp_deg_dithering": output.statistics(pp[on]), "freq_hz_dithering": output.statistics(freq[on]),
-            "pp_deg_all": output.statistics(pp), "by_parameter": effect}
+        thirds = {"lower_third": x <= lo + (hi - lo) / 3.0, "upper_third": x >= hi - (hi - lo) / 3.0}
+        effect[p] = {f"p_{cat}_{where}": float(np.mean(mask[sel])) if sel.any() else None
+                     for cat, mask in cats.items() for where, sel in thirds.items()}
+        effect[p].update({f"pp_median_dither_{where}_deg": float(np.median(pp[sel & cats["dither"]]))
+                          if (sel & cats["dither"]).any() else None for where, sel in thirds.items()})
+    doc: dict[str, Any] = {"wing_runs": n, "large_oscillation_above_deg": LARGE_OSCILLATION_DEG}
+    for cat, mask in cats.items():
+        k = int(mask.sum())
+        doc[cat] = {"count": k, "probability": k / n if n else None, "probability_95": list(_wilson(k, n))}
+    doc["pp_deg_dither"] = output.statistics(pp[cats["dither"]])
+    doc["freq_hz_dither"] = output.statistics(freq[cats["dither"]])
+    doc["pp_deg_large_oscillation"] = output.statistics(pp[large])
+    doc["freq_hz_large_oscillation"] = output.statistics(freq[large])
+    doc["by_parameter"] = effect
+    return doc
 
 
 FINDINGS: dict[str, Callable[[Campaign, Path], dict[str, Any]]] = {
