@@ -18,19 +18,20 @@ def load_measured(path: Path, channel: str | None, rig: Any = None) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Identify and print the summary; write JSON and the report when asked."""
-    from ema_sim.config import CHANNELS, load_channel  # noqa: PLC0415
-    from ema_sim.identify.report import summary, to_json, write_json, write_report  # noqa: PLC0415
+    """Identify and print the summary; write JSON, the report and the residuals when asked."""
+    from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415
+    from ema_sim.identify.record import prepare  # noqa: PLC0415
+    from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415
     from ema_sim.identify.stepwise import identify  # noqa: PLC0415
 
     check_channel(args.channel)
+    overrides = parse_overrides(args.overrides)
     data = load_measured(args.data, args.channel, rig_format(args))
-    channel = args.channel or data.metadata.get("channel", "")
-    if channel not in CHANNELS:
-        channel = "left_wing"
+    channel, note = resolve_channel(data, args.channel)
+    record = prepare(data, channel, channel_note=note, command=args.command_hold)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
-    result = identify(data, load_channel(channel), args.model, parse_overrides(args.overrides),
-                      max_effects=args.max_effects, log=say)
+    result = identify(record.data, record.channel, args.model, overrides, max_effects=args.max_effects, log=say,
+                      record=record)
     report = to_json(result, str(args.data))
     print(summary(report))
     if args.json:
@@ -38,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         path = write_report(result, report, args.report)
         print(f"report: {path}")
+    if args.residuals:
+        print(f"residuals: {write_residuals(result, args.residuals)}")
     return 0
 
 
@@ -58,6 +61,11 @@ def register(sub: Any) -> None:
     p.add_argument("--max-effects", type=int, default=8, help="most effects to add (8)")
     p.add_argument("--json", type=Path, default=None, help="write the report JSON here")
     p.add_argument("--report", type=Path, default=None, help="write report.md and plots in this directory")
+    p.add_argument("--residuals", type=Path, default=None, metavar="FILE.csv",
+                   help="write time, measured, baseline and final model outputs and residuals per output (CSV)")
+    p.add_argument("--command", dest="command_hold", default="detect", choices=("detect", "held", "sampled"),
+                   help="how the rig logged its command: held between samples (the data contract), sampled from a "
+                        "running demand, or detect it (a record that cannot tell is fitted both ways)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     add_data_args(p)
     p.set_defaults(func=run)

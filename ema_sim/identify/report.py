@@ -1,22 +1,34 @@
-"""What ``ema identify`` says: the contract's JSON, a Markdown report and residual plots."""
+"""What ``ema identify`` says: the contract's JSON, a Markdown report, residual plots and a residuals CSV.
+
+The JSON is strict (RFC 8259): a value that does not exist is ``null`` and an unbounded one is said in
+words (:func:`strict`), so no reader meets a bare ``NaN`` or ``Infinity``. Beside the contract's keys
+it carries the ``reference`` (position = command), the ``warnings`` (:mod:`ema_sim.identify.trust`,
+:mod:`ema_sim.identify.diagnosis`), the noise floors with their resolution, how the command was
+taken, the travel, the unit, the effects ``removed`` again, identifiability and the residual
+diagnosis.
+"""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ema_sim.analysis.noise import input_independence, whiteness
-from ema_sim.identify.effects import EFFECTS, FREE
+from ema_sim.identify.diagnosis import BY_FIELD, diagnose
+from ema_sim.identify.effects import FREE
 from ema_sim.identify.fit import Fit
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stepwise import Identification
+from ema_sim.identify.trust import assess, reference
+from ema_sim.io.csv import write_csv
 from ema_sim.models import create
 
-_VOCAB = {e.field: e for e in EFFECTS if e.field is not None}
+_VOCAB = BY_FIELD
 
 
 def _round(x: float, digits: int = 6) -> float:
@@ -90,16 +102,51 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
     }
 
 
+def strict(value: Any) -> Any:
+    """``value`` with every non-finite number made strict JSON: NaN → null, ±inf → "unbounded" in words.
+
+    Parameters
+    ----------
+    value : Any
+        Nested dicts, lists, tuples and scalars (numpy's included).
+
+    Returns
+    -------
+    Any
+        The same structure with plain Python scalars only.
+    """
+    if isinstance(value, Mapping):
+        return {str(k): strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_, int, np.integer)):
+        return value.item() if isinstance(value, np.generic) else value
+    if isinstance(value, (float, np.floating)):
+        x = float(value)
+        return x if math.isfinite(x) else None if math.isnan(x) else "unbounded" if x > 0 else "unbounded below"
+    return value
+
+
 def to_json(result: Identification, data_name: str) -> dict[str, Any]:
-    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts)."""
+    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings)."""
     p = result.problem
     base = result.baseline
     final = result.final
     names = _names(result, final)
+    record = result.record
+    warnings, ident, exc = assess(result)
+    diagnosis = diagnose(result)
+    warnings += diagnosis.warnings
+    ref = reference(p)
     report: dict[str, Any] = {
         "data": data_name,
         "outputs": p.outputs,
+        "unit": record.unit if record else "deg",
         "noise_deg": {o: _round(v) for o, v in p.sigma_deg.items()},
+        "resolution_deg": {o: (None if p.noise is None or p.noise[o].resolution is None
+                               else _round(p.noise[o].resolution)) for o in p.outputs},
+        "reference": {"model": f"{'/'.join(o.split('_')[0] for o in p.outputs)} = command",
+                      **{k: {o: _round(v) for o, v in m.items()} for k, m in ref.items()}},
         "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base)},
         "added": [
             {
@@ -113,12 +160,27 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             }
             for s in result.steps
         ],
+        "removed": [{"effect": r.effect, "where": r.where, "params": {k: _round(v) for k, v in r.params.items()},
+                     "reason": r.reason} for r in result.removed],
         "final": {
             "params": _params(result, final),
             "uncertainty": {names[f]: _round(v, 3) for f, v in final.sigma.items()},
+            "relative_uncertainty": {names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()},
+            "correlation": {names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
+                            for a, row in ident.correlation.items()},
+            "not_determined": [names[f] for f in ident.not_determined],
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
         },
+        "warnings": warnings,
+        "diagnosis": diagnosis.as_dict(),
+        "notes": (record.notes if record else []) + result.notes,
+        "command": {**(record.hold.as_dict() if record else {}),
+                    "fitted_as": "sampled" if p.command_sampled else "held"},
+        "travel_deg": ({"declared": list(record.travel.declared), "used": list(record.travel.limits),
+                        "source": record.travel.source, "statement": record.travel.statement} if record else None),
+        "excitation": {"duration_s": _round(exc.duration_s), "level_changes": exc.changes,
+                       "span_deg": _round(exc.span), "content_hz": _round(exc.bandwidth_hz)},
         "rejected": [
             {"effect": v.effect, "where": v.where, "value": None if v.value is None else _round(v.value),
              "reason": v.reason}
@@ -134,18 +196,44 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     impl = implementation_error(result)
     if impl is not None:
         report["declared_implementation_error_deg"] = impl
-    return report
+    return strict(report)
 
 
 def write_json(report: dict[str, Any], path: str | Path) -> None:
-    """Write the report as indented JSON."""
-    Path(path).write_text(json.dumps(report, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`)."""
+    text = json.dumps(strict(report), indent=2, ensure_ascii=False, allow_nan=False)
+    Path(path).write_text(text + "\n", encoding="utf-8")
+
+
+def write_residuals(result: Identification, path: str | Path) -> Path:
+    """Time, and per output the measured, baseline and final model outputs and both residuals, as CSV.
+
+    Every sample of the record is written; ``fitted`` is 1 on the samples the fits were judged on
+    (0 on the first settling ones). Values are in the record's unit (``deg`` unless a linear unit was kept).
+    """
+    p = result.problem
+    cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
+    for o in p.outputs:
+        meas = p.data.column(o)
+        col = OUTPUT_COLUMN[o]
+        cols[f"{o}_measured"] = meas
+        cols[f"{o}_baseline"] = result.baseline.sim[:, col]
+        cols[f"{o}_final"] = result.final.sim[:, col]
+        cols[f"{o}_residual_baseline"] = meas - result.baseline.sim[:, col]
+        cols[f"{o}_residual_final"] = meas - result.final.sim[:, col]
+    meta = {"model": result.model, "unit": result.record.unit if result.record else "deg",
+            "command_fitted_as": "sampled" if p.command_sampled else "held"}
+    write_csv(path, cols, meta)
+    return Path(path)
 
 
 def summary(report: dict[str, Any]) -> str:
     """A few lines for the terminal."""
+    u = "°" if report.get("unit", "deg") == "deg" else f" {report['unit']}"
     lines = [f"{report['data']}: {report['samples']} samples at {report['sample_hz']:g} Hz, "
-             f"noise {', '.join(f'{o} {v:.4g}°' for o, v in report['noise_deg'].items())}"]
+             f"noise {', '.join(f'{o} {v:.4g}{u}' for o, v in report['noise_deg'].items())}"]
+    if "reference" in report:
+        lines.append(f"reference {report['reference']['model']}: rms {_fmt_rms(report['reference']['rms_deg'])}")
     b = report["baseline"]
     lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'])}")
     for a in report["added"]:
@@ -154,14 +242,22 @@ def summary(report: dict[str, Any]) -> str:
         lines.append(f"      {a['evidence']}")
     if not report["added"]:
         lines.append("  nothing added: no effect paid for itself")
+    for r in report.get("removed", []):
+        lines.append(f"  − {r['effect']} taken out again: {r['reason']}")
     f = report["final"]
     lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'])} "
                  f"({', '.join(f'{v:.2f}× noise' for v in f['rms_over_noise'].values())})")
+    lines += [f"warning: {w}" for w in report.get("warnings", [])]
     return "\n".join(lines)
 
 
-def _fmt_params(params: dict[str, float]) -> str:
-    return ", ".join(f"{k} {v:.4g}" for k, v in params.items()) or "(none)"
+def _num(v: Any, spec: str = ".4g") -> str:
+    """A number in ``spec``, or a word (``unbounded``) or null as it stands."""
+    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
+
+
+def _fmt_params(params: dict[str, Any]) -> str:
+    return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
 
 
 def _fmt_rms(rms: dict[str, float]) -> str:
@@ -217,9 +313,17 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     fig.savefig(out / "fit.png", dpi=110)
     plt.close(fig)
 
-    md = ["# Identification report", "", "```", summary(report), "```", "",
-          "## Error before and after", "", "| | output | rms, deg | max abs, deg | NRMSE | rms / noise | white |",
-          "| --- | --- | --- | --- | --- | --- | --- |"]
+    md = ["# Identification report", "", "```", summary(report), "```", "", "## The record", ""]
+    md += [f"- {n}" for n in report.get("notes", [])]
+    md += ["", "## Warnings", ""]
+    md += [f"- {w}" for w in report.get("warnings", [])] or ["None."]
+    md += ["", "## Error before and after", "",
+           "| | output | rms, deg | max abs, deg | NRMSE | rms / noise | white |",
+           "| --- | --- | --- | --- | --- | --- | --- |"]
+    ref = report["reference"]
+    for o in p.outputs:
+        md.append(f"| reference ({ref['model']}) | {o} | {ref['rms_deg'][o]:.4g} | {ref['max_abs_deg'][o]:.4g} | | "
+                  f"{ref['rms_deg'][o] / report['noise_deg'][o]:.3g} | |")
     for label, key in (("baseline", "baseline"), ("final", "final")):
         block = report[key]
         for o in p.outputs:
@@ -237,7 +341,14 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     md += ["", "## Final parameters", "", "| parameter | value | ±1σ |", "| --- | --- | --- |"]
     unc = report["final"]["uncertainty"]
     for k, v in report["final"]["params"].items():
-        md.append(f"| {k} | {v:.6g} | {unc.get(k, float('nan')):.3g} |")
+        md.append(f"| {k} | {_num(v, '.6g')} | {_num(unc.get(k, '—'), '.3g')} |")
+    if report.get("removed"):
+        md += ["", "## Effects taken out again", "", "| effect | where | parameters | why |",
+               "| --- | --- | --- | --- |"]
+        md += [f"| {r['effect']} | {r['where']} | {_fmt_params(r['params'])} | {r['reason']} |"
+               for r in report["removed"]]
+    md += ["", "## What the final model leaves (residual diagnosis)", ""]
+    md += [f"- {line}" for line in report["diagnosis"]["text"]]
     if report["rejected"]:
         md += ["", "## Candidates fitted and rejected", "", "| effect | where | value | why |",
                "| --- | --- | --- | --- |"]
@@ -247,4 +358,4 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     return out / "report.md"
 
 
-__all__ = ["FREE", "summary", "to_json", "write_json", "write_report"]
+__all__ = ["FREE", "strict", "summary", "to_json", "write_json", "write_report", "write_residuals"]
