@@ -49,13 +49,15 @@ class Drive:
     control_hz: float = 2000.0
     feedforward: float = 0.8
     load_side_feedback: bool = True
+    log_load: bool = False
+    """Log the load-side position (an output sensor outside the loop) whatever the loop closes on."""
     spring: float = 0.0
     """Unmeasured spring load, acceleration per unit of position (1/s²)."""
 
 
 @nb.njit(cache=True)
 def _simulate(ref, ref_rate, n_sub, j_m, j_l, k_s, c_s, kp, kff, vmax, kv, ki, imax, tau_i, tc, b,  # noqa: ANN001, ANN202, PLR0913
-              spring, load_fb, dt):
+              spring, load_fb, log_load, dt):
     """Integrate the plant; ``ref`` is the demand at each control tick (held ``n_sub`` steps)."""
     n = ref.size * n_sub
     out = np.empty(n)
@@ -92,7 +94,7 @@ def _simulate(ref, ref_rate, n_sub, j_m, j_l, k_s, c_s, kp, kff, vmax, kv, ki, i
             w_l += acc_l * dt
             th_m += w_m * dt
             th_l += w_l * dt
-            out[k * n_sub + s] = th_l if load_fb else th_m
+            out[k * n_sub + s] = th_l if load_fb or log_load else th_m
     return out
 
 
@@ -144,7 +146,7 @@ def run_drive(drive: Drive, tick_t: np.ndarray, ref: np.ndarray, ref_rate: np.nd
     tc = drive.coulomb_share * imax
     y = _simulate(ref.astype(float), ref_rate.astype(float), n_sub, j_m, j_l, k_s, c_s, kp, drive.feedforward,
                   drive.speed_limit, kv, ki, imax, drive.current_tau_s, tc, drive.viscous, drive.spring,
-                  drive.load_side_feedback, SIM_S)
+                  drive.load_side_feedback, drive.log_load, SIM_S)
     t = tick_t[0] + SIM_S * np.arange(y.size)
     return t, y
 

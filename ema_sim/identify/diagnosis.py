@@ -9,14 +9,25 @@ its floor, the diagnosis says what is left, for each such output:
   with a motor current, the samples near its limit (|i| ≥ 90 % of its largest); the direction of
   motion. A part is named when it holds at least 40 % of the excess and 1.5 times its share of time;
 * **at which frequency** — the residual's spectrum (Welch) against the white floor ``2σ²/fs``: the
-  frequency below which half the excess power lies, the share above the model's bandwidth, and
-  a *line* (ringing, a limit cycle) where the spectrum stands five times above its running median and
-  the floor; frequencies above the record's Nyquist frequency alias and cannot be named;
+  frequency below which half the excess power lies and the share above the model's bandwidth; and a
+  *ring*: the residual in each window after the command stops (up to 1 s, standing out of the noise)
+  peaks at one frequency, and a mode rings at the same one after every stop, so a ring is claimed
+  when at least three windows and half of them agree within 15 % (a residual that bursts only at
+  moves is no stationary signal: a peak of its average spectrum proves nothing by itself);
+  frequencies above the record's Nyquist frequency alias and cannot be named;
 * **with which input** — the share of the residual's variance a short two-sided FIR (±50 ms) of each
   input explains: the command, its rate and acceleration, the direction of motion (friction and
-  backlash sign with it), the hinge moment and its rate, the motor current. Chance explains about
-  taps/N_eff (N_eff corrected for the residual's and the input's autocorrelation, Bartlett); a share
-  counts above ten per cent and five times that.
+  backlash sign with it), the hinge moment and its rate, the motor current. Inputs are taken greedily,
+  each for what it adds to those before it (the rate and the acceleration of one command overlap); one
+  counts when it adds at least 10 % and a partial F test on the effective number of samples (N over
+  1 + 2Σρₑρₓ, Bartlett: smooth residuals and inputs carry few independent samples) rejects chance at
+  1 in 1000.
+
+**The logger's timing**: a bench logger's sampling instants jitter about the uniform grid its stamps
+are straightened to, which adds ``rate × δt`` to the residual: white, but only while the output moves.
+The variance model ``σ² + σ_t²·rate²`` is fitted to the squared residual (σ_t the rms jitter); when
+the residual divided by its square root is white within 1.5 of unity, the error is the logger's
+timing, said as such (with the stamps' own scatter), and no structure is claimed.
 
 **Proxies**: an added effect is a finding only if the record agrees with itself about it. The final
 fit is linearised (one Gauss-Newton step from the final parameters on each half of the record, with
@@ -34,8 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import median_filter
 from scipy.signal import welch
+from scipy.stats import f as fisher
 
 from ema_sim.analysis.noise import autocorrelation, whiteness
 from ema_sim.analysis.series import hold_tolerance
@@ -51,9 +62,11 @@ STRUCTURED = 1.5
 """An output whose residual rms is above this many noise floors (and not white) has structure left."""
 PART_SHARE = 0.4
 PART_CONCENTRATION = 1.5
-LINE_PROMINENCE = 5.0
+RING_LEVEL = 2.0
+RING_SPREAD = 0.15
+RING_MIN_WINDOWS = 3
 MIN_EXPLAINED = 0.1
-CHANCE_FACTOR = 5.0
+SIGNIFICANCE = 1e-3
 FIR_HALF_S = 0.05
 SPLIT_SIGMA = 3.0
 SPLIT_RELATIVE = 0.2
@@ -91,11 +104,12 @@ class Correlate:
     name: str
     explained: float
     """Share of the residual's variance it explains beyond the inputs named before it."""
-    chance: float
+    p_value: float
+    """Chance of explaining as much with an unrelated input (partial F on the effective samples)."""
 
     def as_dict(self) -> dict[str, float | str]:
         """Plain values for JSON."""
-        return {"input": self.name, "explained_share": self.explained, "chance_share": self.chance}
+        return {"input": self.name, "explained_share": self.explained, "p_value": self.p_value}
 
 
 @dataclass
@@ -112,13 +126,29 @@ class OutputDiagnosis:
     """Half the excess power lies below this frequency."""
     above_bandwidth_share: float | None = None
     line_hz: float | None = None
+    """The frequency it rings at after the command stops (None: no ring the windows agree on)."""
+    ring_windows: int = 0
+    stop_windows: int = 0
     correlates: list[Correlate] = field(default_factory=list)
     """Inputs that explain more than chance, strongest first."""
+    jitter_s: float | None = None
+    """Sampling-time jitter (rms, s) that, with the noise floor, explains the residual (None: it does not)."""
+    stamp_scatter_s: float = 0.0
 
     @property
     def structured(self) -> bool:
-        """Not white and well above the noise floor: structure the model does not explain."""
-        return not self.white and self.rms > STRUCTURED * self.noise
+        """Not white and well above the noise floor, and not sampling-time jitter: structure the model lacks."""
+        return not self.white and self.rms > STRUCTURED * self.noise and self.jitter_s is None
+
+    def jitter_statement(self) -> str:
+        """What sampling-time jitter explains, in words (empty when it explains nothing)."""
+        if self.jitter_s is None:
+            return ""
+        stamps = (f"; the stamps scatter {1e3 * self.stamp_scatter_s:.2g} ms rms about a uniform grid"
+                  if self.stamp_scatter_s > 0 else "")
+        return (f"the error beyond the noise floor on {self.output} is what sampling instants jittering by "
+                f"{1e3 * self.jitter_s:.2g} ms rms leave (error ∝ rate; the residual divided by √(σ² + (rate·"
+                f"{1e3 * self.jitter_s:.2g} ms)²) is white){stamps}: the logger's timing, not the actuator")
 
     def named_parts(self) -> list[Part]:
         """The parts that hold the error (module docstring): in each family, one that stands out from the others."""
@@ -147,6 +177,8 @@ class OutputDiagnosis:
         u = "°" if unit == "deg" else f" {unit}"
         head = (f"{self.output}: rms {self.rms:.3g}{u}, {self.rms / self.noise:.3g}× its noise floor "
                 f"{self.noise:.3g}{u}")
+        if self.jitter_s is not None:
+            return head + ": " + self.jitter_statement()
         if not self.structured:
             return head + (", white" if self.white else ", within 1.5× the floor") + ": nothing left to explain"
         bits = []
@@ -159,7 +191,8 @@ class OutputDiagnosis:
                 freq += f", {100 * self.above_bandwidth_share:.0f} % above the model's bandwidth ({bandwidth:.2g} Hz)"
             bits.append(freq)
         if self.line_hz is not None:
-            bits.append(f"it rings at {self.line_hz:.3g} Hz (a line in its spectrum)")
+            bits.append(f"it rings at {self.line_hz:.3g} Hz after the command stops ({self.ring_windows} of "
+                        f"{self.stop_windows} windows agree)")
         for c in self.correlates:
             bits.append(f"it correlates with the {c.name} (a short filter of it explains {100 * c.explained:.0f} % "
                         "of the residual's variance)")
@@ -196,7 +229,7 @@ class Diagnosis:
         return {
             "outputs": {o: {"rms_deg": d.rms, "noise_deg": d.noise, "white": d.white, "structured": d.structured,
                             "parts": [p.as_dict() for p in d.parts], "median_hz": d.median_hz,
-                            "above_bandwidth_share": d.above_bandwidth_share, "line_hz": d.line_hz,
+                            "above_bandwidth_share": d.above_bandwidth_share, "ring_hz": d.line_hz,
                             "correlates": [c.as_dict() for c in d.correlates]}
                         for o, d in self.outputs.items()},
             "proxies": [{"parameter": p.name, "effect": p.effect, "first_half": p.first, "second_half": p.second,
@@ -206,15 +239,29 @@ class Diagnosis:
 
 
 # ------------------------------------------------------------------------------------------ where in time
+def _moving(u: FloatArray) -> NDArray[np.bool_]:
+    """Samples at which the command is changing (either side of a change beyond its hold tolerance)."""
+    step = np.concatenate([[False], np.abs(np.diff(u)) > hold_tolerance(u)])
+    return step | np.concatenate([step[1:], [False]])
+
+
+def _stops(problem: Problem) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Indices (among the fitted samples) where the command stops changing, and where it next changes."""
+    moving = _moving(problem.data.command_deg)[problem.mask].astype(np.int8)
+    edges = np.diff(moving)
+    stops = np.flatnonzero(edges == -1) + 1
+    starts = np.flatnonzero(edges == 1) + 1
+    nxt = np.array([starts[starts > a][0] if np.any(starts > a) else moving.size for a in stops], dtype=np.int64)
+    return stops.astype(np.int64), nxt
+
+
 def _parts(problem: Problem, fit: Fit, excess: FloatArray, bandwidth: float) -> list[Part]:
     """Shares of the excess error and of the time in each part of the record (module docstring)."""
     d = problem.data
     m = problem.mask
     dt = 1.0 / problem.sample_hz
     u = d.command_deg
-    tol = hold_tolerance(u)
-    step = np.concatenate([[False], np.abs(np.diff(u)) > tol])
-    moving = step | np.concatenate([step[1:], [False]])
+    moving = _moving(u)
     settle_s = min(max(2.0 / bandwidth if math.isfinite(bandwidth) and bandwidth > 0 else 0.25, 0.25), 1.0)
     last = np.where(moving, np.arange(u.size), -1)
     last = np.maximum.accumulate(last)
@@ -247,25 +294,67 @@ def _parts(problem: Problem, fit: Fit, excess: FloatArray, bandwidth: float) -> 
     return sorted(out, key=lambda p: -p.concentration)
 
 
+# ------------------------------------------------------------------------------------------ the logger's timing
+def _jitter(e: FloatArray, sigma: float, rate: FloatArray, fitted: int) -> float | None:
+    """The rms sampling-time jitter that explains ``e`` with the noise floor, or None (module docstring)."""
+    x = rate**2
+    if not np.any(x):
+        return None
+    var_t = float(np.dot(x, e**2 - sigma**2) / np.dot(x, x))
+    if var_t <= 0.0:
+        return None
+    z = e / np.sqrt(sigma**2 + var_t * x)
+    ok = whiteness(z, lags=50, fitted_params=fitted).white and float(np.sqrt(np.mean(z**2))) <= STRUCTURED
+    return math.sqrt(var_t) if ok else None
+
+
 # ------------------------------------------------------------------------------------------ frequency
-def _spectrum(e: FloatArray, sigma: float, fs: float, bandwidth: float
-              ) -> tuple[float | None, float | None, float | None]:
-    """Median frequency of the excess power, its share above ``bandwidth``, and a line (module docstring)."""
+def _spectrum(e: FloatArray, sigma: float, fs: float, bandwidth: float) -> tuple[float | None, float | None]:
+    """Frequency below which half the excess power lies, and its share above ``bandwidth`` (module docstring)."""
     nper = int(min(e.size, 2 ** int(np.log2(max(fs * 4.0, 16.0)))))
     f, pxx = welch(e - np.mean(e), fs=fs, nperseg=nper)
-    floor = 2.0 * sigma**2 / fs
-    ex = np.clip(pxx - floor, 0.0, None)
+    ex = np.clip(pxx - 2.0 * sigma**2 / fs, 0.0, None)
     ex[0] = 0.0
     if ex.sum() <= 0:
-        return None, None, None
+        return None, None
     cum = np.cumsum(ex)
     median = float(f[np.searchsorted(cum, 0.5 * cum[-1])])
     above = float(ex[f > bandwidth].sum() / ex.sum()) if math.isfinite(bandwidth) else None
-    smooth = median_filter(pxx, size=9, mode="nearest")
-    ratio = np.where((f > 2.0 * f[1]) & (pxx > LINE_PROMINENCE * floor), pxx / np.maximum(smooth, 1e-300), 0.0)
-    k = int(np.argmax(ratio))
-    line = float(f[k]) if ratio[k] >= LINE_PROMINENCE else None
-    return median, above, line
+    return median, above
+
+
+def _ring(e: FloatArray, sigma: float, fs: float, stops: NDArray[np.int64], next_change: NDArray[np.int64]
+          ) -> tuple[float | None, int, int]:
+    """The frequency the residual rings at after the command stops, the windows that agree, and all windows.
+
+    Each window runs from a stop of the command to its next change (at most 1 s, at least 8 samples)
+    and must stand out of the noise (rms above 2σ); its residual, detrended and Hann-windowed, peaks at
+    one frequency (an interior peak, twice the level at two periods a window: not a slow tail). A mode
+    rings at the same frequency after every stop: a ring is claimed when at least three windows and half
+    of them peak within 15 % of one another (their median frequency).
+    """
+    peaks = []
+    for a, nxt in zip(stops, next_change, strict=True):
+        w = e[a:min(nxt, a + round(fs))]
+        if w.size < 8 or float(np.sqrt(np.mean(w**2))) <= RING_LEVEL * sigma:
+            continue
+        k = np.arange(w.size)
+        w = (w - np.polyval(np.polyfit(k, w, 1), k)) * np.hanning(w.size)
+        n = max(1024, 1 << int(np.ceil(np.log2(8 * w.size))))
+        spec = np.abs(np.fft.rfft(w, n))
+        freqs = np.fft.rfftfreq(n, 1.0 / fs)
+        low = int(np.searchsorted(freqs, 2.0 * fs / w.size))  # at least two periods in the window
+        k = low + int(np.argmax(spec[low:]))
+        if k > low and spec[k] >= 2.0 * spec[low]:  # an interior peak, not the transient's slow tail
+            peaks.append(float(freqs[k]))
+    best: list[float] = []
+    for f0 in peaks:
+        cluster = [f for f in peaks if abs(f - f0) <= RING_SPREAD * f0]
+        if len(cluster) > len(best):
+            best = cluster
+    if len(best) >= max(RING_MIN_WINDOWS, 0.5 * len(peaks)):
+        return float(np.median(best)), len(best), len(peaks)
+    return None, len(best), len(peaks)
 
 
 # ------------------------------------------------------------------------------------------ inputs
@@ -315,28 +404,37 @@ def _share(e: FloatArray, a: FloatArray) -> float:
     return float(np.dot(fitted, fitted) / tss)
 
 
-def _chance(e: FloatArray, x: FloatArray, taps: int) -> float:
-    """The share ``taps`` columns of ``x`` explain of ``e`` by chance: taps/N_eff (Bartlett's correction)."""
+def _effective_samples(e: FloatArray, x: FloatArray) -> float:
+    """Independent samples behind a correlation of ``e`` with ``x``: N/(1 + 2Σρₑρₓ) (Bartlett)."""
     k_max = min(200, e.size // 4)
     rho = float(np.sum(autocorrelation(e, k_max)[1:] * autocorrelation(x, k_max)[1:]))
-    return min(1.0, taps * max(1.0 + 2.0 * rho, 1.0) / e.size)
+    return e.size / max(1.0 + 2.0 * rho, 1.0)
 
 
 def _correlates(e: FloatArray, inputs: dict[str, FloatArray], fs: float) -> list[Correlate]:
-    """Inputs that explain the residual beyond chance, chosen greedily: each counts only for what it adds."""
+    """Inputs that explain the residual beyond chance, chosen greedily: each counts only for what it adds.
+
+    An input counts when it explains at least 10 % of the residual's variance beyond the inputs named
+    before it and the partial F test on the effective samples rejects chance at 1 in 1000.
+    """
     cols = {name: _lagged(x, fs) for name, x in inputs.items() if np.ptp(x) > 0}
     chosen: list[Correlate] = []
     base = np.zeros((e.size, 0))
     explained = 0.0
     while cols:
-        gains = {name: _share(e, np.column_stack([base, a])) - explained for name, a in cols.items()}
-        name = max(gains, key=lambda k: gains[k])
-        chance = _chance(e, inputs[name], cols[name].shape[1])
-        if gains[name] < max(MIN_EXPLAINED, CHANCE_FACTOR * chance):
+        shares = {name: _share(e, np.column_stack([base, a])) for name, a in cols.items()}
+        name = max(shares, key=lambda k: shares[k])
+        gain = shares[name] - explained
+        taps, total = cols[name].shape[1], base.shape[1] + cols[name].shape[1]
+        dof = _effective_samples(e, inputs[name]) - total - 1.0
+        if gain < MIN_EXPLAINED or dof <= 0:
             break
-        chosen.append(Correlate(name, gains[name], chance))
+        p = float(fisher.sf((gain / taps) / (max(1.0 - shares[name], 1e-12) / dof), taps, dof))
+        if p > SIGNIFICANCE:
+            break
+        chosen.append(Correlate(name, gain, p))
         base = np.column_stack([base, cols.pop(name)])
-        explained += gains[name]
+        explained = shares[name]
     return chosen
 
 
@@ -394,18 +492,22 @@ def diagnose(result: Identification) -> Diagnosis:
     fit = result.final
     unit = result.record.unit if result.record else "deg"
     fs = p.sample_hz
-    bw = bandwidth_hz(fit.params)
+    bw = math.inf if result.final_model else bandwidth_hz(fit.params)
     outputs: dict[str, OutputDiagnosis] = {}
     errors = p.errors_deg(fit.sim)
+    scatter = result.record.stamp_scatter_s if result.record else 0.0
     for o, e in errors.items():
         sigma = p.sigma_deg[o]
         rms = float(np.sqrt(np.mean(e**2)))
         white = whiteness(e / sigma, lags=50, fitted_params=len(fit.free)).white
-        d = OutputDiagnosis(o, rms, sigma, white)
+        d = OutputDiagnosis(o, rms, sigma, white, stamp_scatter_s=scatter)
+        if not white and rms > STRUCTURED * sigma:
+            d.jitter_s = _jitter(e, sigma, fit.sim[p.mask, O_RATE], len(fit.free))
         if d.structured:
             excess = e**2 - sigma**2
             d.parts = _parts(p, fit, excess, bw)
-            d.median_hz, d.above_bandwidth_share, d.line_hz = _spectrum(e, sigma, fs, bw)
+            d.median_hz, d.above_bandwidth_share = _spectrum(e, sigma, fs, bw)
+            d.line_hz, d.ring_windows, d.stop_windows = _ring(e, sigma, fs, *_stops(p))
             d.correlates = _correlates(e, {k: x[p.mask] for k, x in _regressors(p, fit).items()}, fs)
         outputs[o] = d
     proxies = []
@@ -416,6 +518,7 @@ def diagnose(result: Identification) -> Diagnosis:
     nyquist = 0.5 * fs
     text = [d.sentence(unit, nyquist, bw) for d in outputs.values()]
     warnings = [d.short(unit) for d in outputs.values() if d.structured]
+    warnings += [d.jitter_statement() for d in outputs.values() if d.jitter_s is not None]
     left = [d for d in outputs.values() if d.structured]
     if left:
         added = ", ".join(s.effect for s in result.steps) or "nothing"

@@ -60,6 +60,8 @@ class Record:
     notes: list[str] = field(default_factory=list)
     """What was found and done, one line each (for the report's header)."""
     warnings: list[str] = field(default_factory=list)
+    stamp_scatter_s: float = 0.0
+    """Rms of the logged stamps about the least-squares line through them (0 for uniform stamps)."""
 
     @property
     def unit(self) -> str:
@@ -185,4 +187,7 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     notes.append(f"travel: {travel.statement}")
     if travel.outside:
         warnings.append(f"data outside the declared travel: {travel.statement}")
-    return Record(uniform, channel, noise, hold, travel, notes, warnings)
+    k = np.arange(data.time_s.size, dtype=float)
+    line = np.polyval(np.polyfit(k, data.time_s, 1), k)
+    scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - line))
+    return Record(uniform, channel, noise, hold, travel, notes, warnings, scatter)

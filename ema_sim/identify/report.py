@@ -86,7 +86,7 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
     Identification fits the equations with an accurate simulator; this is the extra error the user's
     own implementation adds on the same record, reported apart so it is never mistaken for an effect.
     """
-    if result.model not in ("loada", "loadf"):
+    if result.model not in ("loada", "loadf") or result.final_model:
         return None
     problem = result.problem
     final = result.final
@@ -163,6 +163,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "removed": [{"effect": r.effect, "where": r.where, "params": {k: _round(v) for k, v in r.params.items()},
                      "reason": r.reason} for r in result.removed],
         "final": {
+            "model": result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)]),
             "params": _params(result, final),
             "uncertainty": {names[f]: _round(v, 3) for f, v in final.sigma.items()},
             "relative_uncertainty": {names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()},
@@ -229,23 +230,24 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
 
 def summary(report: dict[str, Any]) -> str:
     """A few lines for the terminal."""
-    u = "°" if report.get("unit", "deg") == "deg" else f" {report['unit']}"
+    unit = report.get("unit", "deg")
+    u = "°" if unit == "deg" else f" {unit}"
     lines = [f"{report['data']}: {report['samples']} samples at {report['sample_hz']:g} Hz, "
              f"noise {', '.join(f'{o} {v:.4g}{u}' for o, v in report['noise_deg'].items())}"]
     if "reference" in report:
-        lines.append(f"reference {report['reference']['model']}: rms {_fmt_rms(report['reference']['rms_deg'])}")
+        lines.append(f"reference {report['reference']['model']}: rms {_fmt_rms(report['reference']['rms_deg'], unit)}")
     b = report["baseline"]
-    lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'])}")
+    lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'], unit)}")
     for a in report["added"]:
-        lines.append(f"  + {a['effect']} {_fmt_params(a['params'])}: rms {_fmt_rms(a['rms_deg_before'])} → "
-                     f"{_fmt_rms(a['rms_deg_after'])}")
+        lines.append(f"  + {a['effect']} {_fmt_params(a['params'])}: rms {_fmt_rms(a['rms_deg_before'], unit)} → "
+                     f"{_fmt_rms(a['rms_deg_after'], unit)}")
         lines.append(f"      {a['evidence']}")
     if not report["added"]:
         lines.append("  nothing added: no effect paid for itself")
     for r in report.get("removed", []):
         lines.append(f"  − {r['effect']} taken out again: {r['reason']}")
     f = report["final"]
-    lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'])} "
+    lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'], unit)} "
                  f"({', '.join(f'{v:.2f}× noise' for v in f['rms_over_noise'].values())})")
     lines += [f"warning: {w}" for w in report.get("warnings", [])]
     return "\n".join(lines)
@@ -260,8 +262,9 @@ def _fmt_params(params: dict[str, Any]) -> str:
     return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
 
 
-def _fmt_rms(rms: dict[str, float]) -> str:
-    return ", ".join(f"{k.split('_')[0]} {v:.4g}°" for k, v in rms.items())
+def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
+    u = "°" if unit == "deg" else f" {unit}"
+    return ", ".join(f"{k.split('_')[0]} {v:.4g}{u}" for k, v in rms.items())
 
 
 def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:  # noqa: PLR0915

@@ -23,7 +23,10 @@ Safeguards (the contract's rules for every report):
   fitted both ways and the interpretation that fits clearly better (ΔBIC ≤ −10) is taken, and said;
 * after the loop each added effect is switched off in the final model: one whose removal no longer
   fails the acceptance criteria, or whose final value fails its physical check, has collapsed to
-  "off" and is taken out again (the model refitted without it), with the reason.
+  "off" and is taken out again (the model refitted without it), with the reason;
+* the trivial model position = command (surface = command) is always available: when the declared
+  model with every effect added still fits worse (weighted, all outputs), the final model *is* the
+  trivial one, and the fitted model stays in the report as the baseline with the reason.
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ MAX_DELTA_BIC = -10.0
 MIN_PARTIAL_F = 20.0
 DONE_EXCESS = 0.02
 """Stop when the weighted error variance is within 2 % of the noise floor."""
+REFERENCE = "position = command"
+"""The trivial model every report compares with (and falls back on)."""
 START_WN_RAD_S = (8.0, 15.0, 30.0, 60.0, 120.0, 250.0, 480.0)
 START_ZETA = (0.35, 0.7, 1.2, 2.0)
 """The coarse grid the baseline may start from (when it does better than the declared values)."""
@@ -131,6 +136,8 @@ class Identification:
     removed: list[Removal] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     """What the fit decided about the record (command interpretation, start), one line each."""
+    final_model: str = ""
+    """:data:`REFERENCE` when the trivial model fits better than anything fitted; else empty (the declared one)."""
 
 
 def _rms(problem: Problem, f: Fit) -> dict[str, float]:
@@ -432,6 +439,17 @@ def _choose_hold(problem: Problem, base: SecondOrderParams, free: list[str], rec
     return held
 
 
+def reference_fit(problem: Problem, params: SecondOrderParams) -> Fit:
+    """The trivial model position = command (surface = command) as a :class:`Fit` with no free parameter.
+
+    ``params`` are carried along unused (a :class:`Fit` has some); its outputs are the logged command.
+    """
+    u = problem.data.command_deg
+    sim = np.column_stack([u, u, np.gradient(u, problem.time_s)])
+    residual = problem.weighted_residual(sim)
+    return Fit(params, False, (), sim, residual, np.zeros((residual.size, 0)), {}, ())
+
+
 def _effect_of(step: Step) -> Effect | None:
     return next((e for e in EFFECTS if e.name == step.effect and e.where == step.where and e.field), None)
 
@@ -516,5 +534,12 @@ def identify(
         result.steps.extend(_entries(problem, cur, new, cand))
         cur = new
     result.final = _prune(problem, result, cur, base)
+    trivial = reference_fit(problem, result.final.params)
+    if trivial.rss <= result.final.rss:
+        why = (f"the model it was added to fits worse than {REFERENCE} "
+               f"(weighted error ×{result.final.rss / trivial.rss:.3g})")
+        result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
+        result.steps.clear()
+        result.final, result.final_model = trivial, REFERENCE
     result.elapsed_s = time.perf_counter() - t0
     return result

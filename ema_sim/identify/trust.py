@@ -199,7 +199,7 @@ def identifiability(problem: Problem, fit: Fit) -> Identifiability:
 
 def _value(name: str, value: float, unit: str) -> str:
     meta = metas(SecondOrderParams).get(name)
-    u = meta.unit if meta else ""
+    u = meta.unit if meta and meta.unit != "-" else ""
     if unit != "deg" and u.startswith("deg"):
         u = unit + u[3:]
     return f"{name} = {value:.4g} {u}".rstrip()
@@ -224,6 +224,14 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
     unit = record.unit if record else "deg"
     out: list[str] = list(record.warnings) if record else []
     nyquist = 0.5 * p.sample_hz
+    ref = reference(p)["rms_deg"]
+    rms = _rms(p, final)
+    if result.final_model:
+        base = _rms(p, result.baseline)
+        out.append(f"the declared {result.model} fits worse than {result.final_model} "
+                   f"({', '.join(f'{o} rms {base[o]:.4g} against {ref[o]:.4g}' for o in p.outputs)}), and no effect "
+                   f"of the vocabulary closes the gap: the final model is {result.final_model}; the fitted "
+                   f"{result.model} is the baseline only")
     for name in final.free:
         value = float(getattr(final.params, name))
         free = FREE.get(name)
@@ -237,13 +245,11 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
             out.append(f"{_value(name, value, unit)} ({f:.3g} Hz) is {where} the record's Nyquist frequency "
                        f"({nyquist:.3g} Hz at {p.sample_hz:.4g} Hz): the record cannot resolve it")
     bw = bandwidth_hz(final.params)
-    if p.sample_hz < SAMPLES_PER_BANDWIDTH * bw:
+    if not result.final_model and p.sample_hz < SAMPLES_PER_BANDWIDTH * bw:
         out.append(f"sample rate {p.sample_hz:.4g} Hz is too low for the dynamics found: the fitted model's bandwidth "
                    f"is {bw:.3g} Hz, which needs at least {SAMPLES_PER_BANDWIDTH * bw:.3g} Hz to be determined")
-    ref = reference(p)["rms_deg"]
-    rms = _rms(p, final)
     for o in p.outputs:
-        if rms[o] >= ref[o]:
+        if not result.final_model and rms[o] >= ref[o]:
             out.append(f"the final model is no better than {o.split('_')[0]} = command on {o}: rms {rms[o]:.4g} "
                        f"against {ref[o]:.4g}")
     for removal in result.removed:
