@@ -4,16 +4,17 @@ When no effect of the vocabulary pays any more and an output's residual is still
 its floor, the diagnosis says what is left, for each such output:
 
 * **where in time** — the share of the error above the noise floor (``e² − σ²``, summed) that falls
-  while the command moves, within a settling time after it stops, or at rest, against the share of
+  while the command moves (outside its levels held 0.1 s or more: a frame-held sweep moves), within a
+  settling time after it reaches a new level, or at rest, against the share of
   time each takes; with a hinge moment, whether the load aids or opposes the motion and its sign;
   with a motor current, the samples near its limit (|i| ≥ 90 % of its largest); the direction of
   motion. A part is named when it holds at least 40 % of the excess and 1.5 times its share of time;
 * **at which frequency** — the residual's spectrum (Welch) against the white floor ``2σ²/fs``: the
   frequency below which half the excess power lies and the share above the model's bandwidth; and a
-  *ring*: the residual in each window after the command stops (up to 1 s, standing out of the noise)
-  peaks at one frequency, and a mode rings at the same one after every stop, so a ring is claimed
-  when at least three windows and half of them agree within 15 % (a residual that bursts only at
-  moves is no stationary signal: a peak of its average spectrum proves nothing by itself);
+  *ring*: the residual in each window after the command reaches a new level (up to 0.5 s) peaks at one
+  frequency well above its noise, and a mode rings at the same one after every level, so a ring is
+  claimed when at least three windows and half of them agree within 15 % (a residual that bursts only
+  at moves is no stationary signal: a peak of its average spectrum proves nothing by itself);
   frequencies above the record's Nyquist frequency alias and cannot be named;
 * **with which input** — the share of the residual's variance a short two-sided FIR (±50 ms) of each
   input explains: the command, its rate and acceleration, the direction of motion (friction and
@@ -49,7 +50,7 @@ from scipy.signal import welch
 from scipy.stats import f as fisher
 
 from ema_sim.analysis.noise import autocorrelation, whiteness
-from ema_sim.analysis.series import hold_tolerance
+from ema_sim.analysis.series import Hold, holds
 from ema_sim.identify.effects import EFFECTS, FREE, Effect
 from ema_sim.identify.fit import Fit, block_covariance
 from ema_sim.identify.problem import Problem
@@ -62,7 +63,12 @@ STRUCTURED = 1.5
 """An output whose residual rms is above this many noise floors (and not white) has structure left."""
 PART_SHARE = 0.4
 PART_CONCENTRATION = 1.5
-RING_LEVEL = 2.0
+HOLD_S = 0.1
+"""A command level held this long is at rest; between such holds the command moves."""
+RING_S = 0.5
+RING_ABOVE_NOISE = 4.0
+RING_OCTAVE = 2.0
+RING_PERIODS = 3.0
 RING_SPREAD = 0.15
 RING_MIN_WINDOWS = 3
 MIN_EXPLAINED = 0.1
@@ -239,36 +245,31 @@ class Diagnosis:
 
 
 # ------------------------------------------------------------------------------------------ where in time
-def _moving(u: FloatArray) -> NDArray[np.bool_]:
-    """Samples at which the command is changing (either side of a change beyond its hold tolerance)."""
-    step = np.concatenate([[False], np.abs(np.diff(u)) > hold_tolerance(u)])
-    return step | np.concatenate([step[1:], [False]])
+def _holds(problem: Problem) -> list[Hold]:
+    """The command's held levels of at least :data:`HOLD_S` (a frame-held sweep or a ramp holds none)."""
+    return holds(problem.data.command_deg, max(2, round(HOLD_S * problem.sample_hz)))
 
 
 def _stops(problem: Problem) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Indices (among the fitted samples) where the command stops changing, and where it next changes."""
-    moving = _moving(problem.data.command_deg)[problem.mask].astype(np.int8)
-    edges = np.diff(moving)
-    stops = np.flatnonzero(edges == -1) + 1
-    starts = np.flatnonzero(edges == 1) + 1
-    nxt = np.array([starts[starts > a][0] if np.any(starts > a) else moving.size for a in stops], dtype=np.int64)
-    return stops.astype(np.int64), nxt
+    """Where each held level starts and ends, as indices among the fitted samples."""
+    first = int(np.argmax(problem.mask))
+    spans = [(h.start - first, h.stop - first) for h in _holds(problem) if h.start > first]
+    return (np.array([a for a, _ in spans], dtype=np.int64), np.array([b for _, b in spans], dtype=np.int64))
 
 
 def _parts(problem: Problem, fit: Fit, excess: FloatArray, bandwidth: float) -> list[Part]:
     """Shares of the excess error and of the time in each part of the record (module docstring)."""
     d = problem.data
     m = problem.mask
-    dt = 1.0 / problem.sample_hz
-    u = d.command_deg
-    moving = _moving(u)
     settle_s = min(max(2.0 / bandwidth if math.isfinite(bandwidth) and bandwidth > 0 else 0.25, 0.25), 1.0)
-    last = np.where(moving, np.arange(u.size), -1)
-    last = np.maximum.accumulate(last)
-    since = np.where(last >= 0, (np.arange(u.size) - last) * dt, np.inf)
-    settling = ~moving & (since <= settle_s)
+    settle = round(settle_s * problem.sample_hz)
+    moving = np.ones(m.size, dtype=bool)
+    settling = np.zeros(m.size, dtype=bool)
+    for h in _holds(problem):
+        moving[h.start:h.stop] = False
+        settling[h.start:min(h.stop, h.start + settle)] = True
     parts = {("motion", "while the command moves"): moving,
-             ("motion", f"within {settle_s:.2g} s after the command stops"): settling,
+             ("motion", f"within {settle_s:.2g} s after the command reaches a new level"): settling,
              ("motion", "with the command at rest"): ~moving & ~settling}
     rate = fit.sim[:, O_RATE]
     fast = np.abs(rate) > 0.01 * max(float(np.max(np.abs(rate))), 1e-12)
@@ -323,30 +324,50 @@ def _spectrum(e: FloatArray, sigma: float, fs: float, bandwidth: float) -> tuple
     return median, above
 
 
+def _decay(w: FloatArray) -> FloatArray:
+    """The least-squares constant plus one decaying exponential through ``w`` (time constant from a grid)."""
+    k = np.arange(w.size, dtype=float)
+    best, fitted = np.inf, np.full(w.size, np.mean(w))
+    for tau in np.geomspace(0.5, 2.0 * w.size, 24):
+        a = np.column_stack([np.ones(w.size), np.exp(-k / tau)])
+        coef, *_ = np.linalg.lstsq(a, w, rcond=None)
+        fit = a @ coef
+        rss = float(np.sum((w - fit) ** 2))
+        if rss < best:
+            best, fitted = rss, fit
+    return fitted
+
+
 def _ring(e: FloatArray, sigma: float, fs: float, stops: NDArray[np.int64], next_change: NDArray[np.int64]
           ) -> tuple[float | None, int, int]:
-    """The frequency the residual rings at after the command stops, the windows that agree, and all windows.
+    """The frequency the residual rings at after the command reaches a level, the windows that agree, all windows.
 
-    Each window runs from a stop of the command to its next change (at most 1 s, at least 8 samples)
-    and must stand out of the noise (rms above 2σ); its residual, detrended and Hann-windowed, peaks at
-    one frequency (an interior peak, twice the level at two periods a window: not a slow tail). A mode
-    rings at the same frequency after every stop: a ring is claimed when at least three windows and half
-    of them peak within 15 % of one another (their median frequency).
+    Each window runs from the start of a held command level to its end (at most :data:`RING_S`, at
+    least 8 samples). What does not oscillate is taken out first: the best constant plus one decaying
+    exponential (:func:`_decay`; a mismatched real pole leaves just that). A ring decays from the
+    window's start, so what is left is tapered by the falling half of a Hann window only; its spectrum
+    peaks at one frequency (at least three periods a window), counted when the peak is narrow (twice
+    the spectrum an octave below and above: a ring, not a shape) and stands four times above what
+    the noise floor σ alone gives (no chance over all bins). A mode rings at the same frequency after
+    every level: a ring is claimed when at least three windows and half of those counted agree within
+    15 % (their median).
     """
     peaks = []
     for a, nxt in zip(stops, next_change, strict=True):
-        w = e[a:min(nxt, a + round(fs))]
-        if w.size < 8 or float(np.sqrt(np.mean(w**2))) <= RING_LEVEL * sigma:
+        w = e[a:min(nxt, a + round(RING_S * fs))]
+        if w.size < 8:
             continue
-        k = np.arange(w.size)
-        w = (w - np.polyval(np.polyfit(k, w, 1), k)) * np.hanning(w.size)
+        w = w - _decay(w)
+        taper = np.cos(0.5 * np.pi * np.arange(w.size) / (w.size - 1)) ** 2
         n = max(1024, 1 << int(np.ceil(np.log2(8 * w.size))))
-        spec = np.abs(np.fft.rfft(w, n))
+        spec = np.abs(np.fft.rfft(w * taper, n))
         freqs = np.fft.rfftfreq(n, 1.0 / fs)
-        low = int(np.searchsorted(freqs, 2.0 * fs / w.size))  # at least two periods in the window
-        k = low + int(np.argmax(spec[low:]))
-        if k > low and spec[k] >= 2.0 * spec[low]:  # an interior peak, not the transient's slow tail
-            peaks.append(float(freqs[k]))
+        noise = sigma * np.sqrt(np.sum(taper**2))
+        low = int(np.searchsorted(freqs, RING_PERIODS * fs / w.size))
+        j = low + int(np.argmax(spec[low:]))
+        octave = np.interp([freqs[j] / 2.0, min(2.0 * freqs[j], freqs[-1])], freqs, spec)
+        if j > low and spec[j] >= RING_ABOVE_NOISE * noise and spec[j] >= RING_OCTAVE * float(np.max(octave)):
+            peaks.append(float(freqs[j]))
     best: list[float] = []
     for f0 in peaks:
         cluster = [f for f in peaks if abs(f - f0) <= RING_SPREAD * f0]

@@ -39,8 +39,7 @@ NYQUIST_SHARE = 0.5
 """A frequency at or above this share of the Nyquist frequency is not resolved (fewer than 4 samples a period)."""
 SAMPLES_PER_BANDWIDTH = 10.0
 CONTENT_SHARE = 0.95
-"""The command's content: the band holding this share of its rate's power (a logged command's counts add a
-white floor to the rate, so the last few per cent say nothing of what the test excited)."""
+"""The command's content: the band holding this share of its power."""
 BOUND_SHARE = 1e-3
 """Within this share of its range (of the ratio, for a log-scaled one) a value sits on a bound."""
 
@@ -118,7 +117,7 @@ class Excitation:
     """Command changes from one held level (at least 0.1 s) to another (steps, moves), by 2 % of the span or more."""
     span: float
     bandwidth_hz: float
-    """Frequency below which 95 % of the command rate's power lies."""
+    """Frequency below which 95 % of the command's power (about its mean) lies."""
 
     def statement(self, unit: str) -> str:
         """One clause for a warning."""
@@ -145,9 +144,8 @@ def excitation(problem: Problem) -> Excitation:
     span = float(np.ptp(u))
     levels = holds(u, max(2, round(0.1 / dt))) if span > 0 else []
     moves = sum(abs(b.value - a.value) >= 0.02 * span for a, b in pairwise(levels))
-    du = np.diff(u)
-    power = np.abs(np.fft.rfft(du - np.mean(du))) ** 2
-    freqs = np.fft.rfftfreq(du.size, dt)
+    power = np.abs(np.fft.rfft(u - np.mean(u))) ** 2
+    freqs = np.fft.rfftfreq(u.size, dt)
     cum = np.cumsum(power)
     band = float(freqs[np.searchsorted(cum, CONTENT_SHARE * cum[-1])]) if cum[-1] > 0 else 0.0
     return Excitation(float(problem.time_s[-1]), moves, span, band)
