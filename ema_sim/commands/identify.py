@@ -20,11 +20,15 @@ def load_measured(path: Path, channel: str | None, rig: Any = None) -> Any:
 def run(args: argparse.Namespace) -> int:
     """Identify and print the summary; write JSON, the report and the residuals when asked."""
     from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415
+    from ema_sim.errors import UnknownNameError  # noqa: PLC0415
+    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415
     from ema_sim.identify.record import prepare  # noqa: PLC0415
     from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415
     from ema_sim.identify.stepwise import identify  # noqa: PLC0415
 
     check_channel(args.channel)
+    if args.model.strip().lower() not in DECLARED:
+        raise UnknownNameError("declared model for identification", args.model, DECLARED)
     overrides = parse_overrides(args.overrides)
     data = load_measured(args.data, args.channel, rig_format(args))
     channel, note = resolve_channel(data, args.channel)
@@ -54,7 +58,7 @@ def register(sub: Any) -> None:
                     "(data contract) that pay for themselves; reports the error before and after.",
     )
     p.add_argument("data", type=Path, help="a data-contract CSV or a rosbag2 directory")
-    p.add_argument("--model", default="second_order", choices=DECLARED, help="declared starting model")
+    p.add_argument("--model", default="second_order", help=f"declared starting model: {', '.join(DECLARED)}")
     p.add_argument("--channel", default=None, help="channel (default: the data's metadata, else left_wing)")
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="declare a stage of the starting model, e.g. --set compliance_deg_per_kinlb=0.2")

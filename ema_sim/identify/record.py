@@ -28,8 +28,11 @@ from ema_sim.analysis import series
 from ema_sim.analysis.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.noise import NoiseFloor
 from ema_sim.config import ChannelConfig
+from ema_sim.errors import DataError
 from ema_sim.io.csv import MeasuredData
 
+MAX_ABS = 1e6
+"""No command or output in degrees or millimetres is this large: such a column is not what it is named."""
 STOP_S = 0.2
 """The command must sit beyond the output's extreme this long, the output resting there, to show a stop."""
 
@@ -90,6 +93,30 @@ def _stop(data: MeasuredData, noise: dict[str, NoiseFloor], side: int) -> float 
     pinned = (u > top + band) & (y >= top - band)
     dt = float(np.median(np.diff(data.time_s)))
     return side * top if pinned.sum() * dt >= STOP_S else None
+
+
+def check_identifiable(data: MeasuredData) -> None:
+    """One clear error for a record nothing can be identified from (its columns are legal but say nothing).
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record as read.
+    """
+    source = data.source or "data"
+    for name in ("command_deg", *data.outputs):
+        x = data.column(name)
+        if float(np.max(np.abs(x))) > MAX_ABS:
+            raise DataError(f"{source}: {name} reaches {float(np.max(np.abs(x))):.3g} {data.unit}: no actuator moves "
+                            f"beyond ±{MAX_ABS:g}; is the column mapped to the right signal and unit?")
+    span = float(np.ptp(data.command_deg))
+    if span == 0.0:
+        raise DataError(f"{source}: the command never changes ({data.command_deg[0]:g} {data.unit} throughout): "
+                        "there is nothing to identify")
+    for name in data.outputs:
+        if float(np.ptp(data.column(name))) == 0.0:
+            raise DataError(f"{source}: {name} never changes while the command spans {span:.4g} {data.unit}: the "
+                            "actuator did not move, or the column is not its position")
 
 
 def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, NoiseFloor], *,
@@ -159,6 +186,7 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     from ema_sim.analysis.pipeline import command_hold, measure_outputs  # noqa: PLC0415
     from ema_sim.analysis.section2 import Options  # noqa: PLC0415
 
+    check_identifiable(data)
     noise = measure_outputs(data)
     hold = command_hold(data, noise, Options(command=command))
     uniform = series.uniform_record(data, command_sampled=hold.assumed_sampled)

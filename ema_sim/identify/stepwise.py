@@ -58,6 +58,8 @@ MAX_DELTA_BIC = -10.0
 MIN_PARTIAL_F = 20.0
 DONE_EXCESS = 0.02
 """Stop when the weighted error variance is within 2 % of the noise floor."""
+TINY = 1e-300
+"""Floor on a residual sum of squares in a ratio (a noise-free record can be matched exactly)."""
 REFERENCE = "position = command"
 """The trivial model every report compares with (and falls back on)."""
 START_WN_RAD_S = (8.0, 15.0, 30.0, 60.0, 120.0, 250.0, 480.0)
@@ -324,8 +326,8 @@ def _gain(problem: Problem, cur: Fit, new: Fit, q: int, sim_err: dict[str, float
     n = problem.n_fit
     rss0, rss1 = cur.rss, new.rss
     p1 = len(new.free)
-    delta_bic = n * math.log(rss1 / rss0) + q * math.log(n)
-    partial_f = ((rss0 - rss1) / max(q, 1)) / (rss1 / max(n - p1, 1))
+    delta_bic = n * math.log(max(rss1, TINY) / max(rss0, TINY)) + q * math.log(n)
+    partial_f = ((rss0 - rss1) / max(q, 1)) / (max(rss1, TINY) / max(n - p1, 1))
     # The margin is judged per output: an effect that removes a clear share of one output's error
     # above its noise floor counts even when the other output's error is larger.
     before = _blocks(problem, cur.residual)
@@ -336,7 +338,7 @@ def _gain(problem: Problem, cur: Fit, new: Fit, q: int, sim_err: dict[str, float
     sim_floor = max((sim_err[o] / problem.sigma_deg[o]) ** 2 for o in problem.outputs)
     reason = ""
     if rss1 > rss0:
-        reason = f"its fit ends worse than the model it started from (weighted error ×{rss1 / rss0:.3f})"
+        reason = f"its fit ends worse than the model it started from (weighted error ×{rss1 / max(rss0, TINY):.3g})"
     elif delta_bic > MAX_DELTA_BIC or partial_f < MIN_PARTIAL_F:
         reason = f"does not pay for itself (ΔBIC {delta_bic:.1f}, partial F {partial_f:.1f})"
     elif excess_share < MIN_EXCESS_SHARE:
@@ -427,7 +429,7 @@ def _choose_hold(problem: Problem, base: SecondOrderParams, free: list[str], rec
         return held
     problem.set_command_sampled(True)
     sampled = _baseline(problem, base, free)
-    delta_bic = problem.n_fit * math.log(sampled[0].rss / held[0].rss)
+    delta_bic = problem.n_fit * math.log(max(sampled[0].rss, TINY) / max(held[0].rss, TINY))
     if delta_bic <= MAX_DELTA_BIC:
         notes.append(f"command taken as sampled from a running demand, not held: the record has no step-like "
                      f"change from rest to tell, and the declared model fits it clearly better so "
@@ -537,7 +539,7 @@ def identify(
     trivial = reference_fit(problem, result.final.params)
     if trivial.rss <= result.final.rss:
         why = (f"the model it was added to fits worse than {REFERENCE} "
-               f"(weighted error ×{result.final.rss / trivial.rss:.3g})")
+               f"(weighted error ×{result.final.rss / max(trivial.rss, TINY):.3g})")
         result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
         result.steps.clear()
         result.final, result.final_model = trivial, REFERENCE

@@ -324,7 +324,11 @@ def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
                 units.add("deg")
     for name in REQUIRED:
         if name not in wanted:
-            raise DataError(f"{source}: line {line}: missing required column {name!r}")
+            hint = ""
+            if fmt is None and len(header) == 1 and any(sep in header[0] for sep in ("\t", ";")):
+                hint = (" (the header is one cell with tabs or semicolons in it: a rig's own file; map its columns "
+                        "with --columns, e.g. time_ms=t,command_deg=demand,position_deg=pos)")
+            raise DataError(f"{source}: line {line}: missing required column {name!r}{hint}")
     if not any(name in wanted for name in OUTPUTS):
         raise DataError(f"{source}: line {line}: needs a 'position_deg' or 'surface_deg' column")
     if len(units) > 1:
