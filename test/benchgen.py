@@ -56,7 +56,7 @@ class Drive:
 
 
 @nb.njit(cache=True)
-def _simulate(ref, ref_rate, n_sub, j_m, j_l, k_s, c_s, kp, kff, vmax, kv, ki, imax, tau_i, tc, b,  # noqa: ANN001, ANN202, PLR0913
+def _simulate(ref, ref_rate, n_sub, j_m, j_l, k_s, c_s, kp, kff, vmax, kv, ki, imax, tau_i, tc, b,
               spring, load_fb, log_load, dt):
     """Integrate the plant; ``ref`` is the demand at each control tick (held ``n_sub`` steps)."""
     n = ref.size * n_sub
@@ -181,7 +181,7 @@ def bench_log(drive: Drive, tick_t: np.ndarray, ref: np.ndarray, ref_rate: np.nd
     return MeasuredData(time_s=stamps - stamps[0], command_deg=logged, position_deg=pos, source=source, unit=unit)
 
 
-def write_tab(data: MeasuredData, path) -> None:  # noqa: ANN001
+def write_tab(data: MeasuredData, path) -> None:
     """The log as the rig writes it: tab separated, time in integer ms, positions to the count."""
     rows = [f"{round(1e3 * a)}\t{b:.2f}\t{c:.2f}" for a, b, c in zip(data.time_s, data.command_deg,
                                                                      data.position_deg, strict=True)]

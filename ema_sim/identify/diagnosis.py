@@ -27,7 +27,7 @@ its floor, the diagnosis says what is left, for each such output:
 **The logger's timing**: a bench logger's sampling instants jitter about the uniform grid its stamps
 are straightened to, which adds ``rate × δt`` to the residual: white, but only while the output moves.
 The variance model ``σ² + σ_t²·rate²`` is fitted to the squared residual (σ_t the rms jitter); when
-the residual divided by its square root is white within 1.5 of unity, the error is the logger's
+the residual divided by its square root is white (Ljung-Box, 1 %) with an rms within 1.5, the error is the logger's
 timing, said as such (with the stamps' own scatter), and no structure is claimed.
 
 **Proxies**: an added effect is a finding only if the record agrees with itself about it. The final
@@ -63,6 +63,8 @@ STRUCTURED = 1.5
 """An output whose residual rms is above this many noise floors (and not white) has structure left."""
 PART_SHARE = 0.4
 PART_CONCENTRATION = 1.5
+JITTER_WHITE = 0.01
+"""The jitter-normalised residual counts as white when Ljung-Box does not reject it at 1 %."""
 HOLD_S = 0.1
 """A command level held this long is at rest; between such holds the command moves."""
 RING_S = 0.5
@@ -305,7 +307,8 @@ def _jitter(e: FloatArray, sigma: float, rate: FloatArray, fitted: int) -> float
     if var_t <= 0.0:
         return None
     z = e / np.sqrt(sigma**2 + var_t * x)
-    ok = whiteness(z, lags=50, fitted_params=fitted).white and float(np.sqrt(np.mean(z**2))) <= STRUCTURED
+    test = whiteness(z, lags=50, fitted_params=fitted)
+    ok = test.p_value >= JITTER_WHITE and float(np.sqrt(np.mean(z**2))) <= STRUCTURED
     return math.sqrt(var_t) if ok else None
 
 

@@ -63,6 +63,10 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
+def _rms_of(problem: Problem, fit: Fit) -> dict[str, float]:
+    return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(fit.sim).items()}
+
+
 def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
     errors = problem.errors_deg(fit.sim)
     rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in errors.items()}
@@ -147,7 +151,10 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
                                else _round(p.noise[o].resolution)) for o in p.outputs},
         "reference": {"model": f"{'/'.join(o.split('_')[0] for o in p.outputs)} = command",
                       **{k: {o: _round(v) for o, v in m.items()} for k, m in ref.items()}},
-        "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base)},
+        "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base),
+                     "start": ({"params": _params(result, result.start),
+                                "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.start).items()}}
+                               if result.start is not None else None)},
         "added": [
             {
                 "effect": s.effect,
@@ -165,6 +172,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "final": {
             "model": result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)]),
             "params": _params(result, final),
+            "fields": {names[f]: f for f in final.free},
             "uncertainty": {names[f]: _round(v, 3) for f, v in final.sigma.items()},
             "relative_uncertainty": {names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()},
             "correlation": {names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
