@@ -172,6 +172,10 @@ def test_the_ringing_is_found_at_the_plant_s_own_frequency(rig):
     assert ring == pytest.approx(truth_hz, rel=0.1)
     assert any(f"rings at {ring:.3g} Hz" in t for t in report["diagnosis"]["text"])
     assert any("ringing at" in w for w in report["warnings"])
+    for key, value in _final_fields(report).items():
+        f = frequency_hz(key, value)
+        if f is not None and abs(f - ring) <= 0.25 * ring:
+            assert any(w.startswith(f"{key} (") and "still rings at" in w for w in report["warnings"])
     proxies = report["diagnosis"]["proxies"]
     assert proxies
     assert all(p["effect"] for p in proxies)

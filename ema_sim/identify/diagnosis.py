@@ -35,8 +35,9 @@ fit is linearised (one Gauss-Newton step from the final parameters on each half 
 each half's coloured-residual covariance): a parameter whose two halves disagree by more than three
 combined sigma and 20 % changes with what the record excites. An added effect that does so stands in
 for structure the vocabulary lacks (a second lag for a resonance, free play for friction); a declared
-model's own parameter that does so means the model's structure does not fit the whole record. Each is
-said in the diagnosis and in the warnings.
+model's own parameter that does so means the model's structure does not fit the whole record. A fitted
+frequency (ωn, a corner) within 25 % of the frequency the residual still rings at stands in for that
+mode. Each is said in the diagnosis and in the warnings, with the ring left.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ from ema_sim.identify.effects import EFFECTS, FREE, Effect
 from ema_sim.identify.fit import Fit, block_covariance
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.stepwise import Identification
-from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.identify.trust import bandwidth_hz, frequency_hz
 from ema_sim.models.base import O_RATE
 
 FloatArray = NDArray[np.float64]
@@ -78,6 +79,8 @@ SIGNIFICANCE = 1e-3
 FIR_HALF_S = 0.05
 SPLIT_SIGMA = 3.0
 SPLIT_RELATIVE = 0.2
+MODE_MATCH = 0.25
+"""A fitted frequency within this share of the frequency the residual still rings at stands in for that mode."""
 FAMILIES = ("motion", "direction", "load sign", "load against motion", "current")
 BY_FIELD: dict[str, Effect] = {e.field: e for e in EFFECTS if e.field is not None}
 """The vocabulary effect each model parameter belongs to."""
@@ -548,13 +551,23 @@ def diagnose(result: Identification) -> Diagnosis:
         added = ", ".join(s.effect for s in result.steps) or "nothing"
         text.append(f"what is left is structure no effect of the vocabulary explains (added: {added}); the "
                     "model's parameters are the best this structure allows, not a description of it")
+    rings = [(d.output, d.line_hz) for d in left if d.line_hz is not None]
+    seen = "; ".join(f"{o} rings at {f:.3g} Hz" for o, f in rings)
     for px in proxies:
         what = (f"the added {px.effect} stands in for structure the vocabulary lacks, not a finding"
                 if px.effect else "the declared model's structure does not fit the whole record")
         line = (f"{px.name} changes with the part of the record it is estimated on ({px.first:.4g} from the first "
-                f"half, {px.second:.4g} from the second, ±{px.sigma:.2g}): {what}")
+                f"half, {px.second:.4g} from the second, ±{px.sigma:.2g}): {what}" + (f" ({seen})" if seen else ""))
         text.append(line)
         warnings.append(line)
+    for name in fit.free:
+        f = frequency_hz(name, float(getattr(fit.params, name)))
+        for o, ring in rings:
+            if f is not None and abs(f - ring) <= MODE_MATCH * ring:
+                line = (f"{name} ({f:.3g} Hz) sits at the frequency {o} still rings at ({ring:.3g} Hz): the fitted "
+                        "dynamics stand in for a mode the model lacks; read it as that mode, not as the servo's own")
+                text.append(line)
+                warnings.append(line)
     return Diagnosis(outputs, proxies, text, warnings)
 
 

@@ -275,15 +275,21 @@ def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
     return ", ".join(f"{k.split('_')[0]} {v:.4g}{u}" for k, v in rms.items())
 
 
-def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:  # noqa: PLR0915
+def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:
     """Markdown report with plots of the residual before and after, under ``directory``."""
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    _plots(result, report, out)
+    return _markdown(result, report, out)
+
+
+def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
+    """``residual.png`` (before and after, with the noise floor) and ``fit.png`` (measured and model)."""
     import matplotlib as mpl  # noqa: PLC0415 - plotting only when asked
 
     mpl.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
     p = result.problem
     t = p.time_s[p.mask]
     rows = 2 * len(p.outputs) + 1
@@ -296,15 +302,17 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
                                (axes[2 * k + 1], result.final, "after")):
             ax.plot(t, meas - fit.sim[p.mask, col], lw=0.5, color="tab:blue" if fit is result.baseline else "tab:green",
                     label=label)
-            ax.axhspan(-2 * s, 2 * s, color="0.85", zorder=0, label="±2σ noise")
-            ax.set_ylabel(f"{o.split('_')[0]} residual, deg")
+            ax.axhspan(-2 * s, 2 * s, color="0.85", zorder=0, label="±2σ noise floor (counts included)")
+            ax.set_ylabel(f"{o.split('_')[0]} residual, {report.get('unit', 'deg')}")
             ax.legend(loc="upper right", fontsize=8)
             ax.grid(alpha=0.3)
+    unit = report.get("unit", "deg")
     axes[-1].plot(t, p.data.command_deg[p.mask], lw=0.7, label="command_deg")
-    ax2 = axes[-1].twinx()
-    ax2.plot(t, p.hinge_moment[p.mask], lw=0.5, color="tab:red", label="hinge moment")
-    ax2.set_ylabel("hinge moment, in·lb")
-    axes[-1].set_ylabel("command, deg")
+    if p.load_span_inlb > 0.0:  # no empty load axis on a record without a hinge moment
+        ax2 = axes[-1].twinx()
+        ax2.plot(t, p.hinge_moment[p.mask], lw=0.5, color="tab:red", label="hinge moment")
+        ax2.set_ylabel("hinge moment, in·lb")
+    axes[-1].set_ylabel(f"command, {unit}")
     axes[-1].set_xlabel("time, s")
     fig.suptitle("Residual (measured − model) before and after identification")
     fig.tight_layout()
@@ -324,6 +332,11 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     fig.savefig(out / "fit.png", dpi=110)
     plt.close(fig)
 
+
+
+def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path:
+    """``report.md``: the summary, the record, the warnings, the errors, the effects, the diagnosis."""
+    p = result.problem
     md = ["# Identification report", "", "```", summary(report), "```", "", "## The record", ""]
     md += [f"- {n}" for n in report.get("notes", [])]
     md += ["", "## Warnings", ""]

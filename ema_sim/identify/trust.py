@@ -21,7 +21,9 @@ from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import welch
 
+from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
 from ema_sim.analysis.series import holds
 from ema_sim.identify.effects import FREE, Free
 from ema_sim.identify.fit import Fit, covariance
@@ -38,8 +40,9 @@ INSEPARABLE = 0.95
 NYQUIST_SHARE = 0.5
 """A frequency at or above this share of the Nyquist frequency is not resolved (fewer than 4 samples a period)."""
 SAMPLES_PER_BANDWIDTH = 10.0
-CONTENT_SHARE = 0.95
-"""The command's content: the band holding this share of its power."""
+CONTENT_DB = 1e-4
+"""The command's content reaches the highest frequency where its spectrum is within 40 dB of its peak (and
+ten times above the white floor of its counts, when it is logged in counts)."""
 BOUND_SHARE = 1e-3
 """Within this share of its range (of the ratio, for a log-scaled one) a value sits on a bound."""
 
@@ -117,13 +120,13 @@ class Excitation:
     """Command changes from one held level (at least 0.1 s) to another (steps, moves), by 2 % of the span or more."""
     span: float
     bandwidth_hz: float
-    """Frequency below which 95 % of the command's power (about its mean) lies."""
+    """Highest frequency at which the command's spectrum is within 40 dB of its peak."""
 
     def statement(self, unit: str) -> str:
         """One clause for a warning."""
         u = "°" if unit == "deg" else f" {unit}"
         return (f"{self.duration_s:.3g} s, {self.changes} change(s) of the command's level over {self.span:.3g}{u}, "
-                f"command content up to {self.bandwidth_hz:.2g} Hz")
+                f"command within 40 dB of its peak up to {self.bandwidth_hz:.2g} Hz")
 
 
 def excitation(problem: Problem) -> Excitation:
@@ -144,10 +147,11 @@ def excitation(problem: Problem) -> Excitation:
     span = float(np.ptp(u))
     levels = holds(u, max(2, round(0.1 / dt))) if span > 0 else []
     moves = sum(abs(b.value - a.value) >= 0.02 * span for a, b in pairwise(levels))
-    power = np.abs(np.fft.rfft(u - np.mean(u))) ** 2
-    freqs = np.fft.rfftfreq(u.size, dt)
-    cum = np.cumsum(power)
-    band = float(freqs[np.searchsorted(cum, CONTENT_SHARE * cum[-1])]) if cum[-1] > 0 else 0.0
+    freqs, power = welch(u - np.mean(u), fs=1.0 / dt, nperseg=min(u.size, 4096))
+    q = detect_resolution(u, min_span=COMMAND_COUNTS_SPANNED)
+    floor = 10.0 * 2.0 * dt * (q * q / 12.0) if q else 0.0  # ten times the white floor of the command's counts
+    above = np.flatnonzero(power >= max(CONTENT_DB * float(np.max(power)), floor))
+    band = float(freqs[above[-1]]) if above.size else 0.0
     return Excitation(float(problem.time_s[-1]), moves, span, band)
 
 
