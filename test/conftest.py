@@ -8,6 +8,18 @@ import pytest
 FRAME_S = 0.005
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A module whose tests start processes runs in one pytest-xdist worker, its tests one after another.
+
+    ``make test`` runs the suite on two workers (``--dist loadgroup``): other tests go to whichever worker
+    is free. The ROS tests measure frame rates, drops and latencies of real processes, so two of one
+    module never run against each other; the Monte Carlo tests share their module's real Dask cluster.
+    """
+    for item in items:
+        if item.get_closest_marker("ros") is not None or item.module.__name__.endswith("test_montecarlo"):
+            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
+
+
 def frames(duration_s: float) -> np.ndarray:
     """Frame instants over ``duration_s``."""
     return np.arange(round(duration_s / FRAME_S)) * FRAME_S
