@@ -329,3 +329,22 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, name, text, extra, m
 def test_missing_file_is_one_line(tmp_path, capsys):
     assert main(["identify", str(Path(tmp_path) / "none.csv"), "-q"]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_a_parameter_the_record_cannot_move_leaves_the_others_determined():
+    """A zero Jacobian column (a free play never crossed) is infinitely uncertain on its own; the other
+    parameters keep the covariance of the fit without it (before: every parameter was 'not determined')."""
+    from ema_sim.identify.fit import block_covariance  # noqa: PLC0415
+
+    rng = np.random.default_rng(3)
+    jac = [rng.normal(size=(400, 3)), rng.normal(size=(400, 3))]
+    res = [rng.normal(size=400), rng.normal(size=400)]
+    full = block_covariance(res, jac)
+    assert np.all(np.isfinite(full))
+    cut = [np.column_stack([j[:, 0], np.zeros(400), j[:, 2]]) for j in jac]
+    cov = block_covariance(res, cut)
+    assert np.all(np.isinf(cov[1, :]))
+    assert np.all(np.isinf(cov[:, 1]))
+    without = block_covariance(res, [j[:, [0, 2]] for j in jac])
+    np.testing.assert_allclose(cov[np.ix_([0, 2], [0, 2])], without, rtol=1e-12)
+    assert np.all(np.isinf(block_covariance(res, [np.zeros((400, 2))] * 2)))

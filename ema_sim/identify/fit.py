@@ -155,15 +155,24 @@ def block_covariance(residuals: Sequence[FloatArray], jacobians: Sequence[FloatA
     p = jacobians[0].shape[1]
     if p == 0:
         return np.zeros((0, 0))
-    jtj = sum((j.T @ j for j in jacobians), np.zeros((p, p)))
+    out = np.full((p, p), math.inf)
+    norms = np.sqrt(sum((np.sum(j * j, axis=0) for j in jacobians), np.zeros(p)))
+    moved = np.flatnonzero(norms > 1e-12 * max(float(norms.max()), 1e-300))
+    if moved.size == 0:
+        return out
+    # a parameter the record cannot move at all (a zero column) is infinitely uncertain on its own:
+    # the others keep the finite covariance of a fit without it
+    jacobians = [j[:, moved] for j in jacobians]
+    jtj = sum((j.T @ j for j in jacobians), np.zeros((moved.size, moved.size)))
     try:
         inv = np.linalg.inv(jtj)
     except np.linalg.LinAlgError:
-        return np.full((p, p), math.inf)
+        return out
     middle = np.zeros_like(jtj)
     for r, j in zip(residuals, jacobians, strict=True):
         acov = autocovariance(r, COVARIANCE_LAGS)
         kernel = np.concatenate([acov[:0:-1], acov])  # R is Toeplitz: R·J is a convolution
         rj = np.column_stack([fftconvolve(j[:, c], kernel, mode="same") for c in range(j.shape[1])])
         middle += j.T @ rj
-    return np.asarray(inv @ middle @ inv, dtype=float)
+    out[np.ix_(moved, moved)] = inv @ middle @ inv
+    return out

@@ -8,9 +8,11 @@
 * a **sample rate too low** for the dynamics found: below ten times the fitted linear model's −3 dB
   bandwidth (its 10–90 % rise then spans fewer than about three samples);
 * **identifiability**, from the final fit's parameter covariance (coloured-residual corrected): a
-  parameter whose one-sigma uncertainty exceeds a quarter of its value is not determined by the
-  record, and two whose estimates correlate beyond 0.95 cannot be told apart by it; each warning says
-  what excitation the record had (its length, the command's changes, span and bandwidth).
+  parameter whose one-sigma uncertainty exceeds a quarter of its value (of its typical size when it
+  is zero) is not determined by the record; one the record cannot move at all (a zero Jacobian column)
+  is infinitely uncertain, without making the others so; and two whose estimates correlate beyond 0.95
+  cannot be told apart by it; each warning says what excitation the record had (its length, the
+  command's changes, span and bandwidth).
 """
 
 from __future__ import annotations
@@ -190,7 +192,9 @@ def identifiability(problem: Problem, fit: Fit) -> Identifiability:
     for name in fit.free:
         value = float(getattr(fit.params, name))
         sigma = fit.sigma.get(name, math.inf)
-        rel[name] = sigma / abs(value) if value != 0.0 else math.inf
+        # at zero (a bias, an offset) the parameter's typical size stands in for its value
+        size = abs(value) if value != 0.0 else (FREE[name].scale if name in FREE else 0.0)
+        rel[name] = sigma / size if size > 0.0 else math.inf
     correlation = {a: {b: float(corr[i, j]) for j, b in enumerate(names) if j != i and np.isfinite(corr[i, j])}
                    for i, a in enumerate(names)}
     pairs = [(a, b, float(corr[i, j])) for i, a in enumerate(names) for j, b in enumerate(names)
@@ -260,7 +264,8 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
     exc = excitation(p)
     if ident.not_determined:
         which = ", ".join(
-            f"{n} (±1σ {100 * ident.relative_sigma[n]:.0f} % of its value)" if math.isfinite(ident.relative_sigma[n])
+            f"{n} (±1σ {100 * ident.relative_sigma[n]:.0f} % of its "
+            f"{'value' if getattr(final.params, n) else 'typical size'})" if math.isfinite(ident.relative_sigma[n])
             else f"{n} (the record cannot move it)" for n in ident.not_determined)
         out.append(f"not determined by this record, too short or too poorly excited for them: {which}; the record "
                    f"has {exc.statement(unit)}")
