@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
-import math
-
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import UnknownNameError
 from ema_sim.identify.effects import FREE
 from ema_sim.models.second_order import SecondOrderParams
+from ema_sim.parameters import metas
 
 DECLARED = ("second_order", "loac", "loada", "loadf", "sloac")
 """Models identification can start from: the second-order family (fitted with its accurate simulator)."""
+
+
+COMPANION = {
+    "velocity_loop_hz": "accel_limit_dps2",
+    "linkage_zeta": "linkage_freq_hz",
+    "compliance_stiff_deg_per_kinlb": "compliance_knee_inlb",
+    "lvdt_compliance_stiff_deg_per_kinlb": "lvdt_compliance_knee_inlb",
+}
+"""A parameter that means something only with another stage on: the stage that switches it."""
 
 
 def declared(model: str, channel: ChannelConfig, overrides: dict[str, float]) -> tuple[SecondOrderParams, list[str]]:
@@ -34,11 +42,9 @@ def declared(model: str, channel: ChannelConfig, overrides: dict[str, float]) ->
     else:
         params = SecondOrderParams.from_channel(channel, **overrides)
     free = ["wn_rad_s", "zeta"]
+    info = metas(SecondOrderParams)
     for name in FREE:
-        if name in free:
-            continue
-        value = getattr(params, name)
-        on = math.isfinite(value) if name == "rate_limit_dps" else value != 0.0
-        if on:
+        switch = COMPANION.get(name, name)
+        if name not in free and getattr(params, switch) != info[switch].off:
             free.append(name)
     return params, free

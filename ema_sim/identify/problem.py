@@ -13,7 +13,7 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_filter, welch
 
 from ema_sim.analysis.noise import noise_floor
 from ema_sim.config import ChannelConfig
@@ -140,4 +140,25 @@ class Problem:
 
     def max_rate_dps(self, sim: FloatArray) -> float:
         """Largest surface rate the model reaches on this record."""
-        return float(np.max(np.abs(sim[:, O_RATE])))
+        return float(np.max(np.abs(sim[:, 2])))
+
+    def max_accel_dps2(self, sim: FloatArray) -> float:
+        """Largest acceleration the model reaches on this record (its rate's slope between samples)."""
+        return float(np.max(np.abs(np.diff(sim[:, 2]) / np.diff(self.time_s))))
+
+    def ringing_hz(self, sim: FloatArray) -> float:
+        """Where the surface residual's spectrum peaks between 3 Hz and 0.4× the sample rate (0: no clear peak).
+
+        A mode the model lacks leaves a narrow peak there; a broad residual leaves none.
+        """
+        if "surface_deg" not in self.outputs:
+            return 0.0
+        r = self.errors_deg(sim)["surface_deg"]
+        fs = self.sample_hz
+        nper = int(min(r.size, max(256, 2 ** round(np.log2(fs)))))
+        freqs, psd = welch(r - np.mean(r), fs=fs, nperseg=nper)
+        band = (freqs >= 3.0) & (freqs <= 0.4 * fs)
+        if not np.any(band):
+            return 0.0
+        k = int(np.argmax(np.where(band, psd, 0.0)))
+        return float(freqs[k]) if psd[k] > 5.0 * float(np.median(psd[band])) else 0.0

@@ -10,13 +10,11 @@ from typing import Any
 import numpy as np
 
 from ema_sim.analysis.noise import input_independence, whiteness
-from ema_sim.identify.effects import EFFECTS, FREE
+from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stepwise import Identification
 from ema_sim.models import create
-
-_VOCAB = {e.field: e for e in EFFECTS if e.field is not None}
 
 
 def _round(x: float, digits: int = 6) -> float:
@@ -28,24 +26,17 @@ def _round(x: float, digits: int = 6) -> float:
 def _names(result: Identification, fit: Fit) -> dict[str, str]:
     """Model parameter → reported name: the declared model's own names, the vocabulary's for added effects."""
     own = set(result.baseline.free)
-    names: dict[str, str] = {}
-    used: set[str] = set()
-    for f in fit.free:
-        if f in own or f not in _VOCAB:
-            name = f
-        else:
-            effect = _VOCAB[f]
-            name = effect.vocab or f
-            if name in used:
-                name = f"{effect.where}_{name}"
-        names[f] = name
-        used.add(name)
-    return names
+    return {f: f if f in own or f not in KEYS else KEYS[f].name for f in fit.free}
+
+
+def _factor(result: Identification, fit: Fit, f: str) -> float:
+    """The factor from a parameter's model unit to the unit its reported name carries."""
+    return 1.0 if f in result.baseline.free or f not in KEYS else KEYS[f].factor(fit.params)
 
 
 def _params(result: Identification, fit: Fit) -> dict[str, float]:
     names = _names(result, fit)
-    out = {names[f]: _round(float(getattr(fit.params, f))) for f in fit.free}
+    out = {names[f]: _round(float(getattr(fit.params, f)) * _factor(result, fit, f)) for f in fit.free}
     if fit.params.hysteresis_h_lb_per_in > 0.0 and "hysteresis_h_lb_per_in" in fit.free:
         out["load_freq_hz"] = _round(fit.params.hysteresis_freq_hz)
     return out
@@ -115,7 +106,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         ],
         "final": {
             "params": _params(result, final),
-            "uncertainty": {names[f]: _round(v, 3) for f, v in final.sigma.items()},
+            "uncertainty": {names[f]: _round(v * _factor(result, final, f), 3) for f, v in final.sigma.items()},
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
         },

@@ -26,7 +26,7 @@ import numpy as np
 
 from ema_sim.config import ChannelConfig
 from ema_sim.identify.declared import declared
-from ema_sim.identify.effects import EFFECTS, FREE, Context, Effect, Free
+from ema_sim.identify.effects import EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
 from ema_sim.identify.fit import Fit, fit
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.quantization import step_candidates
@@ -48,7 +48,8 @@ class Candidate:
     """An effect at a starting value, with what screening saw of it."""
 
     effect: Effect
-    value: float
+    value: Values
+    """Where its fit starts: model parameter → value."""
     flip: bool
     predicted_drop: float
     """Weighted error it would remove if it entered linearly (all outputs)."""
@@ -141,8 +142,8 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     The rank is the share of one output's error above its noise floor: an effect seen on one output
     only (an LVDT filter) must not be drowned by a larger error on the other.
     """
-    effects = [e for e in EFFECTS if e.applies(ctx) and (e.field is None or e.field not in cur.free)]
-    probes: list[tuple[Effect, float]] = [(e, v) for e in effects for v in e.probes(ctx)]
+    effects = [e for e in EFFECTS if e.applies(ctx) and not any(f in cur.free for f in e.owned)]
+    probes: list[tuple[Effect, Values]] = [(e, v) for e in effects for v in e.probes(ctx)]
     if not probes:
         return []
     params = [e.apply(cur.params, v, ctx) for e, v in probes]
@@ -167,21 +168,20 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
         rs = float(np.dot(r_perp, s_perp))
         beta = rs / ss
         flip = cur.flip
+        start = dict(value)
         if effect.name == "hinge_moment_sign":
             flip = not cur.flip
             if beta <= 0.0:
                 continue
-            start = 0.0
-        elif effect.load_effect and beta < 0.0:
+        elif effect.load_effect and beta < 0.0 and len(value) == 1:
             flip = not cur.flip  # the load would have to act backwards: try it with the sign reversed
-            start = abs(beta) * value
-        elif effect.field in ("kb", "offset_deg", "delay_s"):
-            base = getattr(cur.params, effect.field)
-            start = base + beta * (value - base)
-        else:
-            if beta <= 0.0:
-                continue
-            start = value * min(max(beta, 0.3), 3.0)
+            start = {f: abs(beta) * v for f, v in value.items()}
+        elif effect.field in SIGNED:
+            start = {f: getattr(cur.params, f) + beta * (v - getattr(cur.params, f)) for f, v in value.items()}
+        elif beta <= 0.0:
+            continue
+        elif len(value) == 1:  # a single stage switched on: scale its probe by what the residual asks for
+            start = {f: v * min(max(beta, 0.3), 3.0) for f, v in value.items()}
         step = beta * s_perp
         shares = [float(2.0 * np.dot(rb, sb) - np.dot(sb, sb)) / e
                   for rb, sb, e in zip(_blocks(problem, r_perp), _blocks(problem, step), excess, strict=True)]
@@ -191,6 +191,8 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     return sorted(best.values(), key=lambda c: -c.score)
 
 
+SIGNED = ("kb", "offset_deg", "delay_s", "feedback_delay_s")
+"""Parameters a probe moves from where they are, either way (their screening step is signed)."""
 PRE_QUANTIZER = ("kb", "offset_deg")
 """Parameters acting before the quantizer: the cost is piecewise flat in them once a step is on."""
 
@@ -229,19 +231,17 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
 def _fit_candidate(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit:
     """Fit the current model plus the candidate, every parameter together."""
     effect = cand.effect
-    if effect.field is None:
-        return fit_model(problem, effect.apply(cur.params, 0.0, ctx), cur.free, flip=cand.flip)
-    free_f = FREE.get(effect.field)
-    start = cand.value
-    if free_f is not None:
-        start = min(max(start, free_f.low), free_f.high)
+    if not effect.fields:
+        return fit_model(problem, effect.apply(cur.params, cand.value, ctx), cur.free, flip=cand.flip)
+    start = {f: min(max(v, FREE[f].low), FREE[f].high) if f in FREE else v for f, v in cand.value.items()}
     base = effect.apply(cur.params, start, ctx)
     if not effect.discrete:
-        return fit_model(problem, base, (*cur.free, effect.field), flip=cand.flip)
+        return fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *effect.fields))), flip=cand.flip)
     # A quantizer's step: the linear search's (step, offset) candidates, each checked with the full
     # simulation on a fine local grid (one batch), then the continuous parameters refitted with it.
     grid = [
-        effect.apply(cur.params, q * (1.0 + d), ctx).replace(offset_deg=cur.params.offset_deg + shift)
+        effect.apply(cur.params, {"quantization_deg": q * (1.0 + d)}, ctx).replace(
+            offset_deg=cur.params.offset_deg + shift)
         for q, shift in ctx.quantization_steps for d in np.linspace(-3e-4, 3e-4, 7)
     ]
     sims = problem.simulate(grid, [cand.flip] * len(grid))
@@ -262,7 +262,7 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
            sim_err: dict[str, float]) -> Verdict:
     effect = cand.effect
     n = problem.n_fit
-    q = 0 if effect.field is None else 1
+    q = len([f for f in effect.fields if f not in cur.free])
     rss0, rss1 = cur.rss, new.rss
     p1 = len(new.free) + q
     delta_bic = n * math.log(rss1 / rss0) + q * math.log(n)
@@ -274,7 +274,8 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
     drops = [(float(np.dot(b, b)) - float(np.dot(a, a))) / b.size for b, a in zip(before, after, strict=True)]
     excess_share = max(d * b.size / e for d, b, e in zip(drops, before, _excess(problem, cur.residual), strict=True))
     drop = max(drops)
-    value = None if effect.field is None else float(getattr(new.params, effect.field))
+    values = {f: float(getattr(new.params, f)) for f in effect.fields}
+    value = values[effect.fields[0]] if values else None
     sim_floor = max((sim_err[o] / problem.sigma_deg[o]) ** 2 for o in problem.outputs)
     reason = ""
     if delta_bic > MAX_DELTA_BIC or partial_f < MIN_PARTIAL_F:
@@ -285,13 +286,13 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
         reason = f"changes the error by {100 * drop:.2f} % of the noise variance, below what sampling can tell"
     elif drop < 100.0 * sim_floor:
         reason = "within a hundred times the simulator's own error"
-    elif value is not None:
-        bound = FREE.get(effect.field)
-        why = effect.check(value, ctx)
-        if why:
-            reason = why
-        elif bound is not None and (value >= bound.high * (1 - 1e-3) or (bound.low > 0 and value <= bound.low * 1.001)):
-            reason = f"fitted value {value:.4g} sits on the bound of its physical range"
+    elif values:
+        reason = effect.check(values, ctx) or ""
+        for f, v in values.items():
+            bound = FREE.get(f)
+            if not reason and bound is not None and (v >= bound.high * (1 - 1e-3)
+                                                     or (bound.low > 0 and v <= bound.low * 1.001)):
+                reason = f"fitted {KEYS[f].name if f in KEYS else f} {v:.4g} sits on the bound of its physical range"
     return Verdict(effect.name, effect.where, value, not reason, reason or "accepted", delta_bic, partial_f,
                    excess_share, drop)
 
@@ -319,13 +320,15 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
         evidence = (f"{effect.name.replace('_', ' ')} fits only with the hinge moment reversed "
                     f"(partial ρ = {-abs(cand.rho):.2f} with the declared sign): the load was applied backwards")
         steps.append(Step("hinge_moment_sign", "load", {}, {}, before, before, evidence))
-    value = float(getattr(new.params, effect.field))
-    vocab = {effect.vocab: value}
-    sigma = {effect.vocab: new.sigma[effect.field]} if effect.field in new.sigma else {}
-    if effect.field == "hysteresis_h_lb_per_in":
+    vocab = report_values(new.params, effect.fields)
+    sigma = {KEYS[f].name: new.sigma[f] * KEYS[f].factor(new.params) for f in effect.fields if f in new.sigma}
+    if "hysteresis_h_lb_per_in" in effect.fields:
         vocab["load_freq_hz"] = problem.load_freq_hz
-    where = f" on the {effect.where}" if effect.where in ("feedback", "position", "surface") else ""
-    evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {effect.vocab} = {_fmt(value)}"
+    where = f" on the {effect.where}" if effect.where in ("feedback", "surface") else ""
+    fitted = ", ".join(f"{k} = {_fmt(v)}" for k, v in vocab.items())
+    if effect.name == "feedback_filter":
+        fitted = f"corner 2ζωn = {new.params.zeta * new.params.wn_rad_s / math.pi:.3g} Hz"
+    evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
                 f"{where}; error above the noise floor: {cut}")
     steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence))
     return steps
@@ -355,8 +358,10 @@ def identify(
             break
         steps = (step_candidates(problem, cur.params, cur.sim)
                  if cur.params.quantization_deg == 0.0 and "quantization_deg" not in cur.free else [])
-        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base, steps)
+        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base, steps,
+                      problem.max_accel_dps2(cur.sim), problem.ringing_hz(cur.sim))
         ranked = _screen(problem, cur, ctx)
+        say("  screened: " + ", ".join(f"{c.effect.key} {c.score:.2f}" for c in ranked))
         best: tuple[Fit, Candidate] | None = None
         for k, cand in enumerate(ranked[:TOP_K]):
             new = _fit_candidate(problem, cur, cand, ctx)
