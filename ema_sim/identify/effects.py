@@ -250,6 +250,13 @@ class Effect:
     """Acts through the hinge moment (a negative fit points at a reversed load sign)."""
     restart: bool = False
     """Start its fit from the declared ωn and ζ: without it the fit bent them to mimic the effect."""
+    replaces: tuple[str, ...] = ()
+    """Parameters of another effect this one is an alternative to: its fit is also tried with them switched
+    off (the in-loop feedback filter against the lag on the LVDT reading), and the better one kept."""
+    companions: tuple[str, ...] = ()
+    """Effects (``name/where``) fitted together with this one when the model lacks them: a structure the
+    current fit has bent its own parameters to mimic (the in-loop filter re-times the whole loop, so
+    the delays it hid are freed with it); each one whose value fails its check is dropped again."""
     own: tuple[str, ...] | None = None
     """The parameters that are this effect's alone (its fields when None): once they are fitted, it is in.
     A nonlinear compliance also fits (and reports) the compliance below its knee, which a linear
@@ -426,7 +433,10 @@ def _knee_probe(prefix: str, start: float) -> Probe:
 
 def _nonlinear_applies(prefix: str, output: str) -> Callable[[Context], bool]:
     def applies(ctx: Context) -> bool:
-        return output in ctx.problem.outputs and _loaded(ctx) and _off(ctx, f"{prefix}_knee_inlb")
+        # A refinement of a compliance already in the model: as a rival to the linear one, its three
+        # parameters took a hysteresis loop's quadrature residual for a bend.
+        return (output in ctx.problem.outputs and _loaded(ctx) and _off(ctx, f"{prefix}_knee_inlb")
+                and getattr(ctx.params, f"{prefix}_deg_per_kinlb") > 1e-3)
     return applies
 
 
@@ -461,7 +471,8 @@ EFFECTS: tuple[Effect, ...] = (
            check=_lag_check("feedback_lag_hz")),
     Effect("feedback_filter", "feedback", (),
            "the surface leads the LVDT reading by the servo's own lag: the loop closes on a filtered LVDT",
-           probes=lambda _ctx: [{}], switch={"feedback_filter_in_loop": 1.0},
+           probes=lambda _ctx: [{}], switch={"feedback_filter_in_loop": 1.0}, restart=True,
+           replaces=("feedback_lag_hz",), companions=("time_delay/command", "time_delay/feedback"),
            applies=lambda ctx: _has("surface_deg")(ctx) and ctx.params.feedback_filter_in_loop < 0.5),
     Effect("command_gain", "command", ("kb",), "residual proportional to the command",
            probes=lambda ctx: [{"kb": ctx.params.kb + 0.01}], applies=lambda _ctx: True),
@@ -537,6 +548,9 @@ EFFECTS: tuple[Effect, ...] = (
            "reversed", probes=lambda _ctx: [{}],
            applies=lambda ctx: (hinge_moment_active(ctx.params) or hinge_moment_active(ctx.declared)) and _loaded(ctx)),
 )
+
+BY_KEY: dict[str, Effect] = {e.key: e for e in EFFECTS}
+"""Each effect variant by its ``name/where``."""
 
 VOCABULARY = tuple(dict.fromkeys(e.name for e in EFFECTS))
 """The effect names identification can report."""

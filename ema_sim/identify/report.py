@@ -101,6 +101,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
                 "rms_deg_after": {k: _round(v) for k, v in s.rms_deg_after.items()},
                 "evidence": s.evidence,
                 "where": s.where,
+                **({"replaces": list(s.replaces)} if s.replaces else {}),
             }
             for s in result.steps
         ],

@@ -26,12 +26,13 @@ import numpy as np
 
 from ema_sim.config import ChannelConfig
 from ema_sim.identify.declared import declared
-from ema_sim.identify.effects import EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
+from ema_sim.identify.effects import BY_KEY, EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
 from ema_sim.identify.fit import Fit, fit
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import SecondOrderParams
+from ema_sim.parameters import metas
 
 TOP_K = 3
 MAX_EFFECTS = 8
@@ -69,6 +70,8 @@ class Step:
     rms_deg_before: dict[str, float]
     rms_deg_after: dict[str, float]
     evidence: str
+    replaces: tuple[str, ...] = ()
+    """Report keys of an earlier effect's parameters this one switched off (an alternative that fits better)."""
 
 
 @dataclass(frozen=True)
@@ -228,15 +231,51 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
     return Fit(final.params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
 
 
+def _bic(problem: Problem, f: Fit) -> float:
+    return problem.n_fit * math.log(f.rss) + len(f.free) * math.log(problem.n_fit)
+
+
 def _fit_candidate(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit:
+    """Fit the current model plus the candidate; an alternative to an earlier effect is also tried without it."""
+    new = _fit_added(problem, cur, cand, ctx)
+    swap = [f for f in cand.effect.replaces if f in new.free]
+    if not swap:
+        return new
+    info = metas(SecondOrderParams)
+    base = new.params.replace(**{f: info[f].off for f in swap})
+    alt = fit_model(problem, base, tuple(f for f in new.free if f not in swap), flip=new.flip)
+    return alt if _bic(problem, alt) < _bic(problem, new) else new
+
+
+def _companions(cur: Fit, effect: Effect, ctx: Context) -> list[Effect]:
+    """The effect's companions the model lacks and the record can show."""
+    out = []
+    for key in effect.companions:
+        companion = BY_KEY[key]
+        if companion.applies(ctx) and not any(f in cur.free for f in companion.owned):
+            out.append(companion)
+    return out
+
+
+def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit:
     """Fit the current model plus the candidate, every parameter together."""
     effect = cand.effect
-    if not effect.fields:
+    extra = _companions(cur, effect, ctx)
+    if not effect.fields and not extra:
         return fit_model(problem, effect.apply(cur.params, cand.value, ctx), cur.free, flip=cand.flip)
     start = {f: min(max(v, FREE[f].low), FREE[f].high) if f in FREE else v for f, v in cand.value.items()}
     base = effect.apply(cur.params, start, ctx)
     if not effect.discrete:
-        return fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *effect.fields))), flip=cand.flip)
+        for companion in extra:
+            base = base.replace(**companion.probes(ctx)[0])
+        fields = [f for e in (effect, *extra) for f in e.fields]
+        new = fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *fields))), flip=cand.flip)
+        failed = [f for e in extra if e.check({g: getattr(new.params, g) for g in e.fields}, ctx) for f in e.fields]
+        if failed:
+            info = metas(SecondOrderParams)
+            base = new.params.replace(**{f: info[f].off for f in failed})
+            new = fit_model(problem, base, tuple(f for f in new.free if f not in failed), flip=cand.flip)
+        return new
     # A quantizer's step: the linear search's (step, offset) candidates, each checked with the full
     # simulation on a fine local grid (one batch), then the continuous parameters refitted with it.
     grid = [
@@ -262,7 +301,7 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
            sim_err: dict[str, float]) -> Verdict:
     effect = cand.effect
     n = problem.n_fit
-    q = len([f for f in effect.fields if f not in cur.free])
+    q = len(new.free) - len(cur.free) + sum(1 for f in effect.fields if f not in new.free)  # a swap counts less
     rss0, rss1 = cur.rss, new.rss
     p1 = len(new.free) + q
     delta_bic = n * math.log(rss1 / rss0) + q * math.log(n)
@@ -328,9 +367,19 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
     fitted = ", ".join(f"{k} = {_fmt(v)}" for k, v in vocab.items())
     if effect.name == "feedback_filter":
         fitted = f"corner 2ζωn = {new.params.zeta * new.params.wn_rad_s / math.pi:.3g} Hz"
+    removed = tuple(KEYS[f].name if f in KEYS else f for f in cur.free if f not in new.free)
+    instead = f"; replaces {', '.join(removed)}" if removed else ""
     evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
-                f"{where}; error above the noise floor: {cut}")
-    steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence))
+                f"{where}{instead}; error above the noise floor: {cut}")
+    steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence, removed))
+    for companion in effect.companions:
+        extra = BY_KEY[companion]
+        if extra.fields and all(f in new.free and f not in cur.free for f in extra.fields):
+            values = report_values(new.params, extra.fields)
+            spread = {KEYS[f].name: new.sigma[f] * KEYS[f].factor(new.params) for f in extra.fields if f in new.sigma}
+            text = ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items())
+            steps.append(Step(extra.name, extra.where, values, spread, before, after,
+                              f"{extra.signature}: fitted with {effect.name} ({text}), which it had hidden"))
     return steps
 
 
