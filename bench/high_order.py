@@ -33,7 +33,7 @@ def _sweep_ratio(name: str, **kwargs: object) -> tuple[float, float]:
 def hoad3_realtime() -> Result:
     """One left-wing HOAD3 at 10 kHz, noise and quantization on, through a 60 s sweep sampled at 1 kHz."""
     ratio, wall = _sweep_ratio("hoad3")
-    return Result(ratio, "× real time", ratio >= 1000.0,
+    return Result(ratio, "× real time", ratio >= 3000.0,
                   f"60 s simulated in {wall * 1e3:.1f} ms ({wall / 600_000 * 1e9:.0f} ns a step)")
 
 
@@ -63,7 +63,7 @@ def loes_fit() -> Result:
 
 
 BENCHMARKS = [
-    Benchmark("hoad3_10khz_one_channel", "≥ 1,000× real time", hoad3_realtime),
+    Benchmark("hoad3_10khz_one_channel", "≥ 3,000× real time", hoad3_realtime),
     Benchmark("hoac1_one_channel", "≥ 1× real time", hoac1_realtime),
     Benchmark("figure40_hoad2_vs_hoac1", "error falls with rate", figure40_errors),
     Benchmark("loes_refit_left_wing", "≤ 10 s", loes_fit),

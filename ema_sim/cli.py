@@ -10,15 +10,24 @@ import logging
 import sys
 from collections.abc import Sequence
 from importlib import import_module
+from typing import NoReturn
 
 from ema_sim import __version__
 from ema_sim.commands import COMMANDS
 from ema_sim.errors import EmaError
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line on stderr and exit status 2, like every user error."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``<prog>: error: message`` (no usage block) and exit 2."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``ema`` parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="ema", description="X-43A electromechanical actuator emulation (NASA/TM-2008-214637)."
     )
     parser.add_argument("--version", action="version", version=f"ema_sim {__version__}")

@@ -1,6 +1,20 @@
 """The EMAC node's input streams in lockstep: what a frame takes, and when it may go ahead."""
 
-from ema_sim.nodes.emac import SourceStream, Stream
+import os
+from types import SimpleNamespace
+
+import pytest
+import rclpy
+from rclpy.context import Context
+
+from ema_msgs_py import contract as ct
+from ema_msgs_py.cdr import JointFrame
+from ema_sim.config import CHANNELS, config_dir, ros_parameters
+from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings
+from ema_sim.models import create
+from ema_sim.nodes.emac import EmacNode, SourceStream, Stream
+from ema_sim.run import RunDescription
+from ema_sim.suite import free_domain_id
 
 T = 5_000_000
 
@@ -39,3 +53,120 @@ def test_without_known_sources_any_message_counts():
     s = SourceStream()
     s.push_from(4 * T, [("left_rudder", 0.0)])
     assert s.reached(4 * T)
+
+
+# --------------------------------------------------------------------------- a channel node as a run starts it
+FRAMES = 15
+LAST = ("command", "load", "left_wing", "cowl_door", "clock")
+"""The input that arrives last in frame k is LAST[k % 5]: every one of them in turn."""
+
+
+class ScriptedPorts:
+    """Test-only ports: nothing arrives by itself; the test hands the node each input in the order it picks."""
+
+    composed = False
+
+    def __init__(self, node):
+        self.node = node
+        self.take = {}
+        self.sent = {}
+
+    def frame_publisher(self, topic):
+        return SimpleNamespace(publish=self.sent.setdefault(topic, []).append)
+
+    def frame_subscription(self, topic, callback, on_bad):  # noqa: ARG002
+        self.take[topic] = callback
+
+    def clock_subscription(self, callback):
+        self.take[ct.CLOCK_TOPIC] = callback
+
+    def publishers(self, topic):
+        return len(CHANNELS) if topic == ct.EMAC_FEEDBACK else 1  # every publisher of the suite is alive
+
+    def endpoint_nodes(self):
+        return [self.node]
+
+
+def _source_v(channel, k):
+    """Feedback the other EMACs report at frame k: the left wing slews unevenly, the others rest."""
+    if channel != "left_wing":
+        return 0.0
+    return sum(0.01 * (1 + (7 * j) % 5) for j in range(k))
+
+
+@pytest.fixture
+def right_wing_node(tmp_path):
+    """The right wing's EMAC as the one-process-per-node layout starts it: the run's parameter file, renamed."""
+    run = RunDescription(bag=tmp_path / "bag", profile="ail", maneuver="step", lockstep=True, layout="processes",
+                         emac="channels")
+    (proc,) = [p for p in run.processes() if p.nodes == ("emac_right_wing",)]
+    params = run.write(tmp_path / "run.yaml")
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=free_domain_id(os.getpid() + 53))
+    nodes = []
+
+    def make():
+        nodes.append(EmacNode(None, ports=ScriptedPorts, context=ctx, cli_args=run.ros_arguments(proc, params)))
+        return nodes[-1]
+
+    yield make
+    for node in nodes:
+        node.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+def _drive(node, adversarial):
+    """Every frame's inputs; in the adversarial order the one LAST names is held back over a poll.
+
+    Returns the right wing's reported feedback volts, stamp by stamp; asserts that no frame went ahead
+    without its last input.
+    """
+    take, sent = node.ports.take, node.ports.sent[ct.EMAC_FEEDBACK]
+    take[ct.CLOCK_TOPIC](0)
+    node.poll()  # the trimmed state at t = 0
+    for k in range(FRAMES):
+        s = k * T
+        inputs = {"command": (ct.EMAC_COMMAND, JointFrame(s, ["right_wing"], [0.5])),
+                  "load": (ct.HINGE_MOMENT, JointFrame(s, ["right_wing"], [], [], [100.0])),
+                  **{ch: (ct.EMAC_FEEDBACK, JointFrame(s, [ch], [_source_v(ch, k)]))
+                     for ch in CHANNELS if ch != "right_wing"},
+                  "clock": (ct.CLOCK_TOPIC, (k + 1) * T)}
+        late = LAST[k % len(LAST)] if adversarial else None
+        for name, (topic, msg) in inputs.items():
+            if name != late:
+                take[topic](msg)
+        if late is not None:
+            node.poll()
+            assert len(sent) == k + 1, f"frame {k} went ahead without its {late}"
+            take[inputs[late][0]](inputs[late][1])
+        node.poll()
+        assert [m.stamp_ns for m in sent] == [j * T for j in range(k + 2)]
+    return [m.position[0] for m in sent]
+
+
+@pytest.mark.ros
+def test_a_channel_node_started_by_a_run_waits_for_every_input_of_a_frame(right_wing_node):
+    """Whichever input of a frame comes last (command, hinge moment, a crosstalk source's feedback, the clock),
+    the frame waits for it: the feedback is the same in any order, and the one the frame's inputs make."""
+    friendly = _drive(right_wing_node(), adversarial=False)
+    node = right_wing_node()
+    assert _drive(node, adversarial=True) == friendly
+    assert node.get_name() == "emac_right_wing"
+    assert node.peers == {"emac_left_wing", "emac_left_rudder", "emac_right_rudder", "emac_cowl_door", "testenv",
+                          "maneuver", "simclock"}
+    pp_v = ros_parameters(config_dir() / "emac.yaml")["emac"]["crosstalk"]["right_wing_pp_v"]
+    want, quiet = [], []
+    for noise, out in ((pp_v, want), (0.0, quiet)):
+        unit = EmacChannel(create("loada", "right_wing"), EmacSettings(), crosstalk_noise_pp_v=noise,
+                           stream=CHANNELS.index("right_wing"))
+        meter = ActivityMeter(T / 1e9)
+        out.append(unit.last.position_v)
+        for k in range(FRAMES):
+            for ch in CHANNELS:
+                if ch != "right_wing":
+                    meter.observe(ch, _source_v(ch, k), node.slew_v_per_s[ch])
+            unit.set_command(0.5)
+            unit.set_load(100.0)
+            out.append(unit.step(0.0, meter.activity_except("right_wing")).position_v)
+    assert friendly == want
+    assert sum(a != b for a, b in zip(want, quiet, strict=True)) >= FRAMES - 2  # the crosstalk shows in the frames

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -75,6 +75,11 @@ class AilOptions:
     sim_model: str | None = None
     """Open loop: the simulation's model actuator (default the file's ``open_loop.sim_model``)."""
     config: AilConfig | None = None
+    environment: Profile | None = None
+    """An explicit test environment instead of the named profile's (a Monte Carlo run's dispersed elements;
+    ``disable`` still applies to it)."""
+    model_overrides: Mapping[str, Any] = field(default_factory=dict)
+    """Model keywords (parameters, ``seed``) on top of the elements switched off."""
 
 
 @dataclass
@@ -117,7 +122,8 @@ class AilRun:
 
 def _profile(options: AilOptions) -> Profile:
     env = environment_elements(options.disable)
-    profile = load_profile(options.profile, disable=env)
+    profile = (options.environment.without(*env) if options.environment is not None
+               else load_profile(options.profile, disable=env))
     return profile.with_seed(options.seed) if options.seed is not None else profile
 
 
@@ -205,7 +211,7 @@ def run_ail(options: AilOptions, progress: Callable[[float], None] | None = None
     cfg = options.config or load_ail_config()
     setup = options.setup or cfg.setup(options.profile)
     profile = _profile(AilOptions(**{**options.__dict__, "disable": disabled}))
-    overrides = model_overrides(options.model, disabled)
+    overrides = {**options.model_overrides, **model_overrides(options.model, disabled)}
     loop = _Loop(options, cfg, profile, overrides)
     fmu = Fmu(cfg, setup, open_loop=options.open_loop, sim_model=options.sim_model)
     n = max(1, round(options.duration_s * cfg.frame_hz))

@@ -14,5 +14,6 @@ COMMANDS: tuple[str, ...] = (
     "launch",
     "bag",
     "ail",
+    "montecarlo",
     "listing",
 )

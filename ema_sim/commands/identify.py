@@ -18,19 +18,24 @@ def load_measured(path: Path, channel: str | None, rig: Any = None) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Identify and print the summary; write JSON and the report when asked."""
-    from ema_sim.config import CHANNELS, load_channel  # noqa: PLC0415
-    from ema_sim.identify.report import summary, to_json, write_json, write_report  # noqa: PLC0415
+    """Identify and print the summary; write JSON, the report and the residuals when asked."""
+    from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415
+    from ema_sim.errors import UnknownNameError  # noqa: PLC0415
+    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415
+    from ema_sim.identify.record import prepare  # noqa: PLC0415
+    from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415
     from ema_sim.identify.stepwise import identify  # noqa: PLC0415
 
     check_channel(args.channel)
+    if args.model.strip().lower() not in DECLARED:
+        raise UnknownNameError("declared model for identification", args.model, DECLARED)
+    overrides = parse_overrides(args.overrides)
     data = load_measured(args.data, args.channel, rig_format(args))
-    channel = args.channel or data.metadata.get("channel", "")
-    if channel not in CHANNELS:
-        channel = "left_wing"
+    channel, note = resolve_channel(data, args.channel)
+    record = prepare(data, channel, channel_note=note, command=args.command_hold)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
-    result = identify(data, load_channel(channel), args.model, parse_overrides(args.overrides),
-                      max_effects=args.max_effects, log=say)
+    result = identify(record.data, record.channel, args.model, overrides, max_effects=args.max_effects, log=say,
+                      record=record)
     report = to_json(result, str(args.data))
     print(summary(report))
     if args.json:
@@ -38,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         path = write_report(result, report, args.report)
         print(f"report: {path}")
+    if args.residuals:
+        print(f"residuals: {write_residuals(result, args.residuals)}")
     return 0
 
 
@@ -51,13 +58,18 @@ def register(sub: Any) -> None:
                     "(data contract) that pay for themselves; reports the error before and after.",
     )
     p.add_argument("data", type=Path, help="a data-contract CSV or a rosbag2 directory")
-    p.add_argument("--model", default="second_order", choices=DECLARED, help="declared starting model")
+    p.add_argument("--model", default="second_order", help=f"declared starting model: {', '.join(DECLARED)}")
     p.add_argument("--channel", default=None, help="channel (default: the data's metadata, else left_wing)")
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="declare a stage of the starting model, e.g. --set compliance_deg_per_kinlb=0.2")
     p.add_argument("--max-effects", type=int, default=8, help="most effects to add (8)")
     p.add_argument("--json", type=Path, default=None, help="write the report JSON here")
     p.add_argument("--report", type=Path, default=None, help="write report.md and plots in this directory")
+    p.add_argument("--residuals", type=Path, default=None, metavar="FILE.csv",
+                   help="write time, measured, baseline and final model outputs and residuals per output (CSV)")
+    p.add_argument("--command", dest="command_hold", default="detect", choices=("detect", "held", "sampled"),
+                   help="how the rig logged its command: held between samples (the data contract), sampled from a "
+                        "running demand, or detect it (a record that cannot tell is fitted both ways)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     add_data_args(p)
     p.set_defaults(func=run)

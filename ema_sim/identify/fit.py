@@ -114,37 +114,56 @@ def fit(
         x = res.x
     else:
         x = x0
+    return _at(obj, x, tuple(free_fields))
+
+
+def evaluate(problem: Problem, params: SecondOrderParams, free_fields: Sequence[str], *, flip: bool = False) -> Fit:
+    """The :class:`Fit` of ``params`` as they are (residual, Jacobian, uncertainty), without moving them."""
+    free = [FREE[f] for f in free_fields]
+    obj = _Objective(problem, params, free, flip)
+    return _at(obj, np.array([f.to_x(getattr(params, f.field)) for f in free], dtype=float), tuple(free_fields))
+
+
+def _at(obj: _Objective, x: FloatArray, free_fields: tuple[str, ...]) -> Fit:
+    problem, free = obj.problem, obj.free
     params = obj.params(x)
     sim = obj._simulate([x])[0]
     residual = problem.weighted_residual(sim)
     jac = obj.jacobian(x) if free else np.zeros((residual.size, 0))
-    sigma = _uncertainty(problem, residual, jac, free, params)
-    return Fit(params, flip, tuple(free_fields), sim, residual, jac, sigma, tuple(free_fields))
+    cov = covariance(problem, residual, jac)
+    sigma = {}
+    for i, f in enumerate(free):
+        d = f.derivative(getattr(params, f.field))
+        sigma[f.field] = float(math.sqrt(max(cov[i, i], 0.0)) * abs(d)) if np.isfinite(cov[i, i]) else math.inf
+    return Fit(params, obj.flip, free_fields, sim, residual, jac, sigma, free_fields)
 
 
-def _uncertainty(
-    problem: Problem, residual: FloatArray, jac: FloatArray, free: Sequence[Free], params: SecondOrderParams
-) -> dict[str, float]:
-    """One-sigma parameter uncertainty with the coloured-residual correction, per output block."""
-    if not free:
-        return {}
-    jtj = jac.T @ jac
+def covariance(problem: Problem, residual: FloatArray, jac: FloatArray) -> FloatArray:
+    """Parameter covariance in the fit's scaled coordinates, corrected for coloured residuals per output block.
+
+    Morelli and Klein: (JᵀJ)⁻¹·JᵀRJ·(JᵀJ)⁻¹ with R each output's residual autocovariance (Toeplitz,
+    so R·J is a convolution). A singular JᵀJ (a parameter the record cannot move) gives infinities.
+    """
+    block = int(problem.mask.sum())
+    blocks = range(len(problem.outputs))
+    return block_covariance([residual[b * block:(b + 1) * block] for b in blocks],
+                            [jac[b * block:(b + 1) * block] for b in blocks])
+
+
+def block_covariance(residuals: Sequence[FloatArray], jacobians: Sequence[FloatArray]) -> FloatArray:
+    """:func:`covariance` over given blocks (each output's residual and Jacobian rows, contiguous in time)."""
+    p = jacobians[0].shape[1]
+    if p == 0:
+        return np.zeros((0, 0))
+    jtj = sum((j.T @ j for j in jacobians), np.zeros((p, p)))
     try:
         inv = np.linalg.inv(jtj)
     except np.linalg.LinAlgError:
-        return {f.field: math.inf for f in free}
+        return np.full((p, p), math.inf)
     middle = np.zeros_like(jtj)
-    block = int(problem.mask.sum())
-    for b in range(len(problem.outputs)):
-        r = residual[b * block:(b + 1) * block]
-        j = jac[b * block:(b + 1) * block]
+    for r, j in zip(residuals, jacobians, strict=True):
         acov = autocovariance(r, COVARIANCE_LAGS)
         kernel = np.concatenate([acov[:0:-1], acov])  # R is Toeplitz: R·J is a convolution
         rj = np.column_stack([fftconvolve(j[:, c], kernel, mode="same") for c in range(j.shape[1])])
         middle += j.T @ rj
-    cov = inv @ middle @ inv
-    out = {}
-    for i, f in enumerate(free):
-        d = f.derivative(getattr(params, f.field))
-        out[f.field] = float(math.sqrt(max(cov[i, i], 0.0)) * abs(d))
-    return out
+    return np.asarray(inv @ middle @ inv, dtype=float)

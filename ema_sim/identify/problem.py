@@ -1,8 +1,16 @@
 """A measured record set up for output-error fitting: inputs as breakpoints, outputs, noise weights.
 
 The model is simulated with the *measured* command and hinge moment and compared with the measured
-LVDT position and/or surface angle; each output's residual is divided by its own noise floor so
-outputs with different sensors weigh the same and a perfect model leaves unit variance.
+LVDT position and/or surface angle; each output's residual is divided by its own noise floor (never
+below the counts' quantization, :func:`ema_sim.analysis.noise.output_noise`) so outputs with
+different sensors weigh the same and a perfect model leaves unit variance.
+
+A held command (the data contract) is the model's input from one sample to the next. A command
+the rig *sampled* from a running demand changed anywhere within the sample before it was logged: the
+model is then driven by the linear interpolation between the logged samples (on a grid of the
+simulator's step, each value taken half a step on so the staircase carries no lag of its own), the
+expected input when a change is equally likely anywhere in the interval, and exact for a profile's
+constant-speed segments.
 """
 
 from __future__ import annotations
@@ -15,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import savgol_filter, welch
 
-from ema_sim.analysis.noise import noise_floor
+from ema_sim.analysis.noise import NoiseFloor, output_noise
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.csv import MeasuredData
@@ -39,6 +47,10 @@ class Problem:
     channel: ChannelConfig
     step_s: float = 1e-3
     settle_s: float = SETTLE_S
+    noise: dict[str, NoiseFloor] | None = None
+    """Each output's noise floor (measured on the record when not given)."""
+    command_sampled: bool = False
+    """The command was sampled from a running demand, not held (see the module docstring)."""
     outputs: list[str] = field(init=False)
     time_s: FloatArray = field(init=False)
     sigma_deg: dict[str, float] = field(init=False)
@@ -52,15 +64,27 @@ class Problem:
         self.time_s = d.time_s - d.time_s[0]
         if self.time_s[-1] < 2.0 * self.settle_s:
             raise DataError(f"{d.source or 'data'}: {self.time_s[-1]:.2f} s of data is too short to identify")
-        self.sigma_deg = {o: max(noise_floor(d.column(o)), MIN_NOISE_DEG) for o in self.outputs}
-        cmd = d.command_deg
-        hm = d.hinge_moment
+        if self.noise is None:
+            self.noise = {o: output_noise(d.column(o)) for o in self.outputs}
+        self.sigma_deg = {o: max(self.noise[o].sigma, MIN_NOISE_DEG) for o in self.outputs}
+        self.mask = self.time_s >= self.settle_s
+        self.set_command_sampled(self.command_sampled)
+
+    def set_command_sampled(self, sampled: bool) -> None:
+        """Drive the model with the command held between samples, or interpolated (sampled)."""
+        self.command_sampled = sampled
+        cmd = self.data.command_deg
+        hm = self.data.hinge_moment
+        if sampled:
+            grid = np.arange(0.0, float(self.time_s[-1]), self.step_s)
+            mid = np.minimum(grid + 0.5 * self.step_s, self.time_s[-1])
+            self._bp_t, self._bp_u, self._bp_h = grid, np.interp(mid, self.time_s, cmd), np.interp(mid, self.time_s, hm)
+            return
         keep = np.ones(cmd.size, dtype=bool)
         keep[1:] = (np.diff(cmd) != 0.0) | (np.diff(hm) != 0.0)
         self._bp_t = self.time_s[keep]
         self._bp_u = cmd[keep]
         self._bp_h = hm[keep]
-        self.mask = self.time_s >= self.settle_s
 
     # ---------------------------------------------------------------- facts about the record
     @property

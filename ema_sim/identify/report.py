@@ -1,19 +1,31 @@
-"""What ``ema identify`` says: the contract's JSON, a Markdown report and residual plots."""
+"""What ``ema identify`` says: the contract's JSON, a Markdown report, residual plots and a residuals CSV.
+
+The JSON is strict (RFC 8259): a value that does not exist is ``null`` and an unbounded one is said in
+words (:func:`strict`), so no reader meets a bare ``NaN`` or ``Infinity``. Beside the contract's keys
+it carries the ``reference`` (position = command), the ``warnings`` (:mod:`ema_sim.identify.trust`,
+:mod:`ema_sim.identify.diagnosis`), the noise floors with their resolution, how the command was
+taken, the travel, the unit, the effects ``removed`` again, identifiability and the residual
+diagnosis.
+"""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ema_sim.analysis.noise import input_independence, whiteness
+from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stepwise import Identification
+from ema_sim.identify.trust import assess, reference
+from ema_sim.io.csv import write_csv
 from ema_sim.models import create
 
 
@@ -42,6 +54,10 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
+def _rms_of(problem: Problem, fit: Fit) -> dict[str, float]:
+    return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(fit.sim).items()}
+
+
 def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
     errors = problem.errors_deg(fit.sim)
     rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in errors.items()}
@@ -65,7 +81,7 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
     Identification fits the equations with an accurate simulator; this is the extra error the user's
     own implementation adds on the same record, reported apart so it is never mistaken for an effect.
     """
-    if result.model not in ("loada", "loadf"):
+    if result.model not in ("loada", "loadf") or result.final_model:
         return None
     problem = result.problem
     final = result.final
@@ -81,17 +97,55 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
     }
 
 
+def strict(value: Any) -> Any:
+    """``value`` with every non-finite number made strict JSON: NaN → null, ±inf → "unbounded" in words.
+
+    Parameters
+    ----------
+    value : Any
+        Nested dicts, lists, tuples and scalars (numpy's included).
+
+    Returns
+    -------
+    Any
+        The same structure with plain Python scalars only.
+    """
+    if isinstance(value, Mapping):
+        return {str(k): strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_, int, np.integer)):
+        return value.item() if isinstance(value, np.generic) else value
+    if isinstance(value, (float, np.floating)):
+        x = float(value)
+        return x if math.isfinite(x) else None if math.isnan(x) else "unbounded" if x > 0 else "unbounded below"
+    return value
+
+
 def to_json(result: Identification, data_name: str) -> dict[str, Any]:
-    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts)."""
+    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings)."""
     p = result.problem
     base = result.baseline
     final = result.final
     names = _names(result, final)
+    record = result.record
+    warnings, ident, exc = assess(result)
+    diagnosis = diagnose(result)
+    warnings += diagnosis.warnings
+    ref = reference(p)
     report: dict[str, Any] = {
         "data": data_name,
         "outputs": p.outputs,
+        "unit": record.unit if record else "deg",
         "noise_deg": {o: _round(v) for o, v in p.sigma_deg.items()},
-        "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base)},
+        "resolution_deg": {o: (None if p.noise is None or p.noise[o].resolution is None
+                               else _round(p.noise[o].resolution)) for o in p.outputs},
+        "reference": {"model": f"{'/'.join(o.split('_')[0] for o in p.outputs)} = command",
+                      **{k: {o: _round(v) for o, v in m.items()} for k, m in ref.items()}},
+        "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base),
+                     "start": ({"params": _params(result, result.start),
+                                "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.start).items()}}
+                               if result.start is not None else None)},
         "added": [
             {
                 "effect": s.effect,
@@ -105,12 +159,29 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             }
             for s in result.steps
         ],
+        "removed": [{"effect": r.effect, "where": r.where, "params": {k: _round(v) for k, v in r.params.items()},
+                     "reason": r.reason} for r in result.removed],
         "final": {
+            "model": result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)]),
             "params": _params(result, final),
+            "fields": {names[f]: f for f in final.free},
             "uncertainty": {names[f]: _round(v * _factor(result, final, f), 3) for f, v in final.sigma.items()},
+            "relative_uncertainty": {names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()},
+            "correlation": {names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
+                            for a, row in ident.correlation.items()},
+            "not_determined": [names[f] for f in ident.not_determined],
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
         },
+        "warnings": warnings,
+        "diagnosis": diagnosis.as_dict(),
+        "notes": (record.notes if record else []) + result.notes,
+        "command": {**(record.hold.as_dict() if record else {}),
+                    "fitted_as": "sampled" if p.command_sampled else "held"},
+        "travel_deg": ({"declared": list(record.travel.declared), "used": list(record.travel.limits),
+                        "source": record.travel.source, "statement": record.travel.statement} if record else None),
+        "excitation": {"duration_s": _round(exc.duration_s), "level_changes": exc.changes,
+                       "span_deg": _round(exc.span), "content_hz": _round(exc.bandwidth_hz)},
         "rejected": [
             {"effect": v.effect, "where": v.where, "value": None if v.value is None else _round(v.value),
              "reason": v.reason}
@@ -126,49 +197,91 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     impl = implementation_error(result)
     if impl is not None:
         report["declared_implementation_error_deg"] = impl
-    return report
+    return strict(report)
 
 
 def write_json(report: dict[str, Any], path: str | Path) -> None:
-    """Write the report as indented JSON."""
-    Path(path).write_text(json.dumps(report, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`)."""
+    text = json.dumps(strict(report), indent=2, ensure_ascii=False, allow_nan=False)
+    Path(path).write_text(text + "\n", encoding="utf-8")
+
+
+def write_residuals(result: Identification, path: str | Path) -> Path:
+    """Time, and per output the measured, baseline and final model outputs and both residuals, as CSV.
+
+    Every sample of the record is written; ``fitted`` is 1 on the samples the fits were judged on
+    (0 on the first settling ones). Values are in the record's unit (``deg`` unless a linear unit was kept).
+    """
+    p = result.problem
+    cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
+    for o in p.outputs:
+        meas = p.data.column(o)
+        col = OUTPUT_COLUMN[o]
+        cols[f"{o}_measured"] = meas
+        cols[f"{o}_baseline"] = result.baseline.sim[:, col]
+        cols[f"{o}_final"] = result.final.sim[:, col]
+        cols[f"{o}_residual_baseline"] = meas - result.baseline.sim[:, col]
+        cols[f"{o}_residual_final"] = meas - result.final.sim[:, col]
+    meta = {"model": result.model, "unit": result.record.unit if result.record else "deg",
+            "command_fitted_as": "sampled" if p.command_sampled else "held"}
+    write_csv(path, cols, meta)
+    return Path(path)
 
 
 def summary(report: dict[str, Any]) -> str:
     """A few lines for the terminal."""
+    unit = report.get("unit", "deg")
+    u = "°" if unit == "deg" else f" {unit}"
     lines = [f"{report['data']}: {report['samples']} samples at {report['sample_hz']:g} Hz, "
-             f"noise {', '.join(f'{o} {v:.4g}°' for o, v in report['noise_deg'].items())}"]
+             f"noise {', '.join(f'{o} {v:.4g}{u}' for o, v in report['noise_deg'].items())}"]
+    if "reference" in report:
+        lines.append(f"reference {report['reference']['model']}: rms {_fmt_rms(report['reference']['rms_deg'], unit)}")
     b = report["baseline"]
-    lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'])}")
+    lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'], unit)}")
     for a in report["added"]:
-        lines.append(f"  + {a['effect']} {_fmt_params(a['params'])}: rms {_fmt_rms(a['rms_deg_before'])} → "
-                     f"{_fmt_rms(a['rms_deg_after'])}")
+        lines.append(f"  + {a['effect']} {_fmt_params(a['params'])}: rms {_fmt_rms(a['rms_deg_before'], unit)} → "
+                     f"{_fmt_rms(a['rms_deg_after'], unit)}")
         lines.append(f"      {a['evidence']}")
     if not report["added"]:
         lines.append("  nothing added: no effect paid for itself")
+    for r in report.get("removed", []):
+        lines.append(f"  − {r['effect']} taken out again: {r['reason']}")
     f = report["final"]
-    lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'])} "
+    lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'], unit)} "
                  f"({', '.join(f'{v:.2f}× noise' for v in f['rms_over_noise'].values())})")
+    lines += [f"warning: {w}" for w in report.get("warnings", [])]
     return "\n".join(lines)
 
 
-def _fmt_params(params: dict[str, float]) -> str:
-    return ", ".join(f"{k} {v:.4g}" for k, v in params.items()) or "(none)"
+def _num(v: Any, spec: str = ".4g") -> str:
+    """A number in ``spec``, or a word (``unbounded``) or null as it stands."""
+    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
-def _fmt_rms(rms: dict[str, float]) -> str:
-    return ", ".join(f"{k.split('_')[0]} {v:.4g}°" for k, v in rms.items())
+def _fmt_params(params: dict[str, Any]) -> str:
+    return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
 
 
-def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:  # noqa: PLR0915
+def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
+    u = "°" if unit == "deg" else f" {unit}"
+    return ", ".join(f"{k.split('_')[0]} {v:.4g}{u}" for k, v in rms.items())
+
+
+def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:
     """Markdown report with plots of the residual before and after, under ``directory``."""
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    _plots(result, report, out)
+    return _markdown(result, report, out)
+
+
+def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
+    """``residual.png`` (before and after, with the noise floor) and ``fit.png`` (measured and model)."""
     import matplotlib as mpl  # noqa: PLC0415 - plotting only when asked
 
     mpl.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
     p = result.problem
     t = p.time_s[p.mask]
     rows = 2 * len(p.outputs) + 1
@@ -181,15 +294,17 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
                                (axes[2 * k + 1], result.final, "after")):
             ax.plot(t, meas - fit.sim[p.mask, col], lw=0.5, color="tab:blue" if fit is result.baseline else "tab:green",
                     label=label)
-            ax.axhspan(-2 * s, 2 * s, color="0.85", zorder=0, label="±2σ noise")
-            ax.set_ylabel(f"{o.split('_')[0]} residual, deg")
+            ax.axhspan(-2 * s, 2 * s, color="0.85", zorder=0, label="±2σ noise floor (counts included)")
+            ax.set_ylabel(f"{o.split('_')[0]} residual, {report.get('unit', 'deg')}")
             ax.legend(loc="upper right", fontsize=8)
             ax.grid(alpha=0.3)
+    unit = report.get("unit", "deg")
     axes[-1].plot(t, p.data.command_deg[p.mask], lw=0.7, label="command_deg")
-    ax2 = axes[-1].twinx()
-    ax2.plot(t, p.hinge_moment[p.mask], lw=0.5, color="tab:red", label="hinge moment")
-    ax2.set_ylabel("hinge moment, in·lb")
-    axes[-1].set_ylabel("command, deg")
+    if p.load_span_inlb > 0.0:  # no empty load axis on a record without a hinge moment
+        ax2 = axes[-1].twinx()
+        ax2.plot(t, p.hinge_moment[p.mask], lw=0.5, color="tab:red", label="hinge moment")
+        ax2.set_ylabel("hinge moment, in·lb")
+    axes[-1].set_ylabel(f"command, {unit}")
     axes[-1].set_xlabel("time, s")
     fig.suptitle("Residual (measured − model) before and after identification")
     fig.tight_layout()
@@ -209,9 +324,22 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     fig.savefig(out / "fit.png", dpi=110)
     plt.close(fig)
 
-    md = ["# Identification report", "", "```", summary(report), "```", "",
-          "## Error before and after", "", "| | output | rms, deg | max abs, deg | NRMSE | rms / noise | white |",
-          "| --- | --- | --- | --- | --- | --- | --- |"]
+
+
+def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path:
+    """``report.md``: the summary, the record, the warnings, the errors, the effects, the diagnosis."""
+    p = result.problem
+    md = ["# Identification report", "", "```", summary(report), "```", "", "## The record", ""]
+    md += [f"- {n}" for n in report.get("notes", [])]
+    md += ["", "## Warnings", ""]
+    md += [f"- {w}" for w in report.get("warnings", [])] or ["None."]
+    md += ["", "## Error before and after", "",
+           "| | output | rms, deg | max abs, deg | NRMSE | rms / noise | white |",
+           "| --- | --- | --- | --- | --- | --- | --- |"]
+    ref = report["reference"]
+    for o in p.outputs:
+        md.append(f"| reference ({ref['model']}) | {o} | {ref['rms_deg'][o]:.4g} | {ref['max_abs_deg'][o]:.4g} | | "
+                  f"{ref['rms_deg'][o] / report['noise_deg'][o]:.3g} | |")
     for label, key in (("baseline", "baseline"), ("final", "final")):
         block = report[key]
         for o in p.outputs:
@@ -229,7 +357,14 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     md += ["", "## Final parameters", "", "| parameter | value | ±1σ |", "| --- | --- | --- |"]
     unc = report["final"]["uncertainty"]
     for k, v in report["final"]["params"].items():
-        md.append(f"| {k} | {v:.6g} | {unc.get(k, float('nan')):.3g} |")
+        md.append(f"| {k} | {_num(v, '.6g')} | {_num(unc.get(k, '—'), '.3g')} |")
+    if report.get("removed"):
+        md += ["", "## Effects taken out again", "", "| effect | where | parameters | why |",
+               "| --- | --- | --- | --- |"]
+        md += [f"| {r['effect']} | {r['where']} | {_fmt_params(r['params'])} | {r['reason']} |"
+               for r in report["removed"]]
+    md += ["", "## What the final model leaves (residual diagnosis)", ""]
+    md += [f"- {line}" for line in report["diagnosis"]["text"]]
     if report["rejected"]:
         md += ["", "## Candidates fitted and rejected", "", "| effect | where | value | why |",
                "| --- | --- | --- | --- |"]
@@ -239,4 +374,4 @@ def write_report(result: Identification, report: dict[str, Any], directory: str 
     return out / "report.md"
 
 
-__all__ = ["FREE", "summary", "to_json", "write_json", "write_report"]
+__all__ = ["FREE", "strict", "summary", "to_json", "write_json", "write_report", "write_residuals"]

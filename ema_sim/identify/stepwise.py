@@ -13,6 +13,20 @@ promising few properly (all parameters together) and accepts the best one only w
   binds, a positive compliance...).
 
 The loop stops when nothing passes or nothing is left above the noise floor.
+
+Safeguards (the contract's rules for every report):
+
+* the declared model is fitted from the better of its declared start and a coarse grid over ωn and
+  ζ (one batched simulation), so a far-off configuration does not trap the baseline in a local
+  minimum; no fit ends worse than the parameters it started from (the start is kept if it would);
+* a record that cannot tell a held command from a sampled one (no step-like change from rest) is
+  fitted both ways and the interpretation that fits clearly better (ΔBIC ≤ −10) is taken, and said;
+* after the loop each added effect is switched off in the final model: one whose removal no longer
+  fails the acceptance criteria, or whose final value fails its physical check, has collapsed to
+  "off" and is taken out again (the model refitted without it), with the reason;
+* the trivial model position = command (surface = command) is always available: when the declared
+  model with every effect added still fits worse (weighted, all outputs), the final model *is* the
+  trivial one, and the fitted model stays in the report as the baseline with the reason.
 """
 
 from __future__ import annotations
@@ -24,12 +38,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ema_sim.analysis.command_hold import HoldMode
 from ema_sim.config import ChannelConfig
 from ema_sim.identify.declared import declared
 from ema_sim.identify.effects import BY_KEY, EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
-from ema_sim.identify.fit import Fit, fit
+from ema_sim.identify.fit import Fit, evaluate, fit
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.quantization import step_candidates
+from ema_sim.identify.record import Record, prepare
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
@@ -42,6 +58,15 @@ MAX_DELTA_BIC = -10.0
 MIN_PARTIAL_F = 20.0
 DONE_EXCESS = 0.02
 """Stop when the weighted error variance is within 2 % of the noise floor."""
+NOT_DETERMINED = 0.25
+"""An effect whose own parameter's one-sigma uncertainty exceeds this share of its value is not accepted."""
+TINY = 1e-300
+"""Floor on a residual sum of squares in a ratio (a noise-free record can be matched exactly)."""
+REFERENCE = "position = command"
+"""The trivial model every report compares with (and falls back on)."""
+START_WN_RAD_S = (8.0, 15.0, 30.0, 60.0, 120.0, 250.0, 480.0)
+START_ZETA = (0.35, 0.7, 1.2, 2.0)
+"""The coarse grid the baseline may start from (when it does better than the declared values)."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +114,16 @@ class Verdict:
     noise_share: float
 
 
+@dataclass(frozen=True)
+class Removal:
+    """An added effect taken out again because it collapsed to "off" in the final fit."""
+
+    effect: str
+    where: str
+    params: dict[str, float]
+    reason: str
+
+
 @dataclass
 class Identification:
     """The outcome: the declared fit, the effects added, the final fit, and every verdict on the way."""
@@ -101,6 +136,15 @@ class Identification:
     verdicts: list[Verdict] = field(default_factory=list)
     simulator_error_deg: dict[str, float] = field(default_factory=dict)
     elapsed_s: float = 0.0
+    record: Record | None = None
+    """The prepared record: noise floors, command hold, travel, unit, and what was found on the way."""
+    start: Fit | None = None
+    """The declared model at the parameters its fit started from."""
+    removed: list[Removal] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    """What the fit decided about the record (command interpretation, start), one line each."""
+    final_model: str = ""
+    """:data:`REFERENCE` when the trivial model fits better than anything fitted; else empty (the declared one)."""
 
 
 def _rms(problem: Problem, f: Fit) -> dict[str, float]:
@@ -212,6 +256,21 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
     held = [f for f in free if f in PRE_QUANTIZER]
     if q <= 0.0 or not held:
         return fit(problem, base, free, flip=flip)
+    return no_worse(problem, base, free, _fit_quantized(problem, base, free, held, flip=flip))
+
+
+def no_worse(problem: Problem, start: SecondOrderParams, free: tuple[str, ...] | list[str], new: Fit) -> Fit:
+    """``new``, unless it ends worse than the parameters it started from: then the start, as a fit."""
+    at_start = problem.weighted_residual(problem.simulate([start], [new.flip])[0])
+    if new.rss <= float(np.dot(at_start, at_start)):
+        return new
+    return evaluate(problem, start, tuple(free), flip=new.flip)
+
+
+def _fit_quantized(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] | list[str], held: list[str],
+                   *, flip: bool) -> Fit:
+    """:func:`fit_model` with a quantizer on: smooth fit, coordinate grids on ``held``, smooth fit again."""
+    q = base.quantization_deg
     smooth = [f for f in free if f not in PRE_QUANTIZER]
     first = fit(problem, base, smooth, flip=flip)
     u_max = max(float(np.max(np.abs(problem.data.command_deg))), 1e-6)
@@ -297,15 +356,18 @@ def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit
     return fit_model(problem, best, new.free, flip=cand.flip)
 
 
-def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
-           sim_err: dict[str, float]) -> Verdict:
-    effect = cand.effect
+def _gain(problem: Problem, cur: Fit, new: Fit, q: int, sim_err: dict[str, float]
+          ) -> tuple[str, float, float, float, float]:
+    """Whether going from ``cur`` to ``new`` (``q`` more parameters) pays.
+
+    Returns the reason it does not ("" when it does), ΔBIC, partial F, the largest share of one output's
+    error above its floor removed, and the share of the noise variance removed.
+    """
     n = problem.n_fit
-    q = len(new.free) - len(cur.free) + sum(1 for f in effect.fields if f not in new.free)  # a swap counts less
     rss0, rss1 = cur.rss, new.rss
-    p1 = len(new.free) + q
-    delta_bic = n * math.log(rss1 / rss0) + q * math.log(n)
-    partial_f = ((rss0 - rss1) / max(q, 1)) / (rss1 / max(n - p1, 1))
+    p1 = len(new.free)
+    delta_bic = n * math.log(max(rss1, TINY) / max(rss0, TINY)) + q * math.log(n)
+    partial_f = ((rss0 - rss1) / max(q, 1)) / (max(rss1, TINY) / max(n - p1, 1))
     # The margin is judged per output: an effect that removes a clear share of one output's error
     # above its noise floor counts even when the other output's error is larger.
     before = _blocks(problem, cur.residual)
@@ -313,11 +375,11 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
     drops = [(float(np.dot(b, b)) - float(np.dot(a, a))) / b.size for b, a in zip(before, after, strict=True)]
     excess_share = max(d * b.size / e for d, b, e in zip(drops, before, _excess(problem, cur.residual), strict=True))
     drop = max(drops)
-    values = {f: float(getattr(new.params, f)) for f in effect.fields}
-    value = values[effect.fields[0]] if values else None
     sim_floor = max((sim_err[o] / problem.sigma_deg[o]) ** 2 for o in problem.outputs)
     reason = ""
-    if delta_bic > MAX_DELTA_BIC or partial_f < MIN_PARTIAL_F:
+    if rss1 > rss0:
+        reason = f"its fit ends worse than the model it started from (weighted error ×{rss1 / max(rss0, TINY):.3g})"
+    elif delta_bic > MAX_DELTA_BIC or partial_f < MIN_PARTIAL_F:
         reason = f"does not pay for itself (ΔBIC {delta_bic:.1f}, partial F {partial_f:.1f})"
     elif excess_share < MIN_EXCESS_SHARE:
         reason = f"removes only {100 * excess_share:.1f} % of the error above the noise floor"
@@ -325,13 +387,28 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
         reason = f"changes the error by {100 * drop:.2f} % of the noise variance, below what sampling can tell"
     elif drop < 100.0 * sim_floor:
         reason = "within a hundred times the simulator's own error"
-    elif values:
+    return reason, delta_bic, partial_f, excess_share, drop
+
+
+def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
+           sim_err: dict[str, float]) -> Verdict:
+    effect = cand.effect
+    q = len(new.free) - len(cur.free) + sum(1 for f in effect.fields if f not in new.free)  # a swap counts less
+    reason, delta_bic, partial_f, excess_share, drop = _gain(problem, cur, new, q, sim_err)
+    values = {f: float(getattr(new.params, f)) for f in effect.fields}
+    value = values[effect.fields[0]] if values else None
+    if not reason and values:
         reason = effect.check(values, ctx) or ""
         for f, v in values.items():
             bound = FREE.get(f)
             if not reason and bound is not None and (v >= bound.high * (1 - 1e-3)
                                                      or (bound.low > 0 and v <= bound.low * 1.001)):
                 reason = f"fitted {KEYS[f].name if f in KEYS else f} {v:.4g} sits on the bound of its physical range"
+        for f, v in values.items():
+            spread = new.sigma.get(f, 0.0) / abs(v) if v else math.inf
+            if not reason and f in effect.owned and spread > NOT_DETERMINED:
+                reason = (f"the record does not determine its {KEYS[f].name if f in KEYS else f} "
+                          f"(±1σ {100 * spread:.0f} % of {v:.4g}): a stand-in, not a finding")
     return Verdict(effect.name, effect.where, value, not reason, reason or "accepted", delta_bic, partial_f,
                    excess_share, drop)
 
@@ -383,6 +460,89 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
     return steps
 
 
+def start_point(problem: Problem, base: SecondOrderParams, free: list[str], flip: bool) -> SecondOrderParams:
+    """The declared start, or the best point of a coarse ωn × ζ grid when it fits better (one batched run)."""
+    if not {"wn_rad_s", "zeta"} <= set(free):
+        return base
+    wn, zeta = FREE["wn_rad_s"], FREE["zeta"]
+    grid = [base] + [base.replace(wn_rad_s=w, zeta=z) for w in START_WN_RAD_S for z in START_ZETA
+                     if wn.low <= w <= wn.high and zeta.low <= z <= zeta.high]
+    sims = problem.simulate(grid, [flip] * len(grid))
+    costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
+    return grid[int(np.argmin(costs))]
+
+
+def _baseline(problem: Problem, base: SecondOrderParams, free: list[str]) -> tuple[Fit, Fit]:
+    """The declared model's fit from its best start, and the model at that start."""
+    start = start_point(problem, base, free, False)
+    return no_worse(problem, start, free, fit_model(problem, start, free, flip=False)), evaluate(
+        problem, start, tuple(free), flip=False)
+
+
+def _choose_hold(problem: Problem, base: SecondOrderParams, free: list[str], record: Record,
+                 notes: list[str]) -> tuple[Fit, Fit]:
+    """Fit the baseline with the command as the record says it was logged, or both ways when it cannot tell."""
+    held = _baseline(problem, base, free)
+    if record.hold.sampled is not None or record.hold.source != "detected":
+        return held
+    problem.set_command_sampled(True)
+    sampled = _baseline(problem, base, free)
+    delta_bic = problem.n_fit * math.log(max(sampled[0].rss, TINY) / max(held[0].rss, TINY))
+    if delta_bic <= MAX_DELTA_BIC:
+        notes.append(f"command taken as sampled from a running demand, not held: the record has no step-like "
+                     f"change from rest to tell, and the declared model fits it clearly better so "
+                     f"(ΔBIC {delta_bic:.0f})")
+        return sampled
+    problem.set_command_sampled(False)
+    notes.append(f"command taken as held (the data contract): the record cannot tell, and a sampled command "
+                 f"fits no better (ΔBIC {delta_bic:+.0f})")
+    return held
+
+
+def reference_fit(problem: Problem, params: SecondOrderParams) -> Fit:
+    """The trivial model position = command (surface = command) as a :class:`Fit` with no free parameter.
+
+    ``params`` are carried along unused (a :class:`Fit` has some); its outputs are the logged command.
+    """
+    u = problem.data.command_deg
+    sim = np.column_stack([u, u, np.gradient(u, problem.time_s)])
+    residual = problem.weighted_residual(sim)
+    return Fit(params, False, (), sim, residual, np.zeros((residual.size, 0)), {}, ())
+
+
+def _effect_of(step: Step) -> Effect | None:
+    effect = BY_KEY.get(f"{step.effect}/{step.where}")
+    return effect if effect is not None and effect.fields else None
+
+
+def _prune(problem: Problem, result: Identification, cur: Fit, base: SecondOrderParams) -> Fit:
+    """Take out again every added effect that collapsed to "off" in the final fit (module docstring)."""
+    info = metas(SecondOrderParams)
+    for step in reversed(list(result.steps)):
+        effect = _effect_of(step)
+        if effect is None or not all(f in cur.free for f in effect.owned):
+            continue
+        values = {f: float(getattr(cur.params, f)) for f in effect.fields}
+        off = {f: getattr(base, f) if info[f].off is None else info[f].off for f in effect.owned}
+        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base,
+                      max_accel_dps2=problem.max_accel_dps2(cur.sim))
+        reason = effect.check(values, ctx)
+        free = tuple(f for f in cur.free if f not in off)
+        if reason is None:
+            without = evaluate(problem, cur.params.replace(**off), free, flip=cur.flip)
+            why = _gain(problem, without, cur, len(off), result.simulator_error_deg)[0]
+            if not why:
+                continue
+            reason = f"switched off in the final model, it no longer pays: {why}"
+        refit = fit_model(problem, cur.params.replace(**off), free, flip=cur.flip)
+        if refit.rss > result.baseline.rss:
+            continue  # never end worse than the declared model's own fit
+        result.steps.remove(step)
+        result.removed.append(Removal(step.effect, step.where, dict(step.params), reason))
+        cur = refit
+    return cur
+
+
 def identify(
     data: MeasuredData,
     channel: ChannelConfig,
@@ -391,16 +551,25 @@ def identify(
     *,
     max_effects: int = MAX_EFFECTS,
     log: Callable[[str], None] | None = None,
+    record: Record | None = None,
+    command: HoldMode = "detect",
 ) -> Identification:
-    """Fit ``model`` to ``data``, then add the vocabulary effects it lacks while they pay for themselves."""
+    """Fit ``model`` to ``data``, then add the vocabulary effects it lacks while they pay for themselves.
+
+    ``record`` is ``data`` already prepared (:func:`ema_sim.identify.record.prepare`, with the
+    channel's stand-in note); without it the record is prepared here with ``channel`` as declared
+    and ``command`` (detect, held or sampled) for how its command was logged.
+    """
     t0 = time.perf_counter()
     say = log or (lambda _msg: None)
-    problem = Problem(data, channel)
-    base, free = declared(model, channel, overrides or {})
-    cur = fit_model(problem, base, free, flip=False)
+    record = record or prepare(data, channel, command=command)
+    problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled)
+    base, free = declared(model, record.channel, overrides or {})
+    notes: list[str] = []
+    cur, start = _choose_hold(problem, base, free, record, notes)
     baseline = cur
     say(f"baseline {model}: rms {_rms(problem, cur)}")
-    result = Identification(problem, model, baseline, cur)
+    result = Identification(problem, model, baseline, cur, record=record, start=start, notes=notes)
     result.simulator_error_deg = simulator_error(problem, cur.params, cur.flip)
     for _ in range(max_effects):
         if cur.rss / problem.n_fit - 1.0 <= DONE_EXCESS:
@@ -428,6 +597,13 @@ def identify(
         new, cand = best
         result.steps.extend(_entries(problem, cur, new, cand))
         cur = new
-    result.final = cur
+    result.final = _prune(problem, result, cur, base)
+    trivial = reference_fit(problem, result.final.params)
+    if trivial.rss <= result.final.rss:
+        why = (f"the model it was added to fits worse than {REFERENCE} "
+               f"(weighted error ×{result.final.rss / max(trivial.rss, TINY):.3g})")
+        result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
+        result.steps.clear()
+        result.final, result.final_model = trivial, REFERENCE
     result.elapsed_s = time.perf_counter() - t0
     return result

@@ -23,7 +23,7 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -63,7 +63,7 @@ def _fast_storage() -> type:
     class FastMcapWriter(McapWriter):
         def __init__(self, path: Path, compression: Any) -> None:
             super().__init__(path, compression)
-            self.bio = _BackgroundFile(self.bio)
+            self.bio = _BackgroundFile(self.bio)  # type: ignore[assignment]  # duck-typed file
             self._index: dict[int, array.array[int]] = {}
             self._times: list[int] = []
 
@@ -138,7 +138,7 @@ class _BackgroundFile:
 
     def __init__(self, fh: Any) -> None:
         self._fh = fh
-        self._pos = fh.tell()
+        self._pos = int(fh.tell())
         self._queue: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
         self._failed: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
@@ -180,13 +180,22 @@ def _swapped(index: array.array[int]) -> bytes:
 
 
 class BagWriter:
-    """A rosbag2 (MCAP) bag being written; topics are added on first use."""
+    """A rosbag2 (MCAP) bag being written; topics are added on first use.
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag directory to create (must not exist).
+    metadata : mapping, optional
+        Test parameters for the bag's ``custom_data`` (strings, or values written as JSON).
+    """
 
     def __init__(self, path: str | Path, metadata: Mapping[str, Any] | None = None) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer, WriterError  # noqa: PLC0415
 
         class _Writer(Writer):
-            STORAGE_PLUGINS: ClassVar = {**Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: _fast_storage()}
+            STORAGE_PLUGINS: Mapping[StoragePlugin, type[Any]] = {
+                **Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: _fast_storage()}
 
         self.path = Path(path)
         try:
@@ -194,7 +203,10 @@ class BagWriter:
             self._writer.open()
         except (WriterError, OSError) as exc:
             raise DataError(f"{self.path}: cannot create bag ({exc})") from None
-        self._storage = self._writer.storage
+        storage = self._writer.storage
+        if storage is None:  # open() always sets it; narrows the type
+            raise DataError(f"{self.path}: the bag writer opened no storage")
+        self._storage = storage
         self._connections: dict[str, Any] = {}
         self.counts: dict[str, int] = {}
         self._first_ns = 2**63 - 1
@@ -205,13 +217,31 @@ class BagWriter:
         self.closed = False
 
     def set_metadata(self, key: str, value: Any) -> None:
-        """A test parameter for the bag's ``custom_data`` (written at close)."""
+        """A test parameter for the bag's ``custom_data`` (written at close).
+
+        Parameters
+        ----------
+        key : str
+            The parameter's name.
+        value : Any
+            A string, kept as is, or any value, kept as its JSON text.
+        """
         text = value if isinstance(value, str) else json.dumps(value)
         self.metadata[key] = text
         self._writer.set_custom_data(key, text)
 
     def add_topic(self, topic: str, msgtype: str, qos: ct.QosSpec | None = None) -> None:
-        """Register a topic (its type's definition goes into the bag)."""
+        """Register a topic (its type's definition goes into the bag).
+
+        Parameters
+        ----------
+        topic : str
+            The topic's name.
+        msgtype : str
+            Its ROS message type (``sensor_msgs/msg/JointState``).
+        qos : QosSpec, optional
+            The offered QoS; by default the topic contract's, else the frame QoS.
+        """
         if topic in self._connections:
             return
         spec = qos or (ct.TOPICS[topic].qos if topic in ct.TOPICS else ct.FRAME_QOS)
@@ -220,7 +250,19 @@ class BagWriter:
         self.counts[topic] = 0
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes | memoryview) -> None:
-        """One serialized message (straight into the open chunk: no copy, no parsing)."""
+        """One serialized message (straight into the open chunk: no copy, no parsing).
+
+        Parameters
+        ----------
+        topic : str
+            The topic (registered on first use).
+        msgtype : str
+            Its ROS message type.
+        log_time_ns : int
+            The record's log time, ns.
+        raw : bytes or memoryview
+            The CDR-serialized message.
+        """
         conn = self._connections.get(topic)
         if conn is None:
             self.add_topic(topic, msgtype)
@@ -232,7 +274,17 @@ class BagWriter:
         self._last_ns = max(self._last_ns, ns)
 
     def write_message(self, topic: str, log_time_ns: int, msg: Any) -> None:
-        """One typestore message."""
+        """One typestore message.
+
+        Parameters
+        ----------
+        topic : str
+            The topic (registered on first use).
+        log_time_ns : int
+            The record's log time, ns.
+        msg : Any
+            A rosbags typestore message (its ``__msgtype__`` names the type).
+        """
         self.write(topic, msg.__msgtype__, log_time_ns, ts.serialize(msg))
 
     def close(self) -> None:
@@ -258,6 +310,24 @@ def write_bag(path: str | Path, columns: Mapping[str, Any], metadata: Mapping[st
 
     ``columns`` has ``time_s`` and ``command_deg`` and optionally ``position_deg``, ``surface_deg``,
     ``hinge_moment_inlb``, ``current_a``. The calibration of ``config/<channel>.yaml`` makes the volts.
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag directory to create.
+    columns : mapping
+        Data-contract columns (arrays of one length).
+    metadata : mapping
+        Test parameters for the bag's ``custom_data``.
+    channel : str
+        The channel the columns belong to (its calibration makes the volts).
+    frame_hz : float, optional
+        The frame rate recorded in the metadata.
+
+    Returns
+    -------
+    Path
+        The bag directory.
     """
     sc = ct.scaling(channel)
     t = np.asarray(columns["time_s"], dtype=float)
@@ -869,6 +939,18 @@ def reindex_bag(path: str | Path, *, keep_original: bool = True) -> ReindexRepor
     and the bag's ``metadata.yaml`` (per-topic counts, times, QoS). The test's parameters come from the
     file's rosbag2 metadata when it has one, else from the latched ``/ema/test`` message. The original
     file is kept beside the new one as ``<name>.mcap.orig`` unless ``keep_original`` is false.
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag directory (or its ``.mcap`` file).
+    keep_original : bool
+        Keep the cut file beside the new one as ``<name>.mcap.orig``.
+
+    Returns
+    -------
+    ReindexReport
+        Records recovered per topic, bytes dropped, and the paths written.
     """
     import shutil  # noqa: PLC0415
 

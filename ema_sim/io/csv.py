@@ -301,6 +301,14 @@ def _delimiter(header_line: str, fmt: RigFormat | None) -> str:
     return ","
 
 
+def _rig_hint(header: list[str], fmt: RigFormat | None) -> str:
+    """A hint when a contract CSV's header is one cell holding tabs or semicolons: a rig's own file."""
+    if fmt is None and len(header) == 1 and any(sep in header[0] for sep in ("\t", ";")):
+        return (" (the header is one cell with tabs or semicolons in it: a rig's own file; map its columns with "
+                "--columns, e.g. time_ms=t,command_deg=demand,position_deg=pos)")
+    return ""
+
+
 def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
              ) -> tuple[dict[str, tuple[int, str, float]], str]:
     """Contract column → (index in the file, the file's name, factor); and the positions' unit."""
@@ -324,7 +332,7 @@ def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
                 units.add("deg")
     for name in REQUIRED:
         if name not in wanted:
-            raise DataError(f"{source}: line {line}: missing required column {name!r}")
+            raise DataError(f"{source}: line {line}: missing required column {name!r}{_rig_hint(header, fmt)}")
     if not any(name in wanted for name in OUTPUTS):
         raise DataError(f"{source}: line {line}: needs a 'position_deg' or 'surface_deg' column")
     if len(units) > 1:

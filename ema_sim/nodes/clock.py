@@ -19,7 +19,7 @@ from std_msgs.msg import String
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
-from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list
 from ema_sim.nodes.ports import Ports
 
@@ -107,10 +107,10 @@ class ClockNode(SuiteNode):
             self._tick()
             return 0.0
         if self.last_frame is not None and self.k >= self.last_frame:
-            if self._barrier(self.k) or now - self.waiting_since > self.stall_s:
+            if not self.done and (self._barrier(self.k) or now - self.waiting_since > self.stall_s):
                 self.done = True
                 self.finished_wall = now
-            return self._resend(now)
+            return MAX_SPIN_S if self.done else self._resend(now)  # done and composed: its driver ends the process
         need = (self.k + 1 - self.window) * self.frame_ns
         if need >= 0 and not self._barrier(self.k + 1 - self.window):
             if now - self.waiting_since <= self.stall_s:

@@ -56,10 +56,13 @@ class SuiteNode(Node):
         super().__init__(name, parameter_overrides=cli_overrides(args) if args is not None else [], **kwargs)
         self.params = Declared(self)
         self.done = False
+        self.ends_process = True
+        """Its being done ends its process (not a composed clock's: :func:`ema_sim.nodes.container.compose`)."""
         self.peers: set[str] = set(self.params.declare([Spec(
             "peers", [], "suite nodes to see in the graph (and be matched with) before calling itself ready",
-            kind=ParameterType.PARAMETER_STRING_ARRAY)], "peers")["peers"]) - {name}
-        """Suite nodes that must be in the graph before this one calls itself ready."""
+            kind=ParameterType.PARAMETER_STRING_ARRAY)], "peers")["peers"]) - {self.get_name()}
+        """Suite nodes that must be in the graph before this one calls itself ready: the others, by the name this
+        node has in the graph (a process's ``-r __node:=`` renames the ``name`` its class defaults to)."""
         self.auto_ready = True
         """Announce readiness as soon as matched (the maneuver node announces itself when it starts)."""
         self._last_log: dict[str, float] = {}
@@ -205,7 +208,10 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
 
 
 def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any]) -> None:
-    while stop["signal"] is None and not any(n.done for n in nodes):
+    def finished() -> bool:
+        return any(n.done and n.ends_process for n in nodes)
+
+    while stop["signal"] is None and not finished():
         for node in nodes:
             if not node._ready_sent:
                 node.check_ready()
@@ -218,7 +224,7 @@ def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any])
                 break
         if bus is not None:
             bus.release()
-        if any(n.done for n in nodes):
+        if finished():
             break
         executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
 

@@ -17,6 +17,9 @@ A topic published inside the container is carried inside only: the container doe
 from DDS (rclpy cannot ignore a process's own publications), so the container should host every EMAC
 of the suite. Measured here: a lockstep frame of five HOAD3 channels with the AIL environment moves 2
 messages into the container and 6 out, instead of about 40 cross-process messages.
+
+The process ends when a composed driver (maneuver, fmu) is done, or when it is stopped; a composed clock's
+last frame does not end it, as the last frames may not have reached a driver in another process yet.
 """
 
 from __future__ import annotations
@@ -393,6 +396,11 @@ def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
             flags["channels"] = host.emac_channels if name == "emac" else [name[len("emac_"):]]
         nodes.append(cls(argparse.Namespace(**flags), ports=bus.ports, name=name))  # type: ignore[call-arg]
     lockstep = any(getattr(n, "lockstep", False) for n in nodes)
+    for node in nodes:
+        if isinstance(node, clock_node.ClockNode) and len(nodes) > 2:
+            # The clock's last frame does not end the run: its composed nodes' last frames (fed back in the same
+            # round) still have to reach a driver outside, which may lag; the process ends with its driver.
+            node.ends_process = False
     for node in nodes:  # under use_sim_time: every composed node's ROS clock follows the in-process clock
         bus.time_feed.clocks.append(own_time_source(node))
     bus.time_feed.clocks = [c for c in bus.time_feed.clocks if c is not None]

@@ -172,14 +172,16 @@ class Stream:
 class SourceStream(Stream):
     """The other channels' feedback (crosstalk sources): a frame is there when every source has sent it.
 
-    Which sources exist is learnt from the suite's ``--peers`` (``emac_<channel>`` nodes): a frame waits
-    for each of them, so the crosstalk a channel sees does not depend on which source's message came
-    first. Without peers (a node run on its own) any source's message counts, as it cannot know better.
+    Which sources exist is the node's to say (:attr:`expected`; the EMAC node takes them from the suite's
+    peers, its ``emac_<channel>`` nodes): a frame waits for each of them, so the crosstalk a channel sees
+    does not depend on which source's message came first. Without them (a node run on its own) any
+    source's message counts, as it cannot know better.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, expected: frozenset[str] = frozenset()) -> None:
         super().__init__()
-        self.expected: frozenset[str] = frozenset()
+        self.expected = expected
+        """The sources every frame waits for (empty: any source's message counts); known before the first message."""
         self._latest: dict[str, int] = {}
 
     def push_from(self, stamp: int, item: list[tuple[str, float]]) -> None:
@@ -199,9 +201,11 @@ class SourceStream(Stream):
 class EmacNode(SuiteNode):
     """The node (see the module docstring)."""
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None) -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None,
+                 **options: Any) -> None:
+        """``options``: rclpy node options (``context``, ``cli_args``), as a process's ROS arguments give them."""
         given = channel_list(getattr(args, "channels", None) or ["left_wing"])
-        super().__init__(name or (f"emac_{given[0]}" if len(given) == 1 else "emac"), args)
+        super().__init__(name or (f"emac_{given[0]}" if len(given) == 1 else "emac"), args, **options)
         name = self.get_name()
         self.ports = ports(self)
         own = self.params.declare(node_specs(given), name)
@@ -226,7 +230,8 @@ class EmacNode(SuiteNode):
         # streams
         self.commands = Stream()
         self.loads = Stream()
-        self.source_fb = SourceStream()
+        self.source_fb = SourceStream(frozenset(c for c in self.sources if f"emac_{c}" in self.peers))
+        """The crosstalk sources: the peers' EMAC channel nodes (see :class:`SourceStream`)."""
         self._stream_list = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
         self._diagnostics_every = round(self.settings.frame_hz)
         self._frames_to_diagnostics = self._diagnostics_every
@@ -245,6 +250,10 @@ class EmacNode(SuiteNode):
         self.get_logger().info(
             f"{self.model_name} on {', '.join(self.channels)}; {'lockstep' if self.lockstep else 'real time'} at "
             f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
+        if self.lockstep and self.sources and not self.source_fb.expected:
+            self.get_logger().warning(
+                f"lockstep: no emac_<channel> peers name the crosstalk sources ({', '.join(self.sources)}); each "
+                "frame takes whichever source feedback has come, so the crosstalk may differ from run to run")
 
     def _init_counters(self) -> None:
         """What the node counts: frames late or skipped, waits, messages, inputs dropped."""
@@ -511,15 +520,9 @@ class EmacNode(SuiteNode):
         last = self.last_good_wall[ch]
         return None if last is None else max(now - last, 0.0)
 
-    def _learn_sources(self) -> None:
-        """The crosstalk sources that exist: the peers' EMAC channel nodes (see :class:`SourceStream`)."""
-        if self.sources and not self.source_fb.expected and self.peers:
-            self.source_fb.expected = frozenset(c for c in self.sources if f"emac_{c}" in self.peers)
-
     def _poll_lockstep(self) -> float:
         if self.clock_ns is None:
             return 0.05
-        self._learn_sources()
         if self.model_ns is None:  # first tick: report the trimmed state at the start time
             self.model_ns = self.clock_ns
             trimmed = {ch: u.last for ch, u in self.units.items()}

@@ -1,0 +1,221 @@
+"""The record as identification sees it: noise floors, how the command was logged, stamps, travel, units.
+
+Before anything is fitted, the facts a careful engineer checks first are read off the record, each
+with the sentence the report carries:
+
+* each output's **noise floor**, never below its counts' own quantization (``q/√12``), and its
+  resolution (:func:`ema_sim.analysis.noise.output_noise`); the fit weighs each output by it;
+* whether the command was **held** between samples (the contract) or **sampled** from a running
+  demand (:mod:`ema_sim.analysis.command_hold`); a sampled command is reconstructed between samples
+  by linear interpolation (:class:`~ema_sim.identify.problem.Problem`), which is the expected
+  response when a logged change happened anywhere in the sample before it was logged;
+* jittery stamps straightened, gapped ones resampled (:func:`ema_sim.analysis.series.uniform_record`);
+* the **travel**: a record that goes beyond the declared channel's travel is never clipped silently;
+  the model's limits are taken from the data (at the output's extreme where the record shows a stop:
+  the command beyond it while the output rests there; opened past the data where it shows none), and
+  a warning says so. A record in a linear unit kept as logged, or on a stand-in channel, has no
+  declared travel to compare with: its limits always come from the data;
+* the **unit**: positions kept in mm or in are named, so no one reads them as degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ema_sim.analysis import series
+from ema_sim.analysis.command_hold import CommandHold, HoldMode
+from ema_sim.analysis.noise import NoiseFloor
+from ema_sim.config import ChannelConfig
+from ema_sim.errors import DataError
+from ema_sim.io.csv import MeasuredData
+
+MAX_ABS = 1e6
+"""No command or output in degrees or millimetres is this large: such a column is not what it is named."""
+STOP_S = 0.2
+"""The command must sit beyond the output's extreme this long, the output resting there, to show a stop."""
+
+
+@dataclass(frozen=True)
+class Travel:
+    """The travel limits the model is given, and where they come from."""
+
+    declared: tuple[float, float]
+    limits: tuple[float, float]
+    source: str
+    """``declared``, ``data`` or ``data, stop seen``."""
+    statement: str
+    outside: bool
+    """The record goes beyond the declared travel."""
+
+
+@dataclass
+class Record:
+    """A measured record prepared for identification, with what was found and done on the way."""
+
+    data: MeasuredData
+    channel: ChannelConfig
+    """The channel's configuration, its travel replaced when the data required it."""
+    noise: dict[str, NoiseFloor]
+    hold: CommandHold
+    travel: Travel
+    notes: list[str] = field(default_factory=list)
+    """What was found and done, one line each (for the report's header)."""
+    warnings: list[str] = field(default_factory=list)
+    stamp_scatter_s: float = 0.0
+    """Rms of the logged stamps about the least-squares line through them (0 for uniform stamps)."""
+
+    @property
+    def unit(self) -> str:
+        """Unit of the command and outputs (``deg``, or a linear unit kept as logged)."""
+        return self.data.unit
+
+    @property
+    def command_sampled(self) -> bool:
+        """Whether the fit reconstructs the command between samples (sampled) or holds it."""
+        return self.hold.assumed_sampled
+
+
+def _extent(data: MeasuredData) -> tuple[float, float]:
+    values = [data.command_deg, *(data.column(o) for o in data.outputs)]
+    return float(min(np.min(v) for v in values)), float(max(np.max(v) for v in values))
+
+
+def _stop(data: MeasuredData, noise: dict[str, NoiseFloor], side: int) -> float | None:
+    """The output's extreme on one side (+1 upper, −1 lower) when the record shows a stop there."""
+    name = data.outputs[0]
+    y = side * data.column(name)
+    u = side * data.command_deg
+    nf = noise[name]
+    band = max(4.0 * nf.sigma, 2.0 * (nf.resolution or 0.0))
+    top = float(np.max(y))
+    pinned = (u > top + band) & (y >= top - band)
+    dt = float(np.median(np.diff(data.time_s)))
+    return side * top if pinned.sum() * dt >= STOP_S else None
+
+
+def check_identifiable(data: MeasuredData) -> None:
+    """One clear error for a record nothing can be identified from (its columns are legal but say nothing).
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record as read.
+    """
+    source = data.source or "data"
+    for name in ("command_deg", *data.outputs):
+        x = data.column(name)
+        if float(np.max(np.abs(x))) > MAX_ABS:
+            raise DataError(f"{source}: {name} reaches {float(np.max(np.abs(x))):.3g} {data.unit}: no actuator moves "
+                            f"beyond ±{MAX_ABS:g}; is the column mapped to the right signal and unit?")
+    span = float(np.ptp(data.command_deg))
+    if span == 0.0:
+        raise DataError(f"{source}: the command never changes ({data.command_deg[0]:g} {data.unit} throughout): "
+                        "there is nothing to identify")
+    for name in data.outputs:
+        if float(np.ptp(data.column(name))) == 0.0:
+            raise DataError(f"{source}: {name} never changes while the command spans {span:.4g} {data.unit}: the "
+                            "actuator did not move, or the column is not its position")
+
+
+def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, NoiseFloor], *,
+                  stand_in: bool) -> Travel:
+    """The model's travel on this record (see the module docstring).
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    channel : ChannelConfig
+        The declared channel (its ``position_min_deg`` / ``position_max_deg``).
+    noise : dict
+        Each output's noise floor (what "resting at the extreme" means).
+    stand_in : bool
+        The channel is a stand-in (none given or named by the record): its travel says nothing.
+
+    Returns
+    -------
+    Travel
+        The limits to simulate with and the sentence that says where they come from.
+    """
+    declared = (channel.position_min_deg, channel.position_max_deg)
+    lo, hi = _extent(data)
+    unit = "°" if data.unit == "deg" else f" {data.unit}"
+    outside = data.unit == "deg" and not stand_in and (lo < declared[0] or hi > declared[1])
+    if data.unit == "deg" and not stand_in and not outside:
+        return Travel(declared, declared, "declared", f"within {channel.channel}'s travel "
+                      f"{declared[0]:g}…{declared[1]:g}°", False)
+    span = hi - lo
+    stops = (_stop(data, noise, -1), _stop(data, noise, +1))
+    limits = (stops[0] if stops[0] is not None else lo - span, stops[1] if stops[1] is not None else hi + span)
+    seen = [f"a stop at {s:.4g}{unit}" for s in stops if s is not None]
+    how = (f"limits at {', '.join(seen)} where the command stays beyond the output"
+           if seen else "no stop seen: limits opened past the data")
+    source = "data, stop seen" if seen else "data"
+    if outside:
+        text = (f"the record spans {lo:.4g}…{hi:.4g}°, outside {channel.channel}'s declared travel "
+                f"{declared[0]:g}…{declared[1]:g}°: travel taken from the data ({how}), not clipped")
+    elif data.unit != "deg":
+        text = f"positions in {data.unit} as logged: travel taken from the data ({how})"
+    else:
+        text = f"no channel named: travel taken from the data spanning {lo:.4g}…{hi:.4g}° ({how})"
+    return Travel(declared, limits, source, text, outside)
+
+
+def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | None = None,
+            command: HoldMode = "detect") -> Record:
+    """Noise floors, command hold, uniform stamps, travel and unit of one record (module docstring).
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record as read.
+    channel : ChannelConfig
+        The declared channel.
+    channel_note : str, optional
+        Why the channel is a stand-in (none given, none in the metadata); None when it was named.
+    command : {"detect", "held", "sampled"}
+        How the command was logged: detected from the record, or as the user says.
+
+    Returns
+    -------
+    Record
+        The prepared record, its notes and warnings.
+    """
+    from ema_sim.analysis.pipeline import command_hold, measure_outputs  # noqa: PLC0415
+    from ema_sim.analysis.section2 import Options  # noqa: PLC0415
+
+    check_identifiable(data)
+    noise = measure_outputs(data)
+    hold = command_hold(data, noise, Options(command=command))
+    uniform = series.uniform_record(data, command_sampled=hold.assumed_sampled)
+    travel = travel_limits(uniform, channel, noise, stand_in=channel_note is not None)
+    if travel.limits != travel.declared:
+        channel = replace(channel, position_min_deg=travel.limits[0], position_max_deg=travel.limits[1])
+    notes: list[str] = []
+    warnings: list[str] = []
+    if channel_note:
+        notes.append(channel_note)
+    if data.unit != "deg":
+        line = (f"positions in {data.unit} as logged (no --crank-arm-in): every *_deg figure of this report is "
+                f"in {data.unit}, every rate in {data.unit}/s")
+        notes.append(line)
+        warnings.append(line)
+    for name, nf in noise.items():
+        if nf.resolution is not None:
+            notes.append(f"{name} logged in counts of {nf.resolution:g}: noise floor {nf.sigma:.3g} "
+                         f"({'the counts' if nf.limited_by_resolution else 'white noise'} set it)")
+    if hold.sampled is None and hold.source == "detected":
+        notes.append(f"command: {hold.evidence}; held and sampled both fitted, the better taken (below)")
+    else:
+        notes.append(f"command {hold.statement}")
+    if "resampled" in uniform.metadata:
+        notes.append(uniform.metadata["resampled"])
+    notes.append(f"travel: {travel.statement}")
+    if travel.outside:
+        warnings.append(f"data outside the declared travel: {travel.statement}")
+    k = np.arange(data.time_s.size, dtype=float)
+    line = np.polyval(np.polyfit(k, data.time_s, 1), k)
+    scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - line))
+    return Record(uniform, channel, noise, hold, travel, notes, warnings, scatter)
