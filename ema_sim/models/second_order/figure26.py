@@ -217,7 +217,7 @@ def drive_on(p: FloatArray) -> bool:
     bool
         True when the drive's velocity is a state.
     """
-    return p[P.accel_limit_dps2] < math.inf or (p[P.feedback_filter_in_loop] > 0.5 and p[P.linkage_freq_hz] > 0.0)
+    return bool(p[P.accel_limit_dps2] < math.inf or (p[P.feedback_filter_in_loop] > 0.5 and p[P.linkage_freq_hz] > 0.0))
 
 
 @jit
@@ -395,7 +395,7 @@ def actuator_position(p: FloatArray, x: float, v: float) -> float:
         The actuator's position (deg).
     """
     if p[P.feedback_filter_in_loop] > 0.5:
-        return x + v / (2.0 * p[P.zeta] * p[P.wn_rad_s])
+        return float(x + v / (2.0 * p[P.zeta] * p[P.wn_rad_s]))
     return x
 
 
@@ -437,7 +437,7 @@ def free_play_subsystem(p: FloatArray) -> bool:
     bool
         True with free play and no linkage mode.
     """
-    return p[P.free_play_deg] > 0.0 and p[P.linkage_freq_hz] <= 0.0
+    return bool(p[P.free_play_deg] > 0.0 and p[P.linkage_freq_hz] <= 0.0)
 
 
 @jit
@@ -499,7 +499,7 @@ def linkage_accel(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuat
     w0 = TWO_PI * p[P.linkage_freq_hz]
     damping = 2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p)
     target = surface_compliance(p, hinge_moment_inlb)
-    return (w0 * w0 * (target - linkage_spring(p, y[X.linkage_deg])) - damping * y[X.linkage_rate_dps]
+    return float(w0 * w0 * (target - linkage_spring(p, y[X.linkage_deg])) - damping * y[X.linkage_rate_dps]
             - actuator_accel)
 
 
@@ -593,7 +593,7 @@ def history_spacing_s(p: FloatArray) -> float:
     float
         Seconds.
     """
-    return 2.0 * p[P.feedback_delay_s] / HISTORY_SIZE
+    return float(2.0 * p[P.feedback_delay_s] / HISTORY_SIZE)
 
 
 @jit
@@ -783,7 +783,7 @@ def max_step_s(p: FloatArray) -> float:
         fastest = max(fastest, TWO_PI * p[P.linkage_freq_hz])
     if drive_on(p):  # a first-order loop: RK4 at h·λ = 1 is accurate to 2 % of its (fast) transient
         fastest = max(fastest, 0.25 * TWO_PI * p[P.velocity_loop_hz])
-    return 1.0 / (4.0 * fastest)
+    return float(1.0 / (4.0 * fastest))
 
 
 @jit
@@ -802,7 +802,7 @@ def linkage_rest(p: FloatArray, hinge_moment_inlb: float) -> float:
     float
         The deflection (deg), pushed across the free play by the load.
     """
-    return surface_compliance(p, hinge_moment_inlb) + 0.5 * p[P.free_play_deg] * np.sign(hinge_moment_inlb)
+    return float(surface_compliance(p, hinge_moment_inlb) + 0.5 * p[P.free_play_deg] * np.sign(hinge_moment_inlb))
 
 
 @nb.njit(cache=True)
