@@ -93,10 +93,10 @@ class Free:
         return value if self.log else self.scale
 
 
-def _free(name: str, *, log: bool = False, scale: float = 1.0, high: float | None = None) -> Free:
+def _free(name: str, *, log: bool = False, scale: float = 1.0) -> Free:
     """A fitted parameter whose bounds are its declared range (:mod:`ema_sim.models.second_order.params`)."""
     m = metas(SecondOrderParams)[name]
-    return Free(name, m.min, m.max if high is None else high, log=log, scale=scale)
+    return Free(name, m.min, m.max, log=log, scale=scale)
 
 
 # Every continuously fitted parameter of the second-order family; bounds from the parameter metadata.
@@ -111,7 +111,7 @@ FREE: dict[str, Free] = {
         _free("kb", scale=0.01),
         _free("offset_deg", scale=0.05),
         _free("rate_limit_dps", log=True, scale=100.0),
-        _free("k2_dps_per_lb", scale=0.01, high=1.0),
+        _free("k2_dps_per_lb", scale=0.01),
         _free("threshold_deg", scale=0.05),
         _free("free_play_deg", scale=0.1),
         _free("compliance_deg_per_kinlb", scale=0.2),
@@ -121,7 +121,7 @@ FREE: dict[str, Free] = {
         _free("integral_hz", log=True, scale=0.1),
         _free("servo_compliance_deg_per_kinlb", scale=0.1),
         _free("accel_limit_dps2", log=True, scale=1e4),
-        _free("velocity_loop_hz", log=True, scale=300.0, high=1000.0),
+        _free("velocity_loop_hz", log=True, scale=300.0),
         _free("linkage_freq_hz", log=True, scale=30.0),
         _free("linkage_zeta", log=True, scale=0.1),
         _free("compliance_knee_inlb", log=True, scale=500.0),

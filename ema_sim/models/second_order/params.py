@@ -39,7 +39,7 @@ class SecondOrderParams:
         "deg/s", "unloaded rate limit rl on the velocity command (3.1.2.1)", min=1.0, max=2000.0, off=INF,
         kernel="rate_limit_dps")
     k2_dps_per_lb: float = pm.param("deg/s/lbf", "rate-limit slope K2 with the load hm/marm (3.1.2.1)", min=0.0,
-                                    off=0.0, kernel="k2_dps_per_lb")
+                                    max=1.0, off=0.0, kernel="k2_dps_per_lb")
     moment_arm_in: float = pm.param("in", "moment arm marm (the servo crank arm) of the rate limit's load term",
                                     min=0.0, min_exclusive=True, channel="crank_arm_in", kernel="moment_arm_in")
     position_min_deg: float = pm.param("deg", "lower position limit on the states (3.1.2.1)",
@@ -100,7 +100,7 @@ class SecondOrderParams:
         "deg/s²", "current-limited drive: the actuator's acceleration at the current limit, unloaded (figure 30's "
         "stage 5)", min=100.0, max=1e6, off=INF, default=INF, kernel="accel_limit_dps2")
     velocity_loop_hz: float = pm.param(
-        "Hz", "bandwidth of the current-limited drive's velocity loop (with accel_limit_dps2)", min=5.0, max=5000.0,
+        "Hz", "bandwidth of the current-limited drive's velocity loop (with accel_limit_dps2)", min=5.0, max=1000.0,
         default=300.0, kernel="velocity_loop_hz")
     linkage_freq_hz: float = pm.param(
         "Hz", "the surface's own mode outside the servo loop: surface inertia on the linkage stiffness below the "
