@@ -89,9 +89,11 @@ def make_record(
     outputs: tuple[str, ...] = ("position_deg", "surface_deg"),
     reverse_load_column: bool = False,
     channel: str = "left_wing",
+    resolution_deg: float = 0.0,
     **truth: float,
 ) -> MeasuredData:
-    """A record of the truth model with ``effects`` and sensor noise (seeded)."""
+    """A record of the truth model with ``effects`` and sensor noise (seeded); outputs logged in counts of
+    ``resolution_deg`` when it is not 0 (a coarse sensor)."""
     rng = np.random.default_rng(seed)
     frames = np.arange(round(duration_s / FRAME_S)) * FRAME_S
     cmd = command_sequence(frames, duration_s)
@@ -107,6 +109,8 @@ def make_record(
         if name in outputs:
             clean = rec.position_deg[0] if name == "position_deg" else rec.surface_deg[0]
             cols[name] = clean + rng.normal(0.0, sigma, t.size)
+            if resolution_deg > 0.0:
+                cols[name] = np.round(cols[name] / resolution_deg) * resolution_deg
     return MeasuredData(
         time_s=t,
         command_deg=cmd[held],

@@ -146,6 +146,14 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
                      "start": ({"params": _params(result, result.start),
                                 "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.start).items()}}
                                if result.start is not None else None)},
+        **({"declared": {
+            "model": result.model,
+            "rms_deg": {o: _round(v) for o, v in result.as_declared.rms_deg.items()},
+            "equivalent": {k: _round(v) for k, v in result.as_declared.equivalent.items()},
+            "fitted": list(result.as_declared.free),
+            "held_fixed": list(result.as_declared.held_fixed),
+            "not_determinable": list(result.as_declared.not_determinable),
+        }} if result.as_declared is not None else {}),
         "added": [
             {
                 "effect": s.effect,
@@ -236,6 +244,10 @@ def summary(report: dict[str, Any]) -> str:
              f"noise {', '.join(f'{o} {v:.4g}{u}' for o, v in report['noise_deg'].items())}"]
     if "reference" in report:
         lines.append(f"reference {report['reference']['model']}: rms {_fmt_rms(report['reference']['rms_deg'], unit)}")
+    if "declared" in report:
+        d = report["declared"]
+        lines.append(f"declared {d['model']} as it is: rms {_fmt_rms(d['rms_deg'], unit)}; not determinable by the "
+                     f"record: {', '.join(d['not_determinable']) or 'none'}")
     b = report["baseline"]
     lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'], unit)}")
     for a in report["added"]:

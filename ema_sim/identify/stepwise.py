@@ -40,7 +40,7 @@ import numpy as np
 
 from ema_sim.analysis.command_hold import HoldMode
 from ema_sim.config import ChannelConfig
-from ema_sim.identify.declared import declared
+from ema_sim.identify.declared import HIGH_ORDER, declared, not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
 from ema_sim.identify.fit import Fit, evaluate, fit
 from ema_sim.identify.problem import Problem
@@ -124,6 +124,22 @@ class Removal:
     reason: str
 
 
+@dataclass(frozen=True)
+class AsDeclared:
+    """A high-order or linear declared model on the record, and the second-order-family equivalent fitted for it."""
+
+    rms_deg: dict[str, float]
+    """The model run as it is (its own simulation): the error before anything is fitted."""
+    equivalent: dict[str, float]
+    """The equivalent's stages (model parameter → declared starting value)."""
+    free: tuple[str, ...]
+    """The stages fitted."""
+    held_fixed: tuple[str, ...]
+    """Stages the record cannot move (kept at their declared values, not fitted)."""
+    not_determinable: tuple[str, ...]
+    """The declared model's parameters the equivalent does not carry (lumped into ωn and ζ, or not seen)."""
+
+
 @dataclass
 class Identification:
     """The outcome: the declared fit, the effects added, the final fit, and every verdict on the way."""
@@ -145,6 +161,8 @@ class Identification:
     """What the fit decided about the record (command interpretation, start), one line each."""
     final_model: str = ""
     """:data:`REFERENCE` when the trivial model fits better than anything fitted; else empty (the declared one)."""
+    as_declared: AsDeclared | None = None
+    """A high-order or linear declared model: its own error and the equivalent it was fitted through."""
 
 
 def _rms(problem: Problem, f: Fit) -> dict[str, float]:
@@ -543,6 +561,36 @@ def _prune(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
     return cur
 
 
+MOVE_SHARE = 1e-3
+"""A parameter whose Jacobian column is below this share of the largest one cannot be moved by the record."""
+
+
+def _as_declared(problem: Problem, model: str, base: SecondOrderParams, free: list[str], notes: list[str]
+                 ) -> AsDeclared:
+    """A high-order declared model: its own error on the record, and which of its equivalent's stages to fit.
+
+    The stages whose Jacobian column at the start is negligible (a current limit the record never
+    reaches, a delay under a sample) cannot be moved by the record: they are held at their declared
+    values and said, not fitted (a singular fit would make every uncertainty infinite).
+    """
+    d = problem.data
+    sim = run_declared(model, problem.channel, problem.time_s, d.command_deg, d.hinge_moment)
+    rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(sim).items()}
+    at = evaluate(problem, base, tuple(free), flip=False)
+    size = np.linalg.norm(at.jacobian, axis=0)
+    still = [f for f, s in zip(at.jac_free, size, strict=True)
+             if f not in ("wn_rad_s", "zeta") and s <= MOVE_SHARE * float(np.max(size, initial=0.0))]
+    fitted = [f for f in free if f not in still]
+    text = ", ".join(f"{o} {v:.4g}°" for o, v in rms.items())
+    notes.append(f"{model} as declared (its own simulation on the record): rms {text}; fitted through its "
+                 f"second-order-family stages ({', '.join(fitted)})")
+    if still:
+        notes.append(f"{model}'s {', '.join(still)} cannot be moved by this record (the output does not change "
+                     "with them): held at the declared values, not fitted")
+    return AsDeclared(rms, {f: float(getattr(base, f)) for f in free}, tuple(fitted), tuple(still),
+                      tuple(not_determinable(model, problem.channel)))
+
+
 def identify(
     data: MeasuredData,
     channel: ChannelConfig,
@@ -564,12 +612,18 @@ def identify(
     say = log or (lambda _msg: None)
     record = record or prepare(data, channel, command=command)
     problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled)
-    base, free = declared(model, record.channel, overrides or {})
+    peak = float(np.percentile(np.abs(problem.hinge_moment), 98))
+    base, free = declared(model, record.channel, overrides or {}, peak)
     notes: list[str] = []
+    key = model.strip().lower()
+    as_declared = _as_declared(problem, key, base, free, notes) if key in HIGH_ORDER else None
+    if as_declared is not None:
+        free = list(as_declared.free)
     cur, start = _choose_hold(problem, base, free, record, notes)
     baseline = cur
     say(f"baseline {model}: rms {_rms(problem, cur)}")
     result = Identification(problem, model, baseline, cur, record=record, start=start, notes=notes)
+    result.as_declared = as_declared
     result.simulator_error_deg = simulator_error(problem, cur.params, cur.flip)
     for _ in range(max_effects):
         if cur.rss / problem.n_fit - 1.0 <= DONE_EXCESS:
