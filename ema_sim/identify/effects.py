@@ -366,7 +366,8 @@ def _load_rate_check(v: Values, ctx: Context) -> str | None:
 
 
 def _accel_check(v: Values, ctx: Context) -> str | None:
-    unlimited = ctx.max_accel_dps2
+    free = ctx.params.replace(accel_limit_dps2=math.inf)
+    unlimited = ctx.problem.max_accel_dps2(ctx.problem.simulate([free])[0])
     accel = v["accel_limit_dps2"]
     if unlimited > 0.0 and accel > 0.95 * unlimited:
         return f"acceleration limit {accel:.0f} °/s² never binds (the model peaks at {unlimited:.0f} °/s²)"
@@ -505,8 +506,8 @@ EFFECTS: tuple[Effect, ...] = (
            check=_min("servo_compliance_deg_per_kinlb", 1e-3, "servo compliance"), load_effect=True),
     Effect("current_limit", "feedback", ("accel_limit_dps2", "velocity_loop_hz"),
            "the start of each large step is slower than the servo asks: the drive's acceleration saturates",
-           probes=lambda ctx: [{"accel_limit_dps2": max(0.5 * ctx.max_accel_dps2, 200.0), "velocity_loop_hz": 300.0}],
-           applies=lambda ctx: _off(ctx, "accel_limit_dps2") and ctx.max_accel_dps2 > 1000.0,
+           probes=lambda _ctx: [{"accel_limit_dps2": a, "velocity_loop_hz": 300.0} for a in (1e3, 4e3, 1.6e4)],
+           applies=lambda ctx: _off(ctx, "accel_limit_dps2"),
            check=_accel_check),
     Effect("free_play", "surface", ("free_play_deg",), "a square wave in the sign of the hinge moment on the surface",
            probes=lambda _ctx: [{"free_play_deg": 0.1}, {"free_play_deg": 0.3}],

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -416,7 +416,7 @@ def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
     values = {f: float(getattr(new.params, f)) for f in effect.fields}
     value = values[effect.fields[0]] if values else None
     if not reason and values:
-        reason = effect.check(values, ctx) or ""
+        reason = effect.check(values, replace(ctx, params=new.params)) or ""
         for f, v in values.items():
             bound = FREE.get(f)
             if not reason and bound is not None and (v >= bound.high * (1 - 1e-3)
