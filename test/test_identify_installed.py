@@ -8,12 +8,17 @@ record's noise floor (the floor the report states, never below the counts' quant
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from identgen import make_record
 
+from ema_sim.cli import main
 from ema_sim.config import load_channel
+from ema_sim.identify.effects import FREE
 from ema_sim.identify.stepwise import identify
+from ema_sim.io.csv import write_csv
 
 WING = load_channel("left_wing")
 DURATION_S = 20.0
@@ -52,3 +57,47 @@ def test_a_null_under_heavy_load_adds_nothing():
     data = make_record({}, seed=105, duration_s=DURATION_S, load_amp_inlb=3000.0)
     result = identify(data, WING, "second_order")
     assert result.steps == []
+
+
+def test_a_high_order_model_is_declared_through_its_own_parameters():
+    """HOAC1's equivalent carries its own slew limit, LVDT filter in the loop, integral corner, backlash and
+    figure 32's stiffness; what no position and surface record determines (motor, bus, PWM...) is listed."""
+    from ema_sim.identify.declared import declared, equivalent, not_determinable  # noqa: PLC0415
+    from ema_sim.models.high_order.params import HighOrderParams  # noqa: PLC0415
+
+    h = HighOrderParams.from_channel(WING, "hoac1")
+    eq = equivalent("hoac1", WING)
+    assert eq["rate_limit_dps"] == pytest.approx(h.rate_limit_in_s * h.deg_per_in)
+    assert eq["free_play_deg"] == pytest.approx(h.gear_backlash_in * h.deg_per_in)
+    assert eq["integral_hz"] == pytest.approx(h.position_integral_per_s2 / h.position_gain_per_s / (2 * np.pi))
+    assert eq["feedback_filter_in_loop"] == 1.0
+    assert eq["delay_s"] == 0.0
+    hoad3 = equivalent("hoad3", WING, 1500.0)
+    assert hoad3["delay_s"] == pytest.approx(0.004)
+    assert hoad3["feedback_delay_s"] == pytest.approx(0.002)
+    assert hoad3["compliance_stiff_deg_per_kinlb"] < hoad3["compliance_deg_per_kinlb"]  # figure 33 stiffens
+    missing = not_determinable("hoad3", WING)
+    assert {"stator_resistance_ohm", "bus_supply_v", "pwm_dead_band_v"} <= set(missing)
+    assert "rate_limit_in_s" not in missing
+    assert "command_delay_s" not in missing
+    params, free = declared("hoad3", WING, {}, 1500.0)
+    assert {"delay_s", "feedback_delay_s", "compliance_knee_inlb", "rate_limit_dps"} <= set(free)
+    for f in free:  # fit bounds are the declared ranges
+        assert FREE[f].low <= getattr(params, f) <= FREE[f].high
+
+
+def test_loes_declared_reports_its_own_error_before_and_the_fit_after(tmp_path):
+    """A declared linear model is run as it is on the record (the error before), then its equivalent is fitted."""
+    data = make_record({"time_delay": 0.008}, seed=106, duration_s=10.0)
+    csv = tmp_path / "r.csv"
+    write_csv(csv, {k: getattr(data, k) for k in ("time_s", "command_deg", "position_deg", "surface_deg",
+                                                   "hinge_moment_inlb")}, {"channel": "left_wing"})
+    out = tmp_path / "r.json"
+    assert main(["identify", str(csv), "--model", "loes", "--json", str(out), "-q"]) == 0
+    report = json.loads(out.read_text())
+    d = report["declared"]
+    assert d["model"] == "loes"
+    assert set(d["fitted"]) >= {"wn_rad_s", "zeta", "delay_s"}
+    for o, before in d["rms_deg"].items():
+        assert report["final"]["rms_deg"][o] < before
+    assert report["final"]["params"]["delay_s"] == pytest.approx(0.008, rel=0.2)
