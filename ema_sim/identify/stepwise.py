@@ -138,6 +138,8 @@ class AsDeclared:
     """Stages the record cannot move (kept at their declared values, not fitted)."""
     not_determinable: tuple[str, ...]
     """The declared model's parameters the equivalent does not carry (lumped into ωn and ζ, or not seen)."""
+    sim: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3)))
+    """Its outputs on the record (position, surface, rate columns)."""
 
 
 @dataclass
@@ -588,7 +590,7 @@ def _as_declared(problem: Problem, model: str, base: SecondOrderParams, free: li
         notes.append(f"{model}'s {', '.join(still)} cannot be moved by this record (the output does not change "
                      "with them): held at the declared values, not fitted")
     return AsDeclared(rms, {f: float(getattr(base, f)) for f in free}, tuple(fitted), tuple(still),
-                      tuple(not_determinable(model, problem.channel)))
+                      tuple(not_determinable(model, problem.channel)), sim[:, :3])
 
 
 def identify(
@@ -659,5 +661,20 @@ def identify(
         result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
         result.steps.clear()
         result.final, result.final_model = trivial, REFERENCE
+    if as_declared is not None:
+        _keep_declared(problem, result, as_declared)
     result.elapsed_s = time.perf_counter() - t0
     return result
+
+
+def _keep_declared(problem: Problem, result: Identification, as_declared: AsDeclared) -> None:
+    """A declared model that fits better as it is than anything fitted through its equivalent is the final model."""
+    r = problem.weighted_residual(as_declared.sim)
+    if float(np.dot(r, r)) > result.final.rss:
+        return
+    why = (f"the declared {result.model} as it is fits better than its fitted second-order-family equivalent "
+           f"(weighted error ×{result.final.rss / max(float(np.dot(r, r)), TINY):.3g})")
+    result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
+    result.steps.clear()
+    result.final = Fit(result.final.params, False, (), as_declared.sim, r, np.zeros((r.size, 0)), {}, ())
+    result.final_model = f"{result.model} (as declared)"

@@ -28,7 +28,7 @@ from ema_sim.analysis.series import holds
 from ema_sim.identify.effects import FREE, KEYS, Free
 from ema_sim.identify.fit import Fit, covariance
 from ema_sim.identify.problem import Problem
-from ema_sim.identify.stepwise import Identification
+from ema_sim.identify.stepwise import REFERENCE, Identification
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
@@ -234,7 +234,7 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
     nyquist = 0.5 * p.sample_hz
     ref = reference(p)["rms_deg"]
     rms = _rms(p, final)
-    if result.final_model:
+    if result.final_model == REFERENCE:
         base = _rms(p, result.baseline)
         out.append(f"the declared {result.model} fits worse than {result.final_model} "
                    f"({', '.join(f'{o} rms {base[o]:.4g} against {ref[o]:.4g}' for o in p.outputs)}), and no effect "
