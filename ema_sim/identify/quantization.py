@@ -51,7 +51,9 @@ def _pre_quantizer(problem: Problem, p: SecondOrderParams) -> FloatArray:
 
 
 @nb.njit(cache=True, parallel=True)
-def _costs(residual, v, shift, steps, b, a, weight, starts, ends, warm):  # noqa: ANN001, ANN202
+def _costs(residual: NDArray[np.float64], v: NDArray[np.float64], shift: float, steps: NDArray[np.float64],
+           b: NDArray[np.float64], a: NDArray[np.float64], weight: NDArray[np.float64], starts: NDArray[np.int64],
+           ends: NDArray[np.int64], warm: int) -> NDArray[np.float64]:
     """Σ weight·(residual − G·(q·round((v + shift)/q) − v))² for every step q, over the windows given.
 
     The model the residual was taken against saw ``v`` unquantized; the candidate quantizes it with

@@ -85,7 +85,7 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
         return None
     problem = result.problem
     final = result.final
-    model = create(result.model, problem.channel, params=final.params)
+    model = create(result.model, problem.channel.channel, params=final.params)
     sign = -1.0 if final.flip else 1.0
     d = problem.data
     model.trim(d.command_deg[0], sign * d.hinge_moment[0])
@@ -138,8 +138,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "outputs": p.outputs,
         "unit": record.unit if record else "deg",
         "noise_deg": {o: _round(v) for o, v in p.sigma_deg.items()},
-        "resolution_deg": {o: (None if p.noise is None or p.noise[o].resolution is None
-                               else _round(p.noise[o].resolution)) for o in p.outputs},
+        "resolution_deg": {o: _resolution(p, o) for o in p.outputs},
         "reference": {"model": f"{'/'.join(o.split('_')[0] for o in p.outputs)} = command",
                       **{k: {o: _round(v) for o, v in m.items()} for k, m in ref.items()}},
         "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base),
@@ -205,7 +204,14 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     impl = implementation_error(result)
     if impl is not None:
         report["declared_implementation_error_deg"] = impl
-    return strict(report)
+    out: dict[str, Any] = strict(report)
+    return out
+
+
+def _resolution(p: Problem, output: str) -> float | None:
+    """An output's count size, None when it has none."""
+    q = None if p.noise is None else p.noise[output].resolution
+    return None if q is None else _round(q)
 
 
 def write_json(report: dict[str, Any], path: str | Path) -> None:

@@ -310,6 +310,16 @@ def _fit_quantized(problem: Problem, base: SecondOrderParams, free: tuple[str, .
     return Fit(final.params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
 
 
+def _offs(fields: tuple[str, ...] | list[str], base: SecondOrderParams) -> dict[str, float]:
+    """Each parameter switched off (its declared off value; the declared model's value for one without)."""
+    info = metas(SecondOrderParams)
+    out = {}
+    for f in fields:
+        off = info[f].off
+        out[f] = float(getattr(base, f)) if off is None else float(off)
+    return out
+
+
 def _bic(problem: Problem, f: Fit) -> float:
     return problem.n_fit * math.log(f.rss) + len(f.free) * math.log(problem.n_fit)
 
@@ -320,8 +330,7 @@ def _fit_candidate(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) ->
     swap = [f for f in cand.effect.replaces if f in new.free]
     if not swap:
         return new
-    info = metas(SecondOrderParams)
-    base = new.params.replace(**{f: info[f].off for f in swap})
+    base = new.params.replace(**_offs(swap, ctx.declared))
     alt = fit_model(problem, base, tuple(f for f in new.free if f not in swap), flip=new.flip)
     return alt if _bic(problem, alt) < _bic(problem, new) else new
 
@@ -351,8 +360,7 @@ def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit
         new = fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *fields))), flip=cand.flip)
         failed = [f for e in extra if e.check({g: getattr(new.params, g) for g in e.fields}, ctx) for f in e.fields]
         if failed:
-            info = metas(SecondOrderParams)
-            base = new.params.replace(**{f: info[f].off for f in failed})
+            base = new.params.replace(**_offs(failed, ctx.declared))
             new = fit_model(problem, base, tuple(f for f in new.free if f not in failed), flip=cand.flip)
         return new
     # A quantizer's step: the linear search's (step, offset) candidates, each checked with the full
@@ -364,10 +372,10 @@ def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit
     ]
     sims = problem.simulate(grid, [cand.flip] * len(grid))
     costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(s) for s in sims)]
-    start = grid[int(np.argmin(costs))]
-    free = tuple(cur.free) if start.offset_deg == cur.params.offset_deg else (*cur.free, "offset_deg")
+    first = grid[int(np.argmin(costs))]
+    free = tuple(cur.free) if first.offset_deg == cur.params.offset_deg else (*cur.free, "offset_deg")
     free = tuple(dict.fromkeys(free))
-    new = fit_model(problem, start, free, flip=cand.flip)
+    new = fit_model(problem, first, free, flip=cand.flip)
     # The step and the command map settle together: search the step again around the refit model.
     steps = new.params.quantization_deg * (1.0 + np.linspace(-2e-3, 2e-3, 41))
     sims = problem.simulate([new.params.replace(quantization_deg=g) for g in steps], [cand.flip] * steps.size)
@@ -537,13 +545,12 @@ def _effect_of(step: Step) -> Effect | None:
 
 def _prune(problem: Problem, result: Identification, cur: Fit, base: SecondOrderParams) -> Fit:
     """Take out again every added effect that collapsed to "off" in the final fit (module docstring)."""
-    info = metas(SecondOrderParams)
     for step in reversed(list(result.steps)):
         effect = _effect_of(step)
         if effect is None or not all(f in cur.free for f in effect.owned):
             continue
         values = {f: float(getattr(cur.params, f)) for f in effect.fields}
-        off = {f: getattr(base, f) if info[f].off is None else info[f].off for f in effect.owned}
+        off = _offs(effect.owned, base)
         ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base,
                       max_accel_dps2=problem.max_accel_dps2(cur.sim))
         reason = effect.check(values, ctx)

@@ -244,7 +244,7 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
         value = float(getattr(final.params, name))
         free = FREE.get(name)
         side = on_bound(value, free) if free else None
-        if side:
+        if side and free is not None:
             out.append(f"{_value(name, value, unit, result)} sits on the {side} bound of its range "
                        f"({free.low:g}…{free.high:g}): the fit pushed it as far as it may, so the value is no estimate")
         f = frequency_hz(name, value)
