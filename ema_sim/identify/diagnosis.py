@@ -172,7 +172,13 @@ class OutputDiagnosis:
         return sorted(out, key=lambda p: FAMILIES.index(p.family))
 
     def short(self, unit: str) -> str:
-        """The diagnosis in a few words (for the warnings)."""
+        """The diagnosis in a few words (for the warnings).
+
+        Parameters
+        ----------
+        unit : str
+            The record's position unit (deg, mm, in).
+        """
         u = "°" if unit == "deg" else f" {unit}"
         bits = [f"{100 * p.excess_share:.0f} % of it {p.name}" for p in self.named_parts()]
         if self.median_hz is not None:
@@ -184,7 +190,17 @@ class OutputDiagnosis:
                 + "; ".join(bits))
 
     def sentence(self, unit: str, nyquist_hz: float, bandwidth: float) -> str:
-        """The diagnosis in words, one sentence."""
+        """The diagnosis in words, one sentence.
+
+        Parameters
+        ----------
+        unit : str
+            The record's position unit (deg, mm, in).
+        nyquist_hz : float
+            Half the sample rate (Hz).
+        bandwidth : float
+            The final model's −3 dB bandwidth (Hz).
+        """
         u = "°" if unit == "deg" else f" {unit}"
         head = (f"{self.output}: rms {self.rms:.3g}{u}, {self.rms / self.noise:.3g}× its noise floor "
                 f"{self.noise:.3g}{u}")

@@ -132,12 +132,17 @@ FREE: dict[str, Free] = {
 }
 
 
+def _same_unit(_p: Any) -> float:
+    """The report's unit is the model's: factor 1."""
+    return 1.0
+
+
 @dataclass(frozen=True)
 class Key:
     """How the report names a model parameter, and the factor from the model's unit to the report's."""
 
     name: str
-    factor: Callable[[Any], float] = field(default=lambda _p: 1.0)
+    factor: Callable[[Any], float] = _same_unit
 
 
 def _per_kinlb_from_per_lb(p: Any) -> float:
@@ -223,6 +228,7 @@ Check = Callable[[Values, Context], "str | None"]
 
 
 def _no_check(_v: Values, _ctx: Context) -> str | None:
+    """Every fitted value is physical."""
     return None
 
 

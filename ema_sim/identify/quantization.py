@@ -109,6 +109,21 @@ def step_candidates(problem: Problem, p: SecondOrderParams, current_sim: FloatAr
 
     Each comes with the correction to the command offset it wants: a wrong offset moves every
     rounding threshold, so step and offset are refined together around each coarse pick.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    p : SecondOrderParams
+        The model.
+    current_sim : numpy.ndarray
+        The current model's outputs on the record.
+    keep : int
+        How many candidates to return.
+    low : float
+        Smallest step tried (deg).
+    high : float
+        Largest step tried (deg).
     """
     output = "position_deg" if "position_deg" in problem.outputs else "surface_deg"
     residual = problem.data.column(output) - current_sim[:, OUTPUT_COLUMN[output]]

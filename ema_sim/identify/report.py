@@ -80,6 +80,11 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
 
     Identification fits the equations with an accurate simulator; this is the extra error the user's
     own implementation adds on the same record, reported apart so it is never mistaken for an effect.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
     """
     if result.model not in ("loada", "loadf") or result.final_model:
         return None
@@ -123,7 +128,15 @@ def strict(value: Any) -> Any:
 
 
 def to_json(result: Identification, data_name: str) -> dict[str, Any]:
-    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings)."""
+    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings).
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    data_name : str
+        How the report names the data (its path).
+    """
     p = result.problem
     base = result.baseline
     final = result.final
@@ -215,7 +228,15 @@ def _resolution(p: Problem, output: str) -> float | None:
 
 
 def write_json(report: dict[str, Any], path: str | Path) -> None:
-    """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`)."""
+    """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`).
+
+    Parameters
+    ----------
+    report : dict
+        The report (:func:`to_json`).
+    path : path-like
+        Where to write it.
+    """
     text = json.dumps(strict(report), indent=2, ensure_ascii=False, allow_nan=False)
     Path(path).write_text(text + "\n", encoding="utf-8")
 
@@ -225,6 +246,13 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
 
     Every sample of the record is written; ``fitted`` is 1 on the samples the fits were judged on
     (0 on the first settling ones). Values are in the record's unit (``deg`` unless a linear unit was kept).
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    path : path-like
+        Where to write it.
     """
     p = result.problem
     cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
@@ -243,7 +271,13 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
 
 
 def summary(report: dict[str, Any]) -> str:
-    """A few lines for the terminal."""
+    """A few lines for the terminal.
+
+    Parameters
+    ----------
+    report : dict
+        The report (:func:`to_json`).
+    """
     unit = report.get("unit", "deg")
     u = "°" if unit == "deg" else f" {unit}"
     lines = [f"{report['data']}: {report['samples']} samples at {report['sample_hz']:g} Hz, "
@@ -286,7 +320,17 @@ def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
 
 
 def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:
-    """Markdown report with plots of the residual before and after, under ``directory``."""
+    """Markdown report with plots of the residual before and after, under ``directory``.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    report : dict
+        The report (:func:`to_json`).
+    directory : path-like
+        The report's directory (created).
+    """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     _plots(result, report, out)

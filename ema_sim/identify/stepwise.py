@@ -172,7 +172,17 @@ def _rms(problem: Problem, f: Fit) -> dict[str, float]:
 
 
 def simulator_error(problem: Problem, params: SecondOrderParams, flip: bool) -> dict[str, float]:
-    """RMS change of each output when the simulator's step is halved: its own accuracy on this record."""
+    """RMS change of each output when the simulator's step is halved: its own accuracy on this record.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    params : SecondOrderParams
+        The model.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    """
     coarse = problem.simulate([params], [flip])[0]
     step = problem.step_s
     problem.step_s = step / 2.0
@@ -271,6 +281,17 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
     move them: the smooth parameters are fitted with them held, then a coordinate search (a grid of
     11 over ±half a step, then one five times finer, for each) picks them, then the smooth
     parameters are fitted again.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    base : SecondOrderParams
+        The starting parameters (everything not fitted stays as here).
+    free : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
     """
     q = base.quantization_deg
     held = [f for f in free if f in PRE_QUANTIZER]
@@ -280,7 +301,19 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
 
 
 def no_worse(problem: Problem, start: SecondOrderParams, free: tuple[str, ...] | list[str], new: Fit) -> Fit:
-    """``new``, unless it ends worse than the parameters it started from: then the start, as a fit."""
+    """``new``, unless it ends worse than the parameters it started from: then the start, as a fit.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    start : SecondOrderParams
+        The parameters the fit started from.
+    free : sequence of str
+        The model parameters fitted.
+    new : Fit
+        The fit.
+    """
     at_start = problem.weighted_residual(problem.simulate([start], [new.flip])[0])
     if new.rss <= float(np.dot(at_start, at_start)):
         return new
@@ -489,7 +522,19 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
 
 
 def start_point(problem: Problem, base: SecondOrderParams, free: list[str], flip: bool) -> SecondOrderParams:
-    """The declared start, or the best point of a coarse ωn × ζ grid when it fits better (one batched run)."""
+    """The declared start, or the best point of a coarse ωn × ζ grid when it fits better (one batched run).
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    base : SecondOrderParams
+        The starting parameters (everything not fitted stays as here).
+    free : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    """
     if not {"wn_rad_s", "zeta"} <= set(free):
         return base
     wn, zeta = FREE["wn_rad_s"], FREE["zeta"]
@@ -531,6 +576,13 @@ def reference_fit(problem: Problem, params: SecondOrderParams) -> Fit:
     """The trivial model position = command (surface = command) as a :class:`Fit` with no free parameter.
 
     ``params`` are carried along unused (a :class:`Fit` has some); its outputs are the logged command.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    params : SecondOrderParams
+        Carried along unused (a fit has some).
     """
     u = problem.data.command_deg
     sim = np.column_stack([u, u, np.gradient(u, problem.time_s)])
@@ -616,6 +668,25 @@ def identify(
     ``record`` is ``data`` already prepared (:func:`ema_sim.identify.record.prepare`, with the
     channel's stand-in note); without it the record is prepared here with ``channel`` as declared
     and ``command`` (detect, held or sampled) for how its command was logged.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The measured record.
+    channel : ChannelConfig
+        The channel (travel, moment arm, configured values).
+    model : str
+        The declared model (:data:`ema_sim.identify.declared.DECLARED`).
+    overrides : dict, optional
+        Stages declared on top (model parameter → value).
+    max_effects : int
+        Most effects to add.
+    log : callable, optional
+        Called with each progress line.
+    record : Record, optional
+        ``data`` already prepared (:func:`ema_sim.identify.record.prepare`).
+    command : str
+        How the command was logged: ``detect``, ``held`` or ``sampled``.
     """
     t0 = time.perf_counter()
     say = log or (lambda _msg: None)

@@ -71,7 +71,15 @@ def _rms(problem: Problem, fit: Fit) -> dict[str, float]:
 
 
 def on_bound(value: float, free: Free) -> str | None:
-    """``"lower"`` or ``"upper"`` when ``value`` sits on that bound of its range, else None."""
+    """``"lower"`` or ``"upper"`` when ``value`` sits on that bound of its range, else None.
+
+    Parameters
+    ----------
+    value : float
+        The parameter's value.
+    free : Free
+        Its fitted range.
+    """
     if free.log and free.low > 0.0:
         span = math.log(free.high / free.low)
         if math.log(value / free.low) <= BOUND_SHARE * span:
@@ -88,7 +96,15 @@ def on_bound(value: float, free: Free) -> str | None:
 
 
 def frequency_hz(name: str, value: float) -> float | None:
-    """The value of a parameter in Hz when it is a frequency (unit rad/s or Hz), else None."""
+    """The value of a parameter in Hz when it is a frequency (unit rad/s or Hz), else None.
+
+    Parameters
+    ----------
+    name : str
+        A model parameter.
+    value : float
+        The parameter's value.
+    """
     meta = metas(SecondOrderParams).get(name)
     if meta is None:
         return None
@@ -100,7 +116,13 @@ def frequency_hz(name: str, value: float) -> float | None:
 
 
 def bandwidth_hz(p: SecondOrderParams) -> float:
-    """−3 dB bandwidth of the model's linear command → position dynamics (ωn, ζ and the lags on)."""
+    """−3 dB bandwidth of the model's linear command → position dynamics (ωn, ζ and the lags on).
+
+    Parameters
+    ----------
+    p : SecondOrderParams
+        The model.
+    """
     f = np.geomspace(1e-3, 1e4, 4000)
     s = 2j * np.pi * f
     h = p.wn_rad_s**2 / (s**2 + 2.0 * p.zeta * p.wn_rad_s * s + p.wn_rad_s**2)
@@ -123,7 +145,13 @@ class Excitation:
     """Highest frequency at which the command's spectrum is within 40 dB of its peak."""
 
     def statement(self, unit: str) -> str:
-        """One clause for a warning."""
+        """One clause for a warning.
+
+        Parameters
+        ----------
+        unit : str
+            The record's position unit (deg, mm, in).
+        """
         u = "°" if unit == "deg" else f" {unit}"
         return (f"{self.duration_s:.3g} s, {self.changes} change(s) of the command's level over {self.span:.3g}{u}, "
                 f"command within 40 dB of its peak up to {self.bandwidth_hz:.2g} Hz")
@@ -200,7 +228,15 @@ def identifiability(problem: Problem, fit: Fit) -> Identifiability:
 
 
 def label(result: Identification, name: str) -> str:
-    """A parameter as the report names it: an added effect's key, with the model parameter when they differ."""
+    """A parameter as the report names it: an added effect's key, with the model parameter when they differ.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    name : str
+        A model parameter.
+    """
     key = name if name in result.baseline.free or name not in KEYS else KEYS[name].name
     return name if key == name else f"{key}: {name}"
 
