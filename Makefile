@@ -4,9 +4,9 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 # The packages `make typecheck` (and so `make test`) checks with mypy --strict (config: pyproject.toml).
-TYPED  := ema_sim/models ema_sim/signals ema_sim/environment ema_sim/io ema_sim/analysis ema_sim/montecarlo
+TYPED  := ema_sim/models ema_sim/signals ema_sim/environment ema_sim/identify ema_sim/io ema_sim/analysis ema_sim/montecarlo
 
-.PHONY: venv test lint typecheck demo bench clean
+.PHONY: venv test test-slow lint typecheck demo bench clean
 
 venv: $(STAMP)
 
@@ -26,7 +26,11 @@ typecheck: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy $(TYPED)
-	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m "not slow"
+
+# The long end-to-end runs (pytest marker `slow`: identification on HOAD3 records, minutes each).
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow
 
 demo: $(STAMP)
 	$(BIN)/python -m ema_sim.demo

@@ -26,7 +26,15 @@ EFFECT_FIELDS = {  # vocabulary effect -> the model field its parameter lands in
     "free_play": "free_play_deg",
     "compliance": "compliance_deg_per_kinlb",
     "hysteretic_damping": "hysteresis_h_lb_per_in",
+    "time_delay/feedback": "feedback_delay_s",
+    "compliance/feedback": "lvdt_compliance_deg_per_kinlb",
+    "servo_integral": "integral_hz",
+    "servo_compliance": "servo_compliance_deg_per_kinlb",
+    "load_rate_limit": "k2_dps_per_lb",
 }
+"""Single-parameter effects: vocabulary effect (/where) → the model field its parameter lands in. The
+multi-parameter ones (linkage_mode, nonlinear_compliance, current_limit, feedback_filter) are given as
+a dict of model fields."""
 FRAME_S = 0.005
 
 
@@ -58,17 +66,19 @@ def load_sequence(t: np.ndarray, amp_inlb: float = 600.0) -> np.ndarray:
     return amp_inlb * (np.sin(2 * np.pi * 0.1 * t) + 0.25 * np.sign(np.sin(2 * np.pi * 0.37 * t + 0.4)))
 
 
-def truth_params(effects: dict[str, float], *, channel: str = "left_wing", wn_rad_s: float = 56.5,
+def truth_params(effects: dict[str, float | dict[str, float]], *, channel: str = "left_wing", wn_rad_s: float = 56.5,
                  zeta: float = 0.65, **extra: float) -> SecondOrderParams:
     """The basic second order plus the named effects (vocabulary names → model parameters)."""
-    values = {EFFECT_FIELDS[name]: v for name, v in effects.items()}
+    values: dict[str, float] = {}
+    for name, v in effects.items():
+        values.update(v if isinstance(v, dict) else {EFFECT_FIELDS[name]: v})
     if "hysteretic_damping" in effects:
         values["hysteresis_freq_hz"] = 0.1
     return SecondOrderParams.basic(load_channel(channel), wn_rad_s=wn_rad_s, zeta=zeta, **values, **extra)
 
 
 def make_record(
-    effects: dict[str, float],
+    effects: dict[str, float | dict[str, float]],
     *,
     seed: int = 0,
     noise_deg: tuple[float, float] = (0.003, 0.002),
@@ -79,9 +89,11 @@ def make_record(
     outputs: tuple[str, ...] = ("position_deg", "surface_deg"),
     reverse_load_column: bool = False,
     channel: str = "left_wing",
+    resolution_deg: float = 0.0,
     **truth: float,
 ) -> MeasuredData:
-    """A record of the truth model with ``effects`` and sensor noise (seeded)."""
+    """A record of the truth model with ``effects`` and sensor noise (seeded); outputs logged in counts of
+    ``resolution_deg`` when it is not 0 (a coarse sensor)."""
     rng = np.random.default_rng(seed)
     frames = np.arange(round(duration_s / FRAME_S)) * FRAME_S
     cmd = command_sequence(frames, duration_s)
@@ -97,6 +109,8 @@ def make_record(
         if name in outputs:
             clean = rec.position_deg[0] if name == "position_deg" else rec.surface_deg[0]
             cols[name] = clean + rng.normal(0.0, sigma, t.size)
+            if resolution_deg > 0.0:
+                cols[name] = np.round(cols[name] / resolution_deg) * resolution_deg
     return MeasuredData(
         time_s=t,
         command_deg=cmd[held],

@@ -157,7 +157,8 @@ def test_a_close_follower_is_position_equals_command_and_says_why(rig):
 
 def test_the_ringing_is_found_at_the_plant_s_own_frequency(rig):
     """The load sensor rings after every step at the coupled mode; the diagnosis names its frequency (measured here
-    on the noiseless plant at 10 kHz) and says the added effects are proxies."""
+    on the noiseless plant at 10 kHz); the drive's current limit is named at its value, and what stands in for
+    the ring is said."""
     report, *_ = rig["rotary_ringing_load_sensor"]
     drive = RIG["rotary_ringing_load_sensor"][0]
     tt, u, r = steps([3.0], dwell_s=1.5)
@@ -176,10 +177,16 @@ def test_the_ringing_is_found_at_the_plant_s_own_frequency(rig):
         f = frequency_hz(key, value)
         if f is not None and abs(f - ring) <= 0.25 * ring:
             assert any(w.startswith(f"{key} (") and "still rings at" in w for w in report["warnings"])
+    # The drive's current limit is in the vocabulary (current_limit): named at the plant's own value, not a proxy.
+    (limit,) = [a for a in report["added"] if a["effect"] == "current_limit"]
+    assert limit["params"]["accel_dps2"] == pytest.approx(drive.accel_limit, rel=0.2)
+    # The ring is not: what stands in for it is said, an added effect as a proxy, a declared parameter as structure.
     proxies = report["diagnosis"]["proxies"]
     assert proxies
-    assert all(p["effect"] for p in proxies)
-    assert any("stands in for structure the vocabulary lacks" in w for w in report["warnings"])
+    for p in proxies:
+        why = ("stands in for structure the vocabulary lacks" if p["effect"]
+               else "the declared model's structure does not fit the whole record")
+        assert any(w.startswith(p["parameter"]) and why in w for w in report["warnings"])
 
 
 def test_a_named_channel_s_travel_is_never_a_silent_clip(rig, tmp_path):

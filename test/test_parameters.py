@@ -21,7 +21,8 @@ from ema_sim.switches import ELEMENTS, element_names, model_overrides
 PARAMETER_SETS = (SecondOrderParams, HighOrderParams, LoesParams, PathSpec)
 # The unit a name's suffix promises, for every suffix the configuration uses.
 SUFFIX_UNITS = {
-    "_rad_s": "rad/s", "_hz": "Hz", "_s": "s", "_deg": "deg", "_dps": "deg/s", "_dps_per_lb": "deg/s/lbf",
+    "_rad_s": "rad/s", "_hz": "Hz", "_s": "s", "_deg": "deg", "_dps": "deg/s", "_dps2": "deg/s²",
+    "_dps_per_lb": "deg/s/lbf",
     "_in": "in", "_in_s": "in/s", "_inlb": "in·lb", "_inlbs2": "in·lb·s²", "_lbf": "lbf", "_lbf_per_in": "lbf/in",
     "_lbf_s_per_in": "lbf·s/in", "_lb_per_in": "lbf/in", "_per_kinlb": "1/(1000 in·lb)",
     "_deg_per_kinlb": "deg/(1000 in·lb)", "_v": "V", "_a": "A", "_ohm": "Ω", "_mh": "mH", "_uf": "µF",

@@ -82,8 +82,8 @@ SPLIT_RELATIVE = 0.2
 MODE_MATCH = 0.25
 """A fitted frequency within this share of the frequency the residual still rings at stands in for that mode."""
 FAMILIES = ("motion", "direction", "load sign", "load against motion", "current")
-BY_FIELD: dict[str, Effect] = {e.field: e for e in EFFECTS if e.field is not None}
-"""The vocabulary effect each model parameter belongs to."""
+BY_FIELD: dict[str, Effect] = {f: e for e in reversed(EFFECTS) for f in e.owned}
+"""The vocabulary effect each model parameter belongs to (the first that owns it)."""
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,13 @@ class OutputDiagnosis:
         return sorted(out, key=lambda p: FAMILIES.index(p.family))
 
     def short(self, unit: str) -> str:
-        """The diagnosis in a few words (for the warnings)."""
+        """The diagnosis in a few words (for the warnings).
+
+        Parameters
+        ----------
+        unit : str
+            The record's position unit (deg, mm, in).
+        """
         u = "°" if unit == "deg" else f" {unit}"
         bits = [f"{100 * p.excess_share:.0f} % of it {p.name}" for p in self.named_parts()]
         if self.median_hz is not None:
@@ -184,7 +190,17 @@ class OutputDiagnosis:
                 + "; ".join(bits))
 
     def sentence(self, unit: str, nyquist_hz: float, bandwidth: float) -> str:
-        """The diagnosis in words, one sentence."""
+        """The diagnosis in words, one sentence.
+
+        Parameters
+        ----------
+        unit : str
+            The record's position unit (deg, mm, in).
+        nyquist_hz : float
+            Half the sample rate (Hz).
+        bandwidth : float
+            The final model's −3 dB bandwidth (Hz).
+        """
         u = "°" if unit == "deg" else f" {unit}"
         head = (f"{self.output}: rms {self.rms:.3g}{u}, {self.rms / self.noise:.3g}× its noise floor "
                 f"{self.noise:.3g}{u}")

@@ -100,7 +100,21 @@ def fit(
     flip: bool = False,
     max_nfev: int = 40,
 ) -> Fit:
-    """Fit ``free_fields`` of ``base`` to the record; everything else stays as in ``base``."""
+    """Fit ``free_fields`` of ``base`` to the record; everything else stays as in ``base``.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    base : SecondOrderParams
+        The starting parameters (everything not fitted stays as here).
+    free_fields : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    max_nfev : int
+        Most residual evaluations of the optimiser.
+    """
     free = [FREE[f] for f in free_fields]
     obj = _Objective(problem, base, free, flip)
     x0 = np.array([f.to_x(getattr(base, f.field)) for f in free], dtype=float)
@@ -118,7 +132,19 @@ def fit(
 
 
 def evaluate(problem: Problem, params: SecondOrderParams, free_fields: Sequence[str], *, flip: bool = False) -> Fit:
-    """The :class:`Fit` of ``params`` as they are (residual, Jacobian, uncertainty), without moving them."""
+    """The :class:`Fit` of ``params`` as they are (residual, Jacobian, uncertainty), without moving them.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    params : SecondOrderParams
+        The parameters, as they are.
+    free_fields : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    """
     free = [FREE[f] for f in free_fields]
     obj = _Objective(problem, params, free, flip)
     return _at(obj, np.array([f.to_x(getattr(params, f.field)) for f in free], dtype=float), tuple(free_fields))
@@ -143,6 +169,15 @@ def covariance(problem: Problem, residual: FloatArray, jac: FloatArray) -> Float
 
     Morelli and Klein: (JᵀJ)⁻¹·JᵀRJ·(JᵀJ)⁻¹ with R each output's residual autocovariance (Toeplitz,
     so R·J is a convolution). A singular JᵀJ (a parameter the record cannot move) gives infinities.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    residual : numpy.ndarray
+        The stacked weighted residual (outputs one after the other).
+    jac : numpy.ndarray
+        Its Jacobian (one column per fitted parameter).
     """
     block = int(problem.mask.sum())
     blocks = range(len(problem.outputs))
@@ -151,7 +186,15 @@ def covariance(problem: Problem, residual: FloatArray, jac: FloatArray) -> Float
 
 
 def block_covariance(residuals: Sequence[FloatArray], jacobians: Sequence[FloatArray]) -> FloatArray:
-    """:func:`covariance` over given blocks (each output's residual and Jacobian rows, contiguous in time)."""
+    """:func:`covariance` over given blocks (each output's residual and Jacobian rows, contiguous in time).
+
+    Parameters
+    ----------
+    residuals : sequence of numpy.ndarray
+        Each output block's residual, contiguous in time.
+    jacobians : sequence of numpy.ndarray
+        Each output block's Jacobian rows.
+    """
     p = jacobians[0].shape[1]
     if p == 0:
         return np.zeros((0, 0))

@@ -21,7 +21,7 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_filter, welch
 
 from ema_sim.analysis.noise import NoiseFloor, output_noise
 from ema_sim.config import ChannelConfig
@@ -71,7 +71,13 @@ class Problem:
         self.set_command_sampled(self.command_sampled)
 
     def set_command_sampled(self, sampled: bool) -> None:
-        """Drive the model with the command held between samples, or interpolated (sampled)."""
+        """Drive the model with the command held between samples, or interpolated (sampled).
+
+        Parameters
+        ----------
+        sampled : bool
+            True: interpolate the command between samples; False: hold it.
+        """
         self.command_sampled = sampled
         cmd = self.data.command_deg
         hm = self.data.hinge_moment
@@ -138,6 +144,13 @@ class Problem:
         """Outputs ``(n, samples, 3)`` — position, surface, rate — of each parameter set on this record.
 
         ``flips[i]`` runs instance ``i`` with the hinge moment reversed (the hinge_moment_sign effect).
+
+        Parameters
+        ----------
+        params : sequence of SecondOrderParams
+            One parameter set per instance.
+        flips : sequence of bool, optional
+            Per instance, run with the hinge moment reversed.
         """
         n = len(params)
         flips = [False] * n if flips is None else list(flips)
@@ -151,7 +164,13 @@ class Problem:
         return out[:, :, [O_POS, O_SURF, O_RATE]]
 
     def weighted_residual(self, sim: FloatArray) -> FloatArray:
-        """Stacked ``(measured − model)/σ`` over the fitted samples of every output, for one simulation."""
+        """Stacked ``(measured − model)/σ`` over the fitted samples of every output, for one simulation.
+
+        Parameters
+        ----------
+        sim : numpy.ndarray
+            One simulation's outputs (samples × position, surface, rate).
+        """
         parts = [
             (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.sigma_deg[o]
             for o in self.outputs
@@ -159,9 +178,53 @@ class Problem:
         return np.concatenate(parts)
 
     def errors_deg(self, sim: FloatArray) -> dict[str, FloatArray]:
-        """Measured − model per output, in degrees, over the fitted samples."""
+        """Measured − model per output, in degrees, over the fitted samples.
+
+        Parameters
+        ----------
+        sim : numpy.ndarray
+            One simulation's outputs (samples × position, surface, rate).
+        """
         return {o: self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]] for o in self.outputs}
 
     def max_rate_dps(self, sim: FloatArray) -> float:
-        """Largest surface rate the model reaches on this record."""
-        return float(np.max(np.abs(sim[:, O_RATE])))
+        """Largest surface rate the model reaches on this record.
+
+        Parameters
+        ----------
+        sim : numpy.ndarray
+            One simulation's outputs (samples × position, surface, rate).
+        """
+        return float(np.max(np.abs(sim[:, 2])))
+
+    def max_accel_dps2(self, sim: FloatArray) -> float:
+        """Largest acceleration the model reaches on this record (its rate's slope between samples).
+
+        Parameters
+        ----------
+        sim : numpy.ndarray
+            One simulation's outputs (samples × position, surface, rate).
+        """
+        return float(np.max(np.abs(np.diff(sim[:, 2]) / np.diff(self.time_s))))
+
+    def ringing_hz(self, sim: FloatArray) -> float:
+        """Where the surface residual's spectrum peaks between 3 Hz and 0.4× the sample rate (0: no clear peak).
+
+        A mode the model lacks leaves a narrow peak there; a broad residual leaves none.
+
+        Parameters
+        ----------
+        sim : numpy.ndarray
+            One simulation's outputs (samples × position, surface, rate).
+        """
+        if "surface_deg" not in self.outputs:
+            return 0.0
+        r = self.errors_deg(sim)["surface_deg"]
+        fs = self.sample_hz
+        nper = int(min(r.size, max(256, 2 ** round(np.log2(fs)))))
+        freqs, psd = welch(r - np.mean(r), fs=fs, nperseg=nper)
+        band = (freqs >= 3.0) & (freqs <= 0.4 * fs)
+        if not np.any(band):
+            return 0.0
+        k = int(np.argmax(np.where(band, psd, 0.0)))
+        return float(freqs[k]) if psd[k] > 5.0 * float(np.median(psd[band])) else 0.0

@@ -51,7 +51,9 @@ def _pre_quantizer(problem: Problem, p: SecondOrderParams) -> FloatArray:
 
 
 @nb.njit(cache=True, parallel=True)
-def _costs(residual, v, shift, steps, b, a, weight, starts, ends, warm):  # noqa: ANN001, ANN202
+def _costs(residual: NDArray[np.float64], v: NDArray[np.float64], shift: float, steps: NDArray[np.float64],
+           b: NDArray[np.float64], a: NDArray[np.float64], weight: NDArray[np.float64], starts: NDArray[np.int64],
+           ends: NDArray[np.int64], warm: int) -> NDArray[np.float64]:
     """Σ weight·(residual − G·(q·round((v + shift)/q) − v))² for every step q, over the windows given.
 
     The model the residual was taken against saw ``v`` unquantized; the candidate quantizes it with
@@ -107,6 +109,21 @@ def step_candidates(problem: Problem, p: SecondOrderParams, current_sim: FloatAr
 
     Each comes with the correction to the command offset it wants: a wrong offset moves every
     rounding threshold, so step and offset are refined together around each coarse pick.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    p : SecondOrderParams
+        The model.
+    current_sim : numpy.ndarray
+        The current model's outputs on the record.
+    keep : int
+        How many candidates to return.
+    low : float
+        Smallest step tried (deg).
+    high : float
+        Largest step tried (deg).
     """
     output = "position_deg" if "position_deg" in problem.outputs else "surface_deg"
     residual = problem.data.column(output) - current_sim[:, OUTPUT_COLUMN[output]]

@@ -216,6 +216,6 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     if travel.outside:
         warnings.append(f"data outside the declared travel: {travel.statement}")
     k = np.arange(data.time_s.size, dtype=float)
-    line = np.polyval(np.polyfit(k, data.time_s, 1), k)
-    scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - line))
+    trend = np.polyval(np.polyfit(k, data.time_s, 1), k)
+    scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - trend))
     return Record(uniform, channel, noise, hold, travel, notes, warnings, scatter)

@@ -19,16 +19,14 @@ from typing import Any
 import numpy as np
 
 from ema_sim.analysis.noise import input_independence, whiteness
-from ema_sim.identify.diagnosis import BY_FIELD, diagnose
-from ema_sim.identify.effects import FREE
+from ema_sim.identify.diagnosis import diagnose
+from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stepwise import Identification
 from ema_sim.identify.trust import assess, reference
 from ema_sim.io.csv import write_csv
 from ema_sim.models import create
-
-_VOCAB = BY_FIELD
 
 
 def _round(x: float, digits: int = 6) -> float:
@@ -40,24 +38,17 @@ def _round(x: float, digits: int = 6) -> float:
 def _names(result: Identification, fit: Fit) -> dict[str, str]:
     """Model parameter → reported name: the declared model's own names, the vocabulary's for added effects."""
     own = set(result.baseline.free)
-    names: dict[str, str] = {}
-    used: set[str] = set()
-    for f in fit.free:
-        if f in own or f not in _VOCAB:
-            name = f
-        else:
-            effect = _VOCAB[f]
-            name = effect.vocab or f
-            if name in used:
-                name = f"{effect.where}_{name}"
-        names[f] = name
-        used.add(name)
-    return names
+    return {f: f if f in own or f not in KEYS else KEYS[f].name for f in fit.free}
+
+
+def _factor(result: Identification, fit: Fit, f: str) -> float:
+    """The factor from a parameter's model unit to the unit its reported name carries."""
+    return 1.0 if f in result.baseline.free or f not in KEYS else KEYS[f].factor(fit.params)
 
 
 def _params(result: Identification, fit: Fit) -> dict[str, float]:
     names = _names(result, fit)
-    out = {names[f]: _round(float(getattr(fit.params, f))) for f in fit.free}
+    out = {names[f]: _round(float(getattr(fit.params, f)) * _factor(result, fit, f)) for f in fit.free}
     if fit.params.hysteresis_h_lb_per_in > 0.0 and "hysteresis_h_lb_per_in" in fit.free:
         out["load_freq_hz"] = _round(fit.params.hysteresis_freq_hz)
     return out
@@ -89,12 +80,17 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
 
     Identification fits the equations with an accurate simulator; this is the extra error the user's
     own implementation adds on the same record, reported apart so it is never mistaken for an effect.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
     """
     if result.model not in ("loada", "loadf") or result.final_model:
         return None
     problem = result.problem
     final = result.final
-    model = create(result.model, problem.channel, params=final.params)
+    model = create(result.model, problem.channel.channel, params=final.params)
     sign = -1.0 if final.flip else 1.0
     d = problem.data
     model.trim(d.command_deg[0], sign * d.hinge_moment[0])
@@ -132,7 +128,15 @@ def strict(value: Any) -> Any:
 
 
 def to_json(result: Identification, data_name: str) -> dict[str, Any]:
-    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings)."""
+    """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings).
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    data_name : str
+        How the report names the data (its path).
+    """
     p = result.problem
     base = result.baseline
     final = result.final
@@ -147,14 +151,21 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "outputs": p.outputs,
         "unit": record.unit if record else "deg",
         "noise_deg": {o: _round(v) for o, v in p.sigma_deg.items()},
-        "resolution_deg": {o: (None if p.noise is None or p.noise[o].resolution is None
-                               else _round(p.noise[o].resolution)) for o in p.outputs},
+        "resolution_deg": {o: _resolution(p, o) for o in p.outputs},
         "reference": {"model": f"{'/'.join(o.split('_')[0] for o in p.outputs)} = command",
                       **{k: {o: _round(v) for o, v in m.items()} for k, m in ref.items()}},
         "baseline": {"model": result.model, "params": _params(result, base), **_stats(p, base),
                      "start": ({"params": _params(result, result.start),
                                 "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.start).items()}}
                                if result.start is not None else None)},
+        **({"declared": {
+            "model": result.model,
+            "rms_deg": {o: _round(v) for o, v in result.as_declared.rms_deg.items()},
+            "equivalent": {k: _round(v) for k, v in result.as_declared.equivalent.items()},
+            "fitted": list(result.as_declared.free),
+            "held_fixed": list(result.as_declared.held_fixed),
+            "not_determinable": list(result.as_declared.not_determinable),
+        }} if result.as_declared is not None else {}),
         "added": [
             {
                 "effect": s.effect,
@@ -164,6 +175,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
                 "rms_deg_after": {k: _round(v) for k, v in s.rms_deg_after.items()},
                 "evidence": s.evidence,
                 "where": s.where,
+                **({"replaces": list(s.replaces)} if s.replaces else {}),
             }
             for s in result.steps
         ],
@@ -173,7 +185,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             "model": result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)]),
             "params": _params(result, final),
             "fields": {names[f]: f for f in final.free},
-            "uncertainty": {names[f]: _round(v, 3) for f, v in final.sigma.items()},
+            "uncertainty": {names[f]: _round(v * _factor(result, final, f), 3) for f, v in final.sigma.items()},
             "relative_uncertainty": {names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()},
             "correlation": {names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
                             for a, row in ident.correlation.items()},
@@ -205,11 +217,26 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     impl = implementation_error(result)
     if impl is not None:
         report["declared_implementation_error_deg"] = impl
-    return strict(report)
+    out: dict[str, Any] = strict(report)
+    return out
+
+
+def _resolution(p: Problem, output: str) -> float | None:
+    """An output's count size, None when it has none."""
+    q = None if p.noise is None else p.noise[output].resolution
+    return None if q is None else _round(q)
 
 
 def write_json(report: dict[str, Any], path: str | Path) -> None:
-    """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`)."""
+    """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`).
+
+    Parameters
+    ----------
+    report : dict
+        The report (:func:`to_json`).
+    path : path-like
+        Where to write it.
+    """
     text = json.dumps(strict(report), indent=2, ensure_ascii=False, allow_nan=False)
     Path(path).write_text(text + "\n", encoding="utf-8")
 
@@ -219,6 +246,13 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
 
     Every sample of the record is written; ``fitted`` is 1 on the samples the fits were judged on
     (0 on the first settling ones). Values are in the record's unit (``deg`` unless a linear unit was kept).
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    path : path-like
+        Where to write it.
     """
     p = result.problem
     cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
@@ -237,13 +271,23 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
 
 
 def summary(report: dict[str, Any]) -> str:
-    """A few lines for the terminal."""
+    """A few lines for the terminal.
+
+    Parameters
+    ----------
+    report : dict
+        The report (:func:`to_json`).
+    """
     unit = report.get("unit", "deg")
     u = "°" if unit == "deg" else f" {unit}"
     lines = [f"{report['data']}: {report['samples']} samples at {report['sample_hz']:g} Hz, "
              f"noise {', '.join(f'{o} {v:.4g}{u}' for o, v in report['noise_deg'].items())}"]
     if "reference" in report:
         lines.append(f"reference {report['reference']['model']}: rms {_fmt_rms(report['reference']['rms_deg'], unit)}")
+    if "declared" in report:
+        d = report["declared"]
+        lines.append(f"declared {d['model']} as it is: rms {_fmt_rms(d['rms_deg'], unit)}; not determinable by the "
+                     f"record: {', '.join(d['not_determinable']) or 'none'}")
     b = report["baseline"]
     lines.append(f"baseline {b['model']}: {_fmt_params(b['params'])}; rms {_fmt_rms(b['rms_deg'], unit)}")
     for a in report["added"]:
@@ -276,7 +320,17 @@ def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
 
 
 def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:
-    """Markdown report with plots of the residual before and after, under ``directory``."""
+    """Markdown report with plots of the residual before and after, under ``directory``.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    report : dict
+        The report (:func:`to_json`).
+    directory : path-like
+        The report's directory (created).
+    """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     _plots(result, report, out)

@@ -34,14 +34,14 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ema_sim.analysis.command_hold import HoldMode
 from ema_sim.config import ChannelConfig
-from ema_sim.identify.declared import declared
-from ema_sim.identify.effects import EFFECTS, FREE, Context, Effect, Free
+from ema_sim.identify.declared import HIGH_ORDER, declared, not_determinable, run_declared
+from ema_sim.identify.effects import BY_KEY, EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
 from ema_sim.identify.fit import Fit, evaluate, fit
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.quantization import step_candidates
@@ -58,6 +58,8 @@ MAX_DELTA_BIC = -10.0
 MIN_PARTIAL_F = 20.0
 DONE_EXCESS = 0.02
 """Stop when the weighted error variance is within 2 % of the noise floor."""
+NOT_DETERMINED = 0.25
+"""An effect whose own parameter's one-sigma uncertainty exceeds this share of its value is not accepted."""
 TINY = 1e-300
 """Floor on a residual sum of squares in a ratio (a noise-free record can be matched exactly)."""
 REFERENCE = "position = command"
@@ -72,7 +74,8 @@ class Candidate:
     """An effect at a starting value, with what screening saw of it."""
 
     effect: Effect
-    value: float
+    value: Values
+    """Where its fit starts: model parameter → value."""
     flip: bool
     predicted_drop: float
     """Weighted error it would remove if it entered linearly (all outputs)."""
@@ -92,6 +95,8 @@ class Step:
     rms_deg_before: dict[str, float]
     rms_deg_after: dict[str, float]
     evidence: str
+    replaces: tuple[str, ...] = ()
+    """Report keys of an earlier effect's parameters this one switched off (an alternative that fits better)."""
 
 
 @dataclass(frozen=True)
@@ -119,6 +124,24 @@ class Removal:
     reason: str
 
 
+@dataclass(frozen=True)
+class AsDeclared:
+    """A high-order or linear declared model on the record, and the second-order-family equivalent fitted for it."""
+
+    rms_deg: dict[str, float]
+    """The model run as it is (its own simulation): the error before anything is fitted."""
+    equivalent: dict[str, float]
+    """The equivalent's stages (model parameter → declared starting value)."""
+    free: tuple[str, ...]
+    """The stages fitted."""
+    held_fixed: tuple[str, ...]
+    """Stages the record cannot move (kept at their declared values, not fitted)."""
+    not_determinable: tuple[str, ...]
+    """The declared model's parameters the equivalent does not carry (lumped into ωn and ζ, or not seen)."""
+    sim: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3)))
+    """Its outputs on the record (position, surface, rate columns)."""
+
+
 @dataclass
 class Identification:
     """The outcome: the declared fit, the effects added, the final fit, and every verdict on the way."""
@@ -140,6 +163,8 @@ class Identification:
     """What the fit decided about the record (command interpretation, start), one line each."""
     final_model: str = ""
     """:data:`REFERENCE` when the trivial model fits better than anything fitted; else empty (the declared one)."""
+    as_declared: AsDeclared | None = None
+    """A high-order or linear declared model: its own error and the equivalent it was fitted through."""
 
 
 def _rms(problem: Problem, f: Fit) -> dict[str, float]:
@@ -147,7 +172,17 @@ def _rms(problem: Problem, f: Fit) -> dict[str, float]:
 
 
 def simulator_error(problem: Problem, params: SecondOrderParams, flip: bool) -> dict[str, float]:
-    """RMS change of each output when the simulator's step is halved: its own accuracy on this record."""
+    """RMS change of each output when the simulator's step is halved: its own accuracy on this record.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    params : SecondOrderParams
+        The model.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    """
     coarse = problem.simulate([params], [flip])[0]
     step = problem.step_s
     problem.step_s = step / 2.0
@@ -184,8 +219,8 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     The rank is the share of one output's error above its noise floor: an effect seen on one output
     only (an LVDT filter) must not be drowned by a larger error on the other.
     """
-    effects = [e for e in EFFECTS if e.applies(ctx) and (e.field is None or e.field not in cur.free)]
-    probes: list[tuple[Effect, float]] = [(e, v) for e in effects for v in e.probes(ctx)]
+    effects = [e for e in EFFECTS if e.applies(ctx) and not any(f in cur.free for f in e.owned)]
+    probes: list[tuple[Effect, Values]] = [(e, v) for e in effects for v in e.probes(ctx)]
     if not probes:
         return []
     params = [e.apply(cur.params, v, ctx) for e, v in probes]
@@ -210,21 +245,20 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
         rs = float(np.dot(r_perp, s_perp))
         beta = rs / ss
         flip = cur.flip
+        start = dict(value)
         if effect.name == "hinge_moment_sign":
             flip = not cur.flip
             if beta <= 0.0:
                 continue
-            start = 0.0
-        elif effect.load_effect and beta < 0.0:
+        elif effect.load_effect and beta < 0.0 and len(value) == 1:
             flip = not cur.flip  # the load would have to act backwards: try it with the sign reversed
-            start = abs(beta) * value
-        elif effect.field in ("kb", "offset_deg", "delay_s"):
-            base = getattr(cur.params, effect.field)
-            start = base + beta * (value - base)
-        else:
-            if beta <= 0.0:
-                continue
-            start = value * min(max(beta, 0.3), 3.0)
+            start = {f: abs(beta) * v for f, v in value.items()}
+        elif effect.field in SIGNED:
+            start = {f: getattr(cur.params, f) + beta * (v - getattr(cur.params, f)) for f, v in value.items()}
+        elif beta <= 0.0:
+            continue
+        elif len(value) == 1:  # a single stage switched on: scale its probe by what the residual asks for
+            start = {f: v * min(max(beta, 0.3), 3.0) for f, v in value.items()}
         step = beta * s_perp
         shares = [float(2.0 * np.dot(rb, sb) - np.dot(sb, sb)) / e
                   for rb, sb, e in zip(_blocks(problem, r_perp), _blocks(problem, step), excess, strict=True)]
@@ -234,6 +268,8 @@ def _screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     return sorted(best.values(), key=lambda c: -c.score)
 
 
+SIGNED = ("kb", "offset_deg", "delay_s", "feedback_delay_s")
+"""Parameters a probe moves from where they are, either way (their screening step is signed)."""
 PRE_QUANTIZER = ("kb", "offset_deg")
 """Parameters acting before the quantizer: the cost is piecewise flat in them once a step is on."""
 
@@ -245,6 +281,17 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
     move them: the smooth parameters are fitted with them held, then a coordinate search (a grid of
     11 over ±half a step, then one five times finer, for each) picks them, then the smooth
     parameters are fitted again.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    base : SecondOrderParams
+        The starting parameters (everything not fitted stays as here).
+    free : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
     """
     q = base.quantization_deg
     held = [f for f in free if f in PRE_QUANTIZER]
@@ -254,7 +301,19 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
 
 
 def no_worse(problem: Problem, start: SecondOrderParams, free: tuple[str, ...] | list[str], new: Fit) -> Fit:
-    """``new``, unless it ends worse than the parameters it started from: then the start, as a fit."""
+    """``new``, unless it ends worse than the parameters it started from: then the start, as a fit.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    start : SecondOrderParams
+        The parameters the fit started from.
+    free : sequence of str
+        The model parameters fitted.
+    new : Fit
+        The fit.
+    """
     at_start = problem.weighted_residual(problem.simulate([start], [new.flip])[0])
     if new.rss <= float(np.dot(at_start, at_start)):
         return new
@@ -284,30 +343,72 @@ def _fit_quantized(problem: Problem, base: SecondOrderParams, free: tuple[str, .
     return Fit(final.params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
 
 
+def _offs(fields: tuple[str, ...] | list[str], base: SecondOrderParams) -> dict[str, float]:
+    """Each parameter switched off (its declared off value; the declared model's value for one without)."""
+    info = metas(SecondOrderParams)
+    out = {}
+    for f in fields:
+        off = info[f].off
+        out[f] = float(getattr(base, f)) if off is None else float(off)
+    return out
+
+
+def _bic(problem: Problem, f: Fit) -> float:
+    return problem.n_fit * math.log(f.rss) + len(f.free) * math.log(problem.n_fit)
+
+
 def _fit_candidate(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit:
+    """Fit the current model plus the candidate; an alternative to an earlier effect is also tried without it."""
+    new = _fit_added(problem, cur, cand, ctx)
+    swap = [f for f in cand.effect.replaces if f in new.free]
+    if not swap:
+        return new
+    base = new.params.replace(**_offs(swap, ctx.declared))
+    alt = fit_model(problem, base, tuple(f for f in new.free if f not in swap), flip=new.flip)
+    return alt if _bic(problem, alt) < _bic(problem, new) else new
+
+
+def _companions(cur: Fit, effect: Effect, ctx: Context) -> list[Effect]:
+    """The effect's companions the model lacks and the record can show."""
+    out = []
+    for key in effect.companions:
+        companion = BY_KEY[key]
+        if companion.applies(ctx) and not any(f in cur.free for f in companion.owned):
+            out.append(companion)
+    return out
+
+
+def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit:
     """Fit the current model plus the candidate, every parameter together."""
     effect = cand.effect
-    if effect.field is None:
-        return fit_model(problem, effect.apply(cur.params, 0.0, ctx), cur.free, flip=cand.flip)
-    free_f = FREE.get(effect.field)
-    start = cand.value
-    if free_f is not None:
-        start = min(max(start, free_f.low), free_f.high)
+    extra = _companions(cur, effect, ctx)
+    if not effect.fields and not extra:
+        return fit_model(problem, effect.apply(cur.params, cand.value, ctx), cur.free, flip=cand.flip)
+    start = {f: min(max(v, FREE[f].low), FREE[f].high) if f in FREE else v for f, v in cand.value.items()}
     base = effect.apply(cur.params, start, ctx)
     if not effect.discrete:
-        return fit_model(problem, base, (*cur.free, effect.field), flip=cand.flip)
+        for companion in extra:
+            base = base.replace(**companion.probes(ctx)[0])
+        fields = [f for e in (effect, *extra) for f in e.fields]
+        new = fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *fields))), flip=cand.flip)
+        failed = [f for e in extra if e.check({g: getattr(new.params, g) for g in e.fields}, ctx) for f in e.fields]
+        if failed:
+            base = new.params.replace(**_offs(failed, ctx.declared))
+            new = fit_model(problem, base, tuple(f for f in new.free if f not in failed), flip=cand.flip)
+        return new
     # A quantizer's step: the linear search's (step, offset) candidates, each checked with the full
     # simulation on a fine local grid (one batch), then the continuous parameters refitted with it.
     grid = [
-        effect.apply(cur.params, q * (1.0 + d), ctx).replace(offset_deg=cur.params.offset_deg + shift)
+        effect.apply(cur.params, {"quantization_deg": q * (1.0 + d)}, ctx).replace(
+            offset_deg=cur.params.offset_deg + shift)
         for q, shift in ctx.quantization_steps for d in np.linspace(-3e-4, 3e-4, 7)
     ]
     sims = problem.simulate(grid, [cand.flip] * len(grid))
     costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(s) for s in sims)]
-    start = grid[int(np.argmin(costs))]
-    free = tuple(cur.free) if start.offset_deg == cur.params.offset_deg else (*cur.free, "offset_deg")
+    first = grid[int(np.argmin(costs))]
+    free = tuple(cur.free) if first.offset_deg == cur.params.offset_deg else (*cur.free, "offset_deg")
     free = tuple(dict.fromkeys(free))
-    new = fit_model(problem, start, free, flip=cand.flip)
+    new = fit_model(problem, first, free, flip=cand.flip)
     # The step and the command map settle together: search the step again around the refit model.
     steps = new.params.quantization_deg * (1.0 + np.linspace(-2e-3, 2e-3, 41))
     sims = problem.simulate([new.params.replace(quantization_deg=g) for g in steps], [cand.flip] * steps.size)
@@ -353,16 +454,22 @@ def _gain(problem: Problem, cur: Fit, new: Fit, q: int, sim_err: dict[str, float
 def _judge(problem: Problem, cur: Fit, new: Fit, cand: Candidate, ctx: Context,
            sim_err: dict[str, float]) -> Verdict:
     effect = cand.effect
-    q = 0 if effect.field is None else 1
+    q = len(new.free) - len(cur.free) + sum(1 for f in effect.fields if f not in new.free)  # a swap counts less
     reason, delta_bic, partial_f, excess_share, drop = _gain(problem, cur, new, q, sim_err)
-    value = None if effect.field is None else float(getattr(new.params, effect.field))
-    if not reason and value is not None:
-        bound = FREE.get(effect.field)
-        why = effect.check(value, ctx)
-        if why:
-            reason = why
-        elif bound is not None and (value >= bound.high * (1 - 1e-3) or (bound.low > 0 and value <= bound.low * 1.001)):
-            reason = f"fitted value {value:.4g} sits on the bound of its physical range"
+    values = {f: float(getattr(new.params, f)) for f in effect.fields}
+    value = values[effect.fields[0]] if values else None
+    if not reason and values:
+        reason = effect.check(values, replace(ctx, params=new.params)) or ""
+        for f, v in values.items():
+            bound = FREE.get(f)
+            if not reason and bound is not None and (v >= bound.high * (1 - 1e-3)
+                                                     or (bound.low > 0 and v <= bound.low * 1.001)):
+                reason = f"fitted {KEYS[f].name if f in KEYS else f} {v:.4g} sits on the bound of its physical range"
+        for f, v in values.items():
+            spread = new.sigma.get(f, 0.0) / abs(v) if v else math.inf
+            if not reason and f in effect.owned and spread > NOT_DETERMINED:
+                reason = (f"the record does not determine its {KEYS[f].name if f in KEYS else f} "
+                          f"(±1σ {100 * spread:.0f} % of {v:.4g}): a stand-in, not a finding")
     return Verdict(effect.name, effect.where, value, not reason, reason or "accepted", delta_bic, partial_f,
                    excess_share, drop)
 
@@ -390,20 +497,44 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
         evidence = (f"{effect.name.replace('_', ' ')} fits only with the hinge moment reversed "
                     f"(partial ρ = {-abs(cand.rho):.2f} with the declared sign): the load was applied backwards")
         steps.append(Step("hinge_moment_sign", "load", {}, {}, before, before, evidence))
-    value = float(getattr(new.params, effect.field))
-    vocab = {effect.vocab: value}
-    sigma = {effect.vocab: new.sigma[effect.field]} if effect.field in new.sigma else {}
-    if effect.field == "hysteresis_h_lb_per_in":
+    vocab = report_values(new.params, effect.fields)
+    sigma = {KEYS[f].name: new.sigma[f] * KEYS[f].factor(new.params) for f in effect.fields if f in new.sigma}
+    if "hysteresis_h_lb_per_in" in effect.fields:
         vocab["load_freq_hz"] = problem.load_freq_hz
-    where = f" on the {effect.where}" if effect.where in ("feedback", "position", "surface") else ""
-    evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {effect.vocab} = {_fmt(value)}"
-                f"{where}; error above the noise floor: {cut}")
-    steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence))
+    where = f" on the {effect.where}" if effect.where in ("feedback", "surface") else ""
+    fitted = ", ".join(f"{k} = {_fmt(v)}" for k, v in vocab.items())
+    if effect.name == "feedback_filter":
+        fitted = f"corner 2ζωn = {new.params.zeta * new.params.wn_rad_s / math.pi:.3g} Hz"
+    removed = tuple(KEYS[f].name if f in KEYS else f for f in cur.free if f not in new.free)
+    instead = f"; replaces {', '.join(removed)}" if removed else ""
+    evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
+                f"{where}{instead}; error above the noise floor: {cut}")
+    steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence, removed))
+    for companion in effect.companions:
+        extra = BY_KEY[companion]
+        if extra.fields and all(f in new.free and f not in cur.free for f in extra.fields):
+            values = report_values(new.params, extra.fields)
+            spread = {KEYS[f].name: new.sigma[f] * KEYS[f].factor(new.params) for f in extra.fields if f in new.sigma}
+            text = ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items())
+            steps.append(Step(extra.name, extra.where, values, spread, before, after,
+                              f"{extra.signature}: fitted with {effect.name} ({text}), which it had hidden"))
     return steps
 
 
 def start_point(problem: Problem, base: SecondOrderParams, free: list[str], flip: bool) -> SecondOrderParams:
-    """The declared start, or the best point of a coarse ωn × ζ grid when it fits better (one batched run)."""
+    """The declared start, or the best point of a coarse ωn × ζ grid when it fits better (one batched run).
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    base : SecondOrderParams
+        The starting parameters (everything not fitted stays as here).
+    free : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    """
     if not {"wn_rad_s", "zeta"} <= set(free):
         return base
     wn, zeta = FREE["wn_rad_s"], FREE["zeta"]
@@ -445,6 +576,13 @@ def reference_fit(problem: Problem, params: SecondOrderParams) -> Fit:
     """The trivial model position = command (surface = command) as a :class:`Fit` with no free parameter.
 
     ``params`` are carried along unused (a :class:`Fit` has some); its outputs are the logged command.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    params : SecondOrderParams
+        Carried along unused (a fit has some).
     """
     u = problem.data.command_deg
     sim = np.column_stack([u, u, np.gradient(u, problem.time_s)])
@@ -453,34 +591,65 @@ def reference_fit(problem: Problem, params: SecondOrderParams) -> Fit:
 
 
 def _effect_of(step: Step) -> Effect | None:
-    return next((e for e in EFFECTS if e.name == step.effect and e.where == step.where and e.field), None)
+    effect = BY_KEY.get(f"{step.effect}/{step.where}")
+    return effect if effect is not None and effect.fields else None
 
 
 def _prune(problem: Problem, result: Identification, cur: Fit, base: SecondOrderParams) -> Fit:
     """Take out again every added effect that collapsed to "off" in the final fit (module docstring)."""
     for step in reversed(list(result.steps)):
         effect = _effect_of(step)
-        if effect is None or effect.field not in cur.free:
+        if effect is None or not all(f in cur.free for f in effect.owned):
             continue
-        value = float(getattr(cur.params, effect.field))
-        off = metas(SecondOrderParams)[effect.field].off
-        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base)
-        reason = effect.check(value, ctx)
+        values = {f: float(getattr(cur.params, f)) for f in effect.fields}
+        off = _offs(effect.owned, base)
+        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base,
+                      max_accel_dps2=problem.max_accel_dps2(cur.sim))
+        reason = effect.check(values, ctx)
+        free = tuple(f for f in cur.free if f not in off)
         if reason is None:
-            without = evaluate(problem, cur.params.replace(**{effect.field: off}),
-                               tuple(f for f in cur.free if f != effect.field), flip=cur.flip)
-            why = _gain(problem, without, cur, 1, result.simulator_error_deg)[0]
+            without = evaluate(problem, cur.params.replace(**off), free, flip=cur.flip)
+            why = _gain(problem, without, cur, len(off), result.simulator_error_deg)[0]
             if not why:
                 continue
             reason = f"switched off in the final model, it no longer pays: {why}"
-        free = tuple(f for f in cur.free if f != effect.field)
-        refit = fit_model(problem, cur.params.replace(**{effect.field: off}), free, flip=cur.flip)
+        refit = fit_model(problem, cur.params.replace(**off), free, flip=cur.flip)
         if refit.rss > result.baseline.rss:
             continue  # never end worse than the declared model's own fit
         result.steps.remove(step)
         result.removed.append(Removal(step.effect, step.where, dict(step.params), reason))
         cur = refit
     return cur
+
+
+MOVE_SHARE = 1e-3
+"""A parameter whose Jacobian column is below this share of the largest one cannot be moved by the record."""
+
+
+def _as_declared(problem: Problem, model: str, base: SecondOrderParams, free: list[str], notes: list[str]
+                 ) -> AsDeclared:
+    """A high-order declared model: its own error on the record, and which of its equivalent's stages to fit.
+
+    The stages whose Jacobian column at the start is negligible (a current limit the record never
+    reaches, a delay under a sample) cannot be moved by the record: they are held at their declared
+    values and said, not fitted (a singular fit would make every uncertainty infinite).
+    """
+    d = problem.data
+    sim = run_declared(model, problem.channel, problem.time_s, d.command_deg, d.hinge_moment)
+    rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(sim).items()}
+    at = evaluate(problem, base, tuple(free), flip=False)
+    size = np.linalg.norm(at.jacobian, axis=0)
+    still = [f for f, s in zip(at.jac_free, size, strict=True)
+             if f not in ("wn_rad_s", "zeta") and s <= MOVE_SHARE * float(np.max(size, initial=0.0))]
+    fitted = [f for f in free if f not in still]
+    text = ", ".join(f"{o} {v:.4g}°" for o, v in rms.items())
+    notes.append(f"{model} as declared (its own simulation on the record): rms {text}; fitted through its "
+                 f"second-order-family stages ({', '.join(fitted)})")
+    if still:
+        notes.append(f"{model}'s {', '.join(still)} cannot be moved by this record (the output does not change "
+                     "with them): held at the declared values, not fitted")
+    return AsDeclared(rms, {f: float(getattr(base, f)) for f in free}, tuple(fitted), tuple(still),
+                      tuple(not_determinable(model, problem.channel)), sim[:, :3])
 
 
 def identify(
@@ -499,25 +668,52 @@ def identify(
     ``record`` is ``data`` already prepared (:func:`ema_sim.identify.record.prepare`, with the
     channel's stand-in note); without it the record is prepared here with ``channel`` as declared
     and ``command`` (detect, held or sampled) for how its command was logged.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The measured record.
+    channel : ChannelConfig
+        The channel (travel, moment arm, configured values).
+    model : str
+        The declared model (:data:`ema_sim.identify.declared.DECLARED`).
+    overrides : dict, optional
+        Stages declared on top (model parameter → value).
+    max_effects : int
+        Most effects to add.
+    log : callable, optional
+        Called with each progress line.
+    record : Record, optional
+        ``data`` already prepared (:func:`ema_sim.identify.record.prepare`).
+    command : str
+        How the command was logged: ``detect``, ``held`` or ``sampled``.
     """
     t0 = time.perf_counter()
     say = log or (lambda _msg: None)
     record = record or prepare(data, channel, command=command)
     problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled)
-    base, free = declared(model, record.channel, overrides or {})
+    peak = float(np.percentile(np.abs(problem.hinge_moment), 98))
+    base, free = declared(model, record.channel, overrides or {}, peak)
     notes: list[str] = []
+    key = model.strip().lower()
+    as_declared = _as_declared(problem, key, base, free, notes) if key in HIGH_ORDER else None
+    if as_declared is not None:
+        free = list(as_declared.free)
     cur, start = _choose_hold(problem, base, free, record, notes)
     baseline = cur
     say(f"baseline {model}: rms {_rms(problem, cur)}")
     result = Identification(problem, model, baseline, cur, record=record, start=start, notes=notes)
+    result.as_declared = as_declared
     result.simulator_error_deg = simulator_error(problem, cur.params, cur.flip)
     for _ in range(max_effects):
         if cur.rss / problem.n_fit - 1.0 <= DONE_EXCESS:
             break
         steps = (step_candidates(problem, cur.params, cur.sim)
                  if cur.params.quantization_deg == 0.0 and "quantization_deg" not in cur.free else [])
-        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base, steps)
+        ctx = Context(problem, cur.params, problem.max_rate_dps(cur.sim), base, steps,
+                      problem.max_accel_dps2(cur.sim), problem.ringing_hz(cur.sim))
         ranked = _screen(problem, cur, ctx)
+        say("  screened: " + ", ".join(f"{c.effect.key} {c.score:.2f}" for c in ranked))
         best: tuple[Fit, Candidate] | None = None
         for k, cand in enumerate(ranked[:TOP_K]):
             new = _fit_candidate(problem, cur, cand, ctx)
@@ -543,5 +739,20 @@ def identify(
         result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
         result.steps.clear()
         result.final, result.final_model = trivial, REFERENCE
+    if as_declared is not None:
+        _keep_declared(problem, result, as_declared)
     result.elapsed_s = time.perf_counter() - t0
     return result
+
+
+def _keep_declared(problem: Problem, result: Identification, as_declared: AsDeclared) -> None:
+    """A declared model that fits better as it is than anything fitted through its equivalent is the final model."""
+    r = problem.weighted_residual(as_declared.sim)
+    if float(np.dot(r, r)) > result.final.rss:
+        return
+    why = (f"the declared {result.model} as it is fits better than its fitted second-order-family equivalent "
+           f"(weighted error ×{result.final.rss / max(float(np.dot(r, r)), TINY):.3g})")
+    result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
+    result.steps.clear()
+    result.final = Fit(result.final.params, False, (), as_declared.sim, r, np.zeros((r.size, 0)), {}, ())
+    result.final_model = f"{result.model} (as declared)"

@@ -27,10 +27,10 @@ from scipy.signal import welch
 
 from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
 from ema_sim.analysis.series import holds
-from ema_sim.identify.effects import FREE, Free
+from ema_sim.identify.effects import FREE, KEYS, Free
 from ema_sim.identify.fit import Fit, covariance
 from ema_sim.identify.problem import Problem
-from ema_sim.identify.stepwise import Identification
+from ema_sim.identify.stepwise import REFERENCE, Identification
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
@@ -73,7 +73,15 @@ def _rms(problem: Problem, fit: Fit) -> dict[str, float]:
 
 
 def on_bound(value: float, free: Free) -> str | None:
-    """``"lower"`` or ``"upper"`` when ``value`` sits on that bound of its range, else None."""
+    """``"lower"`` or ``"upper"`` when ``value`` sits on that bound of its range, else None.
+
+    Parameters
+    ----------
+    value : float
+        The parameter's value.
+    free : Free
+        Its fitted range.
+    """
     if free.log and free.low > 0.0:
         span = math.log(free.high / free.low)
         if math.log(value / free.low) <= BOUND_SHARE * span:
@@ -90,7 +98,15 @@ def on_bound(value: float, free: Free) -> str | None:
 
 
 def frequency_hz(name: str, value: float) -> float | None:
-    """The value of a parameter in Hz when it is a frequency (unit rad/s or Hz), else None."""
+    """The value of a parameter in Hz when it is a frequency (unit rad/s or Hz), else None.
+
+    Parameters
+    ----------
+    name : str
+        A model parameter.
+    value : float
+        The parameter's value.
+    """
     meta = metas(SecondOrderParams).get(name)
     if meta is None:
         return None
@@ -102,7 +118,13 @@ def frequency_hz(name: str, value: float) -> float | None:
 
 
 def bandwidth_hz(p: SecondOrderParams) -> float:
-    """−3 dB bandwidth of the model's linear command → position dynamics (ωn, ζ and the lags on)."""
+    """−3 dB bandwidth of the model's linear command → position dynamics (ωn, ζ and the lags on).
+
+    Parameters
+    ----------
+    p : SecondOrderParams
+        The model.
+    """
     f = np.geomspace(1e-3, 1e4, 4000)
     s = 2j * np.pi * f
     h = p.wn_rad_s**2 / (s**2 + 2.0 * p.zeta * p.wn_rad_s * s + p.wn_rad_s**2)
@@ -125,7 +147,13 @@ class Excitation:
     """Highest frequency at which the command's spectrum is within 40 dB of its peak."""
 
     def statement(self, unit: str) -> str:
-        """One clause for a warning."""
+        """One clause for a warning.
+
+        Parameters
+        ----------
+        unit : str
+            The record's position unit (deg, mm, in).
+        """
         u = "°" if unit == "deg" else f" {unit}"
         return (f"{self.duration_s:.3g} s, {self.changes} change(s) of the command's level over {self.span:.3g}{u}, "
                 f"command within 40 dB of its peak up to {self.bandwidth_hz:.2g} Hz")
@@ -203,12 +231,26 @@ def identifiability(problem: Problem, fit: Fit) -> Identifiability:
     return Identifiability(rel, correlation, undetermined, pairs)
 
 
-def _value(name: str, value: float, unit: str) -> str:
+def label(result: Identification, name: str) -> str:
+    """A parameter as the report names it: an added effect's key, with the model parameter when they differ.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    name : str
+        A model parameter.
+    """
+    key = name if name in result.baseline.free or name not in KEYS else KEYS[name].name
+    return name if key == name else f"{key}: {name}"
+
+
+def _value(name: str, value: float, unit: str, result: Identification) -> str:
     meta = metas(SecondOrderParams).get(name)
     u = meta.unit if meta and meta.unit != "-" else ""
     if unit != "deg" and u.startswith("deg"):
         u = unit + u[3:]
-    return f"{name} = {value:.4g} {u}".rstrip()
+    return f"{label(result, name)} = {value:.4g} {u}".rstrip()
 
 
 def assess(result: Identification) -> tuple[list[str], Identifiability, Excitation]:
@@ -232,7 +274,7 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
     nyquist = 0.5 * p.sample_hz
     ref = reference(p)["rms_deg"]
     rms = _rms(p, final)
-    if result.final_model:
+    if result.final_model == REFERENCE:
         base = _rms(p, result.baseline)
         out.append(f"the declared {result.model} fits worse than {result.final_model} "
                    f"({', '.join(f'{o} rms {base[o]:.4g} against {ref[o]:.4g}' for o in p.outputs)}), and no effect "
@@ -242,13 +284,13 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
         value = float(getattr(final.params, name))
         free = FREE.get(name)
         side = on_bound(value, free) if free else None
-        if side:
-            out.append(f"{_value(name, value, unit)} sits on the {side} bound of its range "
+        if side and free is not None:
+            out.append(f"{_value(name, value, unit, result)} sits on the {side} bound of its range "
                        f"({free.low:g}…{free.high:g}): the fit pushed it as far as it may, so the value is no estimate")
         f = frequency_hz(name, value)
         if f is not None and f >= NYQUIST_SHARE * nyquist:
             where = "above" if f >= nyquist else "near"
-            out.append(f"{_value(name, value, unit)} ({f:.3g} Hz) is {where} the record's Nyquist frequency "
+            out.append(f"{_value(name, value, unit, result)} ({f:.3g} Hz) is {where} the record's Nyquist frequency "
                        f"({nyquist:.3g} Hz at {p.sample_hz:.4g} Hz): the record cannot resolve it")
     bw = bandwidth_hz(final.params)
     if not result.final_model and p.sample_hz < SAMPLES_PER_BANDWIDTH * bw:
@@ -264,12 +306,14 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
     exc = excitation(p)
     if ident.not_determined:
         which = ", ".join(
-            f"{n} (±1σ {100 * ident.relative_sigma[n]:.0f} % of its "
-            f"{'value' if getattr(final.params, n) else 'typical size'})" if math.isfinite(ident.relative_sigma[n])
-            else f"{n} (the record cannot move it)" for n in ident.not_determined)
+            f"{label(result, n)} (±1σ {100 * ident.relative_sigma[n]:.0f} % of its "
+            f"{'value' if getattr(final.params, n) else 'typical size'})"
+            if math.isfinite(ident.relative_sigma[n]) else f"{label(result, n)} (the record cannot move it)"
+            for n in ident.not_determined)
         out.append(f"not determined by this record, too short or too poorly excited for them: {which}; the record "
                    f"has {exc.statement(unit)}")
     for a, b, rho in ident.inseparable:
-        out.append(f"{a} and {b} cannot be told apart by this record: their estimates correlate {rho:+.3f}, so only "
+        out.append(f"{label(result, a)} and {label(result, b)} cannot be told apart by this record: their estimates "
+                   f"correlate {rho:+.3f}, so only "
                    "a combination of them is determined")
     return out, ident, exc

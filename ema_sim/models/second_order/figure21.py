@@ -77,6 +77,29 @@ def velocity_command(u: float, x: float, wn: float, zeta: float, up: float, down
 
 
 @jit
+def rate_loop(v_drive: float, v: float, wn: float, zeta: float) -> float:
+    """Figure 21's rate loop: the acceleration ``2ζωn·(v_drive − v)`` that brings the rate to the demand.
+
+    Parameters
+    ----------
+    v_drive : float
+        The rate the drive delivers (the limited velocity command, with any load droop) (°/s).
+    v : float
+        The rate (°/s).
+    wn : float
+        Natural frequency (rad/s).
+    zeta : float
+        Damping ratio.
+
+    Returns
+    -------
+    float
+        The acceleration (°/s²).
+    """
+    return 2.0 * zeta * wn * (v_drive - v)
+
+
+@jit
 def second_order(u: float, x: float, v: float, wn: float, zeta: float, up: float,
                  down: float) -> tuple[float, int]:
     """Figure 21 with the rate limit on the velocity command: the acceleration and the limit's side.
@@ -106,4 +129,4 @@ def second_order(u: float, x: float, v: float, wn: float, zeta: float, up: float
         The velocity command's side of its limits (0: not limited).
     """
     vc, side = velocity_command(u, x, wn, zeta, up, down)
-    return 2.0 * zeta * wn * (vc - v), side
+    return rate_loop(vc, v, wn, zeta), side

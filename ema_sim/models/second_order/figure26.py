@@ -8,19 +8,30 @@ actuator (integrated at the model's own rate)
     4. command lag           optional first-order lag on the command
     5. compliance correction K_CP, a gain that varies with load (3.1.2.4)
     6. threshold             optional dead zone on the servo error
-    7. rate limit            on the velocity command, rl + K2·hm/marm (3.1.2.1; :mod:`.figure21`)
-    8. second order          ωn, ζ (figure 21)
-    9. position limits       on the states, so nothing winds up
-   10. LVDT compliance       optional deflection with load that the servo loop does not remove
-   11. feedback lag          optional first-order lag on the LVDT feedback
+    7. velocity demand       ωn/(2ζ)·(error + ωi·∫error): optional integral action (figure 30's stage 4),
+                             integrating while nothing limits; rate limit rl + K2·hm/marm (3.1.2.1; :mod:`.figure21`)
+    8. servo compliance      optional: an aiding hinge moment adds (ωn/2ζ)·droop·hm to the rate (2.8)
+    9. current-limited drive optional velocity loop whose acceleration saturates (figure 30's stage 5)
+   10. second order          ωn, ζ (figure 21)
+   11. position limits       on the states, so nothing winds up
+feedback
+   12. LVDT compliance       optional deflection with load the LVDT reads, linear or stiffening at a knee
+   13. feedback lag          optional first-order lag on the LVDT reading (outside the loop)
+   14. feedback delay        optional delay from motion to the reading (HOAD3's 2 ms)
+       in-loop filter        optional reading of figure 21: the loop closes on a first-order filtered LVDT
+                             whose corner is 2ζωn, so the actuator leads the position by ẋ/(2ζωn)
 surface (outside the servo loop)
-   12. free play             hm / Is double-integrated in a limited integrator, ±width/2 (:mod:`.figure29`)
-   13. compliance            optional deflection linear in hinge moment, with optional hysteretic
-                             damping (figure 36): viscous equivalent h/ω on the linkage
+   15. free play             hm / Is double-integrated in a limited integrator, ±width/2 (:mod:`.figure29`)
+   16. compliance            optional deflection with hinge moment, linear or stiffening at a knee
+                             (figures 16, 33), with optional hysteretic damping (figure 36): h/ω on the linkage
+   17. linkage mode          optional: the surface's inertia on the linkage spring (stages 15–16 as its
+                             force–deflection curve, free play its dead zone), excited by the actuator's
+                             acceleration and the hinge moment (figures 32, 33)
 
 The integrators (:mod:`.loada`, :mod:`.loac`, :mod:`.rk4`) call these functions: :func:`command_path`
-for stages 2–3, :func:`servo` for stages 5–8, :func:`derivatives` for the whole chain in continuous
-time, :func:`sample` and :func:`write_outputs` for what the outside sees.
+for stages 2–3, :func:`servo` for stages 5–10, :func:`derivatives` for the whole chain in continuous
+time, :func:`sample` and :func:`write_outputs` for what the outside sees, :func:`history_write` and
+:func:`history_read` for stage 14.
 """
 
 from __future__ import annotations
@@ -32,20 +43,27 @@ import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF
-from ema_sim.models.second_order.figure21 import load_rate_limits, second_order
+from ema_sim.models.second_order.figure21 import load_rate_limits, rate_loop, velocity_command
 from ema_sim.models.second_order.figure29 import free_play_accel
 from ema_sim.models.second_order.params import P, X
 from ema_sim.models.stages import (
     DEG2RAD,
+    FLAG_CURRENT,
     FLAG_FREE_PLAY,
     FLAG_POSITION,
     FLAG_RATE,
     FLAG_THRESHOLD,
+    TIME_EPS_S,
     TWO_PI,
     dead_zone,
     jit,
     quantize,
 )
+
+HISTORY_SIZE = 1024
+"""Entries of stage 14's history ring: the delay spans at most half of them (:func:`history_spacing_s`)."""
+NEVER_S = -1e30
+"""The time of the history entries trim writes: the held state, forever before the record."""
 
 
 @jit
@@ -116,22 +134,52 @@ def compliance_correction(u: float, hinge_moment_inlb: float, kcp_per_kinlb: flo
 
 
 @jit
-def compliance_deflection(hinge_moment_inlb: float, deg_per_kinlb: float) -> float:
-    """Stages 10 and 13: deflection linear in hinge moment (deg).
+def compliance_deflection(hinge_moment_inlb: float, deg_per_kinlb: float, knee_inlb: float = math.inf,
+                          stiff_deg_per_kinlb: float = 0.0) -> float:
+    """Stages 12 and 16: deflection with hinge moment (deg), linear up to the knee, stiffer beyond it.
+
+    ``c·|hm|`` up to the knee, then ``c·knee + c_stiff·(|hm| − knee)``, with the sign of hm (the data
+    contract's ``nonlinear_compliance``); an infinite knee is the linear compliance.
 
     Parameters
     ----------
     hinge_moment_inlb : float
         Hinge moment (in·lb).
     deg_per_kinlb : float
-        Compliance (deg per 1000 in·lb).
+        Compliance below the knee (deg per 1000 in·lb).
+    knee_inlb : float
+        Hinge moment where it stiffens (in·lb; inf: linear).
+    stiff_deg_per_kinlb : float
+        Compliance above the knee (deg per 1000 in·lb).
 
     Returns
     -------
     float
         The deflection (deg).
     """
-    return deg_per_kinlb * hinge_moment_inlb * 1e-3
+    a = abs(hinge_moment_inlb)
+    d = deg_per_kinlb * a if a <= knee_inlb else deg_per_kinlb * knee_inlb + stiff_deg_per_kinlb * (a - knee_inlb)
+    return math.copysign(d * 1e-3, hinge_moment_inlb) if d != 0.0 else 0.0
+
+
+@jit
+def surface_compliance(p: FloatArray, hinge_moment_inlb: float) -> float:
+    """Stage 16's static deflection (deg).
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+
+    Returns
+    -------
+    float
+        The deflection outside the servo loop (deg).
+    """
+    return compliance_deflection(hinge_moment_inlb, p[P.compliance_deg_per_kinlb], p[P.compliance_knee_inlb],
+                                 p[P.compliance_stiff_deg_per_kinlb])
 
 
 @jit
@@ -156,8 +204,113 @@ def servo_input(p: FloatArray, y: FloatArray, u: float) -> float:
 
 
 @jit
-def servo(p: FloatArray, u_in: float, x: float, v: float, hinge_moment_inlb: float) -> tuple[float, int, int]:
-    """Stages 5–8: the actuator's acceleration, its limit flags and which smooth piece it is on.
+def drive_on(p: FloatArray) -> bool:
+    """Stage 9 runs: a current limit, or an in-loop filter whose actuator acceleration moves a linkage mode.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    bool
+        True when the drive's velocity is a state.
+    """
+    return bool(p[P.accel_limit_dps2] < math.inf or (p[P.feedback_filter_in_loop] > 0.5 and p[P.linkage_freq_hz] > 0.0))
+
+
+@jit
+def velocity_demand(p: FloatArray, u_in: float, x: float, integral_deg_s: float,
+                    hinge_moment_inlb: float) -> tuple[float, float, int, int, float]:
+    """Stages 5–8: the limited velocity command, the load's droop rate, flags, smooth piece, integrand.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    u_in : float
+        The servo's input (deg).
+    x : float
+        The position the loop closes on (deg).
+    integral_deg_s : float
+        The integral of the servo error (deg·s).
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+
+    Returns
+    -------
+    command : float
+        The rate-limited velocity command (°/s).
+    droop : float
+        The rate an aiding hinge moment adds through the servo's compliance (°/s).
+    flags : int
+        Rate-limit and threshold flags.
+    piece : int
+        ``3·(rate limit side) + (dead zone side)``.
+    integrand : float
+        The servo error while the integral runs (outside the threshold, rate unlimited), else 0.
+    """
+    wn, zeta = p[P.wn_rad_s], p[P.zeta]
+    u_eff = compliance_correction(u_in, hinge_moment_inlb, p[P.kcp_per_kinlb])
+    e = u_eff - x
+    e_dz, dz = dead_zone(e, p[P.threshold_deg])
+    up, down = load_rate_limits(p[P.rate_limit_dps], p[P.k2_dps_per_lb], hinge_moment_inlb, p[P.moment_arm_in])
+    wi = TWO_PI * p[P.integral_hz]
+    vc, side = velocity_command(x + e_dz + wi * integral_deg_s, x, wn, zeta, up, down)
+    droop = wn / (2.0 * zeta) * p[P.servo_compliance_deg_per_kinlb] * hinge_moment_inlb * 1e-3
+    flags = FLAG_RATE if side != 0 else 0
+    thresholded = p[P.threshold_deg] > 0.0
+    if thresholded and e_dz == 0.0:
+        flags |= FLAG_THRESHOLD
+    if not thresholded:
+        dz = 0
+    integrand = e if (wi > 0.0 and side == 0 and (not thresholded or dz != 0)) else 0.0
+    return vc, droop, flags, 3 * side + dz, integrand
+
+
+@jit
+def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v_drive: float) -> tuple[float, int]:
+    """Stage 9: the drive's velocity loop, its acceleration saturated at the current limit.
+
+    ``dv/dt = sat(ωv·(command − v)) + ωv·droop``: a held load shifts the rate it settles at by the
+    droop; at the limit it still adds its own acceleration.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    command_dps : float
+        The limited velocity command (°/s).
+    droop_dps : float
+        The load's droop rate (°/s).
+    v_drive : float
+        The drive's rate (°/s).
+
+    Returns
+    -------
+    acceleration : float
+        dv/dt (°/s²).
+    side : int
+        +1/−1 on the current limit, 0 below it.
+    """
+    wv = TWO_PI * p[P.velocity_loop_hz]
+    acc = wv * (command_dps - v_drive)
+    limit = p[P.accel_limit_dps2]
+    side = 0
+    if acc > limit:
+        acc = limit
+        side = 1
+    elif acc < -limit:
+        acc = -limit
+        side = -1
+    return acc + wv * droop_dps, side
+
+
+@jit
+def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray,
+          hinge_moment_inlb: float) -> tuple[float, int, int, float, float]:
+    """Stages 5–10: the actuator's acceleration, its limit flags, its smooth piece and two state rates.
 
     Parameters
     ----------
@@ -169,6 +322,8 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, hinge_moment_inlb: flo
         The position the loop closes on (deg).
     v : float
         The rate (°/s).
+    y : numpy.ndarray
+        State (the integral and the drive's rate).
     hinge_moment_inlb : float
         Hinge moment (in·lb).
 
@@ -177,25 +332,31 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, hinge_moment_inlb: flo
     acceleration : float
         °/s².
     flags : int
-        Rate-limit and threshold flags.
+        Rate-limit, current-limit and threshold flags.
     piece : int
-        ``3·(rate limit side) + (dead zone side)``: the right-hand side is smooth while it holds.
+        ``9·(current limit side) + 3·(rate limit side) + (dead zone side)``: smooth while it holds.
+    integral_rate : float
+        d/dt of the integral state (deg).
+    drive_accel : float
+        d/dt of the drive's rate (°/s²; 0 when stage 9 is off).
     """
-    u_eff = compliance_correction(u_in, hinge_moment_inlb, p[P.kcp_per_kinlb])
-    e_dz, dz = dead_zone(u_eff - x, p[P.threshold_deg])
-    up, down = load_rate_limits(p[P.rate_limit_dps], p[P.k2_dps_per_lb], hinge_moment_inlb, p[P.moment_arm_in])
-    a, side = second_order(x + e_dz, x, v, p[P.wn_rad_s], p[P.zeta], up, down)
-    flags = FLAG_RATE if side != 0 else 0
-    if p[P.threshold_deg] > 0.0 and e_dz == 0.0:
-        flags |= FLAG_THRESHOLD
-    if p[P.threshold_deg] <= 0.0:
-        dz = 0
-    return a, flags, 3 * side + dz
+    vc, droop, flags, piece, integrand = velocity_demand(p, u_in, x, y[X.integral_deg_s], hinge_moment_inlb)
+    if drive_on(p):
+        drive_accel, cside = current_limited_drive(p, vc, droop, y[X.drive_rate_dps])
+        v_drive = y[X.drive_rate_dps]
+        if cside != 0:
+            flags |= FLAG_CURRENT
+            integrand = 0.0
+        piece += 9 * cside
+    else:
+        drive_accel = 0.0
+        v_drive = vc + droop
+    return rate_loop(v_drive, v, p[P.wn_rad_s], p[P.zeta]), flags, piece, integrand, drive_accel
 
 
 @jit
 def lvdt(p: FloatArray, x_pos: float, hinge_moment_inlb: float) -> float:
-    """Stage 10: what the LVDT reads, the servo position plus the compliance the loop does not remove.
+    """Stage 12: what the LVDT reads, the servo position plus the compliance the loop does not remove.
 
     Parameters
     ----------
@@ -211,12 +372,36 @@ def lvdt(p: FloatArray, x_pos: float, hinge_moment_inlb: float) -> float:
     float
         The LVDT reading (deg).
     """
-    return x_pos + compliance_deflection(hinge_moment_inlb, p[P.lvdt_compliance_deg_per_kinlb])
+    return x_pos + compliance_deflection(hinge_moment_inlb, p[P.lvdt_compliance_deg_per_kinlb],
+                                         p[P.lvdt_compliance_knee_inlb], p[P.lvdt_compliance_stiff_deg_per_kinlb])
+
+
+@jit
+def actuator_position(p: FloatArray, x: float, v: float) -> float:
+    """Where the actuator is: the position, or ahead of it by ẋ/(2ζωn) when the loop closes on a filtered LVDT.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    x : float
+        The position state (deg).
+    v : float
+        Its rate (°/s).
+
+    Returns
+    -------
+    float
+        The actuator's position (deg).
+    """
+    if p[P.feedback_filter_in_loop] > 0.5:
+        return float(x + v / (2.0 * p[P.zeta] * p[P.wn_rad_s]))
+    return x
 
 
 @jit
 def compliance_time_constant_s(p: FloatArray) -> float:
-    """Stage 13: linkage stiffness k and hysteretic damping h/ω make the compliance a first-order lag.
+    """Stage 16: linkage stiffness k and hysteretic damping h/ω make the compliance a first-order lag.
 
     The linkage deflects x = δ·marm (in) under F = hm/marm (lb), so k = F/x = 1000/(C·marm²) lb/in
     with C in rad per 1000 in·lb; the damper c = h/ω gives τ = c/k. Zero when either is off.
@@ -239,8 +424,88 @@ def compliance_time_constant_s(p: FloatArray) -> float:
 
 
 @jit
+def free_play_subsystem(p: FloatArray) -> bool:
+    """Stage 15 runs as figure 29's own subsystem (not as the dead zone of a linkage mode's spring).
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    bool
+        True with free play and no linkage mode.
+    """
+    return bool(p[P.free_play_deg] > 0.0 and p[P.linkage_freq_hz] <= 0.0)
+
+
+@jit
+def linkage_spring(p: FloatArray, e: float) -> float:
+    """Stage 17's spring, as the static deflection its force balances: stage 16's curve inverted.
+
+    Inside the free play (stage 15) it carries nothing; beyond it, the deflection up to the knee's,
+    then the stiffer segment scaled back to the compliance below the knee (so the linkage frequency
+    is the one below the knee and rises by √(c/c_stiff) above it).
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    e : float
+        The surface's deflection from the actuator (deg).
+
+    Returns
+    -------
+    float
+        The static deflection the spring's force would hold (deg).
+    """
+    e_dz, _ = dead_zone(e, 0.5 * p[P.free_play_deg])
+    c = p[P.compliance_deg_per_kinlb]
+    knee = p[P.compliance_knee_inlb]
+    if c <= 0.0 or knee == math.inf:
+        return e_dz
+    a = abs(e_dz)
+    ck = c * knee * 1e-3
+    if a <= ck:
+        return e_dz
+    return math.copysign(ck + c * (a - ck) / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6), e_dz)
+
+
+@jit
+def linkage_accel(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuator_accel: float) -> float:
+    """Stage 17: the surface's acceleration relative to the actuator (°/s²).
+
+    ``ë = ω²·(curve(hm) − spring(e)) − (2ζω + ω²τh)·ė − a_actuator``: the hinge moment loads the
+    spring, the actuator's acceleration shakes the surface, the damper (and any hysteretic damping's
+    viscous equivalent) damps the relative motion.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+    actuator_accel : float
+        The actuator's acceleration (°/s²).
+
+    Returns
+    -------
+    float
+        d/dt of the linkage rate (°/s²).
+    """
+    w0 = TWO_PI * p[P.linkage_freq_hz]
+    damping = 2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p)
+    target = surface_compliance(p, hinge_moment_inlb)
+    return float(w0 * w0 * (target - linkage_spring(p, y[X.linkage_deg])) - damping * y[X.linkage_rate_dps]
+            - actuator_accel)
+
+
+@jit
 def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, dydt: FloatArray) -> None:
-    """Stages 4–13 in continuous time: the state's derivatives into ``dydt`` (position limits are the integrator's).
+    """Stages 4–17 in continuous time: the state's derivatives into ``dydt`` (position limits are the integrator's).
 
     Parameters
     ----------
@@ -259,9 +524,12 @@ def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float
         dydt[X.command_lag_deg] = TWO_PI * p[P.command_lag_hz] * (u - y[X.command_lag_deg])
     else:
         dydt[X.command_lag_deg] = 0.0
-    a, _, _ = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], hinge_moment_inlb)
+    a, _, _, integrand, drive_accel = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], y,
+                                            hinge_moment_inlb)
     dydt[X.position_deg] = y[X.rate_dps]
     dydt[X.rate_dps] = a
+    dydt[X.integral_deg_s] = integrand
+    dydt[X.drive_rate_dps] = drive_accel
     dydt[X.free_play_deg] = y[X.free_play_rate_dps]
     dydt[X.free_play_rate_dps] = free_play_accel(hinge_moment_inlb, p[P.surface_inertia_inlbs2])
     if p[P.feedback_lag_hz] > 0.0:
@@ -270,17 +538,146 @@ def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float
     else:
         dydt[X.feedback_lag_deg] = 0.0
     tau_c = compliance_time_constant_s(p)
-    if tau_c > 0.0:
-        target = compliance_deflection(hinge_moment_inlb, p[P.compliance_deg_per_kinlb])
-        dydt[X.compliance_deg] = (target - y[X.compliance_deg]) / tau_c
+    if tau_c > 0.0 and p[P.linkage_freq_hz] <= 0.0:
+        dydt[X.compliance_deg] = (surface_compliance(p, hinge_moment_inlb) - y[X.compliance_deg]) / tau_c
     else:
         dydt[X.compliance_deg] = 0.0
+    if p[P.linkage_freq_hz] > 0.0:
+        actuator_accel = drive_accel if p[P.feedback_filter_in_loop] > 0.5 else a
+        dydt[X.linkage_deg] = y[X.linkage_rate_dps]
+        dydt[X.linkage_rate_dps] = linkage_accel(p, y, hinge_moment_inlb, actuator_accel)
+    else:
+        dydt[X.linkage_deg] = 0.0
+        dydt[X.linkage_rate_dps] = 0.0
+    dydt[X.history_head] = 0.0
+    dydt[X.history_last_s] = 0.0
+
+
+@jit
+def feedback_value(p: FloatArray, y: FloatArray, hinge_moment_inlb: float) -> tuple[float, float]:
+    """Stages 12–13: the LVDT reading before the delay, and its rate (stage 14 records both).
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+
+    Returns
+    -------
+    value : float
+        The reading (deg).
+    rate : float
+        Its rate between input changes (°/s).
+    """
+    reading = lvdt(p, y[X.position_deg], hinge_moment_inlb)
+    if p[P.feedback_lag_hz] > 0.0:
+        return y[X.feedback_lag_deg], TWO_PI * p[P.feedback_lag_hz] * (reading - y[X.feedback_lag_deg])
+    return reading, y[X.rate_dps]
+
+
+@jit
+def history_spacing_s(p: FloatArray) -> float:
+    """Closest spacing of stage 14's history entries: the delay then spans at most half the ring.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    float
+        Seconds.
+    """
+    return float(2.0 * p[P.feedback_delay_s] / HISTORY_SIZE)
+
+
+@jit
+def history_write(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, value: float, rate: float,
+                  force: bool) -> None:
+    """Stage 14: record the reading at ``t`` (at most every :func:`history_spacing_s`, unless ``force``).
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State (its history head and last time advance).
+    hist : numpy.ndarray
+        The instance's ring ``(entries, 3)``: time, reading, rate.
+    t : float
+        Now (s).
+    value : float
+        The reading (deg).
+    rate : float
+        Its rate (°/s).
+    force : bool
+        Record even closer than the spacing (an instant a delayed sample will ask for).
+    """
+    if p[P.feedback_delay_s] <= 0.0:
+        return
+    if t <= y[X.history_last_s] + TIME_EPS_S:
+        j = int(y[X.history_head])
+    elif force or t >= y[X.history_last_s] + history_spacing_s(p):
+        j = int(y[X.history_head]) + 1
+        if j >= hist.shape[0]:
+            j = 0
+    else:
+        return
+    hist[j, 0] = t
+    hist[j, 1] = value
+    hist[j, 2] = rate
+    y[X.history_head] = j
+    y[X.history_last_s] = t
+
+
+@jit
+def history_read(y: FloatArray, hist: FloatArray, t: float) -> float:
+    """Stage 14: the reading at ``t`` (in the past), cubic Hermite between the recorded entries.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        State (its history head).
+    hist : numpy.ndarray
+        The instance's ring.
+    t : float
+        The instant asked for (s).
+
+    Returns
+    -------
+    float
+        The reading then (deg); the oldest entry's before the ring's start.
+    """
+    size = hist.shape[0]
+    j = int(y[X.history_head])
+    newer = -1
+    for _ in range(size):
+        if hist[j, 0] <= t + TIME_EPS_S:
+            break
+        newer = j
+        j = j - 1 if j > 0 else size - 1
+    else:
+        return float(hist[newer, 1])
+    t0, t1 = hist[j, 0], hist[newer, 0] if newer >= 0 else hist[j, 0]
+    if newer < 0 or abs(t - t0) <= TIME_EPS_S or t1 - t0 <= TIME_EPS_S:
+        return float(hist[j, 1])
+    h = t1 - t0
+    s = (t - t0) / h
+    s2 = s * s
+    s3 = s2 * s
+    return float((2.0 * s3 - 3.0 * s2 + 1.0) * hist[j, 1] + (s3 - 2.0 * s2 + s) * h * hist[j, 2]
+                 + (-2.0 * s3 + 3.0 * s2) * hist[newer, 1] + (s3 - s2) * h * hist[newer, 2])
 
 
 @jit
 def write_outputs(p: FloatArray, x: FloatArray, position_fb: float, hinge_moment_inlb: float, flags: int,
                   row: FloatArray) -> None:
-    """Stages 10–13 seen from outside: LVDT position, surface angle, rate and flags into one output row.
+    """Stages 12–17 seen from outside: LVDT position, surface angle, rate and flags into one output row.
 
     Parameters
     ----------
@@ -298,23 +695,29 @@ def write_outputs(p: FloatArray, x: FloatArray, position_fb: float, hinge_moment
         The output row (:data:`~ema_sim.models.base.OUTPUT_FIELDS`).
     """
     row[O_POS] = position_fb
-    damped = compliance_time_constant_s(p) > 0.0
-    compliance = x[X.compliance_deg] if damped else compliance_deflection(hinge_moment_inlb,
-                                                                            p[P.compliance_deg_per_kinlb])
-    row[O_SURF] = lvdt(p, x[X.position_deg], hinge_moment_inlb) + x[X.free_play_deg] + compliance
+    actuator = lvdt(p, actuator_position(p, x[X.position_deg], x[X.rate_dps]), hinge_moment_inlb)
+    half = 0.5 * p[P.free_play_deg]
+    if p[P.linkage_freq_hz] > 0.0:
+        row[O_SURF] = actuator + x[X.linkage_deg]
+        in_free_play = half > 0.0 and abs(x[X.linkage_deg]) <= half
+    else:
+        damped = compliance_time_constant_s(p) > 0.0
+        compliance = x[X.compliance_deg] if damped else surface_compliance(p, hinge_moment_inlb)
+        row[O_SURF] = actuator + x[X.free_play_deg] + compliance
+        in_free_play = half > 0.0 and abs(x[X.free_play_deg]) < half
     row[O_RATE] = x[X.rate_dps]
     row[O_CUR] = np.nan
     row[O_BUS] = np.nan
-    half = 0.5 * p[P.free_play_deg]
     if x[X.position_deg] >= p[P.position_max_deg] or x[X.position_deg] <= p[P.position_min_deg]:
         flags |= FLAG_POSITION
-    if half > 0.0 and abs(x[X.free_play_deg]) >= half:
+    if half > 0.0 and not in_free_play:
         flags |= FLAG_FREE_PLAY
     row[O_FLAGS] = flags
 
 
 @jit
-def sample(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, row: FloatArray) -> None:
+def sample(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, hist: FloatArray, t: float,
+           row: FloatArray) -> None:
     """The continuous models' outputs at a sample instant, from the state and the held inputs.
 
     Parameters
@@ -327,18 +730,23 @@ def sample(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, row
         The command after stages 1–3 (deg).
     hinge_moment_inlb : float
         Hinge moment (in·lb).
+    hist : numpy.ndarray
+        Stage 14's ring.
+    t : float
+        The sample instant (s).
     row : numpy.ndarray
         The output row.
     """
-    _, flags, _ = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], hinge_moment_inlb)
-    lagged = p[P.feedback_lag_hz] > 0.0
-    position_fb = y[X.feedback_lag_deg] if lagged else lvdt(p, y[X.position_deg], hinge_moment_inlb)
+    _, flags, _, _, _ = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], y, hinge_moment_inlb)
+    position_fb, _ = feedback_value(p, y, hinge_moment_inlb)
+    if p[P.feedback_delay_s] > 0.0:
+        position_fb = history_read(y, hist, t - p[P.feedback_delay_s])
     write_outputs(p, y, position_fb, hinge_moment_inlb, flags, row)
 
 
 @jit
 def compliance_gain(p: FloatArray, dt: float) -> float:
-    """Stage 13's exact step gain over ``dt`` (1 when the compliance is undamped).
+    """Stage 16's exact step gain over ``dt`` (1 when the compliance is undamped).
 
     Parameters
     ----------
@@ -356,12 +764,55 @@ def compliance_gain(p: FloatArray, dt: float) -> float:
     return 1.0 - math.exp(-dt / tau_c) if tau_c > 0.0 else 1.0
 
 
+@jit
+def max_step_s(p: FloatArray) -> float:
+    """The longest step a fixed-order integrator may take: a quarter of the fastest stage's time constant.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    float
+        Seconds.
+    """
+    fastest = p[P.wn_rad_s]
+    if p[P.linkage_freq_hz] > 0.0:
+        fastest = max(fastest, TWO_PI * p[P.linkage_freq_hz])
+    if drive_on(p):  # a first-order loop: RK4 at h·λ = 1 is accurate to 2 % of its (fast) transient
+        fastest = max(fastest, 0.25 * TWO_PI * p[P.velocity_loop_hz])
+    return float(1.0 / (4.0 * fastest))
+
+
+@jit
+def linkage_rest(p: FloatArray, hinge_moment_inlb: float) -> float:
+    """Stage 17 at rest under a held load: the deflection whose spring balances the compliance's.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+
+    Returns
+    -------
+    float
+        The deflection (deg), pushed across the free play by the load.
+    """
+    return float(surface_compliance(p, hinge_moment_inlb) + 0.5 * p[P.free_play_deg] * np.sign(hinge_moment_inlb))
+
+
 @nb.njit(cache=True)
-def trim(params: FloatArray, command_deg: FloatArray, hinge_moment_inlb: FloatArray, states: FloatArray) -> None:
+def trim(params: FloatArray, command_deg: FloatArray, hinge_moment_inlb: FloatArray, states: FloatArray,
+         history: FloatArray) -> None:
     """Every instance's state at rest under a held command and load (no start-up transient).
 
-    The servo sits where stages 2–5 put the command (inside the position limits), the free play on
-    the side the load pushes it, the lags at their inputs.
+    The servo sits where stages 2–5 put the command (inside the position limits), moved by the servo
+    compliance's droop unless an integral holds it (which then stores the droop), the free play on
+    the side the load pushes it, the lags at their inputs, stage 14's history holding the reading.
 
     Parameters
     ----------
@@ -373,17 +824,32 @@ def trim(params: FloatArray, command_deg: FloatArray, hinge_moment_inlb: FloatAr
         The held load of each instance (in·lb).
     states : numpy.ndarray
         Filled with each instance's state.
+    history : numpy.ndarray
+        Each instance's stage-14 ring, filled with the held reading.
     """
     for i in range(params.shape[0]):
         p = params[i]
         x = states[i]
         hm = hinge_moment_inlb[i]
         uq = command_path(p, command_deg[i])
-        pos = min(max(compliance_correction(uq, hm, p[P.kcp_per_kinlb]), p[P.position_min_deg]),
-                  p[P.position_max_deg])
+        droop = p[P.servo_compliance_deg_per_kinlb] * hm * 1e-3
+        target = compliance_correction(uq, hm, p[P.kcp_per_kinlb])
         x[:] = 0.0
+        if p[P.integral_hz] > 0.0:
+            x[X.integral_deg_s] = -droop / (TWO_PI * p[P.integral_hz])
+        else:
+            target += droop
+        pos = min(max(target, p[P.position_min_deg]), p[P.position_max_deg])
         x[X.position_deg] = pos
-        x[X.free_play_deg] = 0.5 * p[P.free_play_deg] * np.sign(hm)
+        x[X.free_play_deg] = 0.5 * p[P.free_play_deg] * np.sign(hm) if free_play_subsystem(p) else 0.0
         x[X.command_lag_deg] = uq
-        x[X.feedback_lag_deg] = pos + compliance_deflection(hm, p[P.lvdt_compliance_deg_per_kinlb])
-        x[X.compliance_deg] = compliance_deflection(hm, p[P.compliance_deg_per_kinlb])
+        x[X.feedback_lag_deg] = lvdt(p, pos, hm)
+        x[X.compliance_deg] = surface_compliance(p, hm)
+        if p[P.linkage_freq_hz] > 0.0:
+            x[X.linkage_deg] = linkage_rest(p, hm)
+        x[X.history_last_s] = NEVER_S
+        reading, _ = feedback_value(p, x, hm)
+        for j in range(history.shape[1]):
+            history[i, j, 0] = NEVER_S
+            history[i, j, 1] = reading
+            history[i, j, 2] = 0.0

@@ -81,7 +81,7 @@ def free_play_exact(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, h: f
         The step (s).
     """
     half = 0.5 * p[P.free_play_deg]
-    if half <= 0.0:
+    if half <= 0.0 or p[P.linkage_freq_hz] > 0.0:  # none, or the dead zone of a linkage mode's spring
         y[X.free_play_deg] = 0.0
         y[X.free_play_rate_dps] = 0.0
         return

@@ -12,7 +12,15 @@ import numpy as np
 
 from ema_sim.models.arrays import FloatArray, IntArray
 from ema_sim.models.integrate import make_dopri5
-from ema_sim.models.second_order.figure26 import command_path, derivatives, sample
+from ema_sim.models.second_order.figure26 import (
+    command_path,
+    derivatives,
+    feedback_value,
+    free_play_subsystem,
+    history_write,
+    max_step_s,
+    sample,
+)
 from ema_sim.models.second_order.params import P, X
 from ema_sim.models.stages import TIME_EPS_S, zoh_index
 
@@ -42,8 +50,10 @@ _loac_dopri5 = make_dopri5(rhs)
 
 @nb.njit(cache=True)
 def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, jh: int, sample_t: FloatArray,
-               js: int, k_samples: int) -> float:
+               js: int, k_samples: int, feedback_delay_s: float, jf: int) -> float:
     """Where an integration step must stop: the next delayed command, hinge moment or sample instant.
+
+    Also the instant a delayed position sample reads (stage 14), so its entry is exact.
 
     Parameters
     ----------
@@ -65,6 +75,10 @@ def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, 
         The next sample.
     k_samples : int
         Number of samples.
+    feedback_delay_s : float
+        The feedback delay (s; 0: none).
+    jf : int
+        The next sample whose delayed position is not recorded yet.
 
     Returns
     -------
@@ -78,13 +92,52 @@ def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, 
         t_next = min(t_next, bp_t[jh + 1])
     if js < k_samples:
         t_next = min(t_next, sample_t[js])
+    if feedback_delay_s > 0.0 and jf < k_samples:
+        t_next = min(t_next, sample_t[jf] - feedback_delay_s)
     return t_next
 
 
 @nb.njit(cache=True)
-def run_continuous(params: FloatArray, states: FloatArray, modes: IntArray, steps: FloatArray, bp_t: FloatArray,
-                   bp_u: FloatArray, bp_h: FloatArray, t0: float, t_end: float, sample_t: FloatArray, rtol: float,
-                   atol: float, out: FloatArray) -> None:
+def record_feedback(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, hinge_moment_inlb: float,
+                    sample_t: FloatArray, jf: int) -> int:
+    """Stage 14 at a stop of a continuous integrator: record the reading, exactly at a delayed sample's instant.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    hist : numpy.ndarray
+        The instance's ring.
+    t : float
+        Now (s).
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    jf : int
+        The next sample whose delayed instant was not reached.
+
+    Returns
+    -------
+    int
+        The next sample whose delayed instant is still ahead.
+    """
+    delay = p[P.feedback_delay_s]
+    if delay <= 0.0:
+        return jf
+    while jf < sample_t.shape[0] and sample_t[jf] - delay <= t + TIME_EPS_S:
+        jf += 1
+    value, rate = feedback_value(p, y, hinge_moment_inlb)
+    history_write(p, y, hist, t, value, rate, jf > 0 and abs(sample_t[jf - 1] - delay - t) < 1e-9)
+    return jf
+
+
+@nb.njit(cache=True)
+def run_continuous(params: FloatArray, states: FloatArray, history: FloatArray, modes: IntArray, steps: FloatArray,
+                   bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t0: float, t_end: float, sample_t: FloatArray,
+                   rtol: float, atol: float, out: FloatArray) -> None:
     """LOAC kernel: integrate every instance from ``t0`` to ``t_end``, breaking at each input change.
 
     Parameters
@@ -93,6 +146,8 @@ def run_continuous(params: FloatArray, states: FloatArray, modes: IntArray, step
         Kernel parameters, one row per instance.
     states : numpy.ndarray
         States, one row per instance, advanced in place.
+    history : numpy.ndarray
+        Each instance's feedback-delay ring (stage 14), advanced in place.
     modes : numpy.ndarray
         Each instance's stop modes (position, free play), updated in place.
     steps : numpy.ndarray
@@ -123,6 +178,7 @@ def run_continuous(params: FloatArray, states: FloatArray, modes: IntArray, step
     for i in range(params.shape[0]):
         p = params[i]
         y = states[i]
+        hist = history[i]
         mode = modes[i]
         half = 0.5 * p[P.free_play_deg]
         limits[0, 0] = X.position_deg
@@ -133,22 +189,25 @@ def run_continuous(params: FloatArray, states: FloatArray, modes: IntArray, step
         limits[1, 1] = X.free_play_rate_dps
         limits[1, 2] = -half
         limits[1, 3] = half
-        if half <= 0.0:
+        if not free_play_subsystem(p):
             mode[1] = 2
             y[X.free_play_deg] = 0.0
             y[X.free_play_rate_dps] = 0.0
-        h_max = 1.0 / (4.0 * p[P.wn_rad_s])
+        h_max = max_step_s(p)
         t = t0
         jd = zoh_index(bp_t, t - p[P.delay_s], 0)
         jh = zoh_index(bp_t, t, 0)
         js = 0
+        jf = 0
         while True:
+            jf = record_feedback(p, y, hist, t, bp_h[i, jh], sample_t, jf)
             while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
-                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], out[i, js])
+                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], hist, sample_t[js], out[i, js])
                 js += 1
             if t >= t_end - TIME_EPS_S:
                 break
-            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples)
+            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples,
+                                p[P.feedback_delay_s], jf)
             u[0] = command_path(p, bp_u[i, jd])
             u[1] = bp_h[i, jh]
             if t_next > t + TIME_EPS_S:

@@ -17,10 +17,14 @@ import numba as nb
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order.figure26 import (
     command_path,
-    compliance_deflection,
     compliance_gain,
+    free_play_subsystem,
+    history_read,
+    history_write,
+    linkage_accel,
     lvdt,
     servo,
+    surface_compliance,
     write_outputs,
 )
 from ema_sim.models.second_order.figure29 import free_play_accel, free_play_euler
@@ -41,9 +45,9 @@ METHOD_LOADF = 1
 """LOADF: backward Euler, the loop closed on the position one frame ahead."""
 
 
-Kernel = Callable[[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, float, int, FloatArray,
-                   FloatArray], None]
-"""``kernel(params, states, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)``."""
+Kernel = Callable[[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, float, int,
+                   FloatArray, FloatArray], None]
+"""``kernel(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)``."""
 
 
 def make_euler(backward: bool) -> Kernel:
@@ -60,26 +64,37 @@ def make_euler(backward: bool) -> Kernel:
         The compiled kernel (see :func:`run_discrete` for its arguments).
     """
 
-    def kernel(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
-               t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
+    def kernel(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
+               bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
         k_samples = sample_t.shape[0]
         for i in range(params.shape[0]):
             p = params[i]
             x = states[i]
+            hist = history[i]
             jd = 0
             jh = 0
             js = 0
             g_cmd = lag_gain(p[P.command_lag_hz], dt)
             g_fb = lag_gain(p[P.feedback_lag_hz], dt)
             g_c = compliance_gain(p, dt)
-            half = 0.5 * p[P.free_play_deg]
+            half = 0.5 * p[P.free_play_deg] if free_play_subsystem(p) else 0.0
             fp_acc_per_inlb = free_play_accel(1.0, p[P.surface_inertia_inlbs2])
+            linkage = p[P.linkage_freq_hz] > 0.0
+            in_loop = p[P.feedback_filter_in_loop] > 0.5
+            fb_delay = p[P.feedback_delay_s]
             hm = bp_h[i, zoh_index(bp_t, t0, 0)]
-            _, flags, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], hm)
+            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm)
+            fb_prev = x[X.feedback_lag_deg]
             for k in range(n_steps + 1):
                 t = t0 + k * dt
+                fb = x[X.feedback_lag_deg]
+                if fb_delay > 0.0:
+                    history_write(p, x, hist, t, fb, (fb - fb_prev) / dt, False)
+                fb_prev = fb
                 while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
-                    write_outputs(p, x, x[X.feedback_lag_deg], hm, flags, out[i, js])
+                    if fb_delay > 0.0:
+                        fb = history_read(x, hist, sample_t[js] - fb_delay)
+                    write_outputs(p, x, fb, hm, flags, out[i, js])
                     js += 1
                 if k == n_steps:
                     break
@@ -88,20 +103,26 @@ def make_euler(backward: bool) -> Kernel:
                 jh = zoh_index(bp_t, t, jh)
                 hm = bp_h[i, jh]
                 x[X.command_lag_deg] = first_order_lag(x[X.command_lag_deg], command_path(p, u_del), g_cmd)
-                # stages 5-9: the servo on the position (LOADF: one frame ahead), limited integrators
+                # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
                 pos, rate = x[X.position_deg], x[X.rate_dps]
-                a, flags, _ = servo(p, x[X.command_lag_deg], pos + dt * rate if backward else pos, rate, hm)
+                a, flags, _, integrand, drive_accel = servo(p, x[X.command_lag_deg],
+                                                            pos + dt * rate if backward else pos, rate, x, hm)
                 pos, rate = euler_pair(pos, rate, a, dt, backward)
                 x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
                                                                            p[P.position_max_deg])
-                # stage 12: free play
+                x[X.integral_deg_s] += dt * integrand
+                x[X.drive_rate_dps] += dt * drive_accel
+                # stage 15: free play; 17: the linkage mode (semi-implicit, stable for the oscillator)
                 x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
                     x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
-                # stages 10-11: LVDT and its feedback lag (gain 1 when off); 13: compliance
+                if linkage:
+                    accel = linkage_accel(p, x, hm, drive_accel if in_loop else a)
+                    x[X.linkage_deg], x[X.linkage_rate_dps] = euler_pair(x[X.linkage_deg], x[X.linkage_rate_dps],
+                                                                         accel, dt, True)
+                # stages 12-13: LVDT and its feedback lag (gain 1 when off); 16: compliance
                 fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
                 x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm), g_fb)
-                target = compliance_deflection(hm, p[P.compliance_deg_per_kinlb])
-                x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], target, g_c)
+                x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm), g_c)
 
     return nb.njit(cache=True)(kernel)
 
@@ -110,8 +131,9 @@ KERNELS: dict[int, Kernel] = {METHOD_FORWARD_EULER: make_euler(False), METHOD_LO
 """The compiled kernel of each method."""
 
 
-def run_discrete(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray,
-                 t0: float, dt: float, n_steps: int, sample_t: FloatArray, method: int, out: FloatArray) -> None:
+def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
+                 bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, method: int,
+                 out: FloatArray) -> None:
     """Fixed-step LOADA/LOADF kernel: every instance through ``n_steps`` steps from ``t0``.
 
     A sample at time s reads the state of the last step at or before s (a DAU sampling a
@@ -123,6 +145,8 @@ def run_discrete(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u:
         Kernel parameters, one row per instance (:data:`~ema_sim.models.second_order.params.P`).
     states : numpy.ndarray
         States, one row per instance, advanced in place.
+    history : numpy.ndarray
+        Each instance's feedback-delay ring (stage 14), advanced in place.
     bp_t : numpy.ndarray
         Input breakpoint times (s).
     bp_u : numpy.ndarray
@@ -142,4 +166,4 @@ def run_discrete(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u:
     out : numpy.ndarray
         Output block ``(instances, samples, outputs)``, filled.
     """
-    KERNELS[method](params, states, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)
+    KERNELS[method](params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)

@@ -20,7 +20,7 @@ from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
-from ema_sim.models.second_order.figure26 import trim
+from ema_sim.models.second_order.figure26 import HISTORY_SIZE, trim
 from ema_sim.models.second_order.loac import run_continuous
 from ema_sim.models.second_order.loada import METHOD_FORWARD_EULER, METHOD_LOADF, run_discrete
 from ema_sim.models.second_order.params import N_STATE, SECTION, P, SecondOrderParams, X
@@ -71,6 +71,9 @@ class SecondOrderModel(ActuatorModel):
         self._P = np.stack([prm.vector() for prm in self.params])
         self._max_delay_s = float(self._P[:, P.delay_s].max())
         self._X = np.zeros((self.n, N_STATE))
+        delayed = bool(np.any(self._P[:, P.feedback_delay_s] > 0.0))
+        self._H = np.zeros((self.n, HISTORY_SIZE if delayed else 1, 3))
+        """Each instance's stage-14 ring (time, reading, rate) for the feedback delay."""
         self.trim()
 
     @classmethod
@@ -102,8 +105,8 @@ class SecondOrderModel(ActuatorModel):
         return (position_deg / kcp - p[:, P.offset_deg]) / (1.0 + p[:, P.kb])
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
-        trim(self._P, np.ascontiguousarray(command_deg, dtype=float), np.ascontiguousarray(hinge_moment_inlb,
-                                                                                          dtype=float), self._X)
+        trim(self._P, np.ascontiguousarray(command_deg, dtype=float),
+             np.ascontiguousarray(hinge_moment_inlb, dtype=float), self._X, self._H)
 
 
 class Loada(SecondOrderModel):
@@ -124,7 +127,7 @@ class Loada(SecondOrderModel):
         t0 = self._steps * dt
         n_steps = max(math.floor((t_end - t0) / dt + 1e-6), 0)
         out = np.empty((self.n, sample_t.size, N_OUT))
-        run_discrete(self._P, self._X, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, self.method, out)
+        run_discrete(self._P, self._X, self._H, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, self.method, out)
         self._steps += n_steps
         return out
 
@@ -154,13 +157,13 @@ class Loac(Tolerances, SecondOrderModel):
         x = self._X[:, X.position_deg]
         p = self._P
         self._mode[:, 0] = np.where(x >= p[:, P.position_max_deg], 1, np.where(x <= p[:, P.position_min_deg], -1, 0))
-        self._mode[:, 1] = np.sign(self._X[:, X.free_play_deg]).astype(np.int64)
+        self._mode[:, 1] = np.sign(self._X[:, X.free_play_deg]).astype(np.int64)  # 0 when no subsystem runs
         self._h = np.full(self.n, 1e-4)
 
     def _integrate(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float,
                    sample_t: FloatArray) -> FloatArray:
         out = np.empty((self.n, sample_t.size, N_OUT))
-        run_continuous(self._P, self._X, self._mode, self._h, bp_t, bp_u, bp_h, self._t, t_end, sample_t,
+        run_continuous(self._P, self._X, self._H, self._mode, self._h, bp_t, bp_u, bp_h, self._t, t_end, sample_t,
                        self.rtol, self.atol, out)
         return out
 
@@ -218,5 +221,5 @@ class SecondOrder(SecondOrderModel):
     def _integrate(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float,
                    sample_t: FloatArray) -> FloatArray:
         out = np.empty((self.n, sample_t.size, N_OUT))
-        run_rk4(self._P, self._X, bp_t, bp_u, bp_h, self._t, t_end, self.step_s, sample_t, out)
+        run_rk4(self._P, self._X, self._H, bp_t, bp_u, bp_h, self._t, t_end, self.step_s, sample_t, out)
         return out

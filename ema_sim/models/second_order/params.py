@@ -39,7 +39,7 @@ class SecondOrderParams:
         "deg/s", "unloaded rate limit rl on the velocity command (3.1.2.1)", min=1.0, max=2000.0, off=INF,
         kernel="rate_limit_dps")
     k2_dps_per_lb: float = pm.param("deg/s/lbf", "rate-limit slope K2 with the load hm/marm (3.1.2.1)", min=0.0,
-                                    off=0.0, kernel="k2_dps_per_lb")
+                                    max=1.0, off=0.0, kernel="k2_dps_per_lb")
     moment_arm_in: float = pm.param("in", "moment arm marm (the servo crank arm) of the rate limit's load term",
                                     min=0.0, min_exclusive=True, channel="crank_arm_in", kernel="moment_arm_in")
     position_min_deg: float = pm.param("deg", "lower position limit on the states (3.1.2.1)",
@@ -80,6 +80,45 @@ class SecondOrderParams:
         max=1e7, off=0.0, default=0.0, kernel="hysteresis_h_lb_per_in")
     hysteresis_freq_hz: float = pm.param("Hz", "the frequency ω/2π of h/ω (the load's)", min=0.0,
                                          min_exclusive=True, default=0.0125, kernel="hysteresis_freq_hz")
+    # installed-actuator stages (identification vocabulary, docs/effects.md); every one off by default
+    feedback_delay_s: float = pm.param("s", "time delay from motion to the LVDT reading, outside the servo loop "
+                                       "(HOAD3's 2 ms, 2.3)", min=0.0, max=0.2, off=0.0, default=0.0,
+                                       kernel="feedback_delay_s")
+    feedback_filter_in_loop: float = pm.param(
+        "-", "1: the servo closes on a first-order filtered LVDT (corner 2ζωn): the position is the filter's "
+        "output, the actuator and surface lead it by 1/(2ζωn) (2.8, figure 30's stage 15)", min=0.0, max=1.0,
+        off=0.0, default=0.0, kernel="feedback_filter_in_loop")
+    integral_hz: float = pm.param("Hz", "servo integral action: the position loop's PI corner Ki/Kp/2π; it "
+                                  "integrates while the drive is unlimited and the error outside the threshold "
+                                  "(figure 30's stage 4)", min=0.001, max=20.0, off=0.0, default=0.0,
+                                  kernel="integral_hz")
+    servo_compliance_deg_per_kinlb: float = pm.param(
+        "deg/(1000 in·lb)", "the droop a proportional servo holds under load: an aiding hinge moment adds "
+        "(ωn/2ζ)·droop to the actuator's rate; integral action washes it out (2.8)", min=0.0, max=10.0, off=0.0,
+        default=0.0, kernel="servo_compliance_deg_per_kinlb")
+    accel_limit_dps2: float = pm.param(
+        "deg/s²", "current-limited drive: the actuator's acceleration at the current limit, unloaded (figure 30's "
+        "stage 5)", min=100.0, max=1e6, off=INF, default=INF, kernel="accel_limit_dps2")
+    velocity_loop_hz: float = pm.param(
+        "Hz", "bandwidth of the current-limited drive's velocity loop (with accel_limit_dps2)", min=5.0, max=1000.0,
+        default=300.0, kernel="velocity_loop_hz")
+    linkage_freq_hz: float = pm.param(
+        "Hz", "the surface's own mode outside the servo loop: surface inertia on the linkage stiffness below the "
+        "compliance knee (figures 32, 33)", min=1.0, max=500.0, off=0.0, default=0.0, kernel="linkage_freq_hz")
+    linkage_zeta: float = pm.param("-", "damping ratio of the linkage mode (at linkage_freq_hz)", min=0.005, max=2.0,
+                                   default=0.1, kernel="linkage_zeta")
+    compliance_knee_inlb: float = pm.param(
+        "in·lb", "nonlinear compliance: the hinge moment where the linkage stiffens (figures 16, 33)", min=1.0,
+        max=1e5, off=INF, default=INF, kernel="compliance_knee_inlb")
+    compliance_stiff_deg_per_kinlb: float = pm.param(
+        "deg/(1000 in·lb)", "nonlinear compliance above the knee (figures 16, 33)", min=0.0, max=10.0, default=0.0,
+        kernel="compliance_stiff_deg_per_kinlb")
+    lvdt_compliance_knee_inlb: float = pm.param(
+        "in·lb", "nonlinear LVDT compliance: the hinge moment where it stiffens (figure 16's LVDT curve)", min=1.0,
+        max=1e5, off=INF, default=INF, kernel="lvdt_compliance_knee_inlb")
+    lvdt_compliance_stiff_deg_per_kinlb: float = pm.param(
+        "deg/(1000 in·lb)", "nonlinear LVDT compliance above the knee", min=0.0, max=10.0, default=0.0,
+        kernel="lvdt_compliance_stiff_deg_per_kinlb")
 
     RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("position_min_deg", "<", "position_max_deg"),)
 
@@ -173,7 +212,9 @@ P = pm.kernel_layout(SecondOrderParams)
 """Kernel slots, generated from the declared kernel names (``p[P.wn_rad_s]``)."""
 
 X = pm.slots("SecondOrderState", ("position_deg", "rate_dps", "free_play_deg", "free_play_rate_dps",
-                                  "command_lag_deg", "feedback_lag_deg", "compliance_deg"))
+                                  "command_lag_deg", "feedback_lag_deg", "compliance_deg", "integral_deg_s",
+                                  "drive_rate_dps", "linkage_deg", "linkage_rate_dps", "history_head",
+                                  "history_last_s"))
 """State columns shared by every implementation."""
 N_STATE = len(X)
 

@@ -13,9 +13,15 @@ import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
-from ema_sim.models.second_order.figure26 import command_path, sample, servo, servo_input
+from ema_sim.models.second_order.figure26 import (
+    command_path,
+    max_step_s,
+    sample,
+    servo,
+    servo_input,
+)
 from ema_sim.models.second_order.figure29 import free_play_exact
-from ema_sim.models.second_order.loac import next_event, rhs
+from ema_sim.models.second_order.loac import next_event, record_feedback, rhs
 from ema_sim.models.second_order.params import P, X
 from ema_sim.models.stages import TIME_EPS_S, limited_integrator, zoh_index
 
@@ -41,7 +47,7 @@ def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray) -> int:
     int
         The piece (see :func:`~ema_sim.models.second_order.figure26.servo`).
     """
-    _, _, piece = servo(p, servo_input(p, y, u[0]), y[X.position_deg], y[X.rate_dps], u[1])
+    _, _, piece, _, _ = servo(p, servo_input(p, y, u[0]), y[X.position_deg], y[X.rate_dps], y, u[1])
     return piece
 
 
@@ -86,8 +92,8 @@ def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArr
 
 
 @nb.njit(cache=True, parallel=True)
-def run_rk4(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t0: float,
-            t_end: float, h_max: float, sample_t: FloatArray, out: FloatArray) -> None:
+def run_rk4(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
+            bp_h: FloatArray, t0: float, t_end: float, h_max: float, sample_t: FloatArray, out: FloatArray) -> None:
     """Second-order kernel for identification; instances run in parallel threads.
 
     Parameters
@@ -96,6 +102,8 @@ def run_rk4(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: Floa
         Kernel parameters, one row per instance.
     states : numpy.ndarray
         States, one row per instance, advanced in place.
+    history : numpy.ndarray
+        Each instance's feedback-delay ring (stage 14), advanced in place.
     bp_t : numpy.ndarray
         Input breakpoint times (s).
     bp_u : numpy.ndarray
@@ -107,7 +115,7 @@ def run_rk4(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: Floa
     t_end : float
         End (s).
     h_max : float
-        Longest RK4 step (s).
+        Longest RK4 step (s); each instance also keeps under its own fastest stage's (:func:`max_step_s`).
     sample_t : numpy.ndarray
         Sample instants (s).
     out : numpy.ndarray
@@ -118,6 +126,7 @@ def run_rk4(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: Floa
     for i in nb.prange(params.shape[0]):
         p = params[i]
         y = states[i]
+        hist = history[i]
         n = y.shape[0]
         u = np.empty(2)
         k1 = np.empty(n)
@@ -130,17 +139,20 @@ def run_rk4(params: FloatArray, states: FloatArray, bp_t: FloatArray, bp_u: Floa
         jd = zoh_index(bp_t, t - p[P.delay_s], 0)
         jh = zoh_index(bp_t, t, 0)
         js = 0
+        jf = 0
         while True:
+            jf = record_feedback(p, y, hist, t, bp_h[i, jh], sample_t, jf)
             while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
-                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], out[i, js])
+                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], hist, sample_t[js], out[i, js])
                 js += 1
             if t >= t_end - TIME_EPS_S:
                 break
-            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples)
+            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples,
+                                p[P.feedback_delay_s], jf)
             u[0] = command_path(p, bp_u[i, jd])
             u[1] = bp_h[i, jh]
             while t_next - t > TIME_EPS_S:
-                h = min(h_max, t_next - t)
+                h = min(h_max, max_step_s(p), t_next - t)
                 s0 = smooth_piece(p, y, u)
                 rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1)
                 if smooth_piece(p, y1, u) != s0 and h > SWITCH_TOL_S:
