@@ -28,6 +28,9 @@ from ema_sim.identify.trust import assess, reference
 from ema_sim.io.csv import write_csv
 from ema_sim.models import create
 
+DIVERGED_DEG = 1.0e3
+"""An implementation error beyond this (or not finite) is a diverging discretization, not an error figure."""
+
 
 def _round(x: float, digits: int = 6) -> float:
     if not math.isfinite(x):
@@ -94,12 +97,36 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
     sign = -1.0 if final.flip else 1.0
     d = problem.data
     model.trim(d.command_deg[0], sign * d.hinge_moment[0])
-    out = model.run_outputs(problem.time_s, d.command_deg, sign * d.hinge_moment, sample_times=problem.time_s,
-                            end_s=float(problem.time_s[-1]))[0]
-    return {
-        o: _round(float(np.sqrt(np.mean((out[problem.mask, OUTPUT_COLUMN[o]] - final.sim[problem.mask, i]) ** 2))))
-        for i, o in ((0, "position_deg"), (1, "surface_deg")) if o in problem.outputs
-    }
+    with np.errstate(all="ignore"):  # a discretization the fitted stages make unstable diverges: said, not warned
+        out = model.run_outputs(problem.time_s, d.command_deg, sign * d.hinge_moment, sample_times=problem.time_s,
+                                end_s=float(problem.time_s[-1]))[0]
+    errors = {}
+    for i, o in ((0, "position_deg"), (1, "surface_deg")):
+        if o in problem.outputs:
+            e = out[problem.mask, OUTPUT_COLUMN[o]] - final.sim[problem.mask, i]
+            diverged = not np.all(np.isfinite(e)) or float(np.max(np.abs(e))) > DIVERGED_DEG
+            errors[o] = math.inf if diverged else _round(float(np.sqrt(np.mean(e**2))))
+    return errors
+
+
+def implementation_warning(result: Identification, errors: Mapping[str, float]) -> str | None:
+    """The warning a diverging declared implementation earns (its rms error unbounded), else None.
+
+    Parameters
+    ----------
+    result : Identification
+        The identification.
+    errors : mapping
+        :func:`implementation_error`'s figures.
+    """
+    bad = [o for o, v in errors.items() if not math.isfinite(v)]
+    if not bad:
+        return None
+    rate = create(result.model, result.problem.channel.channel, params=result.final.params).rate_hz
+    added = ", ".join(s.effect for s in result.steps) or "none"
+    return (f"{result.model} at {rate:g} Hz, the declared discrete implementation, diverges on this record with the "
+            f"fitted parameters ({', '.join(bad)}; effects added: {added}): its fixed step cannot carry them; this "
+            f"report's figures are those of the same equations simulated accurately")
 
 
 def strict(value: Any) -> Any:
@@ -217,6 +244,9 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     impl = implementation_error(result)
     if impl is not None:
         report["declared_implementation_error_deg"] = impl
+        text = implementation_warning(result, impl)
+        if text:
+            warnings.append(text)
     out: dict[str, Any] = strict(report)
     return out
 
