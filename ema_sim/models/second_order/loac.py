@@ -134,6 +134,67 @@ def record_feedback(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, hi
     return jf
 
 
+
+
+@nb.njit(cache=True)
+def at_stop(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, t_end: float, bp_t: FloatArray,
+            bp_u: FloatArray, bp_h: FloatArray, jd: int, jh: int, js: int, jf: int, sample_t: FloatArray,
+            out: FloatArray, u: FloatArray) -> tuple[int, int, float]:
+    """What a continuous integrator does at each stop: stage 14's reading, the samples due, the next stop.
+
+    LOAC (Dormand–Prince) and RK4 share it; only how they cross to the next stop differs.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    hist : numpy.ndarray
+        The instance's feedback-delay ring.
+    t : float
+        Now (s).
+    t_end : float
+        End (s).
+    bp_t : numpy.ndarray
+        Input breakpoint times (s).
+    bp_u : numpy.ndarray
+        The instance's command at each breakpoint (deg).
+    bp_h : numpy.ndarray
+        The instance's hinge moment at each breakpoint (in·lb).
+    jd : int
+        Breakpoint of the delayed command.
+    jh : int
+        Breakpoint of the hinge moment.
+    js : int
+        Next sample to take.
+    jf : int
+        Next sample whose delayed feedback instant is ahead.
+    sample_t : numpy.ndarray
+        Sample instants (s).
+    out : numpy.ndarray
+        The instance's output block ``(samples, outputs)``, filled as samples fall due.
+    u : numpy.ndarray
+        Set to the inputs of the piece that starts here.
+
+    Returns
+    -------
+    tuple
+        ``js``, ``jf`` and the next stop (s); the next stop is ``t`` itself once ``t_end`` is reached.
+    """
+    k_samples = sample_t.shape[0]
+    jf = record_feedback(p, y, hist, t, bp_h[jh], sample_t, jf)
+    while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
+        sample(p, y, command_path(p, bp_u[jd]), bp_h[jh], hist, sample_t[js], out[js])
+        js += 1
+    if t >= t_end - TIME_EPS_S:
+        return js, jf, t
+    t_next = next_event(t_end, bp_t, bp_t.shape[0], jd, p[P.delay_s], jh, sample_t, js, k_samples,
+                        p[P.feedback_delay_s], jf)
+    u[0] = command_path(p, bp_u[jd])
+    u[1] = bp_h[jh]
+    return js, jf, t_next
+
 @nb.njit(cache=True)
 def run_continuous(params: FloatArray, states: FloatArray, history: FloatArray, modes: IntArray, steps: FloatArray,
                    bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t0: float, t_end: float, sample_t: FloatArray,
@@ -171,8 +232,6 @@ def run_continuous(params: FloatArray, states: FloatArray, history: FloatArray, 
     out : numpy.ndarray
         Output block ``(instances, samples, outputs)``, filled.
     """
-    k_samples = sample_t.shape[0]
-    m = bp_t.shape[0]
     limits = np.empty((2, 4))
     u = np.empty(2)
     for i in range(params.shape[0]):
@@ -200,16 +259,9 @@ def run_continuous(params: FloatArray, states: FloatArray, history: FloatArray, 
         js = 0
         jf = 0
         while True:
-            jf = record_feedback(p, y, hist, t, bp_h[i, jh], sample_t, jf)
-            while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
-                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], hist, sample_t[js], out[i, js])
-                js += 1
+            js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, js, jf, sample_t, out[i], u)
             if t >= t_end - TIME_EPS_S:
                 break
-            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples,
-                                p[P.feedback_delay_s], jf)
-            u[0] = command_path(p, bp_u[i, jd])
-            u[1] = bp_h[i, jh]
             if t_next > t + TIME_EPS_S:
                 steps[i], _ = _loac_dopri5(p, u, y, t, t_next, steps[i], rtol, atol, h_max, limits, mode)
             t = t_next

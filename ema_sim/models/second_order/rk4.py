@@ -14,14 +14,12 @@ import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order.figure26 import (
-    command_path,
     max_step_s,
-    sample,
     servo,
     servo_input,
 )
 from ema_sim.models.second_order.figure29 import free_play_exact
-from ema_sim.models.second_order.loac import next_event, record_feedback, rhs
+from ema_sim.models.second_order.loac import at_stop, rhs
 from ema_sim.models.second_order.params import P, X
 from ema_sim.models.stages import TIME_EPS_S, limited_integrator, zoh_index
 
@@ -121,8 +119,6 @@ def run_rk4(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: F
     out : numpy.ndarray
         Output block ``(instances, samples, outputs)``, filled.
     """
-    k_samples = sample_t.shape[0]
-    m = bp_t.shape[0]
     for i in nb.prange(params.shape[0]):
         p = params[i]
         y = states[i]
@@ -141,16 +137,9 @@ def run_rk4(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: F
         js = 0
         jf = 0
         while True:
-            jf = record_feedback(p, y, hist, t, bp_h[i, jh], sample_t, jf)
-            while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
-                sample(p, y, command_path(p, bp_u[i, jd]), bp_h[i, jh], hist, sample_t[js], out[i, js])
-                js += 1
+            js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, js, jf, sample_t, out[i], u)
             if t >= t_end - TIME_EPS_S:
                 break
-            t_next = next_event(t_end, bp_t, m, jd, p[P.delay_s], jh, sample_t, js, k_samples,
-                                p[P.feedback_delay_s], jf)
-            u[0] = command_path(p, bp_u[i, jd])
-            u[1] = bp_h[i, jh]
             while t_next - t > TIME_EPS_S:
                 h = min(h_max, max_step_s(p), t_next - t)
                 s0 = smooth_piece(p, y, u)
