@@ -8,11 +8,13 @@ import json
 import math
 
 import pytest
+from identgen import make_record
 from scipy.stats import chi2
 
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.consistency import compare, compare_field, format_table, parse_report, read_reports
+from ema_sim.io.csv import write_csv
 from ema_sim.models.second_order import SecondOrderParams
 
 OWN = {"wn_rad_s": "wn_rad_s", "zeta": "zeta", "delay_s": "delay_s"}
@@ -298,3 +300,36 @@ def test_bad_input_is_one_line_and_exit_status_2(tmp_path, capsys, case, message
     assert len(err.strip().splitlines()) == 1
     assert "Traceback" not in err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_end_to_end_three_maneuvers_of_one_actuator_agree_and_a_different_actuator_is_named(tmp_path, capsys):
+    """``ema identify`` on three records of one LOAC actuator (delay and compliance undeclared; different
+    lengths, loads and noise draws), and on a fourth whose compliance is 10 % stiffer: the three agree on
+    every parameter, the fourth disagrees on the compliance only."""
+    paths = []
+    for seed, duration_s, load_inlb, compliance in ((1, 12.0, 600.0, 0.3), (2, 16.0, 900.0, 0.3),
+                                                    (3, 20.0, 400.0, 0.3), (4, 12.0, 600.0, 0.27)):
+        d = make_record({"time_delay": 0.006, "compliance": compliance}, seed=seed, duration_s=duration_s,
+                        load_amp_inlb=load_inlb)
+        csv = tmp_path / f"r{seed}.csv"
+        write_csv(csv, {k: getattr(d, k) for k in ("time_s", "command_deg", "position_deg", "surface_deg",
+                                                   "hinge_moment_inlb")}, d.metadata)
+        paths.append(str(tmp_path / f"r{seed}.json"))
+        assert main(["identify", str(csv), "--json", paths[-1], "-q"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "same.json"
+    assert main(["identify-consistency", *paths[:3], "--json", str(out)]) == 0
+    same = {f["field"]: f for f in _strict_loads(out.read_text(encoding="utf-8"))["fields"]}
+    assert set(same) == {"wn_rad_s", "zeta", "delay_s", "compliance_deg_per_kinlb"}
+    assert {f["verdict"] for f in same.values()} == {"agree"}
+    assert same["delay_s"]["weighted_mean"] == pytest.approx(0.006, rel=1e-3)
+    assert same["compliance_deg_per_kinlb"]["weighted_mean"] == pytest.approx(0.3, rel=1e-3)
+    assert main(["identify-consistency", *paths, "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    four = {f["field"]: f for f in _strict_loads(out.read_text(encoding="utf-8"))["fields"]}
+    assert four["compliance_deg_per_kinlb"]["verdict"] == "disagree"
+    assert all("r4.json" in p["reports"] for p in four["compliance_deg_per_kinlb"]["beyond"])
+    assert len(four["compliance_deg_per_kinlb"]["beyond"]) == 3
+    assert {four[f]["verdict"] for f in ("wn_rad_s", "zeta", "delay_s")} == {"agree"}
+    assert "disagree: compliance_deg_per_kinlb: beyond 3σ: " in text
