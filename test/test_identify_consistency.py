@@ -252,6 +252,23 @@ def test_cli_prints_the_table_writes_strict_json_and_exits_0_when_parameters_dis
     assert doc["verdicts"] == {"agree": 1, "disagree": 1, "undetermined": 1, "single": 1}
 
 
+def test_bare_nan_and_infinity_of_an_older_report_are_read_as_no_number_and_the_output_stays_strict(tmp_path,
+                                                                                                   capsys):
+    docs = agreeing()
+    docs[0]["final"]["uncertainty"]["zeta"] = math.inf
+    docs[1]["final"]["params"]["delay_s"] = math.nan
+    paths = _write(tmp_path, docs)
+    assert "Infinity" in (tmp_path / "m1.json").read_text(encoding="utf-8")
+    out = tmp_path / "c.json"
+    assert main(["identify-consistency", *paths, "--json", str(out)]) == 0
+    assert "undetermined: zeta: m1.json gives no finite uncertainty" in capsys.readouterr().out
+    fields = {f["field"]: f for f in _strict_loads(out.read_text(encoding="utf-8"))["fields"]}
+    assert fields["zeta"]["values"]["m1.json"]["sigma"] == "unbounded"
+    assert fields["delay_s"]["values"]["m2.json"]["value"] is None
+    assert fields["delay_s"]["reason"].startswith("m2.json gives no finite value")
+    assert fields["wn_rad_s"]["verdict"] == "agree"
+
+
 def test_reports_with_the_same_file_name_are_named_by_path(tmp_path):
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
@@ -270,6 +287,7 @@ def test_reports_with_the_same_file_name_are_named_by_path(tmp_path):
         ("not_a_report", "m2.json: not an `ema identify` report (no final object)"),
         ("a_list", "m2.json: not an `ema identify` report (a JSON list, not an object)"),
         ("channels", "reports of different channels cannot be compared: m1.json left_wing, m2.json right_rudder"),
+        ("units", "reports of different units cannot be compared: m1.json deg, m2.json mm"),
         ("sigma", "--sigma must be a positive number, got 0"),
     ],
 )
@@ -278,6 +296,8 @@ def test_bad_input_is_one_line_and_exit_status_2(tmp_path, capsys, case, message
     extra: list[str] = []
     if case == "channels":
         docs[1]["channel"] = "right_rudder"
+    elif case == "units":
+        docs[1]["unit"] = "mm"
     paths = _write(tmp_path, docs)
     if case == "missing":
         paths[1] = str(tmp_path / "nope.json")
