@@ -24,6 +24,13 @@ its floor, the diagnosis says what is left, for each such output:
   1 + 2Σρₑρₓ, Bartlett: smooth residuals and inputs carry few independent samples) rejects chance at
   1 in 1000.
 
+**Inside or outside the servo loop**: with both sensors, the share of the surface's error above its
+noise that the position's error carries too, sample for sample (what ``surface − position`` no longer
+holds beyond both floors). At half or more the error is the actuator's own motion, which the LVDT
+reads too, not the linkage or the surface's compliance outside the loop: a servo whose dynamics go
+beyond the fitted model's (motor and velocity loop, current limit, drive dead band, integral action),
+so the remedy is a higher-fidelity declared model (``hoac1``, ``hoad3``), not another surface effect.
+
 **The logger's timing**: a bench logger's sampling instants jitter about the uniform grid its stamps
 are straightened to, which adds ``rate × δt`` to the residual: white, but only while the output moves.
 The variance model ``σ² + σ_t²·rate²`` is fitted to the squared residual (σ_t the rms jitter); when
@@ -52,6 +59,7 @@ from scipy.stats import f as fisher
 
 from ema_sim.analysis.noise import autocorrelation, whiteness
 from ema_sim.analysis.series import Hold, holds
+from ema_sim.identify.declared import HIGH_ORDER
 from ema_sim.identify.effects import EFFECTS, FREE, Effect
 from ema_sim.identify.fit import Fit, block_covariance
 from ema_sim.identify.problem import Problem
@@ -80,6 +88,10 @@ FIR_HALF_S = 0.05
 SPLIT_SIGMA = 3.0
 SPLIT_RELATIVE = 0.2
 MODE_MATCH = 0.25
+IN_LOOP_SHARE = 0.5
+"""Share of the surface's residual the position's residual must explain to place the error inside the loop."""
+EQUIVALENT_EXCESS = 3.0
+"""Final rms over the noise floor beyond which the fitted parameters are said to be equivalents."""
 """A fitted frequency within this share of the frequency the residual still rings at stands in for that mode."""
 FAMILIES = ("motion", "direction", "load sign", "load against motion", "current")
 BY_FIELD: dict[str, Effect] = {f: e for e in reversed(EFFECTS) for f in e.owned}
@@ -142,9 +154,16 @@ class OutputDiagnosis:
     stop_windows: int = 0
     correlates: list[Correlate] = field(default_factory=list)
     """Inputs that explain more than chance, strongest first."""
+    actuator_share: float | None = None
+    """Share of this (surface) residual's variance the position's residual explains (None: not examined)."""
     jitter_s: float | None = None
     """Sampling-time jitter (rms, s) that, with the noise floor, explains the residual (None: it does not)."""
     stamp_scatter_s: float = 0.0
+
+    @property
+    def in_loop(self) -> bool:
+        """Most of this output's structured error is the actuator's motion, shared with the position."""
+        return self.structured and self.actuator_share is not None and self.actuator_share >= IN_LOOP_SHARE
 
     @property
     def structured(self) -> bool:
@@ -186,6 +205,9 @@ class OutputDiagnosis:
         if self.line_hz is not None:
             bits.append(f"ringing at {self.line_hz:.3g} Hz")
         bits += [f"correlates with the {c.name} ({100 * c.explained:.0f} %)" for c in self.correlates]
+        if self.in_loop:
+            bits.append(f"{100 * (self.actuator_share or 0.0):.0f} % of it is the position's own error (inside the "
+                        "servo loop)")
         return (f"residual not white on {self.output} (rms {self.rms:.3g}{u}, {self.rms / self.noise:.3g}× noise): "
                 + "; ".join(bits))
 
@@ -225,6 +247,11 @@ class OutputDiagnosis:
                         "of the residual's variance)")
         if not self.correlates:
             bits.append("no input explains it")
+        if self.in_loop:
+            share = 100 * (self.actuator_share or 0.0)
+            bits.append(f"the position's residual carries {share:.0f} % "
+                        "of it: the actuator's own motion is off (the LVDT reads it too), not the surface outside "
+                        "the loop")
         return (head + ", not white: " + "; ".join(bits)
                 + f" (structure above the Nyquist frequency, {nyquist_hz:.3g} Hz, cannot be seen)")
 
@@ -257,7 +284,8 @@ class Diagnosis:
             "outputs": {o: {"rms_deg": d.rms, "noise_deg": d.noise, "white": d.white, "structured": d.structured,
                             "parts": [p.as_dict() for p in d.parts], "median_hz": d.median_hz,
                             "above_bandwidth_share": d.above_bandwidth_share, "ring_hz": d.line_hz,
-                            "correlates": [c.as_dict() for c in d.correlates]}
+                            "correlates": [c.as_dict() for c in d.correlates],
+                            "position_residual_share": d.actuator_share}
                         for o, d in self.outputs.items()},
             "proxies": [{"parameter": p.name, "effect": p.effect, "first_half": p.first, "second_half": p.second,
                          "sigma_of_difference": p.sigma} for p in self.proxies],
@@ -436,6 +464,39 @@ def _lagged(x: FloatArray, fs: float) -> FloatArray:
     return np.column_stack(cols)
 
 
+def _what_the_structure_means(result: Identification, left: list[OutputDiagnosis]) -> list[str]:
+    """What a structured residual says about the fitted parameters and where the missing structure lies.
+
+    Parameters
+    ----------
+    result : Identification
+        The outcome.
+    left : list of OutputDiagnosis
+        The outputs whose residual is structured.
+    """
+    lines: list[str] = []
+    if not left:
+        return lines
+    worst = max(left, key=lambda d: d.rms / d.noise)
+    if worst.rms > EQUIVALENT_EXCESS * worst.noise:
+        line = (f"the fitted parameters are equivalents of a model that leaves {worst.rms / worst.noise:.3g}× the "
+                f"noise on {worst.output}: their uncertainties cover the noise, not the missing structure, so "
+                "another maneuver of the same actuator can give values that differ beyond them (fitted delays "
+                "hold the lags the model lacks)")
+        lines.append(line)
+    servo = (": the servo's dynamics go beyond the fitted model's (motor and velocity loop, current limit, drive "
+             "dead band, integral action)")
+    remedy = ("" if result.final_model else
+              servo + f"; the declared {result.model}'s own structure carries them, its second-order-family "
+              "equivalent does not" if result.model.strip().lower() in HIGH_ORDER else
+              servo + "; a higher-fidelity declared model (--model hoac1 or hoad3) is what it asks for, not another "
+              "surface effect")
+    lines += [f"{100 * (d.actuator_share or 0.0):.0f} % of the residual on {d.output} is the position's own error: "
+              f"the actuator's motion is off inside the servo loop, not the surface outside it{remedy}"
+              for d in left if d.in_loop]
+    return lines
+
+
 def _share(e: FloatArray, a: FloatArray) -> float:
     """Share of ``e``'s variance the least-squares combination of the columns of ``a`` explains."""
     e = e - np.mean(e)
@@ -445,6 +506,33 @@ def _share(e: FloatArray, a: FloatArray) -> float:
     coef, *_ = np.linalg.lstsq(a, e, rcond=None)
     fitted = a @ coef
     return float(np.dot(fitted, fitted) / tss)
+
+
+def _in_loop_share(surface: FloatArray, position: FloatArray, sigma_surface: float, sigma_position: float
+                   ) -> float | None:
+    """Share of the surface's error above its noise that the position's error carries too, sample for sample.
+
+    An error in the actuator's motion moves the surface one for one, so it cancels in ``surface − position``;
+    what stays there beyond both noise floors is the surface's own (linkage, compliance outside the loop).
+    The same share from a filter of the position's residual would credit any mode the command excites
+    in both, so the comparison is at zero lag with unit gain.
+
+    Parameters
+    ----------
+    surface : numpy.ndarray
+        The surface's residual (deg).
+    position : numpy.ndarray
+        The position's residual on the same samples (deg).
+    sigma_surface : float
+        The surface's noise floor (deg).
+    sigma_position : float
+        The position's noise floor (deg).
+    """
+    excess = float(np.mean(surface**2)) - sigma_surface**2
+    if excess <= 0.0:
+        return None
+    own = float(np.mean((surface - position) ** 2)) - sigma_surface**2 - sigma_position**2
+    return min(max(1.0 - own / excess, 0.0), 1.0)
 
 
 def _effective_samples(e: FloatArray, x: FloatArray) -> float:
@@ -552,6 +640,8 @@ def diagnose(result: Identification) -> Diagnosis:
             d.median_hz, d.above_bandwidth_share = _spectrum(e, sigma, fs, bw)
             d.line_hz, d.ring_windows, d.stop_windows = _ring(e, sigma, fs, *_stops(p))
             d.correlates = _correlates(e, {k: x[p.mask] for k, x in _regressors(p, fit).items()}, fs)
+            if o == "surface_deg" and "position_deg" in errors:
+                d.actuator_share = _in_loop_share(e, errors["position_deg"], sigma, p.sigma_deg["position_deg"])
         outputs[o] = d
     proxies = []
     own = set(result.baseline.free)
@@ -567,6 +657,9 @@ def diagnose(result: Identification) -> Diagnosis:
         added = ", ".join(s.effect for s in result.steps) or "nothing"
         text.append(f"what is left is structure no effect of the vocabulary explains (added: {added}); the "
                     "model's parameters are the best this structure allows, not a description of it")
+    for line in _what_the_structure_means(result, left):
+        text.append(line)
+        warnings.append(line)
     rings = [(d.output, d.line_hz) for d in left if d.line_hz is not None]
     seen = "; ".join(f"{o} rings at {f:.3g} Hz" for o, f in rings)
     for px in proxies:
