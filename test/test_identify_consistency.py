@@ -135,6 +135,19 @@ def test_missing_or_unbounded_uncertainty_and_not_determined_are_undetermined_na
     assert fields["wn_rad_s"].as_dict()["undetermined_in"] == ["r1.json"]
 
 
+def test_a_parameter_found_on_a_grid_is_undetermined_whatever_its_spacing_says():
+    """Kb and offset before a quantizer are grid-searched: ``identify`` gives the grid's spacing as their ±, and
+    the HOAD3 maneuvers' offsets differ by 42 such spacings. Listed in ``final.grid_searched``, they are not
+    compared as if that spacing were a standard deviation."""
+    docs = agreeing()
+    docs[1]["final"]["params"]["delay_s"] += 50 * SIGMA["delay_s"]
+    docs[1]["final"]["grid_searched"] = ["delay_s"]
+    fields = by_field(compare(parsed(docs)))
+    assert fields["delay_s"].verdict == "undetermined"
+    assert fields["delay_s"].reason.startswith("r1.json found it on a grid before the quantizer")
+    assert fields["wn_rad_s"].verdict == "agree"
+
+
 def test_a_field_in_one_report_only_is_single_and_not_compared():
     docs = agreeing()
     docs[1]["final"]["params"]["freq_hz"] = 29.0
@@ -353,3 +366,21 @@ def test_end_to_end_three_maneuvers_of_one_actuator_agree_and_a_different_actuat
     assert len(four["compliance_deg_per_kinlb"]["beyond"]) == 3
     assert {four[f]["verdict"] for f in ("wn_rad_s", "zeta", "delay_s")} == {"agree"}
     assert "disagree: compliance_deg_per_kinlb: beyond 3σ: " in text
+
+
+def test_identify_lists_the_parameters_it_found_on_a_grid():
+    """LOADA declares a 0.02° quantizer, so Kb and the offset are grid-searched: the report says so, and a
+    consistency check of two such reports calls them undetermined instead of comparing grid spacings."""
+    from identgen import make_record  # noqa: PLC0415
+
+    from ema_sim.config import load_channel  # noqa: PLC0415
+    from ema_sim.identify.report import to_json  # noqa: PLC0415
+    from ema_sim.identify.stepwise import identify  # noqa: PLC0415
+
+    data = make_record({"quantization": 0.02, "command_gain": 0.01}, seed=4, duration_s=10.0)
+    doc = to_json(identify(data, load_channel("left_wing"), "loada", max_effects=0), "q.csv")
+    assert sorted(doc["final"]["grid_searched"]) == ["kb", "offset_deg"]
+    assert "wn_rad_s" not in doc["final"]["grid_searched"]
+    fields = by_field(compare(parsed([doc, json.loads(json.dumps(doc))])))
+    assert fields["kb"].verdict == fields["offset_deg"].verdict == "undetermined"
+    assert fields["wn_rad_s"].verdict == "agree"

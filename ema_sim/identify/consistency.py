@@ -12,8 +12,9 @@ pairwise ``|Δ| / √(σa² + σb²)`` with the pair named, and a verdict:
 ``disagree``
     some pair beyond it (the pairs and their distance in sigma are listed);
 ``undetermined``
-    at least one report gives no finite, positive uncertainty for it, or lists it as not determined
-    by its record (those reports are named; the others are still compared among themselves);
+    at least one report gives no finite, positive uncertainty for it, lists it as not determined by its
+    record, or found it on a grid (``final.grid_searched``: a parameter before the quantizer, whose ± is
+    the grid's spacing); those reports are named, the others are still compared among themselves;
 ``single``
     fitted in one report only: listed, not compared.
 
@@ -83,6 +84,8 @@ class IdentifyReport:
         Model fields the report says its record does not determine.
     effects : tuple of tuple of str
         ``(effect, where)`` of every effect added, in order.
+    grid_searched : tuple of str
+        Model fields found by a grid search before the quantizer: their ± is the grid's spacing, no statistic.
     rms_over_noise : dict
         Output → final rms over the noise floor (inf when the rms is unbounded).
     """
@@ -99,6 +102,7 @@ class IdentifyReport:
     not_determined: tuple[str, ...]
     effects: tuple[tuple[str, str], ...]
     rms_over_noise: dict[str, float]
+    grid_searched: tuple[str, ...] = ()
 
     @property
     def structured(self) -> dict[str, float]:
@@ -382,6 +386,8 @@ def parse_report(doc: Any, source: str, name: str | None = None) -> IdentifyRepo
         sigmas[field] = math.inf if math.isnan(s) else abs(s / factor)
     nd = final.get("not_determined") or []
     not_determined = tuple(fields.get(str(k), str(k)) for k in nd) if isinstance(nd, list) else ()
+    gs = final.get("grid_searched") or []
+    grid_searched = tuple(fields.get(str(k), str(k)) for k in gs) if isinstance(gs, list) else ()
     added = doc.get("added") or []
     effects = tuple((str(a.get("effect", "?")), str(a.get("where", "")))
                     for a in added if isinstance(a, Mapping)) if isinstance(added, list) else ()
@@ -389,7 +395,7 @@ def parse_report(doc: Any, source: str, name: str | None = None) -> IdentifyRepo
         name=name or source, path=source, data=str(doc.get("data", "")), channel=channel,
         unit=str(doc.get("unit", "deg")), model=str(final.get("model", "")), keys=keys, values=values,
         sigmas=sigmas, not_determined=not_determined, effects=effects,
-        rms_over_noise=_rms_over_noise(doc, final),
+        rms_over_noise=_rms_over_noise(doc, final), grid_searched=grid_searched,
     )
 
 
@@ -466,7 +472,8 @@ def read_reports(paths: Sequence[str | Path]) -> list[IdentifyReport]:
 
 def _entry(r: IdentifyReport, field: str) -> Entry:
     v, s = r.values[field], r.sigmas[field]
-    ok = math.isfinite(v) and math.isfinite(s) and s > 0.0 and field not in r.not_determined
+    ok = (math.isfinite(v) and math.isfinite(s) and s > 0.0 and field not in r.not_determined
+          and field not in r.grid_searched)
     return Entry(r.name, r.keys[field], v, s, ok)
 
 
@@ -477,6 +484,9 @@ def _undetermined_why(entries: Sequence[Entry], reports: Mapping[str, IdentifyRe
             continue
         if field in reports[e.report].not_determined:
             parts.append(f"{e.report} says its record does not determine it")
+        elif field in reports[e.report].grid_searched:
+            parts.append(f"{e.report} found it on a grid before the quantizer (its ± is the grid's spacing, not a "
+                         "statistical uncertainty)")
         elif not math.isfinite(e.value):
             parts.append(f"{e.report} gives no finite value")
         else:
