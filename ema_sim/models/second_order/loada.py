@@ -5,7 +5,11 @@
   integrators, the position feedback taken one frame ahead of where it belongs, and 200 Hz. It
   responds to a step sooner than LOAC does, the lead that over-predicted flight 1's margins.
 
-Each step runs the stages in diagram order, each lag by its exact zero-order-hold gain.
+Each step runs the stages in diagram order, each lag by its exact zero-order-hold gain. The stages
+identification adds to figure 26 are stepped so the fixed rate cannot destabilise them: stage 9's
+velocity loop by its exact step (:func:`~.figure26.drive_step`; Euler on a 300 Hz loop
+diverges at 800 Hz), the linkage mode semi-implicitly; figure 26's own stages are Euler's, as the
+report's LOADA is.
 """
 
 from __future__ import annotations
@@ -83,7 +87,7 @@ def make_euler(backward: bool) -> Kernel:
             in_loop = p[P.feedback_filter_in_loop] > 0.5
             fb_delay = p[P.feedback_delay_s]
             hm = bp_h[i, zoh_index(bp_t, t0, 0)]
-            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm)
+            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt)
             fb_prev = x[X.feedback_lag_deg]
             for k in range(n_steps + 1):
                 t = t0 + k * dt
@@ -106,7 +110,7 @@ def make_euler(backward: bool) -> Kernel:
                 # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
                 pos, rate = x[X.position_deg], x[X.rate_dps]
                 a, flags, _, integrand, drive_accel = servo(p, x[X.command_lag_deg],
-                                                            pos + dt * rate if backward else pos, rate, x, hm)
+                                                            pos + dt * rate if backward else pos, rate, x, hm, dt)
                 pos, rate = euler_pair(pos, rate, a, dt, backward)
                 x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
                                                                            p[P.position_max_deg])
