@@ -57,6 +57,7 @@ from ema_sim.models.stages import (
     TWO_PI,
     dead_zone,
     jit,
+    oscillator_step,
     quantize,
 )
 
@@ -479,7 +480,7 @@ def free_play_subsystem(p: FloatArray) -> bool:
 
 
 @jit
-def linkage_spring(p: FloatArray, e: float) -> float:
+def linkage_spring(p: FloatArray, e: float) -> tuple[float, int]:
     """Stage 17's spring, as the static deflection its force balances: stage 16's curve inverted.
 
     Inside the free play (stage 15) it carries nothing; beyond it, the deflection up to the knee's,
@@ -495,19 +496,64 @@ def linkage_spring(p: FloatArray, e: float) -> float:
 
     Returns
     -------
-    float
+    deflection : float
         The static deflection the spring's force would hold (deg).
+    piece : int
+        The curve's segment: 0 in the free play, 1 below the knee, 2 above it (:func:`linkage_slope`).
     """
-    e_dz, _ = dead_zone(e, 0.5 * p[P.free_play_deg])
+    e_dz, side = dead_zone(e, 0.5 * p[P.free_play_deg])
+    if side == 0 and p[P.free_play_deg] > 0.0:
+        return e_dz, 0
     c = p[P.compliance_deg_per_kinlb]
     knee = p[P.compliance_knee_inlb]
     if c <= 0.0 or knee == math.inf:
-        return e_dz
+        return e_dz, 1
     a = abs(e_dz)
     ck = c * knee * 1e-3
     if a <= ck:
-        return e_dz
-    return math.copysign(ck + c * (a - ck) / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6), e_dz)
+        return e_dz, 1
+    return math.copysign(ck + c * (a - ck) / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6), e_dz), 2
+
+
+@jit
+def linkage_slope(p: FloatArray, piece: int) -> float:
+    """The slope of :func:`linkage_spring` on one of its segments.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    piece : int
+        0 (free play), 1 (below the knee) or 2 (above it).
+
+    Returns
+    -------
+    float
+        d(deflection)/de.
+    """
+    if piece == 0:
+        return 0.0
+    if piece == 1:
+        return 1.0
+    return float(p[P.compliance_deg_per_kinlb] / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6))
+
+
+@jit
+def linkage_damping(p: FloatArray) -> float:
+    """Stage 17's damping ``2ζω + ω²τh`` (1/s): the damper and any hysteretic damping's viscous equivalent.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    float
+        1/s.
+    """
+    w0 = TWO_PI * p[P.linkage_freq_hz]
+    return float(2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p))
 
 
 @jit
@@ -535,10 +581,75 @@ def linkage_accel(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuat
         d/dt of the linkage rate (°/s²).
     """
     w0 = TWO_PI * p[P.linkage_freq_hz]
-    damping = 2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p)
     target = surface_compliance(p, hinge_moment_inlb)
-    return float(w0 * w0 * (target - linkage_spring(p, y[X.linkage_deg])) - damping * y[X.linkage_rate_dps]
-            - actuator_accel)
+    spring, _ = linkage_spring(p, y[X.linkage_deg])
+    return float(w0 * w0 * (target - spring) - linkage_damping(p) * y[X.linkage_rate_dps] - actuator_accel)
+
+
+@jit
+def linkage_steps(p: FloatArray, dt: float) -> FloatArray:
+    """Stage 17's exact steps over ``dt``, one row per spring segment: ``(φ00, φ01, φ10, φ11, γ0, k)``.
+
+    On each segment of :func:`linkage_spring` the mode is linear, ``ë = −k·e − c·ė + f`` with
+    ``k = ω²·slope``, so its zero-order-hold step (:func:`~ema_sim.models.stages.oscillator_step`) is
+    exact for the inputs held over the step and stable at any rate; computed once per run.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    dt : float
+        The fixed step (s).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(3, 6)``.
+    """
+    w0 = TWO_PI * p[P.linkage_freq_hz]
+    damping = linkage_damping(p)
+    steps = np.empty((3, 6))
+    for piece in range(3):
+        k = w0 * w0 * linkage_slope(p, piece)
+        steps[piece, 0], steps[piece, 1], steps[piece, 2], steps[piece, 3], steps[piece, 4] = oscillator_step(
+            k, damping, dt)
+        steps[piece, 5] = k
+    return steps
+
+
+@jit
+def linkage_step(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuator_accel: float,
+                 steps: FloatArray) -> tuple[float, float]:
+    """Stage 17 over one fixed step: the deflection and its rate after it (deg, °/s).
+
+    The segment the deflection starts on holds for the step, the hinge moment and the actuator's
+    acceleration are held: its affine forcing ``f = ë + k·e + c·ė`` goes through the exact step.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+    actuator_accel : float
+        The actuator's acceleration over the step (°/s²).
+    steps : numpy.ndarray
+        :func:`linkage_steps`.
+
+    Returns
+    -------
+    deflection : float
+        deg.
+    rate : float
+        °/s.
+    """
+    e, v = y[X.linkage_deg], y[X.linkage_rate_dps]
+    _, piece = linkage_spring(p, e)
+    s = steps[piece]
+    f = linkage_accel(p, y, hinge_moment_inlb, actuator_accel) + s[5] * e + linkage_damping(p) * v
+    return s[0] * e + s[1] * v + s[4] * f, s[2] * e + s[3] * v + s[1] * f
 
 
 @jit

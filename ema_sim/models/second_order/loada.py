@@ -8,8 +8,8 @@
 Each step runs the stages in diagram order, each lag by its exact zero-order-hold gain. The stages
 identification adds to figure 26 are stepped so the fixed rate cannot destabilise them: stage 9's
 velocity loop by its exact step (:func:`~.figure26.drive_step`; Euler on a 300 Hz loop
-diverges at 800 Hz), the linkage mode semi-implicitly; figure 26's own stages are Euler's, as the
-report's LOADA is.
+diverges at 800 Hz), the linkage mode by its exact step on each segment of its spring
+(:func:`~.figure26.linkage_step`); figure 26's own stages are Euler's, as the report's LOADA is.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numba as nb
+import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order.figure26 import (
@@ -25,7 +26,8 @@ from ema_sim.models.second_order.figure26 import (
     free_play_subsystem,
     history_read,
     history_write,
-    linkage_accel,
+    linkage_step,
+    linkage_steps,
     lvdt,
     servo,
     surface_compliance,
@@ -84,6 +86,7 @@ def make_euler(backward: bool) -> Kernel:
             half = 0.5 * p[P.free_play_deg] if free_play_subsystem(p) else 0.0
             fp_acc_per_inlb = free_play_accel(1.0, p[P.surface_inertia_inlbs2])
             linkage = p[P.linkage_freq_hz] > 0.0
+            link_steps = linkage_steps(p, dt) if linkage else np.empty((3, 6))
             in_loop = p[P.feedback_filter_in_loop] > 0.5
             fb_delay = p[P.feedback_delay_s]
             hm = bp_h[i, zoh_index(bp_t, t0, 0)]
@@ -116,13 +119,12 @@ def make_euler(backward: bool) -> Kernel:
                                                                            p[P.position_max_deg])
                 x[X.integral_deg_s] += dt * integrand
                 x[X.drive_rate_dps] += dt * drive_accel
-                # stage 15: free play; 17: the linkage mode (semi-implicit, stable for the oscillator)
+                # stage 15: free play; 17: the linkage mode (its exact step on the spring's segment)
                 x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
                     x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
                 if linkage:
-                    accel = linkage_accel(p, x, hm, drive_accel if in_loop else a)
-                    x[X.linkage_deg], x[X.linkage_rate_dps] = euler_pair(x[X.linkage_deg], x[X.linkage_rate_dps],
-                                                                         accel, dt, True)
+                    x[X.linkage_deg], x[X.linkage_rate_dps] = linkage_step(p, x, hm, drive_accel if in_loop else a,
+                                                                           link_steps)
                 # stages 12-13: LVDT and its feedback lag (gain 1 when off); 16: compliance
                 fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
                 x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm), g_fb)
