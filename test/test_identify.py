@@ -253,7 +253,7 @@ def test_from_a_suite_bag_hoad3_declared_loada(tmp_path, capsys):
     assert after["position_deg"] < 0.5 * before["position_deg"]
     assert after["surface_deg"] < 0.8 * before["surface_deg"]
     # the declared LOADA at 800 Hz with the fitted stages (in-loop filter, linkage): bounded, an error figure
-    # well under the fit's residual (measured 0.0118° / 0.0113° against 0.0754° / 0.0418°; issue 13)
+    # well under the fit's residual (measured 0.0118° / 0.0116° against 0.0754° / 0.0418°; issue 13)
     impl = report["declared_implementation_error_deg"]
     assert set(impl) == {"position_deg", "surface_deg"}
     assert all(impl[o] < 0.5 * after[o] for o in impl), (impl, after)
