@@ -8,6 +8,7 @@ COMMANDS: tuple[str, ...] = (
     "compare",
     "analyze",
     "identify",
+    "identify_consistency",
     "loes",
     "acceptance",
     "bench",

@@ -217,6 +217,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             "correlation": {names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
                             for a, row in ident.correlation.items()},
             "not_determined": [names[f] for f in ident.not_determined],
+            "grid_searched": [names[f] for f in final.free if final.jac_free and f not in final.jac_free],
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
         },
