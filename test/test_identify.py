@@ -287,7 +287,10 @@ def test_from_a_suite_bag_hoad3_declared_loada(tmp_path, capsys):
     before, after = report["baseline"]["rms_deg"], report["final"]["rms_deg"]
     assert after["position_deg"] < 0.5 * before["position_deg"]
     assert after["surface_deg"] < 0.8 * before["surface_deg"]
-    # the declared LOADA at 800 Hz: an error figure, or (when the fitted stages make it diverge) a warning saying so
-    diverged = [o for o, v in report["declared_implementation_error_deg"].items() if v == "unbounded"]
-    assert not diverged or any("diverges on this record" in w for w in report["warnings"])
+    # the declared LOADA at 800 Hz with the fitted stages (in-loop filter, linkage): bounded, an error figure
+    # well under the fit's residual (measured 0.0118° / 0.0116° against 0.0754° / 0.0418°; issue 13)
+    impl = report["declared_implementation_error_deg"]
+    assert set(impl) == {"position_deg", "surface_deg"}
+    assert all(impl[o] < 0.5 * after[o] for o in impl), (impl, after)
+    assert not any("diverges on this record" in w for w in report["warnings"])
     assert "loada" in capsys.readouterr().out

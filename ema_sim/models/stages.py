@@ -181,6 +181,57 @@ def lag_gain(corner_hz: float, dt: float) -> float:
 
 
 @jit
+def oscillator_step(stiffness: float, damping: float, dt: float) -> tuple[float, float, float, float, float]:
+    """Exact zero-order-hold step of ``ë = −k·e − c·ė + f`` over ``dt`` with f held (k ≥ 0, c ≥ 0).
+
+    ``e ← φ00·e + φ01·ė + γ0·f`` and ``ė ← φ10·e + φ11·ė + φ01·f``: the matrix exponential in closed
+    form, stable at any step (an explicit Euler step of the same element diverges once ω·dt or c·dt
+    nears 2).
+
+    Parameters
+    ----------
+    stiffness : float
+        k (1/s²).
+    damping : float
+        c (1/s).
+    dt : float
+        The step (s).
+
+    Returns
+    -------
+    tuple of float
+        ``(φ00, φ01, φ10, φ11, γ0)``.
+    """
+    mu = -0.5 * damping
+    d2 = mu * mu - stiffness
+    x2 = abs(d2) * dt * dt
+    if x2 < 1e-6:  # (nearly) critical: the series of cosh/cos and sinh/sin about 0
+        sign = 1.0 if d2 >= 0.0 else -1.0
+        em = math.exp(mu * dt)
+        c_t = em * (1.0 + sign * x2 / 2.0 + x2 * x2 / 24.0)
+        s_t = em * dt * (1.0 + sign * x2 / 6.0 + x2 * x2 / 120.0)
+    elif d2 > 0.0:  # real roots μ ± d ≤ 0: from their exponentials, so a heavy damper cannot overflow
+        d = math.sqrt(d2)
+        e1 = math.exp((mu + d) * dt)
+        e2 = math.exp((mu - d) * dt)
+        c_t = 0.5 * (e1 + e2)
+        s_t = 0.5 * (e1 - e2) / d
+    else:
+        d = math.sqrt(-d2)
+        em = math.exp(mu * dt)
+        c_t = em * math.cos(d * dt)
+        s_t = em * math.sin(d * dt) / d
+    phi11 = c_t + mu * s_t
+    if stiffness > 0.0:
+        gamma0 = (1.0 - phi11 - damping * s_t) / stiffness
+    elif damping > 0.0:
+        gamma0 = (dt - s_t) / damping
+    else:
+        gamma0 = 0.5 * dt * dt
+    return c_t - mu * s_t, s_t, -stiffness * s_t, phi11, gamma0
+
+
+@jit
 def first_order_lag(y: float, u: float, gain: float) -> float:
     """One step of a first-order lag ``y ← y + gain·(u − y)`` (see :func:`lag_gain`).
 

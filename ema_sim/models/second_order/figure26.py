@@ -57,6 +57,7 @@ from ema_sim.models.stages import (
     TWO_PI,
     dead_zone,
     jit,
+    oscillator_step,
     quantize,
 )
 
@@ -270,7 +271,39 @@ def velocity_demand(p: FloatArray, u_in: float, x: float, integral_deg_s: float,
 
 
 @jit
-def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v_drive: float) -> tuple[float, int]:
+def drive_step(p: FloatArray, dt: float) -> tuple[float, float]:
+    """Stage 9's velocity loop over a fixed step: its gain and how far its mean rate leads its start.
+
+    In continuous time the gain is ωv and there is no step. Over a step ``dt`` with the command c
+    held, ``dv/dt = ωv·(c − v)`` moves v by ``g·(c − v)``, ``g = 1 − e^(−ωv·dt)``, and averages
+    ``v + (dt/g − 1/ωv)·Δv/dt`` over the step: the gain ``g/dt`` is that exact step's (Euler with ωv
+    itself diverges once ωv·dt > 2: a 300 Hz loop beyond 254 Hz of it at 800 Hz), and the rate loop
+    it drives integrates the mean (exact below the current limit), not the rate a step late.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    dt : float
+        The fixed step (s); 0 in continuous time.
+
+    Returns
+    -------
+    gain : float
+        rad/s.
+    lead : float
+        s: the mean rate over the step is the rate at its start plus ``lead·dv/dt``.
+    """
+    wv = TWO_PI * p[P.velocity_loop_hz]
+    if dt <= 0.0:
+        return wv, 0.0
+    g = -math.expm1(-wv * dt)
+    return g / dt, dt / g - 1.0 / wv
+
+
+@jit
+def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v_drive: float,
+                          wv: float) -> tuple[float, int]:
     """Stage 9: the drive's velocity loop, its acceleration saturated at the current limit.
 
     ``dv/dt = sat(ωv·(command − v)) + ωv·droop``: a held load shifts the rate it settles at by the
@@ -286,6 +319,8 @@ def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v
         The load's droop rate (°/s).
     v_drive : float
         The drive's rate (°/s).
+    wv : float
+        The velocity loop's gain (rad/s; :func:`drive_step`).
 
     Returns
     -------
@@ -294,7 +329,6 @@ def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v
     side : int
         +1/−1 on the current limit, 0 below it.
     """
-    wv = TWO_PI * p[P.velocity_loop_hz]
     acc = wv * (command_dps - v_drive)
     limit = p[P.accel_limit_dps2]
     side = 0
@@ -308,8 +342,8 @@ def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v
 
 
 @jit
-def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray,
-          hinge_moment_inlb: float) -> tuple[float, int, int, float, float]:
+def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray, hinge_moment_inlb: float,
+          dt: float = 0.0) -> tuple[float, int, int, float, float]:
     """Stages 5–10: the actuator's acceleration, its limit flags, its smooth piece and two state rates.
 
     Parameters
@@ -326,6 +360,8 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray,
         State (the integral and the drive's rate).
     hinge_moment_inlb : float
         Hinge moment (in·lb).
+    dt : float
+        The fixed step (s) stage 9 is discretised for; 0 in continuous time.
 
     Returns
     -------
@@ -342,8 +378,11 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray,
     """
     vc, droop, flags, piece, integrand = velocity_demand(p, u_in, x, y[X.integral_deg_s], hinge_moment_inlb)
     if drive_on(p):
-        drive_accel, cside = current_limited_drive(p, vc, droop, y[X.drive_rate_dps])
+        wv, lead = drive_step(p, dt)
+        drive_accel, cside = current_limited_drive(p, vc, droop, y[X.drive_rate_dps], wv)
         v_drive = y[X.drive_rate_dps]
+        if lead > 0.0:
+            v_drive += lead * drive_accel
         if cside != 0:
             flags |= FLAG_CURRENT
             integrand = 0.0
@@ -441,7 +480,7 @@ def free_play_subsystem(p: FloatArray) -> bool:
 
 
 @jit
-def linkage_spring(p: FloatArray, e: float) -> float:
+def linkage_spring(p: FloatArray, e: float) -> tuple[float, int]:
     """Stage 17's spring, as the static deflection its force balances: stage 16's curve inverted.
 
     Inside the free play (stage 15) it carries nothing; beyond it, the deflection up to the knee's,
@@ -457,19 +496,64 @@ def linkage_spring(p: FloatArray, e: float) -> float:
 
     Returns
     -------
-    float
+    deflection : float
         The static deflection the spring's force would hold (deg).
+    piece : int
+        The curve's segment: 0 in the free play, 1 below the knee, 2 above it (:func:`linkage_slope`).
     """
-    e_dz, _ = dead_zone(e, 0.5 * p[P.free_play_deg])
+    e_dz, side = dead_zone(e, 0.5 * p[P.free_play_deg])
+    if side == 0 and p[P.free_play_deg] > 0.0:
+        return e_dz, 0
     c = p[P.compliance_deg_per_kinlb]
     knee = p[P.compliance_knee_inlb]
     if c <= 0.0 or knee == math.inf:
-        return e_dz
+        return e_dz, 1
     a = abs(e_dz)
     ck = c * knee * 1e-3
     if a <= ck:
-        return e_dz
-    return math.copysign(ck + c * (a - ck) / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6), e_dz)
+        return e_dz, 1
+    return math.copysign(ck + c * (a - ck) / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6), e_dz), 2
+
+
+@jit
+def linkage_slope(p: FloatArray, piece: int) -> float:
+    """The slope of :func:`linkage_spring` on one of its segments.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    piece : int
+        0 (free play), 1 (below the knee) or 2 (above it).
+
+    Returns
+    -------
+    float
+        d(deflection)/de.
+    """
+    if piece == 0:
+        return 0.0
+    if piece == 1:
+        return 1.0
+    return float(p[P.compliance_deg_per_kinlb] / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6))
+
+
+@jit
+def linkage_damping(p: FloatArray) -> float:
+    """Stage 17's damping ``2ζω + ω²τh`` (1/s): the damper and any hysteretic damping's viscous equivalent.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    float
+        1/s.
+    """
+    w0 = TWO_PI * p[P.linkage_freq_hz]
+    return float(2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p))
 
 
 @jit
@@ -497,10 +581,75 @@ def linkage_accel(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuat
         d/dt of the linkage rate (°/s²).
     """
     w0 = TWO_PI * p[P.linkage_freq_hz]
-    damping = 2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p)
     target = surface_compliance(p, hinge_moment_inlb)
-    return float(w0 * w0 * (target - linkage_spring(p, y[X.linkage_deg])) - damping * y[X.linkage_rate_dps]
-            - actuator_accel)
+    spring, _ = linkage_spring(p, y[X.linkage_deg])
+    return float(w0 * w0 * (target - spring) - linkage_damping(p) * y[X.linkage_rate_dps] - actuator_accel)
+
+
+@jit
+def linkage_steps(p: FloatArray, dt: float) -> FloatArray:
+    """Stage 17's exact steps over ``dt``, one row per spring segment: ``(φ00, φ01, φ10, φ11, γ0, k)``.
+
+    On each segment of :func:`linkage_spring` the mode is linear, ``ë = −k·e − c·ė + f`` with
+    ``k = ω²·slope``, so its zero-order-hold step (:func:`~ema_sim.models.stages.oscillator_step`) is
+    exact for the inputs held over the step and stable at any rate; computed once per run.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    dt : float
+        The fixed step (s).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(3, 6)``.
+    """
+    w0 = TWO_PI * p[P.linkage_freq_hz]
+    damping = linkage_damping(p)
+    steps = np.empty((3, 6))
+    for piece in range(3):
+        k = w0 * w0 * linkage_slope(p, piece)
+        steps[piece, 0], steps[piece, 1], steps[piece, 2], steps[piece, 3], steps[piece, 4] = oscillator_step(
+            k, damping, dt)
+        steps[piece, 5] = k
+    return steps
+
+
+@jit
+def linkage_step(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuator_accel: float,
+                 steps: FloatArray) -> tuple[float, float]:
+    """Stage 17 over one fixed step: the deflection and its rate after it (deg, °/s).
+
+    The segment the deflection starts on holds for the step, the hinge moment and the actuator's
+    acceleration are held: its affine forcing ``f = ë + k·e + c·ė`` goes through the exact step.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+    y : numpy.ndarray
+        State.
+    hinge_moment_inlb : float
+        Hinge moment (in·lb).
+    actuator_accel : float
+        The actuator's acceleration over the step (°/s²).
+    steps : numpy.ndarray
+        :func:`linkage_steps`.
+
+    Returns
+    -------
+    deflection : float
+        deg.
+    rate : float
+        °/s.
+    """
+    e, v = y[X.linkage_deg], y[X.linkage_rate_dps]
+    _, piece = linkage_spring(p, e)
+    s = steps[piece]
+    f = linkage_accel(p, y, hinge_moment_inlb, actuator_accel) + s[5] * e + linkage_damping(p) * v
+    return s[0] * e + s[1] * v + s[4] * f, s[2] * e + s[3] * v + s[1] * f
 
 
 @jit

@@ -5,7 +5,11 @@
   integrators, the position feedback taken one frame ahead of where it belongs, and 200 Hz. It
   responds to a step sooner than LOAC does, the lead that over-predicted flight 1's margins.
 
-Each step runs the stages in diagram order, each lag by its exact zero-order-hold gain.
+Each step runs the stages in diagram order, each lag by its exact zero-order-hold gain. The stages
+identification adds to figure 26 are stepped so the fixed rate cannot destabilise them: stage 9's
+velocity loop by its exact step (:func:`~.figure26.drive_step`; Euler on a 300 Hz loop
+diverges at 800 Hz), the linkage mode by its exact step on each segment of its spring
+(:func:`~.figure26.linkage_step`); figure 26's own stages are Euler's, as the report's LOADA is.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numba as nb
+import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order.figure26 import (
@@ -21,7 +26,8 @@ from ema_sim.models.second_order.figure26 import (
     free_play_subsystem,
     history_read,
     history_write,
-    linkage_accel,
+    linkage_step,
+    linkage_steps,
     lvdt,
     servo,
     surface_compliance,
@@ -80,10 +86,11 @@ def make_euler(backward: bool) -> Kernel:
             half = 0.5 * p[P.free_play_deg] if free_play_subsystem(p) else 0.0
             fp_acc_per_inlb = free_play_accel(1.0, p[P.surface_inertia_inlbs2])
             linkage = p[P.linkage_freq_hz] > 0.0
+            link_steps = linkage_steps(p, dt) if linkage else np.empty((3, 6))
             in_loop = p[P.feedback_filter_in_loop] > 0.5
             fb_delay = p[P.feedback_delay_s]
             hm = bp_h[i, zoh_index(bp_t, t0, 0)]
-            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm)
+            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt)
             fb_prev = x[X.feedback_lag_deg]
             for k in range(n_steps + 1):
                 t = t0 + k * dt
@@ -106,19 +113,18 @@ def make_euler(backward: bool) -> Kernel:
                 # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
                 pos, rate = x[X.position_deg], x[X.rate_dps]
                 a, flags, _, integrand, drive_accel = servo(p, x[X.command_lag_deg],
-                                                            pos + dt * rate if backward else pos, rate, x, hm)
+                                                            pos + dt * rate if backward else pos, rate, x, hm, dt)
                 pos, rate = euler_pair(pos, rate, a, dt, backward)
                 x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
                                                                            p[P.position_max_deg])
                 x[X.integral_deg_s] += dt * integrand
                 x[X.drive_rate_dps] += dt * drive_accel
-                # stage 15: free play; 17: the linkage mode (semi-implicit, stable for the oscillator)
+                # stage 15: free play; 17: the linkage mode (its exact step on the spring's segment)
                 x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
                     x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
                 if linkage:
-                    accel = linkage_accel(p, x, hm, drive_accel if in_loop else a)
-                    x[X.linkage_deg], x[X.linkage_rate_dps] = euler_pair(x[X.linkage_deg], x[X.linkage_rate_dps],
-                                                                         accel, dt, True)
+                    x[X.linkage_deg], x[X.linkage_rate_dps] = linkage_step(p, x, hm, drive_accel if in_loop else a,
+                                                                           link_steps)
                 # stages 12-13: LVDT and its feedback lag (gain 1 when off); 16: compliance
                 fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
                 x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm), g_fb)
