@@ -42,12 +42,14 @@ from scipy.stats import chi2
 
 from ema_sim.config import load_channel
 from ema_sim.errors import DataError, SpecError
+from ema_sim.identify.diagnosis import EQUIVALENT_EXCESS
 from ema_sim.identify.effects import KEYS
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
-STRUCTURE_FACTOR = 3.0
-"""A final rms above this many times an output's noise floor: the model leaves structure (issue 13's ≤ 3×)."""
+STRUCTURE_FACTOR = EQUIVALENT_EXCESS
+"""A final rms above this many times an output's noise floor: the model leaves structure, and the report itself
+already calls its parameters equivalents (the diagnosis's one threshold)."""
 
 VERDICTS = ("agree", "disagree", "undetermined", "single")
 """Every verdict :func:`compare` gives, in the order the summary counts them."""
