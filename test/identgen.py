@@ -122,16 +122,17 @@ def make_record(
 
 
 def hoad3_record(*, seed: int = 0, duration_s: float = 30.0, surface_noise_deg: float = 0.002,
-                 load_amp_inlb: float = 600.0, channel: str = "left_wing") -> MeasuredData:
+                 load_amp_inlb: float = 600.0, channel: str = "left_wing", **overrides: float) -> MeasuredData:
     """The same test sequence run on HOAD3 (its own LVDT noise and 5 mV quantization), with an external
-    surface sensor's noise added: the 'real actuator' a second-order model is identified against."""
+    surface sensor's noise added: the 'real actuator' a second-order model is identified against.
+    ``overrides`` are HOAD3 parameters other than its channel's (an actuator off its declared values)."""
     from ema_sim.models import create  # noqa: PLC0415 - only this generator needs the high-order family
 
     rng = np.random.default_rng(seed)
     frames = np.arange(round(duration_s / FRAME_S)) * FRAME_S
     cmd = command_sequence(frames, duration_s)
     hm = load_sequence(frames, load_amp_inlb)
-    model = create("hoad3", channel, seed=seed)
+    model = create("hoad3", channel, seed=seed, **overrides)
     model.trim(cmd[0], hm[0])
     t = np.arange(round(duration_s * 1000.0)) / 1000.0
     rec = model.run(frames, cmd, hm, sample_times=t, end_s=float(t[-1]))

@@ -284,6 +284,35 @@ def test_hoad3_delays_are_4_ms_to_motion_and_2_ms_more_to_feedback():
     assert first(rec.position_deg) - motion == pytest.approx(0.002, abs=1e-4)
 
 
+@pytest.mark.parametrize("which", ["command_delay_s", "feedback_delay_s"])
+def test_hoad3_delays_between_two_steps_blend_them(which):
+    """A delay between two of the 10 kHz steps gives the outputs between those of the two whole-step delays,
+    in proportion (the mean over the step of the delayed input), so identification can fit it by least squares;
+    a whole number of steps is the plain delay. On a 4.3° step, 0.03 ms past a whole step moves the response 30 %
+    of the way to the next step's."""
+    t = frames(0.6)
+    samples = 0.49 + np.arange(0, 3000) / 100_000.0
+    cmd = np.where(t >= 0.5, 4.3, 0.0)
+
+    def run(delay):
+        model = build("hoad3", quantization_v=0.0, **{which: delay})
+        model.trim(0.0)
+        rec = model.run(t, cmd, sample_times=samples, end_s=0.6)
+        return rec.position_deg[0], rec.surface_deg[0]
+
+    base = 0.004 if which == "command_delay_s" else 0.002
+    lo, hi, mid = run(base), run(base + 1e-4), run(base + 0.3e-4)
+    column = 0 if which == "feedback_delay_s" else 1  # the feedback delay moves only the LVDT reading
+    moving = samples < 0.53  # the first 30 ms of the response, before the drive's dead band settles it
+    gap = (lo[column] - hi[column])[moving]
+    assert np.max(np.abs(gap)) > 0.005  # one step of delay matters on this step
+    share = np.dot((lo[column] - mid[column])[moving], gap) / np.dot(gap, gap)
+    assert share == pytest.approx(0.3, abs=0.03)
+    assert np.max(np.abs((lo[column] - mid[column])[moving] - share * gap)) < 0.05 * np.max(np.abs(gap))
+    if which == "feedback_delay_s":
+        np.testing.assert_array_equal(mid[1], lo[1])  # measurement only: the surface does not see it
+
+
 @pytest.mark.parametrize(("channel", "loads", "outside"), [("right_wing", 1780.0, 0.81), ("left_rudder", 470.0, 0.69)])
 def test_hoad3_compliance_curves_follow_section_2_8_and_3_2_1(channel, loads, outside):
     """Figure 33: free play in the steep first segment; most of the compliance outside the servo loop."""

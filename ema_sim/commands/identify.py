@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     record = prepare(data, channel, channel_note=note, command=args.command_hold)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
     result = identify(record.data, record.channel, args.model, overrides, max_effects=args.max_effects, log=say,
-                      record=record)
+                      record=record, escalate=not args.no_escalate)
     report = to_json(result, str(args.data))
     print(summary(report))
     if args.json:
@@ -63,6 +63,9 @@ def register(sub: Any) -> None:
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="declare a stage of the starting model, e.g. --set compliance_deg_per_kinlb=0.2")
     p.add_argument("--max-effects", type=int, default=8, help="most effects to add (8)")
+    p.add_argument("--no-escalate", action="store_true",
+                   help="keep the declared second-order model even when its error is the servo's own motion "
+                        "(default: fit HOAD3's physical parameters then, and report the equivalent beside it)")
     p.add_argument("--json", type=Path, default=None, help="write the report JSON here")
     p.add_argument("--report", type=Path, default=None, help="write report.md and plots in this directory")
     p.add_argument("--residuals", type=Path, default=None, metavar="FILE.csv",

@@ -42,8 +42,10 @@ from scipy.stats import chi2
 
 from ema_sim.config import load_channel
 from ema_sim.errors import DataError, SpecError
-from ema_sim.identify.diagnosis import EQUIVALENT_EXCESS
 from ema_sim.identify.effects import KEYS
+from ema_sim.identify.physical import ESCALATE_TO
+from ema_sim.identify.problem import EQUIVALENT_EXCESS
+from ema_sim.models import model_parameters
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
@@ -585,14 +587,15 @@ def compare(reports: Sequence[IdentifyReport], sigma: float = 3.0) -> Consistenc
             listed = ", ".join(f"{r.name} {getattr(r, attr)}" for r in reports)
             raise DataError(f"reports of different {what} cannot be compared: {listed}")
     by_name = {r.name: r for r in reports}
-    units = metas(SecondOrderParams)
+    units = {m.name: m.unit for m in model_parameters(ESCALATE_TO)} | {k: m.unit for k, m in
+                                                                     metas(SecondOrderParams).items()}
     order: list[str] = []
     for r in reports:
         order += [f for f in r.keys if f not in order]
     fields = []
     for f in order:
         entries = [_entry(r, f) for r in reports if f in r.keys]
-        unit = units[f].unit if f in units else ""
+        unit = units.get(f, "")
         fields.append(compare_field(f, entries, sigma, unit, _undetermined_why(entries, by_name, f)))
     seen: list[tuple[str, str]] = []
     for r in reports:

@@ -198,7 +198,8 @@ def not_determinable(model: str, channel: ChannelConfig) -> list[str]:
 
 
 def run_declared(model: str, channel: ChannelConfig, time_s: FloatArray, command_deg: FloatArray,
-                 hinge_moment_inlb: FloatArray) -> FloatArray:
+                 hinge_moment_inlb: FloatArray, overrides: dict[str, Any] | None = None,
+                 sample_times: FloatArray | None = None) -> FloatArray:
     """The declared model itself (noise off) on the record's inputs: ``(samples, outputs)``, position then surface.
 
     Parameters
@@ -206,9 +207,13 @@ def run_declared(model: str, channel: ChannelConfig, time_s: FloatArray, command
     model : str
         A registry model name.
     channel : ChannelConfig
-        The channel.
+        The channel (its travel as the record set it).
     time_s, command_deg, hinge_moment_inlb : numpy.ndarray
-        The record's time (from 0), command and hinge moment.
+        The inputs' breakpoints (s, from 0), command and hinge moment, held between breakpoints.
+    overrides : dict, optional
+        Model parameters other than declared (name → value in the model's units).
+    sample_times : numpy.ndarray, optional
+        Where the outputs are read (s; default: ``time_s``).
 
     Returns
     -------
@@ -216,7 +221,8 @@ def run_declared(model: str, channel: ChannelConfig, time_s: FloatArray, command
         The outputs at the record's samples.
     """
     options: dict[str, Any] = {"noise": False} if model in ("hoad2", "hoad3") else {}
-    m = create(model, channel.channel, **options)
+    m = create(model, channel, **{**options, **(overrides or {})})
     m.trim(float(command_deg[0]), float(hinge_moment_inlb[0]))
-    return np.asarray(m.run_outputs(time_s, command_deg, hinge_moment_inlb, sample_times=time_s,
-                                    end_s=float(time_s[-1]))[0], dtype=float)
+    samples = time_s if sample_times is None else sample_times
+    return np.asarray(m.run_outputs(time_s, command_deg, hinge_moment_inlb, sample_times=samples,
+                                    end_s=float(samples[-1]))[0], dtype=float)

@@ -62,7 +62,7 @@ from ema_sim.analysis.series import Hold, holds
 from ema_sim.identify.declared import HIGH_ORDER
 from ema_sim.identify.effects import EFFECTS, FREE, Effect
 from ema_sim.identify.fit import Fit, block_covariance
-from ema_sim.identify.problem import Problem
+from ema_sim.identify.problem import EQUIVALENT_EXCESS, IN_LOOP_SHARE, Problem, in_loop_share
 from ema_sim.identify.stepwise import Identification
 from ema_sim.identify.trust import bandwidth_hz, frequency_hz
 from ema_sim.models.base import O_RATE
@@ -88,10 +88,6 @@ FIR_HALF_S = 0.05
 SPLIT_SIGMA = 3.0
 SPLIT_RELATIVE = 0.2
 MODE_MATCH = 0.25
-IN_LOOP_SHARE = 0.5
-"""Share of the surface's residual the position's residual must explain to place the error inside the loop."""
-EQUIVALENT_EXCESS = 3.0
-"""Final rms over the noise floor beyond which the fitted parameters are said to be equivalents."""
 """A fitted frequency within this share of the frequency the residual still rings at stands in for that mode."""
 FAMILIES = ("motion", "direction", "load sign", "load against motion", "current")
 BY_FIELD: dict[str, Effect] = {f: e for e in reversed(EFFECTS) for f in e.owned}
@@ -508,33 +504,6 @@ def _share(e: FloatArray, a: FloatArray) -> float:
     return float(np.dot(fitted, fitted) / tss)
 
 
-def _in_loop_share(surface: FloatArray, position: FloatArray, sigma_surface: float, sigma_position: float
-                   ) -> float | None:
-    """Share of the surface's error above its noise that the position's error carries too, sample for sample.
-
-    An error in the actuator's motion moves the surface one for one, so it cancels in ``surface − position``;
-    what stays there beyond both noise floors is the surface's own (linkage, compliance outside the loop).
-    The same share from a filter of the position's residual would credit any mode the command excites
-    in both, so the comparison is at zero lag with unit gain.
-
-    Parameters
-    ----------
-    surface : numpy.ndarray
-        The surface's residual (deg).
-    position : numpy.ndarray
-        The position's residual on the same samples (deg).
-    sigma_surface : float
-        The surface's noise floor (deg).
-    sigma_position : float
-        The position's noise floor (deg).
-    """
-    excess = float(np.mean(surface**2)) - sigma_surface**2
-    if excess <= 0.0:
-        return None
-    own = float(np.mean((surface - position) ** 2)) - sigma_surface**2 - sigma_position**2
-    return min(max(1.0 - own / excess, 0.0), 1.0)
-
-
 def _effective_samples(e: FloatArray, x: FloatArray) -> float:
     """Independent samples behind a correlation of ``e`` with ``x``: N/(1 + 2Σρₑρₓ) (Bartlett)."""
     k_max = min(200, e.size // 4)
@@ -641,7 +610,7 @@ def diagnose(result: Identification) -> Diagnosis:
             d.line_hz, d.ring_windows, d.stop_windows = _ring(e, sigma, fs, *_stops(p))
             d.correlates = _correlates(e, {k: x[p.mask] for k, x in _regressors(p, fit).items()}, fs)
             if o == "surface_deg" and "position_deg" in errors:
-                d.actuator_share = _in_loop_share(e, errors["position_deg"], sigma, p.sigma_deg["position_deg"])
+                d.actuator_share = in_loop_share(e, errors["position_deg"], sigma, p.sigma_deg["position_deg"])
         outputs[o] = d
     proxies = []
     own = set(result.baseline.free)

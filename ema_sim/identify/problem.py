@@ -37,6 +37,10 @@ SETTLE_S = 0.3
 MIN_NOISE_DEG = 1e-3
 """Floor on a noise estimate: no sensor of table A3 is better (laser tracker ±0.0014°), and a
 noise-free (simulated) output must not outweigh a measured one a thousandfold."""
+IN_LOOP_SHARE = 0.5
+"""Share of the surface's error above its floor the position's error must carry to place it inside the loop."""
+EQUIVALENT_EXCESS = 3.0
+"""Final rms over the noise floor beyond which the fitted parameters are said to be equivalents."""
 
 
 @dataclass
@@ -91,6 +95,14 @@ class Problem:
         self._bp_t = self.time_s[keep]
         self._bp_u = cmd[keep]
         self._bp_h = hm[keep]
+
+    @property
+    def breakpoints(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The model's inputs: breakpoint times (s, from the record's start), command (deg), hinge moment (in·lb).
+
+        Each is held to the next breakpoint (a sampled command is its interpolation: module docstring).
+        """
+        return self._bp_t, self._bp_u, self._bp_h
 
     # ---------------------------------------------------------------- facts about the record
     @property
@@ -228,3 +240,30 @@ class Problem:
             return 0.0
         k = int(np.argmax(np.where(band, psd, 0.0)))
         return float(freqs[k]) if psd[k] > 5.0 * float(np.median(psd[band])) else 0.0
+
+
+def in_loop_share(surface: FloatArray, position: FloatArray, sigma_surface: float, sigma_position: float
+                   ) -> float | None:
+    """Share of the surface's error above its noise that the position's error carries too, sample for sample.
+
+    An error in the actuator's motion moves the surface one for one, so it cancels in ``surface − position``;
+    what stays there beyond both noise floors is the surface's own (linkage, compliance outside the loop).
+    The same share from a filter of the position's residual would credit any mode the command excites
+    in both, so the comparison is at zero lag with unit gain.
+
+    Parameters
+    ----------
+    surface : numpy.ndarray
+        The surface's residual (deg).
+    position : numpy.ndarray
+        The position's residual on the same samples (deg).
+    sigma_surface : float
+        The surface's noise floor (deg).
+    sigma_position : float
+        The position's noise floor (deg).
+    """
+    excess = float(np.mean(surface**2)) - sigma_surface**2
+    if excess <= 0.0:
+        return None
+    own = float(np.mean((surface - position) ** 2)) - sigma_surface**2 - sigma_position**2
+    return min(max(1.0 - own / excess, 0.0), 1.0)

@@ -57,6 +57,28 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
+def _physical_final(result: Identification) -> dict[str, Any]:
+    """The final block of a high-order model whose physical parameters were fitted (model names and units)."""
+    pf = result.physical
+    assert pf is not None
+    p = result.problem
+    return {
+        "model": result.final_model,
+        "params": {k: _round(v) for k, v in pf.scalars().items()},
+        "curves": {k: [_round(float(q)) for q in v] for k, v in pf.params.items() if isinstance(v, tuple)},
+        "declared": {k: ([_round(float(q)) for q in v] if isinstance(v, tuple) else _round(float(v)))
+                     for k, v in pf.declared.items()},
+        "fields": {k: k for k in pf.fitted},
+        "uncertainty": {k: _round(v, 3) for k, v in pf.sigma.items()},
+        "correlation": {a: {b: _round(r, 4) for b, r in row.items()} for a, row in pf.correlation.items()},
+        "not_determined": list(pf.held),
+        "grid_searched": [],
+        "hinge_moment_reversed": False,
+        "simulations": pf.simulations,
+        **_stats(p, result.final),
+    }
+
+
 def _rms_of(problem: Problem, fit: Fit) -> dict[str, float]:
     return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(fit.sim).items()}
 
@@ -89,10 +111,10 @@ def implementation_error(result: Identification) -> dict[str, float] | None:
     result : Identification
         The identification.
     """
-    if result.model not in ("loada", "loadf") or result.final_model:
+    if result.model not in ("loada", "loadf") or (result.final_model and result.equivalent is None):
         return None
     problem = result.problem
-    final = result.final
+    final = result.equivalent or result.final  # the declared model with its effects, even when escalated
     model = create(result.model, problem.channel.channel, params=final.params)
     sign = -1.0 if final.flip else 1.0
     d = problem.data
@@ -208,7 +230,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         ],
         "removed": [{"effect": r.effect, "where": r.where, "params": {k: _round(v) for k, v in r.params.items()},
                      "reason": r.reason} for r in result.removed],
-        "final": {
+        "final": _physical_final(result) if result.physical is not None else {
             "model": result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)]),
             "params": _params(result, final),
             "fields": {names[f]: f for f in final.free},
@@ -221,6 +243,13 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
         },
+        **({"equivalent": {
+            "model": " + ".join([result.model, *(s.effect for s in result.steps)]),
+            "params": _params(result, result.equivalent),
+            "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.equivalent).items()},
+            "rms_over_noise": {o: _round(v / p.sigma_deg[o], 4) for o, v in _rms_of(p, result.equivalent).items()},
+            "escalated_because": result.escalated or None,
+        }} if result.equivalent is not None else {}),
         "warnings": warnings,
         "diagnosis": diagnosis.as_dict(),
         "notes": (record.notes if record else []) + result.notes,

@@ -43,7 +43,8 @@ from ema_sim.config import ChannelConfig
 from ema_sim.identify.declared import HIGH_ORDER, declared, not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, EFFECTS, FREE, KEYS, Context, Effect, Free, Values, report_values
 from ema_sim.identify.fit import Fit, evaluate, fit
-from ema_sim.identify.problem import Problem
+from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
+from ema_sim.identify.problem import EQUIVALENT_EXCESS, IN_LOOP_SHARE, Problem, in_loop_share
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record, prepare
 from ema_sim.io.csv import MeasuredData
@@ -165,6 +166,12 @@ class Identification:
     """:data:`REFERENCE` when the trivial model fits better than anything fitted; else empty (the declared one)."""
     as_declared: AsDeclared | None = None
     """A high-order or linear declared model: its own error and the equivalent it was fitted through."""
+    physical: PhysicalFit | None = None
+    """A high-order model's physical parameters fitted to the record, when they are the final model."""
+    equivalent: Fit | None = None
+    """The declared model with its effects, when :attr:`physical` replaced it as the final model."""
+    escalated: str = ""
+    """Why the physical fit of :data:`ESCALATE_TO` was tried for a second-order declared model (empty: not)."""
 
 
 def _rms(problem: Problem, f: Fit) -> dict[str, float]:
@@ -662,6 +669,7 @@ def identify(
     log: Callable[[str], None] | None = None,
     record: Record | None = None,
     command: HoldMode = "detect",
+    escalate: bool = True,
 ) -> Identification:
     """Fit ``model`` to ``data``, then add the vocabulary effects it lacks while they pay for themselves.
 
@@ -687,6 +695,9 @@ def identify(
         ``data`` already prepared (:func:`ema_sim.identify.record.prepare`).
     command : str
         How the command was logged: ``detect``, ``held`` or ``sampled``.
+    escalate : bool
+        Whether a second-order model out of vocabulary inside the servo loop may be replaced by
+        :data:`ESCALATE_TO` with its physical parameters fitted (never with ``max_effects`` 0).
     """
     t0 = time.perf_counter()
     say = log or (lambda _msg: None)
@@ -705,6 +716,37 @@ def identify(
     result = Identification(problem, model, baseline, cur, record=record, start=start, notes=notes)
     result.as_declared = as_declared
     result.simulator_error_deg = simulator_error(problem, cur.params, cur.flip)
+    physical = fit_physical(problem, key, say) if key in PHYSICAL_MODELS else None
+    searched = max_effects
+    if physical is not None and _within(problem, physical.rms_deg):
+        searched = 0
+        notes.append(f"{key} with its physical parameters fitted leaves at most {EQUIVALENT_EXCESS:g}× the noise "
+                     "floor on every output: its second-order-family equivalent is fitted as the baseline only, "
+                     "no effect of the vocabulary searched")
+    cur = _search(problem, result, cur, base, searched, say)
+    result.final = _prune(problem, result, cur, base)
+    trivial = reference_fit(problem, result.final.params)
+    if trivial.rss <= result.final.rss:
+        why = (f"the model it was added to fits worse than {REFERENCE} "
+               f"(weighted error ×{result.final.rss / max(trivial.rss, TINY):.3g})")
+        result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
+        result.steps.clear()
+        result.final, result.final_model = trivial, REFERENCE
+    if as_declared is not None:
+        _keep_declared(problem, result, as_declared)
+    if physical is not None:
+        _adopt_physical(problem, result, physical)
+    elif escalate and max_effects > 0:
+        result.escalated = _escalation(problem, result)
+        if result.escalated:
+            _adopt_physical(problem, result, fit_physical(problem, ESCALATE_TO, say))
+    result.elapsed_s = time.perf_counter() - t0
+    return result
+
+
+def _search(problem: Problem, result: Identification, cur: Fit, base: SecondOrderParams, max_effects: int,
+            say: Callable[[str], None]) -> Fit:
+    """Add the vocabulary's effects to ``cur`` one at a time while each pays for itself (module docstring)."""
     for _ in range(max_effects):
         if cur.rss / problem.n_fit - 1.0 <= DONE_EXCESS:
             break
@@ -731,18 +773,64 @@ def identify(
         new, cand = best
         result.steps.extend(_entries(problem, cur, new, cand))
         cur = new
-    result.final = _prune(problem, result, cur, base)
-    trivial = reference_fit(problem, result.final.params)
-    if trivial.rss <= result.final.rss:
-        why = (f"the model it was added to fits worse than {REFERENCE} "
-               f"(weighted error ×{result.final.rss / max(trivial.rss, TINY):.3g})")
-        result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
-        result.steps.clear()
-        result.final, result.final_model = trivial, REFERENCE
-    if as_declared is not None:
-        _keep_declared(problem, result, as_declared)
-    result.elapsed_s = time.perf_counter() - t0
-    return result
+    return cur
+
+
+def _within(problem: Problem, rms_deg: dict[str, float]) -> bool:
+    """Every output within :data:`EQUIVALENT_EXCESS` times its noise floor."""
+    return all(v <= EQUIVALENT_EXCESS * problem.sigma_deg[o] for o, v in rms_deg.items())
+
+
+def _escalation(problem: Problem, result: Identification) -> str:
+    """Why the servo's own structure must be fitted (empty: it need not be).
+
+    A second-order declared model whose final fit leaves more than :data:`EQUIVALENT_EXCESS` times the
+    noise on an output, most of the surface's error being the position's own (the actuator's motion,
+    inside the servo loop), has run out of vocabulary: its effects are equivalents of a motor drive.
+    """
+    if result.final_model or result.model.strip().lower() in HIGH_ORDER:
+        return ""
+    if "surface_deg" not in problem.outputs or "position_deg" not in problem.outputs:
+        return ""
+    errors = problem.errors_deg(result.final.sim)
+    worst = max(float(np.sqrt(np.mean(e**2))) / problem.sigma_deg[o] for o, e in errors.items())
+    if worst <= EQUIVALENT_EXCESS:
+        return ""
+    share = in_loop_share(errors["surface_deg"], errors["position_deg"], problem.sigma_deg["surface_deg"],
+                          problem.sigma_deg["position_deg"])
+    if share is None or share < IN_LOOP_SHARE:
+        return ""
+    return (f"{result.model} with its effects leaves {worst:.3g}× the noise and {100 * share:.0f} % of the surface's "
+            "error is the position's own (the servo's motion, inside the loop)")
+
+
+def _adopt_physical(problem: Problem, result: Identification, pf: PhysicalFit) -> None:
+    """The fitted physical parameters become the final model when they fit better (escalated: when they pay)."""
+    cur = result.final
+    excess = max(cur.rss - problem.n_fit, TINY)
+    gain = (cur.rss - pf.rss) / excess
+    text = ", ".join(f"{o} {v:.4g}°" for o, v in pf.rms_deg.items())
+    share = f"{100 * min(gain, 1.0):.1f} %" if gain >= 0.0 else "none"
+    if pf.rss >= cur.rss or (result.escalated and gain < MIN_EXCESS_SHARE):
+        result.notes.append(f"{pf.model} with its physical parameters fitted ({pf.simulations} runs): rms {text}; "
+                            f"not kept: it removes {share} of the error above the noise floor that {_label(result)} "
+                            "left")
+        return
+    held = f"; held at declared values (the record cannot move them): {', '.join(pf.held)}" if pf.held else ""
+    result.notes.append(f"{pf.model} with its physical parameters fitted ({pf.simulations} runs, {pf.elapsed_s:.1f} "
+                        f"s): rms {text}; it removes {share} of the error above the noise floor that "
+                        f"{_label(result)} left{held}")
+    result.physical = pf
+    result.equivalent = cur
+    result.final = Fit(cur.params, False, (), np.asarray(pf.sim, dtype=float), pf.residual,
+                       np.zeros((pf.residual.size, 0)), {}, ())
+    result.final_model = f"{pf.model} (physical parameters fitted)"
+
+
+def _label(result: Identification) -> str:
+    """The model the physical fit replaced, in words."""
+    eq = " + ".join([result.model, *(s.effect for s in result.steps)])
+    return f"{eq} ({result.final_model})" if result.final_model and result.physical is None else eq
 
 
 def _keep_declared(problem: Problem, result: Identification, as_declared: AsDeclared) -> None:

@@ -38,6 +38,8 @@ FloatArray = NDArray[np.float64]
 NOT_DETERMINED = 0.25
 """One-sigma uncertainty above this share of the value: the record does not determine the parameter."""
 INSEPARABLE = 0.95
+FAR_FROM_DECLARED = 3.0
+"""A fitted physical parameter more than this factor from its declared value is said to be so."""
 """Correlation of two estimates above this: the record cannot tell them apart."""
 NYQUIST_SHARE = 0.5
 """A frequency at or above this share of the Nyquist frequency is not resolved (fewer than 4 samples a period)."""
@@ -316,4 +318,49 @@ def assess(result: Identification) -> tuple[list[str], Identifiability, Excitati
         out.append(f"{label(result, a)} and {label(result, b)} cannot be told apart by this record: their estimates "
                    f"correlate {rho:+.3f}, so only "
                    "a combination of them is determined")
-    return out, ident, exc
+    return out + physical_warnings(result), ident, exc
+
+
+def physical_warnings(result: Identification) -> list[str]:
+    """What a reader must know of a high-order model's fitted physical parameters (the final model).
+
+    Why a declared second-order model was replaced; the parameters the record could not determine (held
+    at their declared values); pairs whose estimates correlate beyond :data:`INSEPARABLE`; values more
+    than :data:`FAR_FROM_DECLARED` times off their declared ones.
+
+    Parameters
+    ----------
+    result : Identification
+        The outcome.
+
+    Returns
+    -------
+    list of str
+        One line each.
+    """
+    pf = result.physical
+    if pf is None:
+        return []
+    out = []
+    if result.escalated:
+        out.append(f"{result.escalated}: the declared {result.model} ran out of vocabulary, so the final model is "
+                   f"{pf.model} with its physical parameters fitted (section 4.2.5's loop); {result.model} with its "
+                   "effects is under `equivalent`, its parameters equivalents of that servo")
+    if pf.held:
+        out.append(f"{pf.model}: not determined by this record, held at their declared values: {', '.join(pf.held)}")
+    seen = set()
+    for a, row in pf.correlation.items():
+        for b, rho in row.items():
+            if abs(rho) > INSEPARABLE and (b, a) not in seen:
+                seen.add((a, b))
+                out.append(f"{pf.model}: {a} and {b} cannot be told apart by this record: their estimates correlate "
+                           f"{rho:+.3f}, so only a combination of them is determined")
+    values = pf.scalars()
+    for name in pf.fitted:
+        d = pf.declared[name]
+        ref = float(d[0] if isinstance(d, tuple) else d)
+        if ref > 0.0 and values[name] > 0.0 and max(values[name] / ref, ref / values[name]) > FAR_FROM_DECLARED:
+            out.append(f"{pf.model}: {name} = {values[name]:.4g} is more than {FAR_FROM_DECLARED:g}× off its "
+                       f"declared {ref:.4g}: the record's actuator differs from the declared channel there, or the "
+                       "element stands in for another")
+    return out

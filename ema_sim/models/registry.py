@@ -57,15 +57,15 @@ def model_class(name: str) -> type[ActuatorModel]:
     return found
 
 
-def create(name: str, channel: str = "left_wing", **kwargs: Any) -> ActuatorModel:
+def create(name: str, channel: str | ChannelConfig = "left_wing", **kwargs: Any) -> ActuatorModel:
     """Build model ``name`` for ``channel``.
 
     Parameters
     ----------
     name : str
         Registry name (:func:`model_names`).
-    channel : str
-        Channel name.
+    channel : str or ChannelConfig
+        Channel name, or a channel's configuration (one a record changed, its travel say).
     **kwargs : object
         ``n``, ``rate_hz``, options and parameter overrides, passed to the class.
 

@@ -39,7 +39,7 @@ from ema_sim.models.stages import (
 )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, bp_u: FloatArray, x_out: FloatArray,
                slope_out: FloatArray) -> None:
     """Stage 2 on every breakpoint of every instance: degrees → volts (command curve) → 5 mV → degrees → in.
@@ -128,7 +128,39 @@ def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UI
     return cubic(c0, c1, c2, c3, quantize(volts, p[K.quantization_v]))
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+DELAY_STEP_EPS = 1e-9
+"""A delay within this share of a step of a whole number of steps is that whole number."""
+
+
+@nb.njit(cache=True)
+def split_delay(delay_s: float, dt: float) -> tuple[int, float]:
+    """A delay as whole steps and the share of one more: ``(m, w)`` with ``delay_s = (m + w)·dt``.
+
+    A delay between two steps is the mean over the step of what the delayed input does: ``(1 − w)`` of it as
+    ``m`` steps delayed and ``w`` of it as ``m + 1`` (the LVDT reading blended; the drive's voltage and the
+    integral's error over the step in which the delayed command changes). The outputs then move smoothly
+    with the delay (identification fits it by least squares); a whole number of steps is the plain delay,
+    bit for bit.
+
+    Parameters
+    ----------
+    delay_s : float
+        The delay (s).
+    dt : float
+        The step (s).
+
+    Returns
+    -------
+    tuple of (int, float)
+        Whole steps and the share of the next.
+    """
+    steps = delay_s / dt
+    m = math.floor(steps + DELAY_STEP_EPS)
+    w = steps - m
+    return m, (w if w > DELAY_STEP_EPS else 0.0)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=FASTMATH)
 def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffers: FloatArray, power: FloatArray,  # noqa: PLR0912, PLR0915 - one compiled loop
                  bp_t: FloatArray, cmd_in: FloatArray, cmd_slope: FloatArray, bp_h: FloatArray, t0: float, dt: float,
                  n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
@@ -196,7 +228,11 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         decay_bus = math.exp(-dt / (rsrc * p[K.bus_capacitance_f]))
         a_cmd = math.exp(-TWO_PI * p[K.noise_bandwidth_hz] * dt) if p[K.noise_bandwidth_hz] > 0.0 else 0.0
         w_cmd = p[K.command_noise_v] * math.sqrt(1.0 - a_cmd * a_cmd)
-        n_delay = min(round(p[K.feedback_delay_s] / dt), nbuf - 1)
+        n_delay, w_fb = split_delay(p[K.feedback_delay_s], dt)
+        n_delay = min(n_delay, nbuf - 2)
+        _, w_cmd_delay = split_delay(delay, dt)
+        delay_lo = delay - w_cmd_delay * dt  # whole steps (the delay itself when it is whole)
+        delay_hi = delay_lo + dt
         on = power[i] > 0.5
         brake = 0.0 if on else p[K.brake_holding_lbf]
         fc = p[K.coulomb_friction_lbf] + brake
@@ -213,7 +249,8 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         xi = x[X.integral_in_s]
         flags = int(x[X.flags])
         head = int(x[X.delay_head])
-        jd = zoh_index(bp_t, t0 - delay, 0)
+        jd = zoh_index(bp_t, t0 - delay_lo, 0)
+        jd_hi = zoh_index(bp_t, t0 - delay_hi, 0)
         jh = zoh_index(bp_t, t0, 0)
         js = 0
         for k in range(n_steps + 1):
@@ -221,6 +258,9 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
             while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
                 row = out[i, js]
                 lagged = buf[head - n_delay if head >= n_delay else head - n_delay + nbuf]
+                if w_fb > 0.0:
+                    older = buf[head - n_delay - 1 if head > n_delay else head - n_delay - 1 + nbuf]
+                    lagged += w_fb * (older - lagged)
                 row[O_POS] = feedback_deg(p, lagged, sample_t[js], x, rng)
                 row[O_SURF] = xs * p[K.deg_per_in]
                 row[O_RATE] = vm * p[K.deg_per_in]
@@ -230,13 +270,18 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
                 js += 1
             if k == n_steps:
                 break
-            jd = zoh_index(bp_t, t - delay, jd)
+            jd = zoh_index(bp_t, t - delay_lo, jd)
             jh = zoh_index(bp_t, t, jh)
             hm = bp_h[i, jh]
             flags = 0
             # stages 1–3: delayed, quantized command with noise (volts → inches at its calibration slope)
             ncmd = nz.band_limited_step(ncmd, a_cmd, w_cmd, rng)
             xc = cmd_in[i, jd] + ncmd * cmd_slope[i, jd]
+            xc_hi = xc  # the command one step older, when the delay falls between two steps and it differs
+            if w_cmd_delay > 0.0:
+                jd_hi = zoh_index(bp_t, t - delay_hi, jd_hi)
+                if jd_hi != jd:
+                    xc_hi = min(max(cmd_in[i, jd_hi] + ncmd * cmd_slope[i, jd_hi], xmin), xmax)
             if xc > xmax:
                 xc = xmax
                 flags |= FLAG_POSITION
@@ -257,6 +302,11 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
                 err = xc - lf
                 _, _, _, v, sv, si, sp = servo_drive(kp, vmax, kv, imax, kc, r, ke, vdb, duty, xc, lf, xi, vm, cur,
                                                      vbus, 0, 0, 0, True)
+                if xc_hi != xc:  # the delayed command changed within the step: the drive's mean over it
+                    v_hi = servo_drive(kp, vmax, kv, imax, kc, r, ke, vdb, duty, xc_hi, lf, xi, vm, cur, vbus,
+                                       0, 0, 0, True)[3]
+                    v += w_cmd_delay * (v_hi - v)
+                    err += w_cmd_delay * (xc_hi - xc)
                 cur = motor_current_step(v, cur, vm, inv_r, ke, decay_i)
                 if integrating(sv, si, sp):
                     xi += ki_dt * err

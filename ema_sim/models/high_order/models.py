@@ -26,7 +26,7 @@ from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
 from ema_sim.models.high_order.figure30 import MOTOR_STUCK
 from ema_sim.models.high_order.hoac1 import N_U, U, run_continuous
-from ema_sim.models.high_order.hoad import command_in, run_discrete
+from ema_sim.models.high_order.hoad import DELAY_STEP_EPS, command_in, run_discrete
 from ema_sim.models.high_order.params import BOUNDS, N_CONTINUOUS, N_STATE, SECTION, HighOrderParams, K, X
 from ema_sim.models.high_order.trim import equilibrium
 from ema_sim.parameters import Slots, metas
@@ -127,7 +127,9 @@ class HighOrderModel(ActuatorModel):
                               feedback_cal=(fb.c0, fb.c1, fb.c2, fb.c3))
             for prm, b in zip(self.params, self.bounds, strict=True)
         ])
-        self._max_delay_s = float(self._P[:, K.command_delay_s].max())
+        # a delay between two steps blends the inputs of both (:func:`~ema_sim.models.high_order.hoad.split_delay`)
+        step = 1.0 / self.rate_hz if not self.continuous and self.rate_hz else 0.0
+        self._max_delay_s = float(self._P[:, K.command_delay_s].max()) + step
         self._power = np.ones(self.n)
         self.trim()
 
@@ -274,7 +276,7 @@ class Hoad2(HighOrderModel):
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
         dt = 1.0 / self.rate_hz
-        nbuf = round(float(self._P[:, K.feedback_delay_s].max()) / dt) + 1
+        nbuf = math.floor(float(self._P[:, K.feedback_delay_s].max()) / dt + DELAY_STEP_EPS) + 2
         self._X = np.zeros((self.n, N_STATE))
         self._buf = np.zeros((self.n, nbuf))
         for i, eq in enumerate(self._equilibria(command_deg, hinge_moment_inlb)):

@@ -1,0 +1,430 @@
+"""A discrete high-order model's physical parameters fitted to a record: the report's own loop (4.2.5).
+
+Section 4.2.5 matched installed data by changing the high-order model's physical elements (the
+figure-33 compliance curves, the delays), not by bolting equivalents onto a second-order model. This
+fits those elements of HOAD2/HOAD3 (figure 30's drive with figure 32's or 33's gear train) to a record:
+
+* **Delays** move the output in whole samples of the record's command, so least squares sees no
+  slope in them: each is scanned on a grid (:data:`DELAY_STEP_S`), first wide with the other
+  parameters as declared, then one neighbour either side with the others refitted at each point.
+* **The rest** (gains, limits, friction, PWM dead band, filter corner, damping, inertia, and one scale
+  on each figure-33 curve) are fitted in log coordinates with finite differences of
+  :data:`DIFF_STEP` (a friction or a dead band has no derivative of its own, only its effect on a
+  1 % wider or narrower element).
+* **What the record cannot move** (a column of the Jacobian below :data:`MOVE_SHARE` of the largest,
+  or a relative uncertainty above one) is held at its declared value and named.
+
+The declared model's noise levels and quantization are not fitted; its command noise is run (4.3: noise
+inside the loop dithers the drive's dead band and friction, which a noise-free model would absorb into
+smaller ones), with fixed seeds so that the objective is deterministic, and its LVDT noise is not (the
+record carries its own).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ema_sim.identify.declared import run_declared
+from ema_sim.identify.fit import block_covariance
+from ema_sim.identify.problem import Problem
+from ema_sim.models import model_parameters
+from ema_sim.models.arrays import FloatArray
+
+PHYSICAL_MODELS = ("hoad2", "hoad3")
+"""The declared models whose physical parameters are fitted (discrete, so hundreds of runs are seconds;
+HOAC1's continuous solver is ~40 times slower per run and is left as declared)."""
+ESCALATE_TO = "hoad3"
+"""The installed actuator's model (4.2.5) whose physics a second-order model out of vocabulary is escalated to."""
+DELAYS = ("command_delay_s", "feedback_delay_s")
+CANDIDATES = (
+    "position_gain_per_s", "velocity_gain_a_per_in_s", "current_limit_a", "rate_limit_in_s", "pwm_dead_band_v",
+    "coulomb_friction_lbf", "lvdt_filter_hz", "position_integral_per_s2", "hinge_friction_inlb",
+    "linkage_damping_lbf_s_per_in", "gear_damping_lbf_s_per_in", "gear_stiffness_lbf_per_in",
+    "total_mean_stiffness_lbf_per_in", "actuator_mean_stiffness_lbf_per_in", "surface_inertia_inlbs2",
+)
+"""The physical elements a position/surface record can move, in the model's own names and units."""
+TIED = {
+    "coulomb_friction_lbf": ("stiction_lbf",),
+    "total_mean_stiffness_lbf_per_in": ("total_upper_stiffness_lbf_per_in", "total_lower_stiffness_lbf_per_in"),
+    "actuator_mean_stiffness_lbf_per_in": ("actuator_upper_stiffness_lbf_per_in",
+                                           "actuator_lower_stiffness_lbf_per_in"),
+}
+"""Parameters scaled with another: stiction keeps its ratio to Coulomb friction (one record cannot split
+them), and figure 33's upper and lower curves keep theirs to its mean curve (the fit scales the family)."""
+DELAY_STEP_S = 5e-4
+"""The wide scan's grid, and how far the shifted starts move each delay."""
+DELAY_SPAN_S = 0.012
+DELAY_DIFF_S = 2.5e-4
+"""Difference step of a delay: 2.5 of the model's 0.1 ms steps (between two, the model blends them)."""
+DELAY_SCALE_S = 1e-3
+"""A delay's scale beside the log coordinates (1 ms weighs as a factor e) in the trust region."""
+DELAY_RESOLUTION_S = 1e-4
+"""HOAD2/HOAD3's step: the models delay in whole steps, so the fitted delays are snapped to them
+(:data:`SNAP_STEPS` either side), and a delay's uncertainty is never below half of one."""
+SNAP_STEPS = 10
+SNAP_ROUNDS = 3
+DIFF_STEP = 0.05
+"""Difference step in log coordinates: 5 % of each element. A friction, a dead band or the noise inside
+the loop make the objective rough at small scales; a difference over 5 % follows its trend."""
+MOVE_SHARE = 1e-3
+MAX_NFEV = 40
+REFIT_NFEV = 15
+POLISH_ROUNDS = 4
+POLISH_SHARE = 5e-3
+"""The fit is restarted (its trust region reset) while a restart removes this share of the error above
+the noise floor: on a rough objective the trust region shrinks to nothing before the optimum."""
+START_SHIFT = 0.1
+"""Two more fits start this far (in log, ~10 %) from the first's end, each coordinate shifted alternately up
+and down (and the other way for the second): the spread of where they end is the optimizer's own
+reproducibility on this record, part of each uncertainty."""
+BATCHES = 4
+TINY = 1e-300
+SEEDS = (7, 8, 9)
+"""The model's own noise is run with these seeds: the first for the fit, the others for the two fits from
+shifted starts, so their spread carries the noise inside the loop as well."""
+WORKERS = max(1, min(len(os.sched_getaffinity(0)), 8))
+"""Threads for a Jacobian's columns (the discrete kernels release the GIL)."""
+
+
+@dataclass
+class PhysicalFit:
+    """The fitted physical parameters of a high-order model and what they leave."""
+
+    model: str
+    params: dict[str, Any]
+    """Fitted and held values, in the model's names and units (a curve is its tuple of segment values)."""
+    declared: dict[str, Any]
+    sigma: dict[str, float]
+    """One-sigma uncertainty (a curve's is that of its first segment; a delay's is half its grid step)."""
+    fitted: tuple[str, ...]
+    held: tuple[str, ...]
+    """Parameters the record cannot move: held at their declared values."""
+    sim: FloatArray
+    residual: FloatArray
+    rms_deg: dict[str, float]
+    simulations: int = 0
+    elapsed_s: float = 0.0
+    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    starts: int = 1
+    """Fits from different starts whose ends the uncertainty includes."""
+
+    @property
+    def rss(self) -> float:
+        """Weighted residual sum of squares."""
+        return float(np.dot(self.residual, self.residual))
+
+    def scalars(self) -> dict[str, float]:
+        """Every fitted or held value as one number (a curve by its first segment), for reports."""
+        return {k: float(v[0] if isinstance(v, tuple) else v) for k, v in self.params.items()}
+
+
+def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -> FloatArray:
+    """``model`` at ``values`` on the problem's inputs, its command noise from ``seed``: ``(samples, 3)``.
+
+    The command noise (stage 3) is inside the loop: it dithers the drive's dead band and friction, which a
+    noise-free model would absorb into smaller ones. The LVDT's noise (stage 17) is not run: it is
+    measurement noise only, which the record already carries and the residual's weights already count.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record (its inputs, held or interpolated as the problem drives its models).
+    model : str
+        One of :data:`PHYSICAL_MODELS`.
+    values : dict
+        Model parameters other than declared.
+    seed : int
+        The noise seed.
+    """
+    bp_t, bp_u, bp_h = problem.breakpoints
+    return run_declared(model, problem.channel, bp_t, bp_u, bp_h, sample_times=problem.time_s,
+                        overrides={**values, "noise": True, "seed": seed, "feedback_noise_v": 0.0})[:, :3]
+
+
+class _Runs:
+    """The model on the record at a parameter vector: delays absolute, the rest log-scaled from declared."""
+
+    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, Any]) -> None:
+        self.problem = problem
+        self.model = model
+        self.names = names
+        self.declared = declared
+        self.count = 0
+        self._lock = threading.Lock()
+        self.delay = np.array([n in DELAYS for n in names])
+        self.step = np.where(self.delay, DELAY_DIFF_S, DIFF_STEP)
+        self.scale = np.where(self.delay, DELAY_SCALE_S, 1.0)
+
+    def values(self, x: FloatArray) -> dict[str, Any]:
+        """Model overrides at ``x``."""
+        out: dict[str, Any] = {}
+        for n, v in zip(self.names, x, strict=True):
+            if n in DELAYS:
+                out[n] = max(float(v), 0.0)
+                continue
+            for m in (n, *TIED.get(n, ())):
+                if m in self.declared:
+                    out[m] = _scaled(self.declared[m], float(v))
+        return out
+
+    def sim(self, x: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
+        """The model's outputs at ``x`` with its noise from ``seed``."""
+        with self._lock:
+            self.count += 1
+        return run_model(self.problem, self.model, self.values(x), seed)
+
+    def residual(self, x: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
+        """Weighted residual at ``x``."""
+        return self.problem.weighted_residual(self.sim(x, seed))
+
+    def cost(self, x: FloatArray, seed: int = SEEDS[0]) -> float:
+        """Weighted residual sum of squares at ``x``."""
+        r = self.residual(x, seed)
+        return float(np.dot(r, r))
+
+    def costs(self, points: list[FloatArray], seed: int = SEEDS[0]) -> list[float]:
+        """:meth:`cost` at each point, on every core."""
+        with ThreadPoolExecutor(WORKERS) as pool:
+            return list(pool.map(lambda y: self.cost(y, seed), points))
+
+    def jacobian(self, x: FloatArray, cols: list[int], r0: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
+        """Central differences of the weighted residual in the ``cols`` coordinates, on every core.
+
+        Forward differences (one run a column) stall the fit in the narrow valley the dead band, the
+        velocity gain and the integral make together; central ones follow it (measured: an HOAD3 with 12
+        parameters off their declared values ended 30 % above the truth's error with 5 % forward
+        differences, and below it with central ones). A delay too small to step back is differenced forward.
+        """
+
+        def column(i: int) -> FloatArray:
+            h = float(self.step[i])
+            up = x.copy()
+            up[i] += h
+            down = x.copy()
+            down[i] -= h
+            if self.delay[i] and down[i] < 0.0:
+                return (self.residual(up, seed) - r0) / h
+            return (self.residual(up, seed) - self.residual(down, seed)) / (2.0 * h)
+
+        with ThreadPoolExecutor(WORKERS) as pool:
+            return np.column_stack(list(pool.map(column, cols))) if cols else np.zeros((r0.size, 0))
+
+
+def _scaled(value: Any, log_scale: float) -> Any:
+    """A declared value (or each segment of a curve) times ``exp(log_scale)``."""
+    k = math.exp(log_scale)
+    return tuple(float(q) * k for q in value) if isinstance(value, tuple) else float(value) * k
+
+
+def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEEDS[0]) -> FloatArray:
+    """Least squares over the ``free`` coordinates of ``x`` (the others held)."""
+    if not free:
+        return x
+    last: dict[str, FloatArray] = {}
+
+    def put(z: FloatArray) -> FloatArray:
+        y = x.copy()
+        y[free] = z
+        return y
+
+    def res(z: FloatArray) -> FloatArray:
+        r = runs.residual(put(z), seed)
+        last["z"], last["r"] = z.copy(), r
+        return r
+
+    def jac(z: FloatArray) -> FloatArray:
+        r0 = last["r"] if "z" in last and np.array_equal(last["z"], z) else runs.residual(put(z), seed)
+        return runs.jacobian(put(z), free, r0, seed)
+
+    lower = np.where(runs.delay[free], 0.0, -np.inf)
+    start = np.maximum(x[free], lower)
+    out = least_squares(res, start, jac=jac, bounds=(lower, np.inf), x_scale=runs.scale[free], method="trf",
+                        max_nfev=nfev)
+    return put(np.asarray(out.x, dtype=float))
+
+
+def _scan(runs: _Runs, x: FloatArray, i: int, grid: FloatArray) -> FloatArray:
+    """Coordinate ``i`` on ``grid`` (the others held), the best kept."""
+    points = []
+    for g in grid:
+        y = x.copy()
+        y[i] = max(float(g), 0.0)
+        points.append(y)
+    costs = runs.costs(points)
+    return points[int(np.argmin(costs))]
+
+
+def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0]) -> FloatArray:
+    """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`)."""
+    cost = runs.cost(x, seed)
+    for _ in range(POLISH_ROUNDS):
+        y = _fit(runs, x, free, MAX_NFEV, seed)
+        c = runs.cost(y, seed)
+        if c >= cost:
+            break
+        gain = (cost - c) / max(cost - runs.problem.n_fit, TINY)
+        x, cost = y, c
+        if gain < POLISH_SHARE:
+            break
+    return x
+
+
+def _shifted(runs: _Runs, x: FloatArray, free: list[int], sign: float) -> FloatArray:
+    """``x`` with each free coordinate moved alternately up and down (``sign`` first).
+
+    A log coordinate moves by :data:`START_SHIFT`, a delay by :data:`DELAY_STEP_S` (never below zero).
+    """
+    y = x.copy()
+    for k, i in enumerate(free):
+        y[i] += sign * (DELAY_STEP_S if runs.delay[i] else START_SHIFT) * (1.0 if k % 2 == 0 else -1.0)
+        if runs.delay[i]:
+            y[i] = max(y[i], 0.0)
+    return y
+
+
+def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None) -> PhysicalFit:
+    """Fit ``model``'s physical parameters (module docstring) to the problem's record.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record and its noise floors.
+    model : str
+        One of :data:`PHYSICAL_MODELS`.
+    log : callable, optional
+        Called with each progress line.
+
+    Returns
+    -------
+    PhysicalFit
+        Fitted and held values, uncertainties and the residual.
+    """
+    t0 = time.perf_counter()
+    say = log or (lambda _msg: None)
+    info = {p.name: p for p in model_parameters(model, problem.channel)}
+    tied = [m for n in CANDIDATES for m in TIED.get(n, ())]
+    declared: dict[str, Any] = {n: info[n].default for n in (*DELAYS, *CANDIDATES, *tied) if n in info}
+    names = [n for n in (*DELAYS, *CANDIDATES) if n in info
+             and (n in DELAYS or _positive(info[n].default))]
+    runs = _Runs(problem, model, names, declared)
+    x = np.array([float(declared[n]) if n in DELAYS else 0.0 for n in names])
+    delays = [names.index(n) for n in DELAYS if n in names]
+    rest = [i for i in range(len(names)) if i not in delays]
+    wide = np.arange(0.0, DELAY_SPAN_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
+    for i in delays:
+        x = _scan(runs, x, i, wide)
+    # what the record cannot move, from the Jacobian at the scanned start
+    size = np.linalg.norm(runs.jacobian(x, rest, runs.residual(x)), axis=0)
+    top = float(np.max(size, initial=0.0))
+    held = [names[i] for i, s in zip(rest, size, strict=True) if s <= MOVE_SHARE * top]
+    free = delays + [i for i in rest if names[i] not in held]
+    x = _fit_restarted(runs, x, free)
+    say(f"  {model}: delays scanned, {len(free)} parameters fitted: weighted error {runs.cost(x):.6g}")
+    ends = [x]
+    for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True):
+        ends.append(_fit_restarted(runs, _shifted(runs, x, free, sign), free, seed))
+    mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
+    x = ends[int(np.argmin(mean_cost))]
+    start_sigma = np.std(np.array(ends)[:, free], axis=0, ddof=1) if free else np.zeros(0)
+    say(f"{model} physical fit: {runs.count} runs; mean cost over the noise seeds from {len(ends)} starts: "
+        + ", ".join(f"{c:.6g}" for c in mean_cost))
+    residual = runs.residual(x)
+    sim = runs.sim(x)
+    sigma, corr, vague = _uncertainty(runs, x, free, residual, start_sigma)
+    values = runs.values(x)
+    held += vague
+    for n in vague:
+        for m in (n, *TIED.get(n, ())):
+            if m in declared:
+                values[m] = declared[m]
+    out_sigma = {names[i]: s for i, s in sigma.items() if names[i] not in vague}
+    if vague:  # the held values moved the residual: recompute it there
+        sim = run_model(problem, model, values, SEEDS[0])
+        residual = problem.weighted_residual(sim)
+    rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(sim).items()}
+    fitted = tuple(n for n in names if n not in held)
+    return PhysicalFit(model, values, {n: declared[n] for n in names}, out_sigma, fitted, tuple(held), sim,
+                       residual, rms, runs.count, time.perf_counter() - t0,
+                       {names[a]: {names[b]: v for b, v in row.items()} for a, row in corr.items()}, len(ends))
+
+
+def _positive(v: Any) -> bool:
+    """A declared value a log coordinate can scale (every segment of a curve above zero)."""
+    vals = v if isinstance(v, tuple) else (v,)
+    return all(float(q) > 0.0 for q in vals)
+
+
+def _batch_sigma(residual: FloatArray, jac: FloatArray, block: int, outputs: int) -> FloatArray:
+    """Batch-means one-sigma: the spread of the Gauss-Newton steps on :data:`BATCHES` stretches, over √BATCHES.
+
+    Each step starts from the optimum and sees one contiguous stretch of the record.
+
+    The residual's covariance covers the noise the sensors add; a friction, a dead band or an integral
+    also answer to the noise inside the loop (where the actuator happens to stick), which leaves the
+    residual white yet moves the estimate from one stretch of the record to the next. The spread
+    between stretches measures that; the larger of the two is the uncertainty.
+    """
+    p = jac.shape[1]
+    steps = []
+    edges = np.linspace(0, block, BATCHES + 1).round().astype(int)
+    for a, b in itertools.pairwise(edges):
+        rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
+        j, r = jac[rows], residual[rows]
+        try:
+            steps.append(np.linalg.lstsq(j, r, rcond=None)[0])
+        except np.linalg.LinAlgError:
+            return np.full(p, math.inf)
+    return np.asarray(np.std(np.array(steps), axis=0, ddof=1) / math.sqrt(BATCHES), dtype=float)
+
+
+def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArray, start_sigma: FloatArray
+                 ) -> tuple[dict[int, float], dict[int, dict[int, float]], list[str]]:
+    """One-sigma of each free parameter, correlations, and those the record leaves vague.
+
+    The larger of the coloured-residual and the batch-means sigma (:func:`_batch_sigma`), combined with
+    the spread of the fits from shifted starts under other noise seeds (:data:`START_SHIFT`,
+    :data:`SEEDS`): the noise inside the loop decides where a dead band or a friction lets the actuator
+    stop, the record's own realization of it is unknown, and on a rough objective where the optimizer
+    ends depends on where it starts.
+    """
+    if not free:
+        return {}, {}, []
+    jac = runs.jacobian(x, free, residual)
+    p = runs.problem
+    block = int(p.mask.sum())
+    k = len(p.outputs)
+    cov = block_covariance([residual[b * block:(b + 1) * block] for b in range(k)],
+                           [jac[b * block:(b + 1) * block] for b in range(k)])
+    sx = np.hypot(np.maximum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), _batch_sigma(residual, jac, block, k)),
+                  start_sigma)
+    sigma: dict[int, float] = {}
+    vague: list[str] = []
+    values = runs.values(x)
+    for j, i in enumerate(free):
+        name = runs.names[i]
+        v = values[name]
+        if runs.delay[i]:  # absolute, never finer than the model's own step
+            sigma[i] = max(float(sx[j]), 0.5 * DELAY_RESOLUTION_S) if math.isfinite(sx[j]) else math.inf
+            if sigma[i] > max(float(v), DELAY_RESOLUTION_S):
+                vague.append(name)
+            continue
+        scale = float(v[0] if isinstance(v, tuple) else v)
+        # d(value) = value · d(log value)
+        sigma[i] = abs(scale) * float(sx[j]) if math.isfinite(sx[j]) else math.inf
+        if not math.isfinite(sx[j]) or sx[j] > 1.0:
+            vague.append(name)
+    d = np.where(sx > 0, sx, 1.0)
+    corr_m = cov / np.outer(d, d)
+    corr = {free[a]: {free[b]: float(corr_m[a, b]) for b in range(len(free)) if b != a} for a in range(len(free))}
+    return sigma, corr, vague
