@@ -237,43 +237,47 @@ def test_across_fidelities_hoad3_data_declared_loada():
 
 
 @pytest.mark.slow
-def test_hoad3_data_three_maneuvers_loada_declared_ends_with_the_drives_physics():
+@pytest.mark.parametrize("declared_model", ["loada", "second_order"])
+def test_hoad3_data_three_maneuvers_ends_with_the_drives_physics(declared_model):
     """HOAD3 plays the real actuator on three maneuvers (the test sequence in 15, 20 and 30 s under ±600, ±1000
-    and ±400 in·lb), LOADA declared. LOADA with every effect that pays ends at 3.2–3.8× (position) and 18–23×
-    (surface) its floor, most of the surface's error the position's own: the servo's motion. The tool then
-    fits HOAD3's physical parameters (section 4.2.5's loop) and keeps them, with the equivalent beside: both
-    outputs within 3× the floor, HOAD3's 4 ms and 2 ms delays found, and the physical parameters agree across
-    the three maneuvers within their uncertainties (one exception measured: Coulomb friction, 4.9σ)."""
+    and ±400 in·lb), LOADA or the second order declared. The declared family with every effect that pays ends
+    at 3.0–3.8× (position) and 18–23× (surface) its floor: it has run out of vocabulary. The tool then fits
+    HOAD3's physical parameters (section 4.2.5's loop) and keeps them, with the equivalent beside: both
+    outputs within 2× the floor (measured 1.06–1.07× / 1.12–1.14×), HOAD3's 4 ms and 2 ms delays found
+    (within 0.02 ms), and every physical parameter fitted in two or more reports agrees across the maneuvers
+    within 3σ (measured: 13 of 13 with LOADA)."""
     from ema_sim.identify.consistency import compare, parse_report  # noqa: PLC0415
     from ema_sim.identify.report import to_json  # noqa: PLC0415
 
     docs = []
     for seed, duration_s, amp in ((91, 15.0, 600.0), (92, 20.0, 1000.0), (93, 30.0, 400.0)):
-        result = identify(hoad3_record(seed=seed, duration_s=duration_s, load_amp_inlb=amp), WING, "loada")
+        result = identify(hoad3_record(seed=seed, duration_s=duration_s, load_amp_inlb=amp), WING, declared_model)
         doc = json.loads(json.dumps(to_json(result, f"m{seed}.csv")))
         assert doc["final"]["model"] == "hoad3 (physical parameters fitted)"
-        assert all(v <= 3.0 for v in doc["final"]["rms_over_noise"].values()), doc["final"]["rms_over_noise"]
+        assert all(v <= 2.0 for v in doc["final"]["rms_over_noise"].values()), doc["final"]["rms_over_noise"]
         equivalent = doc["equivalent"]
-        assert equivalent["model"].startswith("loada + ")
-        assert equivalent["rms_over_noise"]["surface_deg"] > 3.0
-        assert "the position's own" in equivalent["escalated_because"]
+        assert equivalent["model"].startswith(f"{declared_model} + ")
+        assert max(equivalent["rms_over_noise"].values()) > 3.0
+        assert "× the noise on" in equivalent["escalated_because"]
+        assert any("ran out of vocabulary" in w for w in doc["warnings"])
         p = doc["final"]["params"]
-        assert p["command_delay_s"] == pytest.approx(0.004, abs=3e-4)
-        assert p["feedback_delay_s"] == pytest.approx(0.002, abs=3e-4)
+        assert p["command_delay_s"] == pytest.approx(0.004, abs=1e-4)
+        assert p["feedback_delay_s"] == pytest.approx(0.002, abs=1e-4)
         assert any("physical parameters fitted" in n for n in doc["notes"])
         docs.append(doc)
     consistency = compare([parse_report(d, f"m{i}.json") for i, d in enumerate(docs)])
     verdicts = {f.field: f.verdict for f in consistency.fields}
-    for name in ("position_gain_per_s", "velocity_gain_a_per_in_s", "pwm_dead_band_v", "lvdt_filter_hz",
-                 "position_integral_per_s2", "linkage_damping_lbf_s_per_in", "total_mean_stiffness_lbf_per_in",
-                 "surface_inertia_inlbs2"):
-        assert verdicts[name] == "agree", (name, verdicts)
-    assert sum(v == "disagree" for v in verdicts.values()) <= 2, verdicts
+    compared = {f for f, v in verdicts.items() if v != "single"}
+    assert compared >= {"command_delay_s", "feedback_delay_s", "position_gain_per_s", "velocity_gain_a_per_in_s",
+                        "pwm_dead_band_v", "lvdt_filter_hz", "position_integral_per_s2",
+                        "linkage_damping_lbf_s_per_in", "total_mean_stiffness_lbf_per_in", "surface_inertia_inlbs2"}
+    assert all(verdicts[f] == "agree" for f in compared), verdicts
 
 
 @pytest.mark.slow
 def test_from_a_suite_bag_hoad3_declared_loada(tmp_path, capsys):
-    """The same question asked of a rosbag2 bag in the node suite's format (200 Hz frames)."""
+    """The same question asked of a rosbag2 bag in the node suite's format (200 Hz frames): LOADA's stages
+    named, then HOAD3's physics kept (measured on a 30 s record: see the README's suite-bag figures)."""
     data = hoad3_record(seed=73, duration_s=DURATION_S)
     frames = slice(0, None, 5)  # the FMU's 200 Hz frames
     bag = write_bag(tmp_path / "hoad3_bag", {
@@ -298,3 +302,9 @@ def test_from_a_suite_bag_hoad3_declared_loada(tmp_path, capsys):
     assert all(impl[o] < 0.5 * after[o] for o in impl), (impl, after)
     assert not any("diverges on this record" in w for w in report["warnings"])
     assert "loada" in capsys.readouterr().out
+    # LOADA's family runs out of vocabulary on it; HOAD3's physics, fitted, ends within 3× the floor the bag
+    # carries on both outputs and finds both delays
+    assert report["final"]["model"] == "hoad3 (physical parameters fitted)"
+    assert all(v <= 3.0 for v in report["final"]["rms_over_noise"].values()), report["final"]["rms_over_noise"]
+    assert report["final"]["params"]["command_delay_s"] == pytest.approx(0.004, abs=3e-4)
+    assert report["final"]["params"]["feedback_delay_s"] == pytest.approx(0.002, abs=3e-4)

@@ -4,13 +4,15 @@ Section 4.2.5 matched installed data by changing the high-order model's physical
 figure-33 compliance curves, the delays), not by bolting equivalents onto a second-order model. This
 fits those elements of HOAD2/HOAD3 (figure 30's drive with figure 32's or 33's gear train) to a record:
 
-* **Delays** move the output in whole samples of the record's command, so least squares sees no
-  slope in them: each is scanned on a grid (:data:`DELAY_STEP_S`), first wide with the other
-  parameters as declared, then one neighbour either side with the others refitted at each point.
+* **Delays** are scanned first, each on a wide grid (:data:`DELAY_STEP_S`) with the rest as declared,
+  then fitted with everything else: the models blend the two whole steps a delay falls between
+  (:func:`ema_sim.models.high_order.hoad.split_delay`), so the output moves smoothly with it.
 * **The rest** (gains, limits, friction, PWM dead band, filter corner, damping, inertia, and one scale
-  on each figure-33 curve) are fitted in log coordinates with finite differences of
-  :data:`DIFF_STEP` (a friction or a dead band has no derivative of its own, only its effect on a
-  1 % wider or narrower element).
+  on each figure-33 curve family) are fitted in log coordinates by least squares with central
+  differences of :data:`DIFF_STEP` (a friction or a dead band has no derivative of its own, only its
+  effect on a 5 % wider or narrower element), the fit restarted while a restart pays.
+* **Two more fits** start :data:`START_SHIFT` away under other noise seeds; the best of the three is
+  kept and their spread joins each uncertainty (with the coloured-residual and the batch-means sigma).
 * **What the record cannot move** (a column of the Jacobian below :data:`MOVE_SHARE` of the largest,
   or a relative uncertainty above one) is held at its declared value and named.
 
@@ -424,7 +426,9 @@ def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArr
         sigma[i] = abs(scale) * float(sx[j]) if math.isfinite(sx[j]) else math.inf
         if not math.isfinite(sx[j]) or sx[j] > 1.0:
             vague.append(name)
-    d = np.where(sx > 0, sx, 1.0)
-    corr_m = cov / np.outer(d, d)
-    corr = {free[a]: {free[b]: float(corr_m[a, b]) for b in range(len(free)) if b != a} for a in range(len(free))}
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr_m = cov / np.outer(d, d)
+    corr = {free[a]: {free[b]: float(corr_m[a, b]) for b in range(len(free)) if b != a and np.isfinite(corr_m[a, b])}
+            for a in range(len(free))}
     return sigma, corr, vague

@@ -784,24 +784,31 @@ def _within(problem: Problem, rms_deg: dict[str, float]) -> bool:
 def _escalation(problem: Problem, result: Identification) -> str:
     """Why the servo's own structure must be fitted (empty: it need not be).
 
-    A second-order declared model whose final fit leaves more than :data:`EQUIVALENT_EXCESS` times the
-    noise on an output, most of the surface's error being the position's own (the actuator's motion,
-    inside the servo loop), has run out of vocabulary: its effects are equivalents of a motor drive.
+    A second-order declared model whose final fit, every effect that paid included, leaves more than
+    :data:`EQUIVALENT_EXCESS` times the noise on a record of both the LVDT and the surface (an installed
+    actuator's record, as HOAD3 describes one) has run out of vocabulary: its effects are equivalents.
+    Where the error is (the share of the surface's the position's carries) is said, not required: HOAD3
+    carries the drive inside the loop and the linkage outside it.
     """
     if result.final_model or result.model.strip().lower() in HIGH_ORDER:
         return ""
     if "surface_deg" not in problem.outputs or "position_deg" not in problem.outputs:
         return ""
     errors = problem.errors_deg(result.final.sim)
-    worst = max(float(np.sqrt(np.mean(e**2))) / problem.sigma_deg[o] for o, e in errors.items())
-    if worst <= EQUIVALENT_EXCESS:
+    ratio = {o: float(np.sqrt(np.mean(e**2))) / problem.sigma_deg[o] for o, e in errors.items()}
+    worst = max(ratio, key=lambda o: ratio[o])
+    if ratio[worst] <= EQUIVALENT_EXCESS:
         return ""
     share = in_loop_share(errors["surface_deg"], errors["position_deg"], problem.sigma_deg["surface_deg"],
                           problem.sigma_deg["position_deg"])
-    if share is None or share < IN_LOOP_SHARE:
-        return ""
-    return (f"{result.model} with its effects leaves {worst:.3g}× the noise and {100 * share:.0f} % of the surface's "
-            "error is the position's own (the servo's motion, inside the loop)")
+    if share is None:
+        where = ""
+    elif share >= IN_LOOP_SHARE:
+        where = f", {100 * share:.0f} % of the surface's error the position's own (the servo's motion, inside the loop)"
+    else:
+        where = (f", {100 * (1.0 - share):.0f} % of the surface's error its own (outside the loop: the linkage, "
+                 "the compliance)")
+    return f"{result.model} with its effects leaves {ratio[worst]:.3g}× the noise on {worst}{where}"
 
 
 def _adopt_physical(problem: Problem, result: Identification, pf: PhysicalFit) -> None:
