@@ -64,8 +64,9 @@ def register(sub: Any) -> None:
                    help="declare a stage of the starting model, e.g. --set compliance_deg_per_kinlb=0.2")
     p.add_argument("--max-effects", type=int, default=8, help="most effects to add (8)")
     p.add_argument("--no-escalate", action="store_true",
-                   help="keep the declared second-order model even when its error is the servo's own motion "
-                        "(default: fit HOAD3's physical parameters then, and report the equivalent beside it)")
+                   help="keep the declared model and its effects even when they leave more than 3x the noise "
+                        "on a record of LVDT and surface (default: fit HOAD3's physical parameters then, and "
+                        "report the declared model beside them as the equivalent)")
     p.add_argument("--json", type=Path, default=None, help="write the report JSON here")
     p.add_argument("--report", type=Path, default=None, help="write report.md and plots in this directory")
     p.add_argument("--residuals", type=Path, default=None, metavar="FILE.csv",

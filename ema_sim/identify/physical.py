@@ -47,7 +47,7 @@ PHYSICAL_MODELS = ("hoad2", "hoad3")
 """The declared models whose physical parameters are fitted (discrete, so hundreds of runs are seconds;
 HOAC1's continuous solver is ~40 times slower per run and is left as declared)."""
 ESCALATE_TO = "hoad3"
-"""The installed actuator's model (4.2.5) whose physics a second-order model out of vocabulary is escalated to."""
+"""The installed actuator's model (4.2.5) whose physics a declared model out of vocabulary is escalated to."""
 DELAYS = ("command_delay_s", "feedback_delay_s")
 CANDIDATES = (
     "position_gain_per_s", "velocity_gain_a_per_in_s", "current_limit_a", "rate_limit_in_s", "pwm_dead_band_v",
@@ -72,16 +72,12 @@ DELAY_DIFF_S = 2.5e-4
 DELAY_SCALE_S = 1e-3
 """A delay's scale beside the log coordinates (1 ms weighs as a factor e) in the trust region."""
 DELAY_RESOLUTION_S = 1e-4
-"""HOAD2/HOAD3's step: the models delay in whole steps, so the fitted delays are snapped to them
-(:data:`SNAP_STEPS` either side), and a delay's uncertainty is never below half of one."""
-SNAP_STEPS = 10
-SNAP_ROUNDS = 3
+"""HOAD2/HOAD3's step: a delay's uncertainty is never below half of it."""
 DIFF_STEP = 0.05
 """Difference step in log coordinates: 5 % of each element. A friction, a dead band or the noise inside
 the loop make the objective rough at small scales; a difference over 5 % follows its trend."""
 MOVE_SHARE = 1e-3
 MAX_NFEV = 40
-REFIT_NFEV = 15
 POLISH_ROUNDS = 4
 POLISH_SHARE = 5e-3
 """The fit is restarted (its trust region reset) while a restart removes this share of the error above
@@ -108,7 +104,7 @@ class PhysicalFit:
     """Fitted and held values, in the model's names and units (a curve is its tuple of segment values)."""
     declared: dict[str, Any]
     sigma: dict[str, float]
-    """One-sigma uncertainty (a curve's is that of its first segment; a delay's is half its grid step)."""
+    """One-sigma uncertainty (a curve's is that of its first segment; a delay's never below half a model step)."""
     fitted: tuple[str, ...]
     held: tuple[str, ...]
     """Parameters the record cannot move: held at their declared values."""

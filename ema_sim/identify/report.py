@@ -244,8 +244,10 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             **_stats(p, final),
         },
         **({"equivalent": {
-            "model": " + ".join([result.model, *(s.effect for s in result.steps)]),
-            "params": _params(result, result.equivalent),
+            "model": result.equivalent_model,
+            # a declared model as it is has no fitted parameters of its own (its run is the declared one)
+            "params": ({} if result.equivalent_model.endswith("(as declared)")
+                       else _params(result, result.equivalent)),
             "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.equivalent).items()},
             "rms_over_noise": {o: _round(v / p.sigma_deg[o], 4) for o, v in _rms_of(p, result.equivalent).items()},
             "escalated_because": result.escalated or None,

@@ -27,6 +27,12 @@ Safeguards (the contract's rules for every report):
 * the trivial model position = command (surface = command) is always available: when the declared
   model with every effect added still fits worse (weighted, all outputs), the final model *is* the
   trivial one, and the fitted model stays in the report as the baseline with the reason.
+
+Beyond the vocabulary (section 4.2.5's loop, :mod:`ema_sim.identify.physical`): a declared HOAD2/HOAD3
+has its physical parameters fitted, and the effect search is skipped when they leave at most
+:data:`EQUIVALENT_EXCESS` times the noise; any other declared model that ends above that on a record of
+LVDT and surface is escalated to HOAD3's physics, kept when it pays, the declared model with its effects
+reported beside it as the equivalent.
 """
 
 from __future__ import annotations
@@ -170,8 +176,10 @@ class Identification:
     """A high-order model's physical parameters fitted to the record, when they are the final model."""
     equivalent: Fit | None = None
     """The declared model with its effects, when :attr:`physical` replaced it as the final model."""
+    equivalent_model: str = ""
+    """:attr:`equivalent` in words (``loada + compliance + …``, ``hoad3 (as declared)``)."""
     escalated: str = ""
-    """Why the physical fit of :data:`ESCALATE_TO` was tried for a second-order declared model (empty: not)."""
+    """Why the physical fit of :data:`ESCALATE_TO` was tried for the declared model (empty: it was not)."""
 
 
 def _rms(problem: Problem, f: Fit) -> dict[str, float]:
@@ -696,7 +704,7 @@ def identify(
     command : str
         How the command was logged: ``detect``, ``held`` or ``sampled``.
     escalate : bool
-        Whether a second-order model out of vocabulary inside the servo loop may be replaced by
+        Whether a declared model that runs out of vocabulary (:func:`_escalation`) may be replaced by
         :data:`ESCALATE_TO` with its physical parameters fitted (never with ``max_effects`` 0).
     """
     t0 = time.perf_counter()
@@ -716,7 +724,12 @@ def identify(
     result = Identification(problem, model, baseline, cur, record=record, start=start, notes=notes)
     result.as_declared = as_declared
     result.simulator_error_deg = simulator_error(problem, cur.params, cur.flip)
-    physical = fit_physical(problem, key, say) if key in PHYSICAL_MODELS else None
+    physical = None
+    if key in PHYSICAL_MODELS and record.unit != "deg":
+        notes.append(f"{key}'s physical parameters not fitted: the record is in {record.unit}, and the model's "
+                     "outputs are surface degrees through its crank arm (give --crank-arm-in to convert)")
+    elif key in PHYSICAL_MODELS:
+        physical = fit_physical(problem, key, say)
     searched = max_effects
     if physical is not None and _within(problem, physical.rms_deg):
         searched = 0
@@ -784,15 +797,15 @@ def _within(problem: Problem, rms_deg: dict[str, float]) -> bool:
 def _escalation(problem: Problem, result: Identification) -> str:
     """Why the servo's own structure must be fitted (empty: it need not be).
 
-    A second-order declared model whose final fit, every effect that paid included, leaves more than
-    :data:`EQUIVALENT_EXCESS` times the noise on a record of both the LVDT and the surface (an installed
-    actuator's record, as HOAD3 describes one) has run out of vocabulary: its effects are equivalents.
-    Where the error is (the share of the surface's the position's carries) is said, not required: HOAD3
-    carries the drive inside the loop and the linkage outside it.
+    A declared model (the second-order family, HOAC1, HOALM, LOES) whose final fit, every effect that paid
+    included, leaves more than :data:`EQUIVALENT_EXCESS` times the noise on a record of both the LVDT and
+    the surface (an installed actuator's record, as HOAD3 describes one) has run out of vocabulary: its
+    effects are equivalents. Where the error is (the share of the surface's the position's carries) is
+    said, not required: HOAD3 carries the drive inside the loop and the linkage outside it.
     """
-    if result.final_model or result.model.strip().lower() in HIGH_ORDER:
-        return ""
     if "surface_deg" not in problem.outputs or "position_deg" not in problem.outputs:
+        return ""
+    if result.record is not None and result.record.unit != "deg":
         return ""
     errors = problem.errors_deg(result.final.sim)
     ratio = {o: float(np.sqrt(np.mean(e**2))) / problem.sigma_deg[o] for o, e in errors.items()}
@@ -828,16 +841,15 @@ def _adopt_physical(problem: Problem, result: Identification, pf: PhysicalFit) -
                         f"s): rms {text}; it removes {share} of the error above the noise floor that "
                         f"{_label(result)} left{held}")
     result.physical = pf
-    result.equivalent = cur
+    result.equivalent, result.equivalent_model = cur, _label(result)
     result.final = Fit(cur.params, False, (), np.asarray(pf.sim, dtype=float), pf.residual,
                        np.zeros((pf.residual.size, 0)), {}, ())
     result.final_model = f"{pf.model} (physical parameters fitted)"
 
 
 def _label(result: Identification) -> str:
-    """The model the physical fit replaced, in words."""
-    eq = " + ".join([result.model, *(s.effect for s in result.steps)])
-    return f"{eq} ({result.final_model})" if result.final_model and result.physical is None else eq
+    """The final model so far, in words (the one a physical fit would replace)."""
+    return result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)])
 
 
 def _keep_declared(problem: Problem, result: Identification, as_declared: AsDeclared) -> None:
