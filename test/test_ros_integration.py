@@ -291,7 +291,8 @@ def test_lockstep_follows_any_clock_publisher_and_keeps_every_frame(client, tmp_
             RELIABLE)
         clock = client.node.create_publisher(Clock, "/clock", DEFAULT_QOS if qos_name == "default" else CLOCK_QOS)
         cmd = client.node.create_publisher(JointState, "/ema/emac/command", RELIABLE)
-        assert client.spin(20, lambda: min(clock.get_subscription_count(), cmd.get_subscription_count(),
+        # discovery of three endpoints: 20 s was once not enough with numba compiling beside it on two cores
+        assert client.spin(60, lambda: min(clock.get_subscription_count(), cmd.get_subscription_count(),
                                            sub.get_publisher_count()) > 0)
         client.spin(2.0)  # the node's side of each match too (discovery takes longer under load)
         volts = [command_v(2.0 * math.sin(k / 15.0)) for k in range(frames)]

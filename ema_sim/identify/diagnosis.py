@@ -460,6 +460,16 @@ def _lagged(x: FloatArray, fs: float) -> FloatArray:
     return np.column_stack(cols)
 
 
+def _what_is_left(result: Identification) -> str:
+    """What a structured residual is, said of the final model (the vocabulary's effects, or a model's physics)."""
+    if result.physical is not None:
+        return (f"what is left is structure {result.physical.model}'s physics, fitted, does not explain; its "
+                "parameters are the best that structure allows, not a description of what is left")
+    added = ", ".join(s.effect for s in result.steps) or "nothing"
+    return (f"what is left is structure no effect of the vocabulary explains (added: {added}); the "
+            "model's parameters are the best this structure allows, not a description of it")
+
+
 def _what_the_structure_means(result: Identification, left: list[OutputDiagnosis]) -> list[str]:
     """What a structured residual says about the fitted parameters and where the missing structure lies.
 
@@ -623,9 +633,7 @@ def diagnose(result: Identification) -> Diagnosis:
     warnings += [d.jitter_statement() for d in outputs.values() if d.jitter_s is not None]
     left = [d for d in outputs.values() if d.structured]
     if left:
-        added = ", ".join(s.effect for s in result.steps) or "nothing"
-        text.append(f"what is left is structure no effect of the vocabulary explains (added: {added}); the "
-                    "model's parameters are the best this structure allows, not a description of it")
+        text.append(_what_is_left(result))
     for line in _what_the_structure_means(result, left):
         text.append(line)
         warnings.append(line)
