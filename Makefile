@@ -15,6 +15,7 @@ $(STAMP): requirements.txt setup.py setup.cfg
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -r requirements.txt
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	$(BIN)/python -m ema_sim.warmup
 	touch $@
 
 lint: $(STAMP)

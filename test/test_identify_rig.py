@@ -33,6 +33,9 @@ from ema_sim.identify.trust import frequency_hz, on_bound
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import Loac
 
+# One worker runs the module: the records are identified once (the module fixture), not once per worker.
+pytestmark = pytest.mark.xdist_group("test_identify_rig")
+
 WING = load_channel("left_wing")
 
 RIG = {

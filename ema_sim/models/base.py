@@ -356,7 +356,8 @@ class ActuatorModel(ABC):
         self._t = 0.0
         self._set_history(np.array([HISTORY_START_S]), u[:, None], hm[:, None])
         self._trim_states(u, hm)
-        return self._sample(self._integrate(self._hist_t, self._hist_u, self._hist_h, 0.0, np.zeros(1))[:, 0])
+        bp_u, bp_h = np.ascontiguousarray(self._hist_u), np.ascontiguousarray(self._hist_h)
+        return self._sample(self._integrate(self._hist_t, bp_u, bp_h, 0.0, np.zeros(1))[:, 0])
 
     def step(self, command_deg: ArrayLike, hinge_moment_inlb: ArrayLike = 0.0, frame_s: float = 0.005) -> Sample:
         """Advance one frame with the command and load held over it; outputs at the frame's end.
@@ -428,9 +429,8 @@ class ActuatorModel(ABC):
         self._h_hi = hi + 1
         t_end = t0 + frame_s
         lo = self._h_lo
-        bp_u, bp_h = buf_u[:, lo:hi + 1], buf_h[:, lo:hi + 1]
-        if self.n > 1:  # column slices of a batch are strided; the kernels take contiguous rows
-            bp_u, bp_h = np.ascontiguousarray(bp_u), np.ascontiguousarray(bp_h)
+        # column slices are strided; the kernels take C-contiguous arrays only (one compiled layout)
+        bp_u, bp_h = np.ascontiguousarray(buf_u[:, lo:hi + 1]), np.ascontiguousarray(buf_h[:, lo:hi + 1])
         sample_t = self._sample_t
         sample_t[0] = t_end
         out = self._integrate(self._buf_t[lo:hi + 1], bp_u, bp_h, t_end, sample_t)
@@ -560,8 +560,8 @@ class ActuatorModel(ABC):
         if samples.size and samples[-1] > t_end + stages.TIME_EPS_S:
             raise EmaError("sample_times go past end_s")
         all_t = np.concatenate([self._hist_t, bp_t])
-        all_u = np.concatenate([self._hist_u, u], axis=1)
-        all_h = np.concatenate([self._hist_h, hm], axis=1)
+        all_u = np.ascontiguousarray(np.concatenate([self._hist_u, u], axis=1))
+        all_h = np.ascontiguousarray(np.concatenate([self._hist_h, hm], axis=1))
         out = np.empty((self.n, samples.size, N_OUT))
         t_start = self._t
         span = max(t_end - t_start, 1e-12)

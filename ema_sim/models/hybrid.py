@@ -22,11 +22,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.integrate import Rhs, make_dopri5
+from ema_sim.models.stages import compile_closure
 
 Guards = Callable[[float, FloatArray, FloatArray, FloatArray, FloatArray], None]
 Transition = Callable[[int, float, FloatArray, FloatArray, FloatArray], None]
@@ -167,4 +167,5 @@ def make_hybrid(  # noqa: PLR0915 - one compiled loop
             h = max(min(h_next, h_max), 1e-12)
         return h, events
 
-    return nb.njit(cache=True)(advance)
+    compiled: Advance = compile_closure(advance, rhs)
+    return compiled

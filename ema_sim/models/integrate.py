@@ -15,10 +15,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray, IntArray
+from ema_sim.models.stages import compile_closure
 
 Rhs = Callable[[float, FloatArray, FloatArray, FloatArray, FloatArray], None]
 """A right-hand side ``rhs(t, y, p, u, dydt)``: fills ``dydt`` for state ``y``, parameters ``p``, inputs ``u``."""
@@ -192,6 +192,7 @@ def make_dopri5(rhs: Rhs) -> Stepper:  # noqa: PLR0915
                 h_prop = min(h_max, hh * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2)))
         return h_prop, steps
 
-    masked = nb.njit(cache=True)(_masked)
-    release = nb.njit(cache=True)(release_stops)
-    return nb.njit(cache=True)(dopri5)
+    masked = compile_closure(_masked, rhs)
+    release = compile_closure(release_stops, rhs)
+    stepper: Stepper = compile_closure(dopri5, rhs)
+    return stepper

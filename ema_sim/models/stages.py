@@ -10,6 +10,8 @@ shape with its configuration. Every element here is written once and used everyw
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -34,6 +36,31 @@ FLAG_STALL = 128
 
 jit = nb.njit(cache=True, inline="always")
 """Compile an element for inlining into the kernels (it takes the caller's floating-point flags)."""
+
+
+def compile_closure(fn: Callable[..., Any], of: Any) -> Any:
+    """Compile a kernel a factory made, cached under a name of its own (``qualname_of``).
+
+    Numba names a cache file after the function's qualified name, which every closure of one factory
+    shares: two processes compiling two of them at once (two nodes' first runs, two test workers)
+    would write one index and one data file between them and load each other's machine code.
+
+    Parameters
+    ----------
+    fn : callable
+        The closure, as its factory defined it.
+    of : object
+        What tells it from its siblings: the compiled function it closes over, or a name.
+
+    Returns
+    -------
+    numba dispatcher
+        ``fn`` compiled and cached.
+    """
+    func = getattr(of, "py_func", of)
+    tag = f"{func.__module__.rsplit('.', 1)[-1]}_{func.__name__}" if callable(func) else str(of)
+    fn.__qualname__ = f"{fn.__qualname__}_{tag}"
+    return nb.njit(cache=True)(fn)
 
 
 @jit

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
@@ -37,6 +36,7 @@ from ema_sim.models.second_order.figure29 import free_play_accel, free_play_eule
 from ema_sim.models.second_order.params import P, X
 from ema_sim.models.stages import (
     TIME_EPS_S,
+    compile_closure,
     euler_pair,
     first_order_lag,
     lag_gain,
@@ -130,7 +130,8 @@ def make_euler(backward: bool) -> Kernel:
                 x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm), g_fb)
                 x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm), g_c)
 
-    return nb.njit(cache=True)(kernel)
+    compiled: Kernel = compile_closure(kernel, "backward" if backward else "forward")
+    return compiled
 
 
 KERNELS: dict[int, Kernel] = {METHOD_FORWARD_EULER: make_euler(False), METHOD_LOADF: make_euler(True)}
