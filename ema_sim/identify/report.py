@@ -23,7 +23,7 @@ from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
-from ema_sim.identify.stepwise import Identification
+from ema_sim.identify.stepwise import AS_DECLARED, Identification
 from ema_sim.identify.trust import assess, reference
 from ema_sim.io.csv import write_csv
 from ema_sim.models import create
@@ -246,7 +246,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         **({"equivalent": {
             "model": result.equivalent_model,
             # a declared model as it is has no fitted parameters of its own (its run is the declared one)
-            "params": ({} if result.equivalent_model.endswith("(as declared)")
+            "params": ({} if result.equivalent_model.endswith(AS_DECLARED)
                        else _params(result, result.equivalent)),
             "rms_deg": {o: _round(v) for o, v in _rms_of(p, result.equivalent).items()},
             "rms_over_noise": {o: _round(v / p.sigma_deg[o], 4) for o, v in _rms_of(p, result.equivalent).items()},

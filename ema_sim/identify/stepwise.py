@@ -74,6 +74,8 @@ REFERENCE = "position = command"
 START_WN_RAD_S = (8.0, 15.0, 30.0, 60.0, 120.0, 250.0, 480.0)
 START_ZETA = (0.35, 0.7, 1.2, 2.0)
 """The coarse grid the baseline may start from (when it does better than the declared values)."""
+AS_DECLARED = " (as declared)"
+"""How a model name reads when the declared model, run as it is, is the final model (no parameters fitted)."""
 
 
 @dataclass(frozen=True)
@@ -862,4 +864,4 @@ def _keep_declared(problem: Problem, result: Identification, as_declared: AsDecl
     result.removed += [Removal(s.effect, s.where, dict(s.params), why) for s in result.steps]
     result.steps.clear()
     result.final = Fit(result.final.params, False, (), as_declared.sim, r, np.zeros((r.size, 0)), {}, ())
-    result.final_model = f"{result.model} (as declared)"
+    result.final_model = f"{result.model}{AS_DECLARED}"
