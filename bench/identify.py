@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ema_sim.benchmark import Benchmark, Result
 from ema_sim.config import load_channel
-from ema_sim.identify.stepwise import identify
+from ema_sim.identify.identification import identify
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from identgen import hoad3_record, make_record

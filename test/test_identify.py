@@ -18,7 +18,7 @@ from ema_sim.analysis.noise import input_independence, noise_floor, whiteness
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import diagnose
-from ema_sim.identify.stepwise import identify
+from ema_sim.identify.identification import identify
 from ema_sim.io.bag import write_bag
 from ema_sim.io.csv import write_csv
 

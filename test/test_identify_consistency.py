@@ -374,8 +374,8 @@ def test_identify_lists_the_parameters_it_found_on_a_grid():
     from identgen import make_record  # noqa: PLC0415
 
     from ema_sim.config import load_channel  # noqa: PLC0415
+    from ema_sim.identify.identification import identify  # noqa: PLC0415
     from ema_sim.identify.report import to_json  # noqa: PLC0415
-    from ema_sim.identify.stepwise import identify  # noqa: PLC0415
 
     data = make_record({"quantization": 0.02, "command_gain": 0.01}, seed=4, duration_s=10.0)
     doc = to_json(identify(data, load_channel("left_wing"), "loada", max_effects=0), "q.csv")

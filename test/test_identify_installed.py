@@ -17,7 +17,7 @@ from identgen import make_record
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.effects import FREE
-from ema_sim.identify.stepwise import identify
+from ema_sim.identify.identification import identify
 from ema_sim.io.csv import write_csv
 
 WING = load_channel("left_wing")

@@ -25,10 +25,12 @@ from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.effects import FREE
 from ema_sim.identify.fit import evaluate
+from ema_sim.identify.identification import identify
+from ema_sim.identify.outcome import REFERENCE, Step
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare, travel_limits
 from ema_sim.identify.report import strict, to_json
-from ema_sim.identify.stepwise import REFERENCE, Step, _prune, identify, no_worse
+from ema_sim.identify.stepwise import no_worse, prune
 from ema_sim.identify.trust import frequency_hz, on_bound
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import Loac
@@ -149,13 +151,19 @@ def test_residuals_file_holds_what_the_report_says(rig, name):
 
 def test_a_close_follower_is_position_equals_command_and_says_why(rig):
     """A drive with full velocity feed-forward follows its profile closer than any second order with ωn ≤ 500 rad/s:
-    the final model is the trivial one, said in a warning, and the diagnosis names the command rate."""
+    the final model is the trivial one (with what discovery adds to it), said in a warning, and the diagnosis
+    names the command rate."""
     report, *_ = rig["rotary_100hz_close_follower"]
-    assert report["final"]["model"] == REFERENCE
-    assert report["final"]["rms_deg"] == report["reference"]["rms_deg"]
+    assert report["final"]["model"].startswith(REFERENCE)
+    assert report["final"]["rms_deg"]["position_deg"] <= report["reference"]["rms_deg"]["position_deg"]
+    assert not report["artefacts"], "a follower's overshoot sampled at 100 Hz is no spike"
     assert report["baseline"]["rms_deg"]["position_deg"] > report["reference"]["rms_deg"]["position_deg"]
     assert any(w.startswith("the declared second_order fits worse than position = command") for w in report["warnings"])
-    assert any("command rate" in c["input"] for c in report["diagnosis"]["outputs"]["position_deg"]["correlates"])
+    # what is left follows the motion: the diagnosis names the command rate, or discovery a term of the motion
+    correlates = report["diagnosis"]["outputs"]["position_deg"]["correlates"]
+    terms = [t["term"] for t in report["discovered"]["outputs"]["position_deg"]["terms"]]
+    assert (any("command rate" in c["input"] for c in correlates)
+            or any(w in t for t in terms for w in ("rate", "acceleration"))), (correlates, terms)
 
 
 def test_the_ringing_is_found_at_the_plant_s_own_frequency(rig):
@@ -184,8 +192,9 @@ def test_the_ringing_is_found_at_the_plant_s_own_frequency(rig):
     (limit,) = [a for a in report["added"] if a["effect"] == "current_limit"]
     assert limit["params"]["accel_dps2"] == pytest.approx(drive.accel_limit, rel=0.2)
     # The ring is not: what stands in for it is said, an added effect as a proxy, a declared parameter as structure.
+    # (a parameter whose halves disagree, or one the fit pushed onto its bound: either way, said as no estimate)
     proxies = report["diagnosis"]["proxies"]
-    assert proxies
+    assert proxies or any("sits on the upper bound" in w or "sits on the lower bound" in w for w in report["warnings"])
     for p in proxies:
         why = ("stands in for structure the vocabulary lacks" if p["effect"]
                else "the declared model's structure does not fit the whole record")
@@ -252,7 +261,7 @@ def test_an_effect_that_collapsed_to_off_is_taken_out_again():
     p = result.problem
     collapsed = evaluate(p, result.final.params.replace(delay_s=2e-5), (*result.final.free, "delay_s"))
     result.steps.append(Step("time_delay", "command", {"delay_s": 2e-5}, {}, {}, {}, "test"))
-    final = _prune(p, result, collapsed, result.baseline.params)
+    final = prune(p, result, collapsed, result.baseline.params, {o: float('inf') for o in p.outputs})
     assert "delay_s" not in final.free
     assert final.params.delay_s == 0.0
     assert [r.effect for r in result.removed] == ["time_delay"]

@@ -22,9 +22,9 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415
     from ema_sim.errors import UnknownNameError  # noqa: PLC0415
     from ema_sim.identify.declared import DECLARED  # noqa: PLC0415
+    from ema_sim.identify.identification import identify  # noqa: PLC0415
     from ema_sim.identify.record import prepare  # noqa: PLC0415
     from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415
-    from ema_sim.identify.stepwise import identify  # noqa: PLC0415
 
     check_channel(args.channel)
     if args.model.strip().lower() not in DECLARED:

@@ -62,8 +62,8 @@ from ema_sim.analysis.series import Hold, holds
 from ema_sim.identify.declared import HIGH_ORDER
 from ema_sim.identify.effects import EFFECTS, FREE, Effect
 from ema_sim.identify.fit import Fit, block_covariance
+from ema_sim.identify.outcome import Identification
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, IN_LOOP_SHARE, Problem, in_loop_share
-from ema_sim.identify.stepwise import Identification
 from ema_sim.identify.trust import bandwidth_hz, frequency_hz
 from ema_sim.models.base import O_RATE
 
@@ -427,15 +427,15 @@ def _ring(e: FloatArray, sigma: float, fs: float, stops: NDArray[np.int64], next
 # ------------------------------------------------------------------------------------------ inputs
 def _regressors(problem: Problem, fit: Fit) -> dict[str, FloatArray]:
     d = problem.data
-    dt = 1.0 / problem.sample_hz
+    t = problem.time_s
     u = d.command_deg
     rate = fit.sim[:, O_RATE]
-    out = {"command": u, "command rate": np.gradient(u, dt),
-           "command acceleration": np.gradient(np.gradient(u, dt), dt),
+    out = {"command": u, "command rate": np.gradient(u, t),
+           "command acceleration": np.gradient(np.gradient(u, t), t),
            "direction of motion (sign of the rate: friction, backlash)":
                np.where(np.abs(rate) > 0.01 * max(float(np.max(np.abs(rate))), 1e-12), np.sign(rate), 0.0)}
     if problem.load_span_inlb > 20.0:
-        out |= {"hinge moment": problem.hinge_moment, "hinge moment rate": np.gradient(problem.hinge_moment, dt)}
+        out |= {"hinge moment": problem.hinge_moment, "hinge moment rate": np.gradient(problem.hinge_moment, t)}
     if d.current_a is not None:
         out["motor current"] = d.current_a
     return out

@@ -263,6 +263,10 @@ class Effect:
     """Effects (``name/where``) fitted together with this one when the model lacks them: a structure the
     current fit has bent its own parameters to mimic (the in-loop filter re-times the whole loop, so
     the delays it hid are freed with it); each one whose value fails its check is dropped again."""
+    contract: Mapping[str, str] = field(default_factory=dict)
+    """The data contract's key for a parameter in this effect's own ``params`` where it differs from the key the
+    final model's parameters carry (the linkage's damping ratio is ``zeta`` in its effect, ``linkage_zeta`` beside
+    the servo's own ``zeta`` in the final model)."""
     own: tuple[str, ...] | None = None
     """The parameters that are this effect's alone (its fields when None): once they are fitted, it is in.
     A nonlinear compliance also fits (and reports) the compliance below its knee, which a linear
@@ -550,7 +554,7 @@ EFFECTS: tuple[Effect, ...] = (
     Effect("linkage_mode", "surface", ("linkage_freq_hz", "linkage_zeta"),
            "the surface rings after steps where the LVDT does not: its own mode outside the servo loop",
            probes=_linkage_probe, applies=lambda ctx: _has("surface_deg")(ctx) and _off(ctx, "linkage_freq_hz"),
-           check=_linkage_check),
+           check=_linkage_check, contract={"linkage_zeta": "zeta"}),
     Effect("hinge_moment_sign", "load", (), "the load-dependent stages fit the residual only with the hinge moment "
            "reversed", probes=lambda _ctx: [{}],
            applies=lambda ctx: (hinge_moment_active(ctx.params) or hinge_moment_active(ctx.declared)) and _loaded(ctx)),

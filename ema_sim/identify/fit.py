@@ -26,6 +26,27 @@ from ema_sim.models.second_order import SecondOrderParams
 FloatArray = NDArray[np.float64]
 FD_STEP = 1e-4
 """Finite-difference step in scaled coordinates (the simulator is smooth to ~1e-7°)."""
+DIVERGED = 1e6
+"""What a non-finite weighted residual entry counts as: a run that diverged is a bad step for the optimiser
+(it backs off), not a crash."""
+
+
+def finite(residual: FloatArray) -> FloatArray:
+    """``residual`` with every non-finite entry replaced by :data:`DIVERGED`.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        A weighted residual.
+
+    Returns
+    -------
+    numpy.ndarray
+        The same, finite.
+    """
+    if np.all(np.isfinite(residual)):
+        return residual
+    return np.where(np.isfinite(residual), residual, DIVERGED)
 COVARIANCE_LAGS = 200
 
 
@@ -73,7 +94,7 @@ class _Objective:
         key = x.tobytes()
         if self._cache is None or self._cache[0] != key:
             self._cache = (key, self._simulate([x])[0])
-        return self.problem.weighted_residual(self._cache[1])
+        return finite(self.problem.weighted_residual(self._cache[1]))
 
     def jacobian(self, x: FloatArray) -> FloatArray:
         _, hi = zip(*(f.x_bounds() for f in self.free), strict=True)
@@ -87,7 +108,7 @@ class _Objective:
             points.append(xp)
         sims = self._simulate(points)
         r0 = self.residual(x)
-        cols = [(self.problem.weighted_residual(s) - r0) / h for s, h in zip(sims, steps, strict=True)]
+        cols = [(finite(self.problem.weighted_residual(s)) - r0) / h for s, h in zip(sims, steps, strict=True)]
         # residual = measured − model, so d(model)/dx = −d(residual)/dx
         return -np.column_stack(cols) if cols else np.zeros((r0.size, 0))
 

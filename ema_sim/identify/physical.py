@@ -38,7 +38,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ema_sim.identify.declared import run_declared
-from ema_sim.identify.fit import block_covariance
+from ema_sim.identify.fit import block_covariance, finite
 from ema_sim.identify.problem import Problem
 from ema_sim.models import model_parameters
 from ema_sim.models.arrays import FloatArray
@@ -88,6 +88,10 @@ and down (and the other way for the second): the spread of where they end is the
 reproducibility on this record, part of each uncertainty."""
 BATCHES = 4
 TINY = 1e-300
+LOG_LIMIT = math.log(100.0)
+"""No element moves beyond a hundredfold of its declared value either way (past that the model is not HOAD3's
+actuator any more, and exp() would overflow or an inertia collapse to zero)."""
+MAX_DELAY_S = 0.05
 SEEDS = (7, 8, 9)
 """The model's own noise is run with these seeds: the first for the fit, the others for the two fits from
 shifted starts, so their spread carries the noise inside the loop as well."""
@@ -183,8 +187,8 @@ class _Runs:
         return run_model(self.problem, self.model, self.values(x), seed)
 
     def residual(self, x: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
-        """Weighted residual at ``x``."""
-        return self.problem.weighted_residual(self.sim(x, seed))
+        """Weighted residual at ``x`` (a run that diverged counts as a very bad one, not an error)."""
+        return finite(self.problem.weighted_residual(self.sim(x, seed)))
 
     def cost(self, x: FloatArray, seed: int = SEEDS[0]) -> float:
         """Weighted residual sum of squares at ``x``."""
@@ -220,8 +224,8 @@ class _Runs:
 
 
 def _scaled(value: Any, log_scale: float) -> Any:
-    """A declared value (or each segment of a curve) times ``exp(log_scale)``."""
-    k = math.exp(log_scale)
+    """A declared value (or each segment of a curve) times ``exp(log_scale)``, the scale within :data:`LOG_LIMIT`."""
+    k = math.exp(min(max(log_scale, -LOG_LIMIT), LOG_LIMIT))
     return tuple(float(q) * k for q in value) if isinstance(value, tuple) else float(value) * k
 
 
@@ -245,9 +249,10 @@ def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEE
         r0 = last["r"] if "z" in last and np.array_equal(last["z"], z) else runs.residual(put(z), seed)
         return runs.jacobian(put(z), free, r0, seed)
 
-    lower = np.where(runs.delay[free], 0.0, -np.inf)
-    start = np.maximum(x[free], lower)
-    out = least_squares(res, start, jac=jac, bounds=(lower, np.inf), x_scale=runs.scale[free], method="trf",
+    lower = np.where(runs.delay[free], 0.0, -LOG_LIMIT)
+    upper = np.where(runs.delay[free], MAX_DELAY_S, LOG_LIMIT)
+    start = np.clip(x[free], lower + 1e-9, upper - 1e-9)
+    out = least_squares(res, start, jac=jac, bounds=(lower, upper), x_scale=runs.scale[free], method="trf",
                         max_nfev=nfev)
     return put(np.asarray(out.x, dtype=float))
 
@@ -286,8 +291,7 @@ def _shifted(runs: _Runs, x: FloatArray, free: list[int], sign: float) -> FloatA
     y = x.copy()
     for k, i in enumerate(free):
         y[i] += sign * (DELAY_STEP_S if runs.delay[i] else START_SHIFT) * (1.0 if k % 2 == 0 else -1.0)
-        if runs.delay[i]:
-            y[i] = max(y[i], 0.0)
+        y[i] = min(max(y[i], 0.0), MAX_DELAY_S) if runs.delay[i] else min(max(y[i], -LOG_LIMIT), LOG_LIMIT)
     return y
 
 

@@ -23,7 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import savgol_filter, welch
 
+from ema_sim.analysis import slew
 from ema_sim.analysis.noise import NoiseFloor, output_noise
+from ema_sim.analysis.slew import Slew
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.csv import MeasuredData
@@ -59,6 +61,13 @@ class Problem:
     time_s: FloatArray = field(init=False)
     sigma_deg: dict[str, float] = field(init=False)
     simulations: int = field(init=False, default=0)
+    dense: bool = field(init=False, default=False)
+    """A held command has a breakpoint at every sample (so a signal can be added to it sample by sample)."""
+    weights: dict[str, float] = field(init=False, default_factory=dict)
+    """Extra weight of an output in the weighted residual (none: every output weighs by its noise floor alone)."""
+    projections: dict[str, FloatArray] = field(init=False, default_factory=dict)
+    """Per output, an orthonormal basis of terms whose combination is solved for at every evaluation and taken
+    out of the weighted residual (variable projection: :meth:`set_output_terms`)."""
 
     def __post_init__(self) -> None:
         d = self.data
@@ -91,10 +100,57 @@ class Problem:
             self._bp_t, self._bp_u, self._bp_h = grid, np.interp(mid, self.time_s, cmd), np.interp(mid, self.time_s, hm)
             return
         keep = np.ones(cmd.size, dtype=bool)
-        keep[1:] = (np.diff(cmd) != 0.0) | (np.diff(hm) != 0.0)
+        if not self.dense:
+            keep[1:] = (np.diff(cmd) != 0.0) | (np.diff(hm) != 0.0)
         self._bp_t = self.time_s[keep]
         self._bp_u = cmd[keep]
         self._bp_h = hm[keep]
+
+    def set_dense(self, dense: bool) -> None:
+        """Give a held command a breakpoint at every sample (True) or only where it changes (False).
+
+        Parameters
+        ----------
+        dense : bool
+            Every sample a breakpoint (the same input, held; a per-sample signal can then be added to it).
+        """
+        self.dense = dense
+        self.set_command_sampled(self.command_sampled)
+
+    def on_breakpoints(self, signal: FloatArray) -> FloatArray:
+        """A signal given at the record's samples, at the model's input breakpoints (held or interpolated).
+
+        Parameters
+        ----------
+        signal : numpy.ndarray
+            One value per sample of the record.
+
+        Returns
+        -------
+        numpy.ndarray
+            One value per breakpoint.
+        """
+        if self.command_sampled:
+            mid = np.minimum(self._bp_t + 0.5 * self.step_s, self.time_s[-1])
+            out: FloatArray = np.interp(mid, self.time_s, signal)
+            return out
+        idx = np.clip(np.searchsorted(self.time_s, self._bp_t + 1e-12, side="right") - 1, 0, self.time_s.size - 1)
+        return np.asarray(signal, dtype=float)[idx]
+
+    def set_output_terms(self, terms: dict[str, FloatArray]) -> None:
+        """Terms whose best combination is added to each output's model at every evaluation (variable projection).
+
+        Parameters
+        ----------
+        terms : dict
+            Output → columns on the fitted samples (``(fitted, k)``); an empty dict removes them.
+        """
+        self.projections = {}
+        for o, cols in terms.items():
+            if cols.size == 0:
+                continue
+            u, sv, _ = np.linalg.svd(cols / self.sigma_deg[o], full_matrices=False)
+            self.projections[o] = u[:, sv > 1e-10 * float(sv[0])]
 
     @property
     def breakpoints(self) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -141,6 +197,12 @@ class Problem:
         return float(np.percentile(np.abs(rate), 99.9))
 
     @cached_property
+    def measured_slew(self) -> Slew:
+        """The slope of the record's rate-limited moves (:mod:`ema_sim.analysis.slew`), on its first output."""
+        output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
+        return slew.measure(self.time_s, self.data.command_deg, self.data.column(output), self.sigma_deg[output])
+
+    @cached_property
     def load_freq_hz(self) -> float:
         """Dominant frequency of the hinge moment (what hysteretic damping's h/ω is evaluated at)."""
         hm = self.hinge_moment - np.mean(self.hinge_moment)
@@ -152,7 +214,8 @@ class Problem:
         return float(max(freqs[int(np.argmax(spec))], 1.0 / self.time_s[-1]))
 
     # ---------------------------------------------------------------- simulation
-    def simulate(self, params: Sequence[SecondOrderParams], flips: Sequence[bool] | None = None) -> FloatArray:
+    def simulate(self, params: Sequence[SecondOrderParams], flips: Sequence[bool] | None = None,
+                 command_offsets: Sequence[FloatArray] | None = None) -> FloatArray:
         """Outputs ``(n, samples, 3)`` — position, surface, rate — of each parameter set on this record.
 
         ``flips[i]`` runs instance ``i`` with the hinge moment reversed (the hinge_moment_sign effect).
@@ -163,15 +226,19 @@ class Problem:
             One parameter set per instance.
         flips : sequence of bool, optional
             Per instance, run with the hinge moment reversed.
+        command_offsets : sequence of numpy.ndarray, optional
+            Per instance, a signal added to the command at each breakpoint (a term acting inside the loop).
         """
         n = len(params)
         flips = [False] * n if flips is None else list(flips)
         sign = np.where(np.asarray(flips, dtype=bool), -1.0, 1.0)[:, None]
         model = SecondOrder(self.channel, params=list(params), step_s=self.step_s)
         h = sign * self._bp_h[None, :]
-        model.trim(np.full(n, self._bp_u[0]), h[:, 0])
-        out = model.run_outputs(self._bp_t, np.broadcast_to(self._bp_u, (n, self._bp_u.size)), h,
-                                sample_times=self.time_s, end_s=float(self.time_s[-1]))
+        u = np.broadcast_to(self._bp_u, (n, self._bp_u.size))
+        if command_offsets is not None:
+            u = u + np.asarray(command_offsets, dtype=float).reshape(n, self._bp_u.size)
+        model.trim(np.ascontiguousarray(u[:, 0]), h[:, 0])
+        out = model.run_outputs(self._bp_t, u, h, sample_times=self.time_s, end_s=float(self.time_s[-1]))
         self.simulations += n
         return out[:, :, [O_POS, O_SURF, O_RATE]]
 
@@ -183,10 +250,15 @@ class Problem:
         sim : numpy.ndarray
             One simulation's outputs (samples × position, surface, rate).
         """
-        parts = [
-            (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.sigma_deg[o]
-            for o in self.outputs
-        ]
+        parts = []
+        for o in self.outputs:
+            part = (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.sigma_deg[o]
+            if o in self.weights:
+                part = part * self.weights[o]
+            basis = self.projections.get(o)
+            if basis is not None:
+                part = part - basis @ (basis.T @ part)
+            parts.append(part)
         return np.concatenate(parts)
 
     def errors_deg(self, sim: FloatArray) -> dict[str, FloatArray]:

@@ -9,7 +9,8 @@ with the sentence the report carries:
   demand (:mod:`ema_sim.analysis.command_hold`); a sampled command is reconstructed between samples
   by linear interpolation (:class:`~ema_sim.identify.problem.Problem`), which is the expected
   response when a logged change happened anywhere in the sample before it was logged;
-* jittery stamps straightened, gapped ones resampled (:func:`ema_sim.analysis.series.uniform_record`);
+* the record's **own stamps**: the model is run between them and read at them, jittery, rounded or gapped
+  as they are; nothing is straightened or resampled, so no output is read where it was not sampled;
 * the **travel**: a record that goes beyond the declared channel's travel is never clipped silently;
   the model's limits are taken from the data (at the output's extreme where the record shows a stop:
   the command beyond it while the output rests there; opened past the data where it shows none), and
@@ -189,8 +190,7 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     check_identifiable(data)
     noise = measure_outputs(data)
     hold = command_hold(data, noise, Options(command=command))
-    uniform = series.uniform_record(data, command_sampled=hold.assumed_sampled)
-    travel = travel_limits(uniform, channel, noise, stand_in=channel_note is not None)
+    travel = travel_limits(data, channel, noise, stand_in=channel_note is not None)
     if travel.limits != travel.declared:
         channel = replace(channel, position_min_deg=travel.limits[0], position_max_deg=travel.limits[1])
     notes: list[str] = []
@@ -210,12 +210,15 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         notes.append(f"command: {hold.evidence}; held and sampled both fitted, the better taken (below)")
     else:
         notes.append(f"command {hold.statement}")
-    if "resampled" in uniform.metadata:
-        notes.append(uniform.metadata["resampled"])
-    notes.append(f"travel: {travel.statement}")
-    if travel.outside:
-        warnings.append(f"data outside the declared travel: {travel.statement}")
     k = np.arange(data.time_s.size, dtype=float)
     trend = np.polyval(np.polyfit(k, data.time_s, 1), k)
     scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - trend))
-    return Record(uniform, channel, noise, hold, travel, notes, warnings, scatter)
+    if scatter:
+        dt = np.diff(data.time_s)
+        notes.append(f"time stamps jitter (intervals {1e3 * dt.min():.3g}-{1e3 * dt.max():.3g} ms, "
+                     f"{1e3 * scatter:.2g} ms rms about a uniform grid): fitted on the record's own stamps, "
+                     "nothing straightened or resampled")
+    notes.append(f"travel: {travel.statement}")
+    if travel.outside:
+        warnings.append(f"data outside the declared travel: {travel.statement}")
+    return Record(data, channel, noise, hold, travel, notes, warnings, scatter)

@@ -18,12 +18,14 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.analysis import slew
 from ema_sim.analysis.noise import input_independence, whiteness
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
+from ema_sim.identify.outcome import AS_DECLARED, Identification, model_name
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
-from ema_sim.identify.stepwise import AS_DECLARED, Identification
+from ema_sim.identify.stages import guarded
 from ema_sim.identify.trust import assess, reference
 from ema_sim.io.csv import write_csv
 from ema_sim.models import create
@@ -63,7 +65,7 @@ def _physical_final(result: Identification) -> dict[str, Any]:
     assert pf is not None
     p = result.problem
     return {
-        "model": result.final_model,
+        "model": model_name(result),
         "params": {k: _round(v) for k, v in pf.scalars().items()},
         "curves": {k: [_round(float(q)) for q in v] for k, v in pf.params.items() if isinstance(v, tuple)},
         "declared": {k: ([_round(float(q)) for q in v] if isinstance(v, tuple) else _round(float(v)))
@@ -176,6 +178,22 @@ def strict(value: Any) -> Any:
     return value
 
 
+def _slew(result: Identification) -> tuple[dict[str, Any], str | None]:
+    """The slope measured on the record's rate-limited moves, and a warning when the model's rate limit disagrees."""
+    measured = result.problem.measured_slew
+    final = result.final
+    if measured.rate is None or "rate_limit_dps" not in final.free:
+        return measured.as_dict(), None
+    fitted = float(final.params.rate_limit_dps)
+    tol = max(slew.AGREE * measured.rate, 2.0 * (measured.sigma or 0.0))
+    if abs(fitted - measured.rate) <= tol:
+        return measured.as_dict(), None
+    return measured.as_dict(), (
+        f"the fitted rate limit {fitted:.4g} and the slope measured on the record's {measured.moves} rate-limited "
+        f"moves, {measured.rate:.4g} (the straight middle of each move), disagree by "
+        f"{100 * (fitted / measured.rate - 1):+.0f} %: the model's limit is not the slope the data show")
+
+
 def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings).
 
@@ -191,9 +209,17 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     final = result.final
     names = _names(result, final)
     record = result.record
-    warnings, ident, exc = assess(result)
-    diagnosis = diagnose(result)
-    warnings += diagnosis.warnings
+    failures = result.failures
+    assessed = guarded("trust", failures, lambda: assess(result))
+    warnings, ident, exc = assessed if assessed is not None else ([], None, None)
+    diagnosis = guarded("diagnosis", failures, lambda: diagnose(result))
+    warnings += diagnosis.warnings if diagnosis is not None else []
+    warnings += result.warnings + result.ambiguities
+    slope = guarded("slew", failures, lambda: _slew(result))
+    if slope is not None and slope[1]:
+        warnings.append(slope[1])
+    warnings += [f"stage '{f.stage}' failed ({f.error}); what it would have said is missing" for f in failures
+                 if f.stage in ("trust", "diagnosis")]
     ref = reference(p)
     report: dict[str, Any] = {
         "data": data_name,
@@ -231,14 +257,15 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "removed": [{"effect": r.effect, "where": r.where, "params": {k: _round(v) for k, v in r.params.items()},
                      "reason": r.reason} for r in result.removed],
         "final": _physical_final(result) if result.physical is not None else {
-            "model": result.final_model or " + ".join([result.model, *(s.effect for s in result.steps)]),
+            "model": model_name(result),
             "params": _params(result, final),
             "fields": {names[f]: f for f in final.free},
             "uncertainty": {names[f]: _round(v * _factor(result, final, f), 3) for f, v in final.sigma.items()},
-            "relative_uncertainty": {names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()},
-            "correlation": {names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
-                            for a, row in ident.correlation.items()},
-            "not_determined": [names[f] for f in ident.not_determined],
+            "relative_uncertainty": ({names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()}
+                                     if ident is not None else {}),
+            "correlation": ({names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
+                             for a, row in ident.correlation.items()} if ident is not None else {}),
+            "not_determined": [names[f] for f in ident.not_determined] if ident is not None else [],
             "grid_searched": [names[f] for f in final.free if final.jac_free and f not in final.jac_free],
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
@@ -252,15 +279,22 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             "rms_over_noise": {o: _round(v / p.sigma_deg[o], 4) for o, v in _rms_of(p, result.equivalent).items()},
             "escalated_because": result.escalated or None,
         }} if result.equivalent is not None else {}),
+        "slew_dps": slope[0] if slope is not None else None,
+        "stages": [o.as_dict() for o in result.stages],
+        "failures": [{"stage": f.stage, "error": f.error, "where": f.where} for f in failures],
+        "discovered": result.discovery.as_dict() if result.discovery is not None else None,
+        "artefacts": result.artefacts,
+        "ambiguities": result.ambiguities,
         "warnings": warnings,
-        "diagnosis": diagnosis.as_dict(),
+        "diagnosis": diagnosis.as_dict() if diagnosis is not None else None,
         "notes": (record.notes if record else []) + result.notes,
         "command": {**(record.hold.as_dict() if record else {}),
                     "fitted_as": "sampled" if p.command_sampled else "held"},
         "travel_deg": ({"declared": list(record.travel.declared), "used": list(record.travel.limits),
                         "source": record.travel.source, "statement": record.travel.statement} if record else None),
-        "excitation": {"duration_s": _round(exc.duration_s), "level_changes": exc.changes,
-                       "span_deg": _round(exc.span), "content_hz": _round(exc.bandwidth_hz)},
+        "excitation": ({"duration_s": _round(exc.duration_s), "level_changes": exc.changes,
+                        "span_deg": _round(exc.span), "content_hz": _round(exc.bandwidth_hz)}
+                       if exc is not None else None),
         "rejected": [
             {"effect": v.effect, "where": v.where, "value": None if v.value is None else _round(v.value),
              "reason": v.reason}
@@ -273,7 +307,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "simulations": p.simulations,
         "elapsed_s": round(result.elapsed_s, 2),
     }
-    impl = implementation_error(result)
+    impl = guarded("implementation error", failures, lambda: implementation_error(result))
     if impl is not None:
         report["declared_implementation_error_deg"] = impl
         text = implementation_warning(result, impl)

@@ -29,8 +29,8 @@ from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
 from ema_sim.analysis.series import holds
 from ema_sim.identify.effects import FREE, KEYS, Free
 from ema_sim.identify.fit import Fit, covariance
+from ema_sim.identify.outcome import REFERENCE, Identification
 from ema_sim.identify.problem import Problem
-from ema_sim.identify.stepwise import REFERENCE, Identification
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
