@@ -298,6 +298,9 @@ def test_a_prepared_record_says_what_it_found(rig):
     assert record.stamp_scatter_s > 0.0
     assert any("in mm as logged" in n for n in record.notes)
     assert any("jitter" in n for n in record.notes)
+    # fitted on its own stamps: nothing straightened, no output interpolated onto a grid it was not sampled on
+    assert np.array_equal(record.data.time_s, data.time_s)
+    assert np.array_equal(record.data.position_deg, data.position_deg)
 
 
 def _rows(n: int, cell: str) -> str:

@@ -4,7 +4,9 @@ The library is built from the record and the current model, not from the effect 
 command, the model's output and its rate and acceleration (the model's, not the measured ones, so
 the regressors carry no measurement noise), the hinge moment, the direction of motion, powers of the
 position (a kinematic nonlinearity or an asymmetric spring), the speed's magnitude (a direction
-asymmetry) and square, time (drift), the tones the residual's own spectrum shows, and products of
+asymmetry) and square, time (drift), the tones the residual's own spectrum shows (never one the demand
+carries: a line at a harmonic of a periodic command is the model's error repeating with each cycle, a
+dynamics it lacks, not a pickup or a mode, and fitting it on the reading would be a proxy), and products of
 the motion signals (a drag that grows with the position or the load, a compliance that changes across
 the travel). Each term says what a residual of its shape is (:attr:`Term.meaning`) and where it can
 act: on a reading only (``sensor``: a tone, a drift), on the actuator's motion (``motion``: a drag, a
@@ -27,6 +29,14 @@ MAX_TONES = 2
 TONE_PROMINENCE = 20.0
 """A spectral line counts as a tone when its power is this many times the median around it."""
 MIN_TONE_HZ = 0.5
+COMMAND_LINE = 10.0
+"""The command carries a line when its power there is this many times the median around it."""
+LINE_DEPTH = 1e-4
+"""A command line counts within 40 dB of the command's strongest."""
+PERIODIC = 0.9
+"""A command that correlates this well with itself one period later is periodic."""
+LOCK_BINS = 2.0
+"""A tone within this many spectral bins of a command line, or of a harmonic of its strongest, is locked to it."""
 
 
 def _column(x: FloatArray) -> FloatArray:
@@ -82,6 +92,62 @@ def tones(residual: FloatArray, time_s: FloatArray, limit: int = MAX_TONES) -> l
             break
         found.append(_refine(e, time_s, float(freqs[k]), float(freqs[1] - freqs[0])))
     return found
+
+
+def locked(command: FloatArray, time_s: FloatArray, freq_hz: float) -> bool:
+    """Whether a residual line at ``freq_hz`` is one the demand carries (module docstring).
+
+    Parameters
+    ----------
+    command : numpy.ndarray
+        The command on the same samples as the residual.
+    time_s : numpy.ndarray
+        Their times.
+    freq_hz : float
+        The residual's line.
+
+    Returns
+    -------
+    bool
+        True when the command has a line there, or it is periodic and ``freq_hz`` is a harmonic of its period.
+    """
+    n = command.size
+    if n < 64 or np.ptp(command) == 0.0:
+        return False
+    x = np.asarray(command, dtype=float)
+    spec = np.abs(np.fft.rfft((x - np.mean(x)) * np.hanning(n))) ** 2
+    freqs = np.fft.rfftfreq(n, float(np.median(np.diff(time_s))))
+    df = float(freqs[1] - freqs[0])
+    tol = LOCK_BINS * df
+    width = max(3, n // 400)
+    k = int(np.argmin(np.abs(freqs - freq_hz)))
+    lo = max(0, k - int(LOCK_BINS))
+    top = lo + int(np.argmax(spec[lo:k + int(LOCK_BINS) + 1]))
+    wide = spec[max(0, top - 3 * int(LOCK_BINS)):top + 3 * int(LOCK_BINS) + 1]
+    around = spec[max(0, k - 20 * width):k + 20 * width + 1]
+    if (spec[top] >= float(np.max(wide)) and spec[top] > COMMAND_LINE * max(float(np.median(around)), 1e-300)
+            and spec[top] >= LINE_DEPTH * float(np.max(spec[1:]))):
+        return True  # a line of the command's own (a peak, not the skirt of a neighbour's)
+    usable = freqs >= MIN_TONE_HZ / 5
+    if not np.any(usable):
+        return False
+    f0 = float(freqs[usable][int(np.argmax(spec[usable]))])
+    if not _periodic(x, time_s, 1.0 / f0):
+        return False
+    h = round(freq_hz / f0)
+    return h >= 1 and abs(freq_hz - h * f0) <= tol
+
+
+def _periodic(x: FloatArray, time_s: FloatArray, period_s: float) -> bool:
+    """Whether ``x`` repeats after ``period_s`` (its correlation with itself one period later; two periods seen)."""
+    span = float(time_s[-1] - time_s[0])
+    if period_s <= 0.0 or 2.0 * period_s > span:
+        return False
+    later = np.interp(time_s + period_s, time_s, x)
+    keep = time_s + period_s <= time_s[-1]
+    a, b = x[keep] - np.mean(x[keep]), later[keep] - np.mean(later[keep])
+    den = float(np.sqrt(np.dot(a, a) * np.dot(b, b)))
+    return den > 0.0 and float(np.dot(a, b)) / den >= PERIODIC
 
 
 def _refine(e: FloatArray, t: FloatArray, f0: float, df: float) -> float:
@@ -172,6 +238,8 @@ def library(time_s: FloatArray, command: FloatArray, output: FloatArray, rate: F
                   "load-dependent rate)", "motion"),
         ]
     for f in tones(residual, t[mask]):
+        if locked(u[mask], t[mask], f):
+            continue
         cols = np.column_stack([np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t)])
         terms.append(Term(f"tone {f:.4g} Hz", cols, unit.strip() or "1", f"a tone at {f:.4g} Hz: a pickup, a "
                           "vibration or a mode the model lacks", "sensor"))

@@ -79,9 +79,9 @@ def screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
         s = r - problem.weighted_residual(sim)  # the change the effect makes to the model
         s_perp = s - q @ (q.T @ s)
         ss = float(np.dot(s_perp, s_perp))
-        if ss <= 1e-12 or r_norm == 0.0:
-            continue
         rs = float(np.dot(r_perp, s_perp))
+        if not (math.isfinite(ss) and math.isfinite(rs)) or ss <= 1e-12 or r_norm == 0.0:
+            continue  # a probe whose run diverged (or changes nothing) says nothing of where to start
         beta = rs / ss
         flip = cur.flip
         start = dict(value)
