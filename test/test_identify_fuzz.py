@@ -3,7 +3,7 @@
 Each record is drawn at random from an independent plant and logger. Whatever it holds, ``ema identify``
 exits 0 with strict JSON, its final model is no worse than its baseline and than the reference
 (output = command) on any output, and each stage kept leaves the record no worse than the one before.
-The default suite runs 30 short records (1.5-2 s, at most two effects added and no escalation to the
+The default suite runs 30 short records (1.5-2 s, at most one effect added and no escalation to the
 physics, so the suite keeps its time budget); ``make test-slow`` runs 300, short and long (8-40 s), with
 every stage as ``ema identify`` runs it by default.
 """
@@ -22,8 +22,8 @@ from ema_sim.cli import main
 from ema_sim.identify.stages import NO_WORSE
 
 SHORT = range(30)
-QUICK = ["--max-effects", "2", "--no-escalate"]
-"""The default suite's search: two effects and no escalation to the physics (the slow set runs them all)."""
+QUICK = ["--max-effects", "1", "--no-escalate"]
+"""The default suite's search: one effect and no escalation to the physics (the slow set runs them all)."""
 LONG = range(1000, 1300)
 
 
