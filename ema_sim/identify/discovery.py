@@ -35,7 +35,7 @@ from scipy.optimize import least_squares
 
 from ema_sim.analysis.noise import whiteness
 from ema_sim.identify.effects import FREE
-from ema_sim.identify.fit import FD_STEP, Fit, block_covariance, finite
+from ema_sim.identify.fit import Fit, block_covariance, difference_points, finite
 from ema_sim.identify.library import describe, library
 from ema_sim.identify.outcome import TINY, rms
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
@@ -297,12 +297,7 @@ class _InLoop:
         return finite(r)
 
     def jacobian(self, x: FloatArray) -> FloatArray:
-        points = []
-        steps = np.where(x + FD_STEP <= self.hi, FD_STEP, -FD_STEP)
-        for j in range(x.size):
-            xp = x.copy()
-            xp[j] += steps[j]
-            points.append(xp)
+        points, steps = difference_points(x, self.hi)
         sims = self.sims([x, *points])
         r0 = finite(self.problem.weighted_residual(sims[0]))
         cols = [(finite(self.problem.weighted_residual(s)) - r0) / h for s, h in zip(sims[1:], steps, strict=True)]

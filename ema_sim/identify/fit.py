@@ -98,19 +98,39 @@ class _Objective:
 
     def jacobian(self, x: FloatArray) -> FloatArray:
         _, hi = zip(*(f.x_bounds() for f in self.free), strict=True)
-        steps = []
-        points = []
-        for j in range(x.size):
-            h = FD_STEP if x[j] + FD_STEP <= hi[j] else -FD_STEP
-            xp = x.copy()
-            xp[j] += h
-            steps.append(h)
-            points.append(xp)
+        points, steps = difference_points(x, np.asarray(hi, dtype=float))
         sims = self._simulate(points)
         r0 = self.residual(x)
         cols = [(finite(self.problem.weighted_residual(s)) - r0) / h for s, h in zip(sims, steps, strict=True)]
         # residual = measured − model, so d(model)/dx = −d(residual)/dx
         return -np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+
+
+def difference_points(x: FloatArray, hi: FloatArray) -> tuple[list[FloatArray], list[float]]:
+    """The points of a forward-difference Jacobian at ``x``, and the step taken on each coordinate.
+
+    Each coordinate is stepped by :data:`FD_STEP`, backwards where the step would cross its upper bound.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The optimiser's coordinates.
+    hi : numpy.ndarray
+        Their upper bounds.
+
+    Returns
+    -------
+    tuple
+        One point per coordinate, and the step taken on it.
+    """
+    points, steps = [], []
+    for j in range(x.size):
+        h = FD_STEP if x[j] + FD_STEP <= hi[j] else -FD_STEP
+        xp = x.copy()
+        xp[j] += h
+        points.append(xp)
+        steps.append(h)
+    return points, steps
 
 
 def fit(
