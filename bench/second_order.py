@@ -1,4 +1,8 @@
-"""Speed of the second-order family (issue: foundation): one LOADA channel and a Monte Carlo batch."""
+"""Speed of the second-order family: one LOADA channel and a Monte Carlo batch.
+
+Targets sit near what the code does (issue 27): 9,600–10,400× and 0.27–0.31 s measured on the two-core
+machine under another job's load, so a lost quarter shows as a FAIL (instruction counts: ``make bench-check``).
+"""
 
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ def loada_realtime() -> Result:
 
     wall = timed(once)
     ratio = 60.0 / wall
-    return Result(ratio, "× real time", ratio >= 2000.0, f"60 s simulated in {wall * 1e3:.2f} ms")
+    return Result(ratio, "× real time", ratio >= 8000.0, f"60 s simulated in {wall * 1e3:.2f} ms")
 
 
 def loada_batch() -> Result:
@@ -42,10 +46,10 @@ def loada_batch() -> Result:
         model.run(inputs.time_s, inputs.command_deg, inputs.hinge_moment_inlb, end_s=10.0)
 
     wall = timed(once)
-    return Result(wall, "s", wall <= 2.0, "1,000 instances × 10 s at 800 Hz")
+    return Result(wall, "s", wall <= 0.4, "1,000 instances × 10 s at 800 Hz")
 
 
 BENCHMARKS = [
-    Benchmark("loada_800hz_one_channel", "≥ 2,000× real time", loada_realtime),
-    Benchmark("loada_batch_1000x10s", "≤ 2 s", loada_batch),
+    Benchmark("loada_800hz_one_channel", "≥ 8,000× real time", loada_realtime),
+    Benchmark("loada_batch_1000x10s", "≤ 0.4 s", loada_batch),
 ]

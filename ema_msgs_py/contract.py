@@ -119,12 +119,20 @@ def topic(name: str) -> TopicSpec:
     return TOPICS[name]
 
 
-def endpoint(name: str) -> str:
-    """The name a node gives its publisher or subscription: relative (``ema/fmu/command``).
+GLOBAL = frozenset({"/clock", "/diagnostics"})
+"""Topics ROS names absolutely: every node's ``/clock`` (what rclpy's and rclcpp's time sources take, a
+simulator or ``ros2 bag play --clock`` publishes) and the graph's one ``/diagnostics`` (a diagnostic aggregator
+reads it; each status is named after its node's full name, so vehicles do not collide)."""
 
-    It resolves in the node's namespace: ``-r __ns:=/aircraft2`` moves every topic to ``/aircraft2/ema/...``.
+
+def endpoint(name: str) -> str:
+    """The name a node gives its publisher or subscription: relative (``ema/fmu/command``), or :data:`GLOBAL`.
+
+    A relative name resolves in the node's namespace: ``-r __ns:=/aircraft2`` moves every topic of the suite
+    to ``/aircraft2/ema/...``; ``/clock`` and ``/diagnostics`` stay where ROS has them (a run that wants a
+    clock of its own per namespace remaps ``/clock``, e.g. ``-r /clock:=/aircraft2/clock``).
     """
-    return name.lstrip("/")
+    return name if name in GLOBAL else name.lstrip("/")
 
 
 def canonical(resolved: str, namespace: str = "/") -> str | None:
@@ -236,6 +244,6 @@ def scaling_of(cfg: object) -> Scaling:
 
 
 __all__ = [
-    "CHANNELS", "CLOCK_QOS", "FRAME_HZ", "FRAME_QOS", "FULL_SCALE_V", "LATCHED_QOS", "TOPICS", "QosSpec", "Scaling",
-    "TopicSpec", "canonical", "endpoint", "failure_topic", "scaling", "scaling_of", "topic",
+    "CHANNELS", "CLOCK_QOS", "FRAME_HZ", "FRAME_QOS", "FULL_SCALE_V", "GLOBAL", "LATCHED_QOS", "TOPICS", "QosSpec",
+    "Scaling", "TopicSpec", "canonical", "endpoint", "failure_topic", "scaling", "scaling_of", "topic",
 ]

@@ -7,6 +7,7 @@ Benchmarks live in the scripts under ``bench/``; each script defines ``BENCHMARK
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import time
 from collections.abc import Callable
@@ -43,6 +44,29 @@ def bench_dir() -> Path:
     if not path.is_dir():
         raise EmaError(f"no bench directory at {path} (set EMA_SIM_BENCH)")
     return path
+
+
+def baseline_path(path: Path | None = None) -> Path:
+    """The recorded figures: ``baseline.json`` beside the scripts (``bench`` figures, callgrind ``counts``)."""
+    return (path or bench_dir()) / "baseline.json"
+
+
+def recorded(path: Path | None = None) -> dict[str, float]:
+    """Each benchmark's recorded figure (empty when none is recorded)."""
+    file = baseline_path(path)
+    if not file.exists():
+        return {}
+    figures = json.loads(file.read_text(encoding="utf-8")).get("bench", {})
+    return {str(k): float(v) for k, v in figures.items()}
+
+
+def record(figures: dict[str, float], path: Path | None = None) -> Path:
+    """Write ``figures`` as the recorded ones (other benchmarks' figures and the counts are kept)."""
+    file = baseline_path(path)
+    data = json.loads(file.read_text(encoding="utf-8")) if file.exists() else {}
+    data["bench"] = {**data.get("bench", {}), **figures}
+    file.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    return file
 
 
 def discover(path: Path | None = None) -> list[Benchmark]:

@@ -17,6 +17,8 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ema_sim.errors import ConfigError
+
 FloatArray = NDArray[np.float64]
 NEWTON_STEPS = 8
 """Newton steps of :func:`cubic_inverse` from the linear guess (exact to rounding on a calibration's range)."""
@@ -141,7 +143,7 @@ class Cubic:
         """Build from ``[c0, c1, c2, c3]`` as the config files hold them."""
         c = np.asarray(coeffs, dtype=float).ravel()
         if c.size != 4 or not np.all(np.isfinite(c)):
-            raise ValueError(f"a third-order calibration needs 4 finite coefficients, got {list(c)}")
+            raise ConfigError(f"a third-order calibration needs 4 finite coefficients, got {list(c)}")
         return cls(*map(float, c))
 
     @classmethod

@@ -1,7 +1,7 @@
 """Per-channel configuration: the ROS 2 parameter files under ``config/``, read without ROS.
 
-Each channel file holds ``emac_<channel>: ros__parameters: {...}`` so the EMAC node can take it with
-``--params-file``; offline tools read the same mapping here. Nested sections (``second_order``,
+Each channel file holds ``/**/emac_<channel>: ros__parameters: {...}`` so the EMAC node can take it with
+``--params-file`` (in any namespace); offline tools read the same mapping here. Nested sections (``second_order``,
 ``high_order``...) belong to the model family that uses them.
 """
 

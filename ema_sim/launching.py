@@ -3,8 +3,9 @@
 The launch files and ``ema launch`` start the same processes from the same
 :class:`~ema_sim.run.RunDescription`: its :meth:`~ema_sim.run.RunDescription.processes` become
 ``launch_ros`` ``Node`` actions, each given the run's one parameter file (written next to the bag, as
-``<bag>.logs/run.yaml``), its node name, the namespace and the clock remapping; the driver's end shuts the
-launch down (its bag is then closed). Imports ``launch`` and ``launch_ros``, which a ROS 2 install has.
+``<bag>.logs/run.yaml``), its node name, the namespace and the ``/clock`` remapping (``clock_topic``); the
+driver's end shuts the launch down (its bag is then closed). Imports ``launch`` and ``launch_ros``, which a
+ROS 2 install has.
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ def _nodes(context: Any, layout: str) -> list[Any]:
     values = {name: LaunchConfiguration(name).perform(context) for name in LAUNCH_ARGUMENTS}
     run = from_launch_arguments(values, layout)
     params = run.write(Path(f"{run.bag}.logs") / "run.yaml")
-    clock = values.get("clock_topic") or "clock"
-    remap = [("clock", clock)] if clock != "clock" else []
+    clock = values.get("clock_topic") or "/clock"
+    remap = [("/clock", clock)] if clock != "/clock" else []
     procs = run.processes()
     return [Node(package=PACKAGE, executable=proc.executable, name=proc.node_name, namespace=run.namespace or None,
                  parameters=[str(params)], remappings=remap, arguments=list(proc.arguments), output="screen",

@@ -402,6 +402,10 @@ Relation = tuple[str, str, str]
 """``(a, "<" or "<=", b)``: a declared relation between two parameters of a set."""
 
 
+_VALID = "_validated"
+"""The attribute a frozen parameter set carries once it has passed :func:`validate` (not a field)."""
+
+
 def validate(params: Any, family: str, origin: str = "") -> None:
     """The one validator: every value in its declared range, then the set's declared relations.
 
@@ -420,6 +424,9 @@ def validate(params: Any, family: str, origin: str = "") -> None:
     ConfigError
         One message naming the parameter and what is wrong with it.
     """
+    frozen = type(params).__dataclass_params__.frozen
+    if frozen and params.__dict__.get(_VALID):
+        return  # a frozen set cannot have changed since it passed
     where = f"{origin}: " if origin else ""
     for name, m in metas(params).items():
         value = getattr(params, name)
@@ -436,6 +443,8 @@ def validate(params: Any, family: str, origin: str = "") -> None:
             raise ConfigError(f"{where}{family} parameter {a} must be below {b}")
         if rel == "<=" and not va <= vb:
             raise ConfigError(f"{where}{family} parameter {b} must be at least {a}")
+    if frozen:
+        object.__setattr__(params, _VALID, True)
 
 
 def switched_off(cls: type, elements: Iterable[str] | None = None) -> dict[str, float]:

@@ -307,7 +307,8 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
     "emacs": ("all", "channels that get an EMAC, comma-separated"),
     "emac": (DEFAULT_EMAC, "box: one EMAC node for every channel; channels: one EMAC node per channel"),
     "duration": ("", "seconds (empty: the test's length; 24 with fmu)"),
-    "lockstep": ("false", "run on the clock, frame by frame (true/false)"),
+    "lockstep": ("false", "run on the clock, frame by frame (true/false): the nodes' use_sim_time"),
+    "use_sim_time": ("", "ROS's name for lockstep (true/false; empty: lockstep decides)"),
     "window": ("1", "lockstep: frames the clock may run ahead of the slowest EMAC"),
     "bag": ("", "bag directory to create (empty: bags/<test>_<UTC time>)"),
     "disable": ("", "elements switched off, comma-separated (delay, lag, quantization, noise, dead_band...)"),
@@ -317,7 +318,8 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
     "open_loop": ("false", "with fmu: open-loop AIL"),
     "bungee": ("", "with fmu: bungee on the wings, in·lb"),
     "namespace": ("", "ROS namespace of every node, e.g. /aircraft2"),
-    "clock_topic": ("clock", "the topic the nodes take the lockstep clock from (/clock: a graph-wide clock)"),
+    "clock_topic": ("/clock", "the topic the nodes take the lockstep clock from (/clock, ROS's; a relative name such "
+                              "as clock: one clock per namespace, for two vehicles in lockstep on one graph)"),
 }
 """The launch files' arguments (``ros2 launch ema_sim single.launch.py maneuver:=step``): ``ema launch``'s options."""
 
@@ -341,13 +343,20 @@ def from_launch_arguments(values: dict[str, str], layout: str) -> RunDescription
             raise EmaError(f"launch argument {name}: a number, got {value!r}") from None
 
     fmu = flag("fmu")
+    lockstep = flag("lockstep")
+    if text("use_sim_time"):
+        sim = flag("use_sim_time")
+        if lockstep and not sim:
+            raise EmaError("launch arguments lockstep:=true and use_sim_time:=false disagree (use_sim_time is "
+                           "lockstep's ROS name: give one)")
+        lockstep = sim
     duration = number("duration")
     seed = number("seed")
     return RunDescription(
         bag=Path(text("bag")) if text("bag") else None, model=text("model"), profile=text("profile"),
         test=text("test") or None, maneuver=text("maneuver") or None, load=text("load") or None,
         channels=[text("channels")], emac_channels=[text("emacs")], emac=text("emac"),
-        duration_s=24.0 if fmu and duration is None else duration, lockstep=flag("lockstep"),
+        duration_s=24.0 if fmu and duration is None else duration, lockstep=lockstep,
         window=int(number("window") or 1), layout=layout, disable=[text("disable")],
         seed=None if seed is None else int(seed), rt_priority=int(number("rt_priority") or 0), fmu=fmu,
         open_loop=flag("open_loop"), bungee_inlb=number("bungee"), namespace=text("namespace"),

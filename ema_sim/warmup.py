@@ -25,14 +25,26 @@ from ema_sim.models.registry import create, model_names
 from ema_sim.models.stages import quantize_array
 from ema_sim.montecarlo.metrics import _rms_max, _step_rows, fourier_coefficients
 
+VARIANTS: dict[str, list[dict[str, float]]] = {
+    "loada": [{}, {"integral_hz": 1.0}],
+    "loadf": [{}, {"integral_hz": 1.0}],
+}
+"""Parameter overrides that select a kernel of their own: LOADA's and LOADF's kernels are compiled per stage
+set (:mod:`ema_sim.models.second_order.stage_set`), the report's and the one with identification's stages."""
+
 
 def warm_model(name: str) -> None:
-    """Trim, run and step model ``name`` on one instance and on a batch of two."""
+    """Trim, run and step model ``name`` on one instance and on a batch of two, in each of its :data:`VARIANTS`."""
+    for overrides in VARIANTS.get(name, [{}]):
+        _warm_variant(name, overrides)
+
+
+def _warm_variant(name: str, overrides: dict[str, float]) -> None:
     t = np.arange(0.0, 0.1, 0.005)
     u = np.where(t < 0.02, 0.0, 1.0)
     hm = np.full_like(t, 100.0)
     for n in (1, 2):
-        model = create(name, n=n)
+        model = create(name, n=n, **overrides)
         model.run(t, u, hm)
         model.step(0.5, 50.0)
         model.trim(command_deg=0.2, hinge_moment_inlb=10.0)

@@ -1,7 +1,8 @@
-"""`ros2 launch ema_sim container.launch.py maneuver:=step lockstep:=true`: the suite in the `container` layout.
+"""`ros2 launch ema_sim container.launch.py maneuver:=step use_sim_time:=true`: the suite in the `container` layout.
 
 The same processes as `ema launch --layout container` (ema_sim.run.RunDescription); `ros2 launch ema_sim
-container.launch.py --show-args` lists the arguments (ema launch's options).
+container.launch.py --show-args` lists the arguments (ema launch's options;
+`use_sim_time:=true` and `lockstep:=true` are the same: every node on `/clock`, frame by frame).
 """
 
 from ema_sim.launching import generate

@@ -1,7 +1,8 @@
-"""`ros2 launch ema_sim single.launch.py maneuver:=step lockstep:=true`: the suite in the `single` layout.
+"""`ros2 launch ema_sim single.launch.py maneuver:=step use_sim_time:=true`: the suite in the `single` layout.
 
 The same processes as `ema launch --layout single` (ema_sim.run.RunDescription); `ros2 launch ema_sim
-single.launch.py --show-args` lists the arguments (ema launch's options).
+single.launch.py --show-args` lists the arguments (ema launch's options;
+`use_sim_time:=true` and `lockstep:=true` are the same: every node on `/clock`, frame by frame).
 """
 
 from ema_sim.launching import generate

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from analysis_data import measured
 
-from ema_sim.analysis import frequency_response as frm
+from ema_sim.analysis import frf
 from ema_sim.analysis import second_order_fit as sof
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.signals import parse_maneuver
@@ -112,7 +112,7 @@ def test_record_with_a_gap_is_resampled_with_the_command_held():
 
 def test_zoh_factor_is_half_a_sample_of_delay():
     f = np.array([10.0])
-    z = frm.zoh_factor(f, 1000.0)[0]
+    z = frf.zoh_factor(f, 1000.0)[0]
     assert np.degrees(np.angle(z)) == pytest.approx(-360 * 10 * 0.0005)
     assert abs(z) == pytest.approx(np.sinc(0.01))
 

@@ -19,6 +19,7 @@ RECORD_KEYS = {
     "frequency_response", "sine_dwell", "steps", "slew_rates", "second_order_fits", "timing", "command_error",
     "static_threshold", "dynamic_threshold", "crosstalk", "dither", "compliance", "hysteresis", "free_play",
     "regeneration", "not_computed", "notes", "resolution_deg", "noise", "command", "unit", "profiled_moves",
+    "periodic", "slew",
 }
 
 

@@ -16,7 +16,7 @@ from ema_sim.cli import main as ema
 
 WRITER = """
 import sys, time
-from ema_sim.io import bag as b
+from ema_sim.io.bag import storage, writer
 from ema_msgs_py import typestore as ts, contract as ct
 
 def slow(self):  # a slow disk: a chunk reaches the file 4 KiB at a time
@@ -27,8 +27,8 @@ def slow(self):  # a slow disk: a chunk reaches the file 4 KiB at a time
             if len(item) > 100_000:
                 time.sleep(0.01)
 
-b._BackgroundFile._run = slow
-w = b.BagWriter(sys.argv[1], {"test": "killed"})
+storage._BackgroundFile._run = slow
+w = writer.BagWriter(sys.argv[1], {"test": "killed"})
 w.write_message(ct.TEST, 0, ts.string('{"test": "killed", "channel": "left_wing", "model": "loada"}'))
 n = 0
 while True:

@@ -1,5 +1,4 @@
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -65,7 +64,8 @@ def test_unreadable_files_are_one_clear_error(tmp_path):
     binary.write_bytes(b"\xff\xfe\x00garbage")
     with pytest.raises(DataError, match="not UTF-8"):
         read_csv(binary)
-    assert isinstance(Path(tmp_path), Path)
+    with pytest.raises(DataError, match=r"cannot read \(Is a directory\)"):
+        read_csv(tmp_path)
 
 
 # ---------------------------------------------------------------------------------------------- rig files

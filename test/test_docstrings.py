@@ -16,7 +16,7 @@ import re
 import pytest
 
 PACKAGES = ["ema_sim.models", "ema_sim.signals", "ema_sim.environment", "ema_sim.io", "ema_sim.analysis",
-            "ema_sim.identify", "ema_sim.montecarlo"]
+            "ema_sim.identify", "ema_sim.montecarlo", "ema_sim.export"]
 """The packages kept documented (add a package here once its docstrings are complete)."""
 
 

@@ -1,11 +1,12 @@
 """The EMAC node's input streams in lockstep: what a frame takes, and when it may go ahead."""
 
+import functools
 import os
-from types import SimpleNamespace
 
 import pytest
 import rclpy
 from rclpy.context import Context
+from scripted_ports import ScriptedPorts
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
@@ -61,32 +62,6 @@ LAST = ("command", "load", "left_wing", "cowl_door", "clock")
 """The input that arrives last in frame k is LAST[k % 5]: every one of them in turn."""
 
 
-class ScriptedPorts:
-    """Test-only ports: nothing arrives by itself; the test hands the node each input in the order it picks."""
-
-    composed = False
-
-    def __init__(self, node):
-        self.node = node
-        self.take = {}
-        self.sent = {}
-
-    def frame_publisher(self, topic):
-        return SimpleNamespace(publish=self.sent.setdefault(topic, []).append)
-
-    def frame_subscription(self, topic, callback, on_bad):  # noqa: ARG002
-        self.take[topic] = callback
-
-    def clock_subscription(self, callback):
-        self.take[ct.CLOCK_TOPIC] = callback
-
-    def publishers(self, topic):
-        return len(CHANNELS) if topic == ct.EMAC_FEEDBACK else 1  # every publisher of the suite is alive
-
-    def endpoint_nodes(self):
-        return [self.node]
-
-
 def _source_v(channel, k):
     """Feedback the other EMACs report at frame k: the left wing slews unevenly, the others rest."""
     if channel != "left_wing":
@@ -106,7 +81,8 @@ def right_wing_node(tmp_path):
     nodes = []
 
     def make():
-        nodes.append(EmacNode(None, ports=ScriptedPorts, context=ctx, cli_args=run.ros_arguments(proc, params)))
+        every_channel = functools.partial(ScriptedPorts, alive={ct.EMAC_FEEDBACK: len(CHANNELS)})  # the suite's
+        nodes.append(EmacNode(None, ports=every_channel, context=ctx, cli_args=run.ros_arguments(proc, params)))
         return nodes[-1]
 
     yield make

@@ -283,7 +283,7 @@ def test_hoad3_data_three_maneuvers_ends_with_the_drives_physics(declared_model)
 @pytest.mark.slow
 def test_from_a_suite_bag_hoad3_declared_loada(tmp_path, capsys):
     """The same question asked of a rosbag2 bag in the node suite's format (200 Hz frames): LOADA's stages
-    named, then HOAD3's physics kept (measured on a 30 s record: see the README's suite-bag figures)."""
+    named, then HOAD3's physics kept (measured on a 30 s record: see docs/identify.md's suite-bag figures)."""
     data = hoad3_record(seed=73, duration_s=DURATION_S)
     frames = slice(0, None, 5)  # the FMU's 200 Hz frames
     bag = write_bag(tmp_path / "hoad3_bag", {

@@ -9,6 +9,7 @@ import pytest
 from identgen import make_record
 
 from ema_sim.config import load_channel
+from ema_sim.identify.diagnosis import Correlate, OutputDiagnosis
 from ema_sim.identify.identification import identify
 from ema_sim.identify.library import library, locked, tones
 from ema_sim.identify.regression import stepwise
@@ -90,3 +91,17 @@ def test_every_effect_reports_the_contract_s_keys():
     link = next(e for e in BY_KEY.values() if e.name == "linkage_mode")
     keys = {link.contract.get(KEYS[f].name, KEYS[f].name) for f in link.fields}
     assert keys == {"freq_hz", "zeta"}
+
+
+def test_a_residual_that_fails_its_whiteness_test_is_never_nothing_left_to_explain():
+    """Small but coloured: the words say it is not white and what correlates with it (issue 24)."""
+    white = OutputDiagnosis("position_deg", 0.012, 0.010, True)
+    assert white.sentence("deg", 500.0, 8.0).endswith("white: nothing left to explain")
+    small = OutputDiagnosis("position_deg", 0.013, 0.010, False, correlates=[Correlate("rate", 0.66, 1e-9)])
+    assert not small.structured
+    words = small.sentence("deg", 500.0, 8.0)
+    assert "nothing left" not in words
+    assert "not white" in words
+    assert "rate (a short filter of it explains 66 %" in words
+    bare = OutputDiagnosis("surface_deg", 0.013, 0.010, False)
+    assert bare.sentence("deg", 500.0, 8.0).endswith("no input explains it")

@@ -1,9 +1,24 @@
-"""The package layers: a module imports only from its own layer or below (read from the source, lazy imports too).
+"""The package layers: every package imports only from layers below it, and no module import makes a circle.
 
-0  errors, calibration, config, parameters       the data every layer reads
-1  models, signals                              pure models and test signals (no ROS, no io)
-2  environment                                  the test environment (steps the models' elements)
-3  switches                                     elements switched off by name: environment + models
+Read from the source, imports inside functions and under ``TYPE_CHECKING`` included, so a lazy import
+cannot hide an upward edge or a loop from the check. Layers, lowest first (a package may import its own
+modules and any package of a lower layer, never a sibling of its own layer):
+
+0  errors                                         the one exception tree
+1  ema_sim (its version), calibration, progress,  the data every layer reads
+   benchmark
+2  parameters                                     one declaration of every parameter
+3  config                                         channel files
+4  ema_msgs_py, models, signals                   topic contract; pure models; test signals (no ROS, no io)
+5  environment, simulation, io                    the test environment; running models on signals; CSV and bags
+6  switches, analysis, emac                       elements switched off by name; section-2 analysis; one channel
+7  identify, ail                                  closing the loop; the aircraft in the loop
+8  montecarlo, nodes, export                      campaigns; ROS adapters; models into other simulators
+9  run                                            the suite's processes
+10 suite, launching                               layouts; ``ema launch``
+11 commands, warmup                               ``ema`` subcommands; the kernels compiled ahead
+12 cli                                            the ``ema`` entry point
+13 demo                                           ``make demo``
 """
 
 import ast
@@ -13,60 +28,140 @@ import pytest
 
 import ema_sim
 
-ROOT = Path(ema_sim.__file__).resolve().parent
-BASE = {"ema_sim.errors", "ema_sim.calibration", "ema_sim.config", "ema_sim.parameters"}
-ALLOWED = {
-    "ema_sim.errors": set(),
-    "ema_sim.calibration": set(),
-    "ema_sim.config": {"ema_sim.calibration", "ema_sim.errors"},
-    "ema_sim.parameters": {"ema_sim.errors"},
-    "ema_sim.models": BASE | {"ema_sim.models"},
-    "ema_sim.signals": BASE | {"ema_sim.signals"},
-    "ema_sim.environment": BASE | {"ema_sim.environment", "ema_sim.models"},
-    "ema_sim.switches": BASE | {"ema_sim.environment", "ema_sim.models"},
-}
+ROOT = Path(ema_sim.__file__).resolve().parent.parent
+LAYERS: list[tuple[str, ...]] = [
+    ("ema_sim.errors",),
+    ("ema_sim", "ema_sim.calibration", "ema_sim.progress", "ema_sim.benchmark"),
+    ("ema_sim.parameters",),
+    ("ema_sim.config",),
+    ("ema_msgs_py", "ema_sim.models", "ema_sim.signals"),
+    ("ema_sim.environment", "ema_sim.simulation", "ema_sim.io"),
+    ("ema_sim.switches", "ema_sim.analysis", "ema_sim.emac"),
+    ("ema_sim.identify", "ema_sim.ail"),
+    ("ema_sim.montecarlo", "ema_sim.nodes", "ema_sim.export"),
+    ("ema_sim.run",),
+    ("ema_sim.suite", "ema_sim.launching"),
+    ("ema_sim.commands", "ema_sim.warmup"),
+    ("ema_sim.cli",),
+    ("ema_sim.demo",),
+]
+LAYER = {package: k for k, packages in enumerate(LAYERS) for package in packages}
+PURE = ("ema_sim.models", "ema_sim.signals", "ema_sim.environment", "ema_sim.switches", "ema_sim.parameters",
+        "ema_sim.config", "ema_sim.calibration", "ema_sim.errors")
 FOREIGN = ("rclpy", "rosbags", "mcap", "ema_msgs_py")
-"""What no module of these layers may import (the models are pure: no ROS, no bag I/O)."""
+"""What no module of the pure layers may import (the models are pure: no ROS, no bag I/O)."""
 
 
-def _modules(package: str) -> list[Path]:
-    path = ROOT.joinpath(*package.split(".")[1:])
-    return sorted(path.rglob("*.py")) if path.is_dir() else [path.with_suffix(".py")]
+def modules() -> dict[str, Path]:
+    """Every module of ``ema_sim`` and ``ema_msgs_py``, by dotted name."""
+    found = {}
+    for top in ("ema_sim", "ema_msgs_py"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            found[".".join(parts)] = path
+    return found
 
 
-def _imports(path: Path) -> set[str]:
-    names = set()
+def imports(path: Path, known: dict[str, Path]) -> set[str]:
+    """The modules ``path`` imports (anywhere in it): ``from pkg import sub`` names the submodule, not ``pkg``."""
+    names: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module)
+            subs = [f"{node.module}.{a.name}" for a in node.names if f"{node.module}.{a.name}" in known]
+            names.update(subs)
+            if len(subs) < len(node.names):
+                names.add(node.module)
     return names
 
 
-def _owner(module: str) -> str:
-    """The layer entry an ``ema_sim`` module belongs to (``ema_sim.models.high_order.hoad`` → ``ema_sim.models``)."""
+def package(module: str) -> str:
+    """The layer entry a module belongs to (``ema_sim.models.high_order.hoad`` → ``ema_sim.models``)."""
+    if module == "ema_sim":
+        return module
     parts = module.split(".")
-    return ".".join(parts[:2])
+    return parts[0] if parts[0] != "ema_sim" else ".".join(parts[:2])
 
 
-def _violations(package: str, path: Path) -> list[str]:
-    def above(name: str) -> bool:
-        return name.startswith("ema_sim.") and _owner(name) not in {package, *ALLOWED[package]}
-
-    return [name for name in sorted(_imports(path)) if name.split(".")[0] in FOREIGN or above(name)]
-
-
-@pytest.mark.parametrize("package", sorted(ALLOWED))
-def test_a_package_imports_only_its_own_layer_and_below(package):
-    files = _modules(package)
-    assert files, package
-    for path in files:
-        assert _violations(package, path) == [], f"{path.relative_to(ROOT.parent)} imports above its layer"
+def upward(module: str, target: str) -> bool:
+    """``module`` importing ``target`` breaks the layers (``target`` an ``ema_sim``/``ema_msgs_py`` module)."""
+    own, other = package(module), package(target)
+    return own != other and LAYER[other] >= LAYER[own]
 
 
-def test_the_check_sees_a_lazy_import_above_the_layer(tmp_path):
-    module = tmp_path / "bad.py"
-    module.write_text("from ema_sim.environment import ELEMENTS\nimport numpy\n\n\ndef f():\n"
-                      "    import rclpy\n    from ema_sim.io import bag\n", encoding="utf-8")
-    assert _violations("ema_sim.models", module) == ["ema_sim.environment", "ema_sim.io", "rclpy"]
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import graph's strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    known = modules()
+    return {m: {n for n in imports(p, known) if n in known and n != m} for m, p in known.items()}
+
+
+def test_every_package_has_a_layer():
+    assert sorted({package(m) for m in modules()} - set(LAYER)) == []
+
+
+def test_no_module_imports_a_package_of_its_own_layer_or_above(graph):
+    bad = sorted(f"{m} → {n}" for m, targets in graph.items() for n in targets if upward(m, n))
+    assert bad == []
+
+
+def test_no_import_circle(graph):
+    assert circles(graph) == []
+
+
+@pytest.mark.parametrize("pure", PURE)
+def test_the_pure_layers_import_no_ros_and_no_bag_io(pure):
+    known = modules()
+    bad = sorted(f"{m} → {n}" for m, p in known.items() if package(m) == pure
+                 for n in imports(p, known) if n.split(".")[0] in FOREIGN)
+    assert bad == []
+
+
+def test_the_check_sees_lazy_imports_upward_and_circles(tmp_path):
+    source = tmp_path / "a.py"
+    source.write_text("from ema_sim.models import b\nimport numpy\n\n\ndef f():\n    from ema_sim.io import bag\n",
+                      encoding="utf-8")
+    known = {"ema_sim.models.a": source, "ema_sim.models.b": source, "ema_sim.io": source, "ema_sim.io.bag": source}
+    assert imports(source, known) == {"ema_sim.models.b", "ema_sim.io.bag", "numpy"}
+    assert upward("ema_sim.models.a", "ema_sim.io.bag")
+    assert not upward("ema_sim.io.bag", "ema_sim.models.a")
+    assert upward("ema_sim.models.a", "ema_sim.signals")  # a sibling of its own layer
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert circles({"a": {"b"}, "b": set()}) == []

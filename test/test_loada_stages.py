@@ -18,7 +18,8 @@ from scipy.linalg import expm
 
 from ema_sim.config import load_channel
 from ema_sim.models import create
-from ema_sim.models.second_order.figure26 import drive_step
+from ema_sim.models.second_order import stage_set
+from ema_sim.models.second_order.figure26 import drive_step, stages_on
 from ema_sim.models.second_order.params import P, SecondOrderParams
 from ema_sim.models.stages import oscillator_step
 
@@ -115,3 +116,41 @@ def test_figure_26s_own_stages_do_not_see_stage_9s_parameters(name, rich_inputs)
     np.testing.assert_array_equal(outs[0], outs[1])
     np.testing.assert_array_equal(outs[2], outs[3])
     assert not np.array_equal(outs[0], outs[2])  # the linkage and the delay do change the outputs
+
+
+@pytest.mark.parametrize("name", ["loada", "loadf"])
+def test_the_kernel_compiled_for_the_reports_stages_equals_the_one_that_decides_each_stage(name, rich_inputs):
+    """The kernel specialised on the report's stage set (identification's stages compiled out) gives the
+    outputs of the kernel that tests every stage's parameter, bit for bit, single and in a batch whose other
+    instance switches identification's stages on (that batch runs the general kernel)."""
+    t, cmd, hm = rich_inputs
+    base = SecondOrderParams.from_channel(load_channel("left_wing"))
+    lean = create(name, "left_wing", params=base)
+    assert lean._on == stage_set.REPORT
+    added = base.replace(integral_hz=2.0, feedback_lag_hz=40.0, lvdt_compliance_deg_per_kinlb=0.1)
+    mixed = create(name, "left_wing", params=[base, added])
+    assert mixed._on == stage_set.ALL
+    samples = frames(6.0)
+    outs = []
+    for model in (lean, mixed):
+        model.trim(cmd[0], hm[0])
+        outs.append(model.run_outputs(t, cmd, hm, sample_times=samples, end_s=float(t[-1])))
+    np.testing.assert_array_equal(outs[0][0], outs[1][0])
+    assert not np.array_equal(outs[1][0], outs[1][1])  # the added stages do act in the general kernel
+    lean._on = stage_set.ALL  # the same model through the general kernel
+    lean.trim(cmd[0], hm[0])
+    np.testing.assert_array_equal(lean.run_outputs(t, cmd, hm, sample_times=samples, end_s=float(t[-1])), outs[0])
+
+
+def test_stage_sets_name_each_stage_once():
+    """Each optional stage is one bit, the report's set lies inside the general one, and a parameter set's
+    stages are the ones its parameters switch on."""
+    bits = [v for k, v in vars(stage_set).items() if k.isupper() and k not in ("ALL", "REPORT")]
+    assert sorted(bits) == [1 << i for i in range(len(bits))]
+    assert (1 << len(bits)) - 1 == stage_set.ALL
+    assert stage_set.REPORT & ~stage_set.ALL == 0
+    base = SecondOrderParams.from_channel(load_channel("left_wing"))
+    assert stages_on(base.vector()) & ~stage_set.REPORT == 0
+    assert stages_on(base.replace(linkage_freq_hz=30.0).vector()) & stage_set.LINKAGE
+    assert stage_set.kernel_set(stage_set.KCP | stage_set.INTEGRAL) == stage_set.ALL
+    assert stage_set.kernel_set(stage_set.KCP) == stage_set.REPORT

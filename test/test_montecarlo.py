@@ -287,11 +287,11 @@ def test_bounds_come_from_ema_analyze_json(tmp_path):
     assert json.loads(c.to_json())["dispersions"][0]["uniform"] == [[50.0, 61.0]]  # resolved into the manifest
 
 
-def test_the_readme_campaign_file_is_a_campaign():
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    block = text[text.index("### A campaign file"):]
+def test_the_docs_campaign_file_is_a_campaign():
+    text = (Path(__file__).resolve().parents[1] / "docs" / "montecarlo.md").read_text(encoding="utf-8")
+    block = text[text.index("## A campaign file"):]
     start = block.index("```yaml") + len("```yaml")
-    c = parse_campaign(yaml.safe_load(block[start:block.index("```", start)]), "readme")
+    c = parse_campaign(yaml.safe_load(block[start:block.index("```", start)]), "docs")
     assert c.parameters == ("stator_resistance_ohm", "bound", "position_gain_per_s", "lvdt_filter_hz",
                             "step.load.inlb", "response.maneuver.amp_deg", "dwells.load_inlb")
     assert [e.kind for e in c.experiments] == ["record", "multisine", "dwell"]

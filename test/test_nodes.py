@@ -334,8 +334,8 @@ def test_a_node_never_dies_on_bad_messages_and_failures_switch_at_run_time(ros_p
 
         def failure(spec):  # switch, holding the last command until the node says it switched
             fail.publish(String(data=spec))
-            command(held["deg"], 15.0, until=lambda: diag.get("emac/left_wing", {}).get("failure") == spec)
-            assert diag["emac/left_wing"]["failure"] == spec
+            command(held["deg"], 15.0, until=lambda: diag.get("/emac_left_wing: left_wing", {}).get("failure") == spec)
+            assert diag["/emac_left_wing: left_wing"]["failure"] == spec
 
         command(2.0, 1.0)
         send_garbage(cmd, load)

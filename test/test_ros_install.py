@@ -126,8 +126,8 @@ def _launch(install, layout, given, monkeypatch):
 
 RUNS = [
     {"maneuver": "step"},
-    {"test": "steps", "lockstep": "true", "emac": "channels", "profile": "ail", "namespace": "/aircraft2",
-     "clock_topic": "/clock"},
+    {"test": "steps", "use_sim_time": "true", "emac": "channels", "profile": "ail", "namespace": "/aircraft2",
+     "clock_topic": "clock"},
     {"fmu": "true", "lockstep": "true", "duration": "3", "open_loop": "true"},
 ]
 
@@ -156,8 +156,11 @@ def test_launch_files_name_only_what_the_install_has_and_start_what_ema_launch_s
             ctx = rclpy.Context()  # rcl itself parses it
             rclpy.init(context=ctx, args=["launch", "--ros-args", "--params-file", params])
             rclpy.shutdown(context=ctx)
-    if given.get("clock_topic") == "/clock":
-        assert all(n["remappings"] == [("clock", "/clock")] for n in rec.nodes)
+    assert run.lockstep == (given.get("use_sim_time", given.get("lockstep")) == "true")
+    if given.get("clock_topic") == "clock":  # one clock per namespace: /clock remapped into it
+        assert all(n["remappings"] == [("/clock", "clock")] for n in rec.nodes)
+    else:  # ROS's /clock
+        assert all(not n["remappings"] for n in rec.nodes)
 
 
 # --------------------------------------------------------------------------- installed nodes, installed files

@@ -39,6 +39,10 @@ CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=Rel
                        durability=DurabilityPolicy.VOLATILE)  # rclcpp::ClockQoS
 
 
+STATUS = "/emac_left_wing: left_wing"
+"""The left wing's status on /diagnostics: its node's full name and the channel."""
+
+
 def domain(offset):
     return 1 + (os.getpid() + 53 * offset) % 101
 
@@ -235,10 +239,10 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
         def brake_delay():
             """Command for 0.5 s, stop: seconds until the node reports the brake engaged."""
             hold(client, cmd, 1.0, 0.5)
-            assert client.spin(2, lambda: diag.get("emac/left_wing", {}).get("brake_engaged") == "false")
+            assert client.spin(2, lambda: diag.get(STATUS, {}).get("brake_engaged") == "false")
             last = time.monotonic()
-            assert client.spin(5, lambda: diag["emac/left_wing"]["brake_engaged"] == "true")
-            return diag["emac/left_wing"]["_t"] - last
+            assert client.spin(5, lambda: diag[STATUS]["brake_engaged"] == "true")
+            return diag[STATUS]["_t"] - last
 
         short = brake_delay()
         result = set_param(client, node, "emac.watchdog_timeout_s", 0.6)
@@ -247,13 +251,13 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
         assert short < 0.3, short
         assert 0.5 < long < 1.5, long  # the watchdog took the new timeout
         assert set_param(client, node, "emac.failure", "stuck").successful
-        assert client.spin(3, lambda: diag["emac/left_wing"].get("failure") == "stuck")
+        assert client.spin(3, lambda: diag[STATUS].get("failure") == "stuck")
         assert set_param(client, node, "emac.failure", "none").successful
         assert not set_param(client, node, "emac.failure", "melt").successful  # refused, node goes on
         assert set_param(client, node, "emac.motor_power_on", False).successful
         hold(client, cmd, 1.0, 0.5)  # commanded, but unpowered: the brake holds
-        assert diag["emac/left_wing"]["motor_power_on"] == "false"
-        assert diag["emac/left_wing"]["brake_engaged"] == "true"
+        assert diag[STATUS]["motor_power_on"] == "false"
+        assert diag[STATUS]["brake_engaged"] == "true"
         refused = set_param(client, node, "second_order.wn_rad_s", 80.0)
         assert not refused.successful
         assert "read-only" in refused.reason
@@ -338,14 +342,15 @@ def test_a_namespace_moves_every_topic_of_a_node(client):
             cmd.publish(JointState(name=["left_wing"], position=[command_v(3.0)]))
             client.spin(0.005)
         assert load_channel("left_wing").v_to_deg(got[-1].position[0]) == pytest.approx(3.0, abs=0.05)
-        wanted = {"/aircraft2/ema/emac/feedback", "/aircraft2/ema/emac/command", "/aircraft2/diagnostics",
+        wanted = {"/aircraft2/ema/emac/feedback", "/aircraft2/ema/emac/command", "/diagnostics",
                   "/aircraft2/ema/emac/left_wing/failure", "/aircraft2/ema/ready"}
 
         def ours():
             return {n for n, _ in client.node.get_topic_names_and_types() if n not in ("/rosout", "/parameter_events")}
 
         assert client.spin(20, lambda: wanted <= ours()), sorted(wanted - ours())
-        assert all(t.startswith("/aircraft2/") for t in ours()), sorted(ours())
+        # every topic in the namespace but ROS's global ones (/diagnostics: statuses named by the node's full name)
+        assert all(t.startswith("/aircraft2/") for t in ours() - {"/diagnostics"}), sorted(ours())
     finally:
         stop(*procs)
 
@@ -403,7 +408,7 @@ def test_every_dropped_command_is_counted_and_logged_and_diagnostics_recover(cli
             cmd.publish(msg)
             k += 1
             client.spin(0.005)
-        last = next(s for s in diag[-1].status if s.name == "emac/left_wing")
+        last = next(s for s in diag[-1].status if s.name == STATUS)
         assert (last.level, last.message) == (DiagnosticStatus.OK, "nominal")
         values = {v.key: v.value for v in last.values}
     finally:
@@ -458,7 +463,7 @@ def test_no_node_outlives_the_launcher_and_the_bag_is_closed(client, tmp_path, s
         client.spin(1.0)
         topics = {n for n, _ in client.node.get_topic_names_and_types()} - {"/rosout", "/parameter_events"}
         assert topics
-        assert all(t.startswith("/aircraft2/") for t in topics), sorted(topics)
+        assert all(t.startswith("/aircraft2/") for t in topics - {"/clock", "/diagnostics"}), sorted(topics)
         os.kill(proc.pid, sig)
         proc.wait(timeout=30)
         assert client.spin(30, lambda: not any(_alive(k) for k in kids)), [k for k in kids if _alive(k)]

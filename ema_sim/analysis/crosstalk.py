@@ -20,12 +20,24 @@ follow its command: an output whose rate on the triangle's ramps falls 5 % short
 is tracking error, not crosstalk, and it is not judged against the threshold (quality
 ``not_determined``).
 
+No verdict without its measurement:
+
+* crosstalk is the noise *another* channel's motion puts on this one, so a verdict needs a second
+  channel that moves (:func:`crosstalk_sources`): a suite bag's plan naming the other channels'
+  maneuvers, the metadata's ``static_crosstalk``/``dynamic_crosstalk`` test (three other surfaces
+  square, tables 2 and 3), or a ``moving_channels`` metadata line. A single-channel record gets the
+  figures of its held (or tracking) output only, quality ``not_determined``, no verdict;
+* the threshold is the channel's own: given (``--threshold-deg``), measured in this record (or
+  another of the same channel), else table A2's, which belongs to the X-43A and applies only to a
+  channel named by ``--channel`` or by the record. A stand-in channel has no threshold: figures only.
+
 The test is recognised from a held command with a constant load (:func:`read_hold`) or a steady
 tone that is no sine (:func:`read_triangle`); dither runs on the same holds.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -75,10 +87,10 @@ class CrosstalkResult:
         Frequency of the residual's largest spectral peak, Hz.
     volts_per_deg : float
         Feedback volts per degree.
-    threshold_deg : float
-        The threshold it is judged against, deg.
+    threshold_deg : float or None
+        The threshold it is judged against, deg (None: no threshold applies).
     threshold_source : str
-        Where the threshold comes from.
+        Where the threshold comes from, or why there is none.
     residual : numpy.ndarray
         What the command does not explain, deg.
     notes : list
@@ -91,6 +103,10 @@ class CrosstalkResult:
         First sample of the segment.
     stop : int
         One past the last sample.
+    sources : tuple
+        The other channels that move while this one is observed (none: no crosstalk to judge).
+    sources_note : str
+        Where they come from, or why there are none.
     """
 
     output: str
@@ -101,7 +117,7 @@ class CrosstalkResult:
     sensor_noise_deg: float
     dominant_hz: float | None
     volts_per_deg: float
-    threshold_deg: float
+    threshold_deg: float | None
     threshold_source: str
     residual: FloatArray
     notes: list[str] = field(default_factory=list)
@@ -111,11 +127,13 @@ class CrosstalkResult:
     """Command's and output's median rate on the ramps (moving command only)."""
     start: int = 0
     stop: int = 0
+    sources: tuple[str, ...] = ()
+    sources_note: str = ""
 
     @property
-    def below_threshold(self) -> bool:
-        """Peak-to-peak noise below the threshold amplitude."""
-        return self.peak_to_peak_deg < self.threshold_deg
+    def below_threshold(self) -> bool | None:
+        """Peak-to-peak noise below the threshold amplitude (None: no threshold applies)."""
+        return None if self.threshold_deg is None else self.peak_to_peak_deg < self.threshold_deg
 
     @property
     def lags_behind(self) -> bool:
@@ -123,28 +141,38 @@ class CrosstalkResult:
         return self.rates_dps is not None and self.rates_dps[1] < KEEP_UP * self.rates_dps[0]
 
     @property
-    def quality(self) -> Quality:
-        """``not_determined`` when the output does not follow its command (tracking error, not crosstalk)."""
+    def tracking_error(self) -> bool:
+        """The output does not follow its command: what the fit leaves is tracking error."""
         dependent = self.independence is not None and not self.independence.independent
-        return "not_determined" if dependent or self.lags_behind else "ok"
+        return dependent or self.lags_behind
+
+    @property
+    def quality(self) -> Quality:
+        """``not_determined`` without a second channel that moves, or when the output does not follow its command."""
+        return "not_determined" if self.tracking_error or not self.sources else "ok"
 
     @property
     def quality_note(self) -> str:
         """Why the quality is what it is."""
-        if self.quality == "ok" or self.independence is None:
-            return ""
-        if self.lags_behind and self.rates_dps is not None:
-            rc, ro = self.rates_dps
-            return (f"the output moves at {ro:.3g} °/s on the ramps against the command's {rc:.3g} °/s: it lags ever "
-                    "further behind, so the residual is tracking error, not crosstalk noise")
-        ind = self.independence
-        return (f"the residual follows the command's rate (correlation {ind.peak_correlation:+.2f} at lag "
-                f"{ind.peak_lag}, band ±{ind.bound:.2g}): tracking error, not crosstalk noise")
+        notes = []
+        if self.tracking_error and self.independence is not None:
+            if self.lags_behind and self.rates_dps is not None:
+                rc, ro = self.rates_dps
+                notes.append(f"the output moves at {ro:.3g} °/s on the ramps against the command's {rc:.3g} °/s: it "
+                             "lags ever further behind, so the residual is tracking error, not crosstalk noise")
+            else:
+                ind = self.independence
+                notes.append(f"the residual follows the command's rate (correlation {ind.peak_correlation:+.2f} at lag "
+                             f"{ind.peak_lag}, band ±{ind.bound:.2g}): tracking error, not crosstalk noise")
+        if not self.sources:
+            notes.append(f"no second channel moves ({self.sources_note}): the figures are this output's own noise, "
+                         "not crosstalk")
+        return "; ".join(notes)
 
     @property
     def verdict(self) -> str:
-        """``below``, ``ABOVE``, or ``not judged`` when the residual is not crosstalk."""
-        if self.quality != "ok":
+        """``below``, ``ABOVE``, or ``not judged`` (not crosstalk, or no threshold for this channel)."""
+        if self.quality != "ok" or self.below_threshold is None:
             return "not judged"
         return "below" if self.below_threshold else "ABOVE"
 
@@ -165,6 +193,7 @@ class CrosstalkResult:
             "excess_rms_over_sensor_noise_deg": self.excess_rms_deg, "sensor_noise_deg": self.sensor_noise_deg,
             "dominant_hz": self.dominant_hz, "threshold_deg": self.threshold_deg,
             "threshold_source": self.threshold_source, "below_threshold": self.below_threshold, "notes": self.notes,
+            "moving_channels": list(self.sources), "moving_channels_source": self.sources_note,
         }
 
 
@@ -180,7 +209,7 @@ def _tracking_residual(t: FloatArray, u: FloatArray, y: FloatArray) -> tuple[Flo
 
 
 def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: float, *, output: str,
-                    threshold_deg: float, threshold_source: str, volts_per_deg: float) -> CrosstalkResult:
+                    threshold_deg: float | None, threshold_source: str, volts_per_deg: float) -> CrosstalkResult:
     """Residual noise of the observed channel (see the module docstring).
 
     Parameters
@@ -195,8 +224,8 @@ def crosstalk_noise(t: FloatArray, u: FloatArray, y: FloatArray, sensor_noise: f
         Its noise floor, deg.
     output : str
         Its name.
-    threshold_deg : float
-        The threshold the noise is judged against.
+    threshold_deg : float or None
+        The threshold the noise is judged against (None: none applies).
     threshold_source : str
         Where the threshold comes from.
     volts_per_deg : float
@@ -275,8 +304,43 @@ def read_triangle(m: MovingStretch) -> Reading | None:
                    {"freq_hz": freq, "amp_deg": float(np.median(m.swings) / 2)})
 
 
-def threshold_reference(ra: RecordAnalysis) -> tuple[float, str]:
-    """The threshold crosstalk is judged against: given, measured in the record, else table A2.
+def crosstalk_sources(ra: RecordAnalysis) -> tuple[tuple[str, ...], str]:
+    """The other channels that move while this one is observed, from what the record says (module docstring).
+
+    Parameters
+    ----------
+    ra : RecordAnalysis
+        The record.
+
+    Returns
+    -------
+    tuple
+        The moving channels (empty: none known), and where they come from or why there are none.
+    """
+    meta = ra.data.metadata
+    own = ra.channel.channel if ra.channel_named else meta.get("channel")
+    if meta.get("moving_channels"):
+        names = tuple(n.strip() for n in meta["moving_channels"].split(",") if n.strip() and n.strip() != own)
+        if names:
+            return names, "the metadata's moving_channels"
+    plan = meta.get("plan")
+    if plan:
+        try:
+            doc = json.loads(plan)
+        except ValueError:
+            doc = {}
+        moving = tuple(ch for ch, spec in doc.items() if ch != own and isinstance(spec, dict)
+                       and not str(spec.get("maneuver", "hold")).startswith("hold"))
+        if moving:
+            return moving, "the record's test plan (the other channels' maneuvers)"
+    if meta.get("test") in ("static_crosstalk", "dynamic_crosstalk"):
+        return ("the three other surfaces",), (f"the metadata's {meta['test']} test (tables 2 and 3: three others "
+                                               "square)")
+    return (), "a single channel: no other channel's motion in the record, its plan or its metadata"
+
+
+def threshold_reference(ra: RecordAnalysis) -> tuple[float | None, str]:
+    """The threshold crosstalk is judged against: given, measured in the record, else table A2 for an X-43A channel.
 
     Parameters
     ----------
@@ -286,13 +350,16 @@ def threshold_reference(ra: RecordAnalysis) -> tuple[float, str]:
     Returns
     -------
     tuple
-        The threshold, deg, and where it comes from.
+        The threshold, deg (None when none applies), and where it comes from or why there is none.
     """
     if ra.options.threshold_deg is not None:
         return ra.options.threshold_deg, "given (--threshold-deg)"
     measured = [s.onset_deg for s in ra.of(STATIC) if s.onset_deg is not None]
     if measured:
         return float(measured[0]), "static threshold measured in this record"
+    if not ra.channel_named:
+        return None, ("no threshold: table A2's belongs to the X-43A and the record names no channel of it (give "
+                      "--channel, or --threshold-deg for this actuator's own): figures only")
     ch: ChannelConfig = ra.channel
     return SPEC_THRESHOLD_IN * ch.deg_per_in, f"table A2: {SPEC_THRESHOLD_IN} in × {ch.deg_per_in:.2f} °/in"
 
@@ -309,6 +376,7 @@ class Crosstalk(Section2Test[CrosstalkResult]):
     def run(self, ra: RecordAnalysis) -> list[CrosstalkResult]:
         data, t = ra.data, ra.data.time_s
         threshold, source = threshold_reference(ra)
+        sources, sources_note = crosstalk_sources(ra)
         name, y = ra.primary(("position_deg", "surface_deg"))
         vpd = abs(1.0 / float(ra.channel.feedback_cal.slope(0.0)))
         out = []
@@ -316,7 +384,7 @@ class Crosstalk(Section2Test[CrosstalkResult]):
             sl = slice(seg.start, seg.stop)
             c = crosstalk_noise(t[sl], data.command_deg[sl], y[sl], ra.noise_deg[name], output=name,
                                 threshold_deg=threshold, threshold_source=source, volts_per_deg=vpd)
-            out.append(replace(c, start=seg.start, stop=seg.stop))
+            out.append(replace(c, start=seg.start, stop=seg.stop, sources=sources, sources_note=sources_note))
         return out
 
     @override
@@ -338,17 +406,22 @@ class Crosstalk(Section2Test[CrosstalkResult]):
         for c, img in zip(results, images, strict=True):
             dom = "—" if c.dominant_hz is None else f"{c.dominant_hz:.3g} Hz"
             pp_v = c.peak_to_peak_deg * c.volts_per_deg
+            judged = (f"**{c.verdict}** the threshold {c.threshold_deg:.4f}° ({c.threshold_source})"
+                      if c.threshold_deg is not None else f"**not judged**: {c.threshold_source}")
+            moving = (f"other channels moving: {', '.join(c.sources)} ({c.sources_note})" if c.sources
+                      else "no other channel moves")
             lines += [f"{c.kind}: {c.peak_to_peak_deg:.4f}° peak to peak ({pp_v:.4f} V),"
                       f" RMS {c.rms_deg:.4f}° ({c.excess_rms_deg:.4f}° above the {c.sensor_noise_deg:.4f}° sensor "
-                      f"noise), dominant {dom}; **{c.verdict}** the threshold {c.threshold_deg:.4f}° "
-                      f"({c.threshold_source}). Quality: {quality(c.quality, c.quality_note)}.", ""]
+                      f"noise), dominant {dom}; {moving}; {judged}. Quality: {quality(c.quality, c.quality_note)}.",
+                      ""]
             lines += bullets(c.notes)
             lines += image(img, "crosstalk")
         return lines
 
     @override
     def summary(self, ra: RecordAnalysis, r: CrosstalkResult) -> list[str]:
-        return [f"crosstalk: {r.peak_to_peak_deg:.4f}° p-p, {r.verdict} threshold {r.threshold_deg:.4f}°"
+        against = f" threshold {r.threshold_deg:.4f}°" if r.threshold_deg is not None else " (no threshold)"
+        return [f"crosstalk: {r.peak_to_peak_deg:.4f}° p-p, {r.verdict}{against}"
                 + ("" if r.quality == "ok" else f" ({r.quality_note})")]
 
     @override
@@ -360,11 +433,14 @@ class Crosstalk(Section2Test[CrosstalkResult]):
                                              squeeze=False)
         ax = axes[0][0]
         ax.plot(t, r.residual, lw=0.6, label=f"{r.output} residual ({r.kind})")
-        for v in (-r.threshold_deg / 2, r.threshold_deg / 2):
-            ax.axhline(v, color="r", ls="--", lw=0.8)
+        if r.threshold_deg is not None:
+            for v in (-r.threshold_deg / 2, r.threshold_deg / 2):
+                ax.axhline(v, color="r", ls="--", lw=0.8)
         ax.set_ylabel("deg")
-        ax.set_title(f"crosstalk: {r.peak_to_peak_deg:.4f}° p-p vs threshold {r.threshold_deg:.4f}° (dashed: ±half)"
-                     + ("" if r.quality == "ok" else "; residual follows the command"), fontsize=9)
+        against = (f" vs threshold {r.threshold_deg:.4f}° (dashed: ±half)" if r.threshold_deg is not None
+                   else " (no threshold for this channel)")
+        ax.set_title(f"crosstalk: {r.peak_to_peak_deg:.4f}° p-p{against}"
+                     + ("" if r.quality == "ok" else f"; not judged: {r.quality_note[:60]}"), fontsize=9)
         ax.legend(fontsize=8)
         ax.grid(lw=0.3)
         if moving:

@@ -13,8 +13,10 @@ median window, the size one reads off a strip chart.
 A limit cycle is a line in the spectrum, so the peak must also stand 15 dB above the spectrum around
 it (an octave either side, its own main lobe left out): the slow random toggling of a count between
 two values has a broad low-frequency hump that stands above the band's median without being a line.
-And a limit cycle of an output logged in counts moves it by at least one count: a folded waveform
-smaller than the count is the average of random toggles, not a cycle the sensor can resolve.
+And a limit cycle must stand clear of what the sensor and its noise make on their own: its folded
+peak to peak must reach :data:`LIMIT_COUNTS` counts of an output logged in counts (one count toggling
+at a line of the spectrum is the count's own flicker, a vibration at the edge of a count, not a cycle
+the loop keeps up) and :data:`LIMIT_SIGMAS` times the output's noise floor.
 
 The test runs on every held stretch of :class:`~ema_sim.analysis.crosstalk.Crosstalk`'s ``hold``.
 """
@@ -41,6 +43,10 @@ DETECT_DB = 15.0
 PHASE_BINS = 64
 MIN_PP_DEG = 1e-4
 """An output steadier than this (a quantized, noise-free feedback) has no limit cycle to look for."""
+LIMIT_COUNTS = 3.0
+"""A limit cycle's folded peak to peak reaches this many counts of an output logged in counts."""
+LIMIT_SIGMAS = 4.0
+"""...and this many times the output's noise floor."""
 
 
 @dataclass(frozen=True)
@@ -146,7 +152,8 @@ def _local_db(f: FloatArray, p: FloatArray, i: int) -> float | None:
 
 
 def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: bool = False,
-                  fold_periods: int | None = None, resolution: float | None = None) -> DitherResult | None:
+                  fold_periods: int | None = None, resolution: float | None = None,
+                  noise: float | None = None) -> DitherResult | None:
     """Search a held stretch for a limit cycle.
 
     Parameters
@@ -163,7 +170,9 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: boo
     fold_periods : int, optional
         Fold windows of that many periods and keep the median one (module docstring).
     resolution : float, optional
-        The output's count: a folded cycle smaller than it is not a limit cycle.
+        The output's count: a folded cycle smaller than three of them is not a limit cycle.
+    noise : float, optional
+        The output's noise floor: a folded cycle smaller than four times it is not a limit cycle.
 
     Returns
     -------
@@ -207,10 +216,15 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: boo
             waves = [_fold(t[sel], yd[sel], sine.freq_hz) for sel in ((t >= a) & (t < a + window) for a in starts)]
             wave = waves[int(np.argsort([np.ptp(w) for w in waves])[len(waves) // 2])]
     pp = float(np.ptp(wave))
-    if detected and resolution is not None and pp < resolution:
+    if detected and resolution is not None and pp < LIMIT_COUNTS * resolution:
         detected = False
-        reason = (f"the {sine.freq_hz:.3g} Hz component folds to {pp:.3g}° peak to peak, less than the output's "
-                  f"count {resolution:g}°: random toggling of the count, not a cycle the sensor resolves")
+        reason = (f"the {sine.freq_hz:.3g} Hz component folds to {pp:.3g}° peak to peak, {pp / resolution:.2g} of the "
+                  f"output's counts of {resolution:g}° (a limit cycle needs {LIMIT_COUNTS:g}): the count toggling, "
+                  "not a cycle the loop keeps up")
+    elif detected and noise is not None and pp < LIMIT_SIGMAS * noise:
+        detected = False
+        reason = (f"the {sine.freq_hz:.3g} Hz component folds to {pp:.3g}° peak to peak, under {LIMIT_SIGMAS:g}× the "
+                  f"output's noise floor {noise:.2g}°: not told from the noise")
     return DitherResult(output, float(t[0]), float(t[-1]), detected, float(fb[i]), ratio_db, sine.freq_hz,
                         pp, sine.amplitude, wave, reason, local, resolution)
 
@@ -230,7 +244,8 @@ class Dither(Section2Test[DitherResult]):
         out = []
         for seg in ra.segments(*self.kinds):
             sl = slice(seg.start, seg.stop)
-            d = detect_dither(t[sl], y[sl], output=name, resolution=ra.resolution_deg.get(name))
+            d = detect_dither(t[sl], y[sl], output=name, resolution=ra.resolution_deg.get(name),
+                              noise=ra.noise_deg[name])
             if d:
                 out.append(d)
         return out

@@ -12,7 +12,9 @@ Used by the offline analysis (`ema analyze`) to set detection thresholds and by 
   hundredths of a degree, a 5 mV A/D converter through its calibration): every change of such a
   signal is a whole number of counts. :func:`output_noise` is the floor a record can resolve:
   the white noise, but never less than the counts' own quantization error ``q/√12`` (a still output
-  that reads the same count for seconds has a fourth-difference MAD of zero, not a zero floor).
+  that reads the same count for seconds has a fourth-difference MAD of zero, not a zero floor). When
+  the changes tell nothing (a drive that moves two counts at a time), the values themselves are
+  read for a count grid (:func:`ema_sim.analysis.grid.value_grid`).
 * :func:`whiteness` is the Ljung-Box portmanteau test on the residual's autocorrelation.
 * :func:`input_independence` tests the residual's cross-correlation with the input (a model that
   explains everything leaves a residual uncorrelated with the input at every lag); the band holds
@@ -25,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from ema_sim.analysis.grid import CHANCE, Grid, value_grid
 
 FloatArray = NDArray[np.float64]
 
@@ -130,6 +134,9 @@ class NoiseFloor:
         White noise from the fourth differences (:func:`noise_floor`).
     resolution : float or None
         The count the output is logged in (None: continuous).
+    resolution_source : str
+        How the count was found: ``given``, ``changes`` (every change a whole number of counts), ``values``
+        (every value on the grid), or ``none``.
     """
 
     sigma: float
@@ -138,6 +145,8 @@ class NoiseFloor:
     """White noise from the fourth differences (:func:`noise_floor`)."""
     resolution: float | None
     """The count the output is logged in (None: continuous)."""
+    resolution_source: str = "changes"
+    """How the count was found: ``given``, ``changes``, ``values`` or ``none``."""
 
     @property
     def quantization(self) -> float:
@@ -149,16 +158,51 @@ class NoiseFloor:
         """True when the counts, not the noise, set the floor."""
         return self.resolution is not None and self.quantization >= self.white
 
-    def as_dict(self) -> dict[str, float | bool | None]:
+    def as_dict(self) -> dict[str, float | bool | str | None]:
         """Plain values for JSON.
 
         Returns
         -------
         dict
-            ``sigma``, ``white``, ``resolution`` and ``limited_by_resolution``.
+            ``sigma``, ``white``, ``resolution``, ``resolution_source`` and ``limited_by_resolution``.
         """
         return {"sigma": self.sigma, "white": self.white, "resolution": self.resolution,
-                "limited_by_resolution": self.limited_by_resolution}
+                "resolution_source": self.resolution_source, "limited_by_resolution": self.limited_by_resolution}
+
+    @property
+    def statement(self) -> str:
+        """The floor and the count in one sentence."""
+        if self.resolution is None:
+            return f"continuous (no count grid in the values or their changes), white noise {self.white:.3g}"
+        how = {"given": "given by the metadata", "changes": "every change a whole number of counts",
+               "values": "every value on the grid"}.get(self.resolution_source, self.resolution_source)
+        return (f"counts of {self.resolution:g} ({how}): floor {self.sigma:.3g} = max(white {self.white:.3g}, "
+                f"q/√12 {self.quantization:.3g})")
+
+
+def sparse_multiple(q: float, grid: Grid) -> bool:
+    """Whether a count read from the changes is a multiple of the values' finer grid that too few levels support.
+
+    An output toggling between a handful of levels four counts apart changes by four counts at least:
+    its smallest change is no count. When the values are written on a finer grid and so few of them
+    populate the coarser one that landing on its multiples could be chance
+    (:data:`ema_sim.analysis.grid.CHANCE`), the finer grid is the count.
+
+    Parameters
+    ----------
+    q : float
+        The count from the changes.
+    grid : Grid
+        The values' grid.
+
+    Returns
+    -------
+    bool
+        True when ``grid.q`` should be the count instead.
+    """
+    k = q / grid.q
+    whole = k >= 1.5 and abs(k - round(k)) <= 0.01 * k
+    return whole and (grid.levels - 1) * float(np.log(round(k))) < float(np.log(CHANCE))
 
 
 def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
@@ -175,12 +219,23 @@ def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
     -------
     NoiseFloor
         ``sigma = max(white, resolution/√12)``: a position logged in counts of 0.01 has a floor of at
-        least 0.0029 from the counts alone.
+        least 0.0029 from the counts alone. The count comes from the signal's changes
+        (:func:`detect_resolution`), else from its values (:func:`ema_sim.analysis.grid.value_grid`),
+        which also win when the changes' count is a multiple of theirs that too few levels support
+        (:func:`sparse_multiple`).
     """
     white = noise_floor(y)
-    q = detect_resolution(y) if resolution is None else float(resolution)
+    source = "given"
+    q = float(resolution) if resolution is not None else None
+    if q is None:
+        q, source = detect_resolution(y), "changes"
+        grid = value_grid(y)
+        if grid is not None and (q is None or sparse_multiple(q, grid)):
+            q, source = grid.q, "values"
+        elif q is None:
+            source = "none"
     floor = max(white, q / np.sqrt(12.0)) if q is not None else white
-    return NoiseFloor(float(floor), white, q)
+    return NoiseFloor(float(floor), white, q, source)
 
 
 def autocovariance(x: FloatArray, max_lag: int) -> FloatArray:

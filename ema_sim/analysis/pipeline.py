@@ -16,21 +16,27 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from ema_sim.analysis import series
+from ema_sim.analysis import series, slew
 from ema_sim.analysis.command_hold import CommandHold, detect_command_hold, given
 from ema_sim.analysis.noise import NoiseFloor, output_noise
 from ema_sim.analysis.recognize import recognize
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.second_order_fit import SecondOrderFit
 from ema_sim.analysis.section2 import Options, RecordAnalysis
+from ema_sim.analysis.slew import Slew
 from ema_sim.config import CHANNELS, ChannelConfig, load_channel
 from ema_sim.io.csv import MeasuredData
 
-__all__ = ["Options", "RecordAnalysis", "analyze_record", "analyze_records", "resolve_channel", "spread"]
+RECOGNISED = 0.1
+"""Share of a record's analysis reported done once its tests are recognised."""
+
+__all__ = ["Options", "RecordAnalysis", "analyze_record", "analyze_records", "record_slew", "resolve_channel",
+           "spread"]
 
 
 def resolve_channel(data: MeasuredData, requested: str | None) -> tuple[ChannelConfig, str | None]:
@@ -54,7 +60,9 @@ def resolve_channel(data: MeasuredData, requested: str | None) -> tuple[ChannelC
     if meta in CHANNELS:
         return load_channel(meta), None
     why = f"metadata channel {meta!r} is not one of ours" if meta else "no channel in the metadata"
-    return load_channel("left_wing"), f"{why}: left_wing's configuration used (crank arm, calibration slopes)"
+    return load_channel("left_wing"), (f"{why}: left_wing's configuration used (crank arm, calibration slopes) as "
+                                       "a stand-in; no X-43A table (crosstalk threshold, rated slew) applies to the "
+                                       "record")
 
 
 def measure_outputs(data: MeasuredData) -> dict[str, NoiseFloor]:
@@ -100,7 +108,28 @@ def command_hold(data: MeasuredData, noise: dict[str, NoiseFloor], options: Opti
     return detect_command_hold(data.time_s, data.command_deg, getattr(data, name), nf.sigma, nf.resolution)
 
 
-def analyze_record(data: MeasuredData, options: Options | None = None) -> RecordAnalysis:
+def record_slew(data: MeasuredData, noise: dict[str, NoiseFloor]) -> Slew:
+    """The slope of the record's rate-limited moves, on its own stamps: ``ema identify``'s measurement exactly.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record as read (its own stamps, nothing straightened or resampled).
+    noise : dict
+        Each output's noise floor.
+
+    Returns
+    -------
+    Slew
+        :func:`ema_sim.analysis.slew.measure` on the first output (position, else surface).
+    """
+    name = "position_deg" if data.position_deg is not None else "surface_deg"
+    y = getattr(data, name)
+    return slew.measure(data.time_s - data.time_s[0], data.command_deg, y, max(noise[name].sigma, slew.MIN_NOISE))
+
+
+def analyze_record(data: MeasuredData, options: Options | None = None,
+                   progress: Callable[[float], None] | None = None) -> RecordAnalysis:
     """Recognise and analyse one record (see the module docstring).
 
     Parameters
@@ -109,6 +138,8 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
         The record as read.
     options : Options, optional
         What was asked.
+    progress : callable, optional
+        Called with the share done (0 at the start, then after the recognition and after each test).
 
     Returns
     -------
@@ -116,19 +147,27 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
         Every test's results, what was not computed and why, and notes.
     """
     options = options or Options()
+    say = progress or (lambda _share: None)
+    say(0.0)
     noise = measure_outputs(data)
     hold = command_hold(data, noise, options)
+    measured_slew = record_slew(data, noise)
+    raw_stamps = data.time_s
     data = series.uniform_record(data, command_sampled=hold.assumed_sampled)
     ch, ch_note = resolve_channel(data, options.channel)
     rec = recognize(data)
-    ra = RecordAnalysis(data, ch, rec, noise, hold, options)
+    ra = RecordAnalysis(data, ch, rec, noise, hold, options,
+                        stamps=raw_stamps if raw_stamps.size == data.time_s.size else None, slew=measured_slew,
+                        stand_in=ch_note is not None)
     if ch_note:
         ra.notes.append(ch_note)
     if "resampled" in data.metadata:
         ra.notes.append(data.metadata["resampled"])
     ra.notes += rec.notes
-    for test in TESTS:
+    say(RECOGNISED)
+    for k, test in enumerate(TESTS):
         results = test.run(ra)
+        say(RECOGNISED + (1.0 - RECOGNISED) * (k + 1) / len(TESTS))
         ra.results[test.key] = results
         for r in results:
             ra.fits += test.fits(r)
@@ -149,7 +188,8 @@ def analyze_record(data: MeasuredData, options: Options | None = None) -> Record
     return ra
 
 
-def analyze_records(records: list[MeasuredData], options: Options | None = None) -> list[RecordAnalysis]:
+def analyze_records(records: list[MeasuredData], options: Options | None = None,
+                    progress: Callable[[int, float], None] | None = None) -> list[RecordAnalysis]:
     """Analyse several records, then let each use what another of the same channel measured.
 
     A crosstalk record judged against table A2's threshold is judged again against a static threshold
@@ -162,6 +202,8 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None)
         The records as read.
     options : Options, optional
         What was asked.
+    progress : callable, optional
+        Called with a record's index and the share of it done.
 
     Returns
     -------
@@ -169,12 +211,21 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None)
         One per record, in order.
     """
     options = options or Options()
-    done = [analyze_record(d, options) for d in records]
+    done = [analyze_record(d, options, None if progress is None else _for_record(progress, i))
+            for i, d in enumerate(records)]
     for ra in done:
         same = [o for o in done if o.channel.channel == ra.channel.channel and o is not ra]
         for test in TESTS:
             test.share(ra, same)
     return done
+
+
+def _for_record(progress: Callable[[int, float], None], i: int) -> Callable[[float], None]:
+    """``progress`` bound to record ``i``."""
+    def say(share: float) -> None:
+        progress(i, share)
+
+    return say
 
 
 # ---------------------------------------------------------------------------------------------- across tests

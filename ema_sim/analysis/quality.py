@@ -6,11 +6,15 @@
 * ``not_determined``: the record cannot determine it (too little excitation, above the Nyquist
   frequency, below the sensor's resolution, a command sampled rather than held);
 * ``saturated``: a rate or position limit shaped it (not the small-signal figure).
+
+A :class:`Measurement` is one figure with its uncertainty and quality, or the sentence saying why it
+was not measured.
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from dataclasses import dataclass
+from typing import Any, Literal
 
 Quality = Literal["ok", "on_bound", "not_determined", "saturated"]
 QUALITY_WORDS: dict[str, str] = {"ok": "ok", "on_bound": "on a bound", "not_determined": "not determined",
@@ -32,3 +36,35 @@ def worst(*qualities: Quality) -> Quality:
         The most severe (``ok`` when none is given).
     """
     return max(qualities, key=lambda q: _RANK[q], default="ok")
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """A figure: its value and uncertainty, or why it was not measured ("not measured: why").
+
+    Parameters
+    ----------
+    value : float or None
+        The figure (None: not measured).
+    sigma : float or None
+        Its uncertainty (standard error over the cycles, or the half width of a bracket).
+    quality : Quality
+        ``ok``, ``saturated`` or ``not_determined``.
+    statement : str
+        The figure in words, or "not measured: why".
+    """
+
+    value: float | None
+    sigma: float | None
+    quality: Quality
+    statement: str
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            Value, uncertainty, quality and statement.
+        """
+        return {"value": self.value, "sigma": self.sigma, "quality": self.quality, "statement": self.statement}

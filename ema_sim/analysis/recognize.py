@@ -18,6 +18,12 @@ asked, most specific first, what each stretch is:
   compliance), two opposite load levels (*load_reversal*: free play) or a sinusoidal load
   (*load_sine*: hysteresis); with a constant load, a *hold* (crosstalk, dither).
 
+Repeated cycles of the command (:func:`ema_sim.analysis.periodic.find_periodic`) are then one test:
+a periodic stretch that one segment of a matching kind covers keeps it, with the period and cycles
+added to its parameters; one the readers cut into pieces, or read as something else, becomes one
+segment named by its waveform (``square``, ``sine``, ``triangle``, else ``periodic``). Either way its
+``cycles`` parameter has :mod:`ema_sim.analysis.cycles` average it over its cycles.
+
 The metadata's maneuver and load specs (``ema simulate``, the maneuver node's bags) then confirm each
 segment or relabel it, adding the spec's parameters (sweep band, Schroeder period, tone frequency);
 every segment says what it was recognised from.
@@ -25,6 +31,7 @@ every segment says what it was recognised from.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -33,6 +40,7 @@ from numpy.typing import NDArray
 from ema_sim.analysis import series
 from ema_sim.analysis.moves import find_moves
 from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
+from ema_sim.analysis.periodic import Periodicity, find_periodic
 from ema_sim.analysis.registry import EDGE_READERS, HELD_READERS, MOVE_READERS, MOVING_READERS
 from ema_sim.analysis.segments import (
     EdgeRun,
@@ -66,6 +74,12 @@ MANEUVER_KINDS = {
     "static_threshold": "static_threshold", "dynamic_threshold": "dynamic_threshold", "hold": "hold",
 }
 LOAD_KINDS = {"steps": "load_steps", "reversal": "load_reversal", "sine": "load_sine"}
+PERIODIC_KINDS = {"square": ("square", "steps"), "profiled square": ("profile", "square"),
+                  "trapezoid": ("profile", "square"), "triangle": ("triangle",), "sine": ("sine",),
+                  "other": ("schroeder",)}
+"""Kinds of a single segment that may cover a periodic stretch of each waveform (it keeps its kind)."""
+PERIODIC_COVER = 0.9
+"""Share of a periodic stretch one segment must cover to stand for it."""
 COMPATIBLE = {("broadband", "schroeder"), ("broadband", "sweep"), ("sine", "triangle"), ("triangle", "sine"),
               ("steps", "square"), ("square", "steps"), ("steps", "regen"), ("square", "regen"),
               ("load_reversal", "load_steps"), ("load_steps", "load_reversal")}
@@ -237,11 +251,63 @@ def recognize(data: MeasuredData) -> Recognition:
             segments.append(Segment(r.kind, h.start, h.stop, f"signal: {r.evidence}", {"command_deg": h.value},
                                     holds=stretch.load_holds if r.kind != "hold" else ()))
     segments.sort(key=lambda s: s.start)
+    periodic = find_periodic(t, u, tol)
+    segments = _periodic(segments, periodic, u, dt, tol, min_jump)
     segments = _metadata_window(segments, t, maneuver)
     segments = _reconcile(segments, maneuver, load, notes)
     if not segments:
         notes.append("no section-2 test recognised in the signals")
-    return Recognition(segments, maneuver, load, notes, tol, min_jump)
+    return Recognition(segments, maneuver, load, notes, tol, min_jump, periodic)
+
+
+def _periodic(segments: list[Segment], periodic: list[Periodicity], u: FloatArray, dt: float, tol: float,
+              min_jump: float) -> list[Segment]:
+    """Each periodic stretch of the command as one test (see the module docstring)."""
+    for p in periodic:
+        inside = [s for s in segments if s.start < p.stop and s.stop > p.start and s.kind not in HELD_KINDS]
+        span = p.stop - p.start
+        if len(inside) == 1 and inside[0].kind in PERIODIC_KINDS[p.shape]:
+            s = inside[0]
+            if min(s.stop, p.stop) - max(s.start, p.start) >= PERIODIC_COVER * span:
+                if p.shape == "other":
+                    continue  # a repeating broadband command: its own reader's periodic analysis stands
+                kept = Segment(s.kind, s.start, s.stop, f"{s.evidence}; {p.evidence}", {**p.params(), **s.params},
+                               s.edges, s.holds, s.moves)
+                segments = sorted([x for x in segments if x is not s] + [kept], key=lambda x: x.start)
+                continue
+        # the lead-in and lead-out (the first swing from rest, the last back to it) are part of the same test
+        reach = round(p.period_samples)
+        ends = [s for s in segments if s not in inside and s.kind not in HELD_KINDS
+                and (p.stop <= s.start <= p.stop + reach or p.start - reach <= s.stop <= p.start)]
+        seg = _periodic_segment(p, u, dt, tol, min_jump)
+        if ends:
+            spans = ", ".join(f"samples {s.start}-{s.stop} (read alone as {s.kind})" for s in ends)
+            seg = replace(seg, evidence=f"{seg.evidence}; its lead-in/lead-out {spans} belong to it")
+        segments = sorted([x for x in segments if x not in inside and x not in ends] + [seg], key=lambda x: x.start)
+    return segments
+
+
+def _periodic_segment(p: Periodicity, u: FloatArray, dt: float, tol: float, min_jump: float) -> Segment:
+    """One segment for a periodic stretch the readers cut up or misread."""
+    kind = {"square": "square", "sine": "sine", "triangle": "triangle"}.get(p.shape, "periodic")
+    edges: tuple[Edge, ...] = ()
+    if kind == "square":
+        found = series.edges(u[p.start:p.stop], dt, min_hold_s=MIN_EDGE_HOLD_S, min_jump=min_jump,
+                             max_gap_s=MAX_STEP_S, tol=tol)
+        edges = tuple(_shifted(e, p.start) for e in found)
+        if not edges:
+            kind = "periodic"
+    holds = tuple([edges[0].before] + [e.after for e in edges]) if edges else ()
+    return Segment(kind, p.start, p.stop, f"signal: {p.evidence} (one test, not its pieces)", p.params(), edges,
+                   holds)
+
+
+def _shifted(e: Edge, by: int) -> Edge:
+    """An edge found on a slice, in record indices."""
+    def hold(h: series.Hold) -> series.Hold:
+        return series.Hold(h.start + by, h.stop + by, h.value)
+
+    return Edge(e.index + by, hold(e.before), hold(e.after))
 
 
 def _metadata_window(segments: list[Segment], t: FloatArray, maneuver: Maneuver | None) -> list[Segment]:

@@ -136,7 +136,7 @@ class Regeneration(Section2Test[RegenerationResult]):
         return r.as_dict()
 
     @override
-    def as_json(self, results: list[RegenerationResult]) -> dict[str, Any]:
+    def as_json(self, results: list[RegenerationResult], ra: RecordAnalysis) -> dict[str, Any]:
         return {self.key: results[0].as_dict() if results else None}
 
     @override

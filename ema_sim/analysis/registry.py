@@ -16,6 +16,7 @@ from ema_sim.analysis import (
     calibration_fit,
     compliance,
     crosstalk,
+    cycles,
     dither,
     free_play,
     frequency_response,
@@ -31,9 +32,9 @@ from ema_sim.analysis.section2 import Section2Test
 from ema_sim.analysis.segments import EdgeRun, HeldStretch, MoveRun, MovingStretch, Reading
 
 TESTS: tuple[Section2Test[Any], ...] = (
-    steps.TEST, timing.TEST, frequency_response.TEST, sine_dwell.SINE_DWELL, moves.TEST, calibration_fit.TEST,
-    threshold.STATIC, threshold.DYNAMIC, crosstalk.TEST, dither.TEST, compliance.TEST, hysteresis.TEST,
-    free_play.TEST, regeneration.TEST,
+    steps.TEST, timing.TEST, frequency_response.TEST, cycles.TEST, sine_dwell.SINE_DWELL, moves.TEST,
+    calibration_fit.TEST, threshold.STATIC, threshold.DYNAMIC, crosstalk.TEST, dither.TEST, compliance.TEST,
+    hysteresis.TEST, free_play.TEST, regeneration.TEST,
 )
 
 EDGE_READERS: tuple[Callable[[EdgeRun], Reading | None], ...] = (

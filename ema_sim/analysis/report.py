@@ -24,7 +24,7 @@ from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
 from ema_sim.analysis.section2 import RecordAnalysis
 
-__all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "to_json", "to_markdown"]
+__all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "slope_json", "slope_statement", "to_json", "to_markdown"]
 
 
 def _clean(value: Any) -> Any:  # noqa: PLR0911 - one return per type
@@ -66,13 +66,58 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
         "noise_deg": ra.noise_deg, "resolution_deg": ra.resolution_deg,
         "noise": {k: v.as_dict() for k, v in ra.noise.items()}, "command": ra.command.as_dict(),
         "tests": [s.as_dict(t) for s in ra.recognition.segments],
+        "slew": slope_json(ra),
     }
     for test in TESTS:
-        doc.update(test.as_json(ra.of(test)))
+        doc.update(test.as_json(ra.of(test), ra))
     doc["second_order_fits"] = [f.as_dict() for f in ra.fits]
     doc["not_computed"] = ra.not_computed
     doc["notes"] = ra.notes
     return dict(_clean(doc))
+
+
+SLOPE_METHOD = ("slope of the straight middle (20-80 %) of every move of the output that its command outran, "
+                "median over the moves, on the record's own stamps (ema_sim.analysis.slew.measure): the measurement "
+                "ema identify restarts its rate limit from and compares it with, so both reports give one slope")
+
+
+def slope_statement(ra: RecordAnalysis) -> str:
+    """The record's slope of rate-limited moves in one sentence (or why there is none).
+
+    Parameters
+    ----------
+    ra : RecordAnalysis
+        The record.
+
+    Returns
+    -------
+    str
+        The slope with its spread and the moves it comes from.
+    """
+    s = ra.slew
+    unit = f"{ra.unit.strip()}/s"
+    if s is None or s.rate is None:
+        seen = s.seen if s is not None else 0
+        return f"not measured: no rate-limited move ({seen} move(s) of the output examined, none outrun and straight)"
+    sigma = f" ± {s.sigma:.2g}" if s.sigma is not None else ""
+    return f"{s.rate:.4g}{sigma} {unit} ({s.moves} of {s.seen} moves rate-limited)"
+
+
+def slope_json(ra: RecordAnalysis) -> dict[str, Any]:
+    """The record's slope of rate-limited moves, its statement and method.
+
+    Parameters
+    ----------
+    ra : RecordAnalysis
+        The record.
+
+    Returns
+    -------
+    dict
+        :meth:`~ema_sim.analysis.slew.Slew.as_dict`, ``statement`` and ``method``.
+    """
+    base = ra.slew.as_dict() if ra.slew is not None else {}
+    return {**base, "statement": slope_statement(ra), "method": SLOPE_METHOD}
 
 
 def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
@@ -134,6 +179,8 @@ def _header(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
         ", ".join(f"{k} {v:.2g}{ra.unit}" for k, v in ra.noise_deg.items()), res,
         "sampled" if ra.command.assumed_sampled else "held"]])
     lines += [f"Command: {ra.command.statement}.", ""]
+    lines += [f"Slope of the rate-limited moves: {slope_statement(ra)}; {SLOPE_METHOD}.", ""]
+    lines += [f"Noise and resolution: {'; '.join(f'{k}: {v.statement}' for k, v in ra.noise.items())}.", ""]
     if d.unit != "deg":
         lines += [f"Positions are in {d.unit} as logged (a linear actuator, not converted through a crank arm): "
                   f"every figure below is in {d.unit} and {d.unit}/s where a degree would be.", ""]

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq, least_squares
 from scipy.signal import lfilter, lfilter_zi
 
-from ema_sim.analysis.frequency_response import COHERENCE_FIT, FrequencyResponse
+from ema_sim.analysis.frf import COHERENCE_FIT, FrequencyResponse
 from ema_sim.analysis.noise import WhitenessTest, whiteness
 from ema_sim.analysis.quality import Quality
 from ema_sim.analysis.uncertainty import coloured_covariance

@@ -28,6 +28,7 @@ from ema_sim.analysis.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.noise import NoiseFloor
 from ema_sim.analysis.quality import QUALITY_WORDS, Quality, worst
 from ema_sim.analysis.segments import Recognition, Segment
+from ema_sim.analysis.slew import Slew
 from ema_sim.config import ChannelConfig
 from ema_sim.io.csv import MeasuredData
 
@@ -52,11 +53,12 @@ class Options:
     model : str or None
         A registered model simulated on the measured command and overlaid on the Bode plots.
     threshold_deg : float or None
-        Threshold the crosstalk noise is compared with (default: measured, else table A2).
+        Threshold the crosstalk noise is compared with (default: measured, else table A2 for an X-43A channel).
     compliance_deg_per_kinlb : float or None
         Compliance taken out of the free-play jumps (default: measured in the same run, else none).
     channel : str or None
-        Channel whose configuration is used (default: the record's, else left_wing).
+        Channel whose configuration is used (default: the record's, else left_wing as a stand-in, to which
+        no X-43A table applies).
     command : HoldMode
         How the command was logged: ``detect`` it, or take it as ``held`` or ``sampled``.
     """
@@ -65,7 +67,7 @@ class Options:
     model: str | None = None
     """A registered model simulated on the measured command and overlaid on the Bode plots."""
     threshold_deg: float | None = None
-    """Threshold the crosstalk noise is compared with (default: measured, else table A2)."""
+    """Threshold the crosstalk noise is compared with (default: measured, else table A2 for an X-43A channel)."""
     compliance_deg_per_kinlb: float | None = None
     """Compliance taken out of the free-play jumps (default: measured in the same run, else none)."""
     channel: str | None = None
@@ -99,6 +101,14 @@ class RecordAnalysis:
         What was not computed, and why.
     notes : list
         Notes.
+    stamps : numpy.ndarray or None
+        The record's own time stamps, as logged, when the samples are those of ``data`` (jittery stamps
+        straightened, nothing resampled); None when the record was resampled.
+    slew : Slew or None
+        The slope of the record's rate-limited moves (:func:`ema_sim.analysis.slew.measure`, on its own stamps).
+    stand_in : bool
+        The channel's configuration is a stand-in (no ``--channel``, and the record names none of ours): no
+        X-43A table applies to it.
     """
 
     data: MeasuredData
@@ -113,6 +123,17 @@ class RecordAnalysis:
     """Every second-order fit of the record (steps, moves and frequency responses)."""
     not_computed: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    stamps: FloatArray | None = None
+    """The record's own time stamps, as logged (None when it was resampled)."""
+    slew: Slew | None = None
+    """The slope of the record's rate-limited moves, on its own stamps."""
+    stand_in: bool = False
+    """The channel's configuration is a stand-in: no X-43A table applies to the record."""
+
+    @property
+    def channel_named(self) -> bool:
+        """The record is of an X-43A channel, named by ``--channel`` or by the record itself."""
+        return not self.stand_in
 
     @property
     def noise_deg(self) -> dict[str, float]:
@@ -270,13 +291,15 @@ class Section2Test(ABC, Generic[R]):
             JSON-ready values (numpy scalars and non-finite floats are cleaned later).
         """
 
-    def as_json(self, results: list[R]) -> dict[str, Any]:
+    def as_json(self, results: list[R], ra: RecordAnalysis) -> dict[str, Any]:  # noqa: ARG002 - the default
         """The test's keys in the JSON record.
 
         Parameters
         ----------
         results : list
             Its results on one record.
+        ra : RecordAnalysis
+            The record (what a test's summary across its results may need: the record's slope).
 
         Returns
         -------

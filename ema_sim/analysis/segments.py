@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.analysis import series
+from ema_sim.analysis.periodic import Periodicity
 from ema_sim.analysis.series import Edge, Hold
 from ema_sim.analysis.sine_fit import Sine, fit_sine
 from ema_sim.signals import Load, Maneuver
@@ -163,6 +164,8 @@ class Recognition:
         How far the command may wander and still count as held (five times its noise).
     edge_threshold_deg : float
         The smallest jump between two holds read as a command edge.
+    periodic : list
+        Every run of matching cycles of the command (:class:`~ema_sim.analysis.periodic.Periodicity`).
     """
 
     segments: list[Segment]
@@ -173,6 +176,8 @@ class Recognition:
     """How far the command may wander and still count as held (five times its noise)."""
     edge_threshold_deg: float = 0.0
     """The smallest jump between two holds read as a command edge."""
+    periodic: list[Periodicity] = field(default_factory=list)
+    """Every run of matching cycles of the command."""
 
     def of(self, *kinds: str) -> list[Segment]:
         """Segments of the given kinds.

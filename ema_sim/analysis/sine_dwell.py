@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from typing_extensions import override
 
-from ema_sim.analysis.frequency_response import zoh_factor
+from ema_sim.analysis.frf import zoh_factor
 from ema_sim.analysis.markdown import quality, table
 from ema_sim.analysis.quality import Quality
 from ema_sim.analysis.section2 import RecordAnalysis, Section2Test

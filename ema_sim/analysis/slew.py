@@ -1,14 +1,35 @@
 """The slope of the output's constant-rate moves, measured as a person would with a ruler.
 
 A rate-limited move is a straight line between two rests that the command outran: the output crosses
-the middle of its travel (20 % to 80 %) at one rate while the command moved faster. Each move of the
-output is found from its own motion (a run of samples moving one way faster than a tenth of the
-record's peak rate), a line is fitted to its middle on the record's own time stamps, and the move
-counts as rate-limited when no sample of that middle departs from the line by more than
-:data:`STRAIGHT` of the move's travel (and the noise allows) and the command moved at least
-:data:`OUTRUN` times faster in the same stretch (a step, or a profile faster than the actuator; a
-triangle the actuator follows is straight too, but is the command's own slope). The slew rate is the
-median slope of those moves, per direction and overall, with the moves' spread as its uncertainty.
+its travel at one rate while the command moved faster. Each move of the output is found from its own
+motion (a run of samples moving one way faster than :data:`MOVING` of the record's peak rate) and
+read on the record's own time stamps. It counts as rate-limited when
+
+* it is **long enough** for its straightness to be judged beyond the noise (:data:`STRAIGHT` of its
+  travel at least six noise floors: a third of a degree is too short to tell a rate limit from a
+  linear response at the 0.003° of an inclinometer);
+* it is **straight well beyond its middle**, from 10 % to 90 % of its travel: no sample there departs
+  from a line through them by more than :data:`STRAIGHT` of the travel (and the noise allows). A
+  linear second order's step is nearly straight through its middle, 1-3 % off a line for ζ
+  0.4-0.7, but 2.6-6 % off from 10 % to 90 %, where a rate-limited move of ten times its corners'
+  travel stays within 2 %;
+* it holds **one rate**: the slopes over the three thirds of that stretch agree within :data:`EVEN`
+  (three samples a third at least). A linear step slows through it, by 20-130 % from its first third
+  to its last for ζ 0.6-1, and a lightly damped one speeds up; a sine's swing, straight to within a
+  few per cent from 10 % to 90 % and even between its halves, is 22 % faster in its middle third
+  than in its outer ones;
+* it runs **from rest to rest**: just before and just after it the output moves at most
+  :data:`REST` of its slope (a slow swing's middle, fast enough to count against the record's peak
+  rate, is no move of its own);
+* the **command outran it**: its fastest mean rate over the time the output takes through the
+  middle (20-80 %) of its move reaches :data:`OUTRUN` times the output's slope there (a step, or a
+  profile faster than the actuator; a triangle the actuator follows is straight too, but is the
+  command's own slope). Averaged over that time, neither a jittery stamp nor a command held in
+  frames makes a command look faster than it is.
+
+The slope is read on the middle 20-80 % of each such move. The slew rate is the median slope of those
+moves, per direction and overall, with the moves' spread as its uncertainty. ``ema analyze`` reports
+it for the record (and a periodic test's stretch, and as the steps' large-amplitude slew rate);
 ``ema identify`` restarts a runaway rate-limit fit from it and says when its fitted limit disagrees.
 """
 
@@ -23,16 +44,29 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 MOVING = 0.1
 """A sample moves when its rate exceeds this share of the record's peak rate (99th percentile)."""
-STRAIGHT = 0.03
-"""The middle of a constant-rate move stays within this share of its travel of a straight line."""
+STRAIGHT = 0.02
+"""A constant-rate move stays within this share of its travel of a straight line from 10 % to 90 % of it."""
+WIDE = (0.1, 0.9)
+"""The share of a move's travel that must be straight."""
+MIDDLE = (0.2, 0.8)
+"""The share of a move's travel its slope is read on."""
+EVEN = 0.1
+"""The thirds of a constant-rate move's straight stretch have slopes within this share of each other."""
+THIRDS = 3
+"""The straight stretch is cut into this many parts whose slopes must agree."""
+REST = 0.3
+"""Just before and just after a move (a fifth of its length), the output moves at most this share of its slope."""
 MIN_SAMPLES = 4
 """Fewest samples in a move's middle for its slope to be read."""
-OUTRUN = 1.05
-"""The command's fastest rate in a move's stretch over the output's slope, for the move to be rate-limited."""
+OUTRUN = 1.15
+"""The command's fastest mean rate in a move's stretch over the output's slope, for the move to be rate-limited."""
 LEAD_S = 0.05
 """How far before the output moves its command is looked at (the delay between a step and the motion)."""
 AGREE = 0.1
 """A rate limit within this share of the measured slope agrees with it."""
+MIN_NOISE = 1e-3
+"""The least noise floor a move's straightness is judged with (``ema identify``'s least weight, so both tools
+measure the same slope on the same record)."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +123,42 @@ def _runs(moving: NDArray[np.bool_], sign: FloatArray) -> list[tuple[int, int]]:
     return out
 
 
+def _at_rest(t: FloatArray, y: FloatArray, a0: int, b0: int, slope: float, noise: float) -> bool:
+    """Whether the output is still (under REST of the move's slope) just before and just after the move."""
+    n = max(2, (b0 - a0) // 5)
+    for lo, hi in ((max(a0 - n, 0), a0), (b0, min(b0 + n, y.size - 1))):
+        if hi - lo < 1:
+            continue
+        dt = float(t[hi] - t[lo])
+        if abs(float(y[hi] - y[lo])) / dt > REST * abs(slope) + 3.0 * math.sqrt(2.0) * noise / dt:
+            return False
+    return True
+
+
+def _asked(t: FloatArray, u: FloatArray, span_s: float) -> float:
+    """The command's fastest mean rate over any window of ``span_s``.
+
+    A staircase's frames and a jittery stamp average out over the time the output takes through the
+    middle of its move.
+    """
+    if t.size < 2:
+        return 0.0
+    span_s = max(span_s, float(np.median(np.diff(t))))
+    j = np.minimum(np.searchsorted(t, t + span_s), t.size - 1)
+    ok = j > np.arange(t.size)
+    if not ok.any():
+        return 0.0
+    i = np.flatnonzero(ok)
+    return float(np.max(np.abs(u[j[i]] - u[i]) / (t[j[i]] - t[i])))
+
+
+def _even(t: FloatArray, y: FloatArray) -> bool:
+    """Whether the slopes over the three thirds of a stretch agree within EVEN."""
+    parts = np.array_split(np.arange(t.size), THIRDS)
+    slopes = [abs(float(np.polyfit(t[p[0]:p[-1] + 2], y[p[0]:p[-1] + 2], 1)[0])) for p in parts]
+    return max(slopes) - min(slopes) <= EVEN * max(slopes)
+
+
 def measure(time_s: FloatArray, command: FloatArray, y: FloatArray, noise: float = 0.0) -> Slew:
     """The slew rate of ``y`` from its rate-limited moves (module docstring).
 
@@ -124,22 +194,25 @@ def measure(time_s: FloatArray, command: FloatArray, y: FloatArray, noise: float
         # the move from the rest before it to the rest after it
         a0, b0 = max(a - 1, 0), min(b, y.size - 1)
         travel = float(y[b0] - y[a0])
-        if abs(travel) < max(20.0 * noise, 1e-9):
+        if abs(travel) < max(6.0 * noise / STRAIGHT, 1e-9):
             continue
         seen += 1
         frac = (y[a0:b0 + 1] - y[a0]) / travel
-        mid = np.flatnonzero((frac >= 0.2) & (frac <= 0.8)) + a0
+        mid = np.flatnonzero((frac >= MIDDLE[0]) & (frac <= MIDDLE[1])) + a0
+        wide = np.flatnonzero((frac >= WIDE[0]) & (frac <= WIDE[1])) + a0
         if mid.size < MIN_SAMPLES:
             continue
         tm, ym = t[mid], y[mid]
-        slope, icpt = np.polyfit(tm, ym, 1)
-        dev = float(np.max(np.abs(ym - (slope * tm + icpt))))
+        slope = float(np.polyfit(tm, ym, 1)[0])
+        tw, yw = t[wide], y[wide]
+        line = np.polyfit(tw, yw, 1)
+        dev = float(np.max(np.abs(yw - np.polyval(line, tw))))
         if dev > STRAIGHT * abs(travel) + 3.0 * noise or np.sign(slope) != np.sign(travel):
             continue
+        if wide.size < 3 * THIRDS or not _even(tw, yw) or not _at_rest(t, y, a0, b0, slope, noise):
+            continue
         lead = int(np.searchsorted(t, t[a0] - LEAD_S))
-        stretch = slice(lead, b0 + 1)
-        asked = float(np.max(np.abs(np.diff(u[stretch]) / np.diff(t[stretch])), initial=0.0))
-        if asked >= OUTRUN * abs(slope):
+        if _asked(t[lead:b0 + 1], u[lead:b0 + 1], float(tm[-1] - tm[0])) >= OUTRUN * abs(slope):
             slopes.append(float(slope))
     if not slopes:
         return Slew(None, None, None, None, 0, seen)

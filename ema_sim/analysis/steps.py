@@ -15,6 +15,16 @@ Steps of 0.5°, 1° and 20° give the small- and large-amplitude slew rates. For
   slew rate and no linear fit; the others get :func:`ema_sim.analysis.second_order_fit.fit_step` and
   the hand calculation from rise and settling time beside it.
 
+Every step is also read against its **commanded level** (:mod:`ema_sim.analysis.settling`): overshoot
+past the command, settling into the band about the command, and, when the output is still outside
+that band at the next edge, *unsettled* with the error left to the command (a servo that stops short
+of its command settles against its own last value all the same).
+
+The large-amplitude slew rate is the slope of the record's rate-limited moves
+(:func:`ema_sim.analysis.slew.measure`, on the record's own stamps), the measurement ``ema identify``
+restarts its rate limit from and compares it with; the rate-limited steps' own plateau rate is kept
+beside it, and a disagreement between the two is said.
+
 Each step's quality: ``saturated`` when rate-limited, ``not_determined`` when the step is within ten
 times the noise, else its fit's. A step set recognised from the metadata (a suite bag's
 ``steps:amps_deg=…``) whose steps the command does not show as edges lists each missing step under
@@ -33,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 from typing_extensions import override
 
-from ema_sim.analysis import figure
+from ema_sim.analysis import figure, settling, slew
 from ema_sim.analysis.markdown import image, num, quality, table
 from ema_sim.analysis.quality import Quality
 from ema_sim.analysis.second_order_fit import SecondOrderFit, fit_step, hand_calculation, simulate
@@ -100,6 +110,8 @@ class StepResponse:
         One past its last sample.
     edge : int
         Sample of the command edge.
+    against_command : Settling or None
+        The step read against its commanded level (overshoot, settling, error left at the next edge).
     """
 
     time_s: float
@@ -126,6 +138,8 @@ class StepResponse:
     stop: int
     edge: int = 0
     """Sample of the command edge."""
+    against_command: settling.Settling | None = None
+    """The step read against its commanded level (overshoot, settling, error left at the next edge)."""
 
     @property
     def quality(self) -> Quality:
@@ -178,6 +192,8 @@ class StepResponse:
             "plateau_rate_dps": self.plateau_rate_dps, "rate_limited": self.rate_limited,
             "rate_limit_evidence": self.rate_reason, "fit": self.fit.as_dict() if self.fit else None,
             "fit_note": self.fit_note, "quality": self.quality, "quality_note": self.quality_note,
+            "against_command": self.against_command.as_dict() if self.against_command else None,
+            "settled_to_command": self.against_command.settled if self.against_command else None,
         }
 
 
@@ -246,7 +262,7 @@ def _predicted_peak_rate(amp: float, wn: float, zeta: float) -> float:
 
 def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge], *, output: str,
                   noise_floor: float, rated_slew_dps: float | None = None, fit: bool = True,
-                  sampled: bool = False) -> list[StepResponse]:
+                  sampled: bool = False, counts: float | None = None) -> list[StepResponse]:
     """Metrics of every step, then fits in order of increasing amplitude (see the module docstring).
 
     Parameters
@@ -269,6 +285,8 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
         Fit a second order to every step that is not rate-limited.
     sampled : bool
         The command was sampled from a running demand, not held.
+    counts : float, optional
+        The output's count (for the settling band about the command).
 
     Returns
     -------
@@ -319,7 +337,8 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
             settling_s=m["settling"], settling_band=m["band"], overshoot_pct=m["overshoot"], peak_rate_dps=m["peak"],
             plateau_s=m["plateau"], plateau_rate_dps=m["plateau_rate"], rate_limited=limited,
             rate_reason="; ".join(reasons), fit=step_fit, fit_note=note, start=m["start"], stop=m["stop"],
-            edge=e.index,
+            edge=e.index, against_command=settling.read(t, y, e.after.start, e.after.stop, commanded=e.after.value,
+                                                        change=e.jump, noise=noise_floor, counts=counts),
         )
     return [results[i] for i in range(len(rows))]
 
@@ -335,15 +354,28 @@ class SlewRates:
     small_steps_deg : list
         Their sizes, deg.
     large_dps : float or None
-        Plateau rate of the longest rate-limited step, deg/s.
+        The large-amplitude slew rate: the slope of the record's rate-limited moves when it has any, else the
+        plateau rate of the longest rate-limited step, deg/s.
     large_steps_deg : list
         The rate-limited steps' sizes, deg.
+    large_sigma_dps : float or None
+        The slope's spread over its moves (over √moves).
+    large_source : str
+        Where ``large_dps`` comes from.
+    plateau_dps : float or None
+        Plateau rate of the rate-limited step that stays on its limit longest, deg/s.
+    agreement : str
+        How the slope and the plateau rate compare (the disagreement explained), or "".
     """
 
     small_dps: float | None
     small_steps_deg: list[float]
     large_dps: float | None
     large_steps_deg: list[float]
+    large_sigma_dps: float | None = None
+    large_source: str = "plateau rate of the rate-limited step that stays on its limit longest"
+    plateau_dps: float | None = None
+    agreement: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON.
@@ -354,9 +386,13 @@ class SlewRates:
             Small- and large-amplitude slew rates, the steps they come from, and their definition.
         """
         return {"small_amplitude_dps": self.small_dps, "small_amplitude_steps_deg": self.small_steps_deg,
-                "large_amplitude_dps": self.large_dps, "large_amplitude_steps_deg": self.large_steps_deg,
-                "definition": "small: peak rate of the steps that are not rate-limited; large: slope of the "
-                              "rate plateau of the rate-limited step that stays on its limit longest"}
+                "large_amplitude_dps": self.large_dps, "large_amplitude_sigma_dps": self.large_sigma_dps,
+                "large_amplitude_source": self.large_source, "large_amplitude_steps_deg": self.large_steps_deg,
+                "plateau_dps": self.plateau_dps, "agreement": self.agreement,
+                "definition": "small: peak rate of the steps that are not rate-limited; large: slope of the straight "
+                              "middle (20-80 %) of the record's rate-limited moves, median over the moves (the same "
+                              "measurement ema identify restarts its rate limit from), else the rate plateau of the "
+                              "rate-limited step that stays on its limit longest"}
 
 
 def _longest_plateau_rate(large: list[StepResponse]) -> float | None:
@@ -367,26 +403,44 @@ def _longest_plateau_rate(large: list[StepResponse]) -> float | None:
     return best.plateau_rate_dps if best.plateau_rate_dps is not None else best.peak_rate_dps
 
 
-def slew_rates(steps: list[StepResponse]) -> SlewRates:
-    """Peak rates of the linear steps (small amplitude) and of the rate-limited ones (large amplitude).
+def slew_rates(steps: list[StepResponse], slope: slew.Slew | None = None) -> SlewRates:
+    """Peak rates of the linear steps (small amplitude) and the slope of the rate-limited moves (large amplitude).
 
     Parameters
     ----------
     steps : list of StepResponse
         The steps of a record.
+    slope : Slew, optional
+        The slope of the record's rate-limited moves (:func:`ema_sim.analysis.slew.measure`): the large-amplitude
+        rate when the steps include a rate-limited one and it found rate-limited moves.
 
     Returns
     -------
     SlewRates
-        Both slew rates.
+        Both slew rates, where the large one comes from, and how it compares with the steps' plateau.
     """
     small = [s for s in steps if not s.rate_limited]
     large = [s for s in steps if s.rate_limited]
-    return SlewRates(
-        max((s.peak_rate_dps for s in small), default=None), sorted({round(abs(s.command_step_deg), 4) for s in small}),
-        _longest_plateau_rate(large),
-        sorted({round(abs(s.command_step_deg), 4) for s in large}),
-    )
+    plateau = _longest_plateau_rate(large)
+    small_dps = max((s.peak_rate_dps for s in small), default=None)
+    small_steps = sorted({round(abs(s.command_step_deg), 4) for s in small})
+    large_steps = sorted({round(abs(s.command_step_deg), 4) for s in large})
+    if not large or slope is None or slope.rate is None:
+        return SlewRates(small_dps, small_steps, plateau, large_steps, plateau_dps=plateau)
+    rate = slope.rate
+    source = (f"slope of the straight middle of the record's {slope.moves} rate-limited move(s), median (the "
+              "measurement ema identify restarts its rate limit from)")
+    agreement = ""
+    if plateau is not None:
+        tol = max(slew.AGREE * rate, 2.0 * (slope.sigma or 0.0))
+        if abs(plateau - rate) <= tol:
+            agreement = f"the longest step's plateau rate {plateau:.4g} agrees (within {100 * tol / rate:.2g} %)"
+        else:
+            agreement = (f"the longest step's plateau rate, {plateau:.4g}, differs by "
+                         f"{100 * (plateau / rate - 1):+.0f} %: it is the line through the samples within 5 % of "
+                         "that step's peak rate (a speed loop's overshoot or a short plateau biases it), where the "
+                         "slope is the straight middle 20-80 % of every rate-limited move")
+    return SlewRates(small_dps, small_steps, rate, large_steps, slope.sigma, source, plateau, agreement)
 
 
 def read_steps(run: EdgeRun) -> Reading:
@@ -430,6 +484,40 @@ def _missing_steps(ra: RecordAnalysis, found: list[StepResponse]) -> None:
                 f"{rec.edge_threshold_deg:.3g}°)")
 
 
+def plot_window(ra: RecordAnalysis, r: StepResponse) -> slice:
+    """The samples a step's plot shows: up to 1.5 settling times, or the whole hold when the step is unsettled.
+
+    Parameters
+    ----------
+    ra : RecordAnalysis
+        The record.
+    r : StepResponse
+        The step.
+
+    Returns
+    -------
+    slice
+        From before the edge to where the plot ends (the next edge for an unsettled step: the error left is
+        the plot's last samples less the command).
+    """
+    dt = ra.sample_s()
+    if r.against_command is not None and not r.against_command.settled:
+        return slice(r.start, r.stop)
+    settle = r.settling_s if r.settling_s else 0.4
+    return slice(r.start, min(r.stop, r.edge + max(round(1.5 * settle / dt), round(0.3 / dt), 12)))
+
+
+def _against(s: StepResponse, unit: str) -> str:
+    """The step against its commanded level, in a few words."""
+    c = s.against_command
+    if c is None:
+        return "—"
+    if c.settled:
+        return f"settled in {1e3 * (c.settling_command_s or 0.0):.0f} ms, overshoot {c.overshoot_command_pct:.1f} %"
+    state = "still moving" if c.settling_final_s is None else "flat"
+    return f"**unsettled** ({state}): {c.error_left:+.3g}{unit} left at the next edge"
+
+
 class Steps(Section2Test[StepResponse]):
     """Step metrics, fits and slew rates of every edge of the step and square-wave segments."""
 
@@ -448,14 +536,15 @@ class Steps(Section2Test[StepResponse]):
             rated = ra.channel.slew_rate_dps if d.unit == "deg" and ra.channel.channel == d.metadata.get(
                 "channel") else None
             out = analyze_steps(d.time_s, d.command_deg, y, edges, output=name, noise_floor=ra.noise_deg[name],
-                                rated_slew_dps=rated, sampled=ra.command.assumed_sampled)
+                                rated_slew_dps=rated, sampled=ra.command.assumed_sampled,
+                                counts=ra.resolution_deg.get(name))
         _missing_steps(ra, out)
         return out
 
     @override
-    def as_json(self, results: list[StepResponse]) -> dict[str, Any]:
+    def as_json(self, results: list[StepResponse], ra: RecordAnalysis) -> dict[str, Any]:
         return {self.key: [s.as_dict() for s in results],
-                "slew_rates": slew_rates(results).as_dict() if results else None}
+                "slew_rates": slew_rates(results, ra.slew).as_dict() if results else None}
 
     @override
     def result_json(self, r: StepResponse) -> dict[str, Any]:
@@ -470,21 +559,27 @@ class Steps(Section2Test[StepResponse]):
                  images: list[str | None]) -> list[str]:
         u = ra.unit
         lines = table(["step", "first motion, ms", "rise 10-90 %, ms", "settling, ms", "overshoot, %",
-                       f"peak rate, {u.strip()}/s", "rate-limited", "quality"],
+                       "against the command", f"peak rate, {u.strip()}/s", "rate-limited", "quality"],
                       [[s.label, num(None if s.delay_s is None else 1e3 * s.delay_s, ".2f"),
                         num(None if s.rise_s is None else 1e3 * s.rise_s, ".1f"),
                         num(None if s.settling_s is None else 1e3 * s.settling_s, ".0f"),
-                        num(s.overshoot_pct, ".1f"), f"{s.peak_rate_dps:.1f}",
-                        ("yes: " + s.rate_reason) if s.rate_limited else "no",
+                        num(s.overshoot_pct, ".1f"), _against(s, u),
+                        f"{s.peak_rate_dps:.1f}", ("yes: " + s.rate_reason) if s.rate_limited else "no",
                         quality(s.quality, "" if s.rate_limited else s.quality_note)] for s in results])
+        lines += ["Settling and overshoot are read against the output's own last value (mean of the last 30 % of "
+                  "the hold) and, in *against the command*, against the commanded level: a step still outside the "
+                  "band about the command at the next edge is unsettled, with the error left.", ""]
         if ra.command.assumed_sampled:
             lines += [f"The command is sampled, not held: first motions are against the sample at which the change "
                       f"was logged; the demand changed up to {1e3 * ra.sample_s():.3g} ms earlier.", ""]
-        sr = slew_rates(results)
+        sr = slew_rates(results, ra.slew)
+        sigma = f" ± {sr.large_sigma_dps:.2g}" if sr.large_sigma_dps else ""
         lines += [f"Slew rate: small amplitude {num(sr.small_dps, '.1f', f' {u.strip()}/s')} (steps "
                   f"{', '.join(f'{a:g}{u}' for a in sr.small_steps_deg) or '—'}), large amplitude "
-                  f"{num(sr.large_dps, '.1f', f' {u.strip()}/s')} (steps "
-                  f"{', '.join(f'{a:g}{u}' for a in sr.large_steps_deg) or '—'}; table 1: 115.8 °/s).", ""]
+                  f"{num(sr.large_dps, '.1f', f' {u.strip()}/s')}{sigma} (steps "
+                  f"{', '.join(f'{a:g}{u}' for a in sr.large_steps_deg) or '—'}; {sr.large_source}"
+                  + (f"; {sr.agreement}" if sr.agreement else "")
+                  + ("; table 1: 115.8 °/s" if ra.channel_named else "") + ").", ""]
         for s, img in zip(results, images, strict=True):
             lines += image(img, s.label)
         return lines
@@ -495,21 +590,25 @@ class Steps(Section2Test[StepResponse]):
         extra = (f"; fit ωn {f.wn_rad_s.value:.2f} ± {f.wn_rad_s.sigma:.2g}, ζ {f.zeta.value:.3f}, delay "
                  f"{1e3 * f.delay_s.value:.2f} ms" if f else f"; {r.fit_note}")
         flag = "" if r.quality in ("ok", "saturated") else f" [{r.quality}: {r.quality_note}]"
-        return [f"{r.label}: peak rate {r.peak_rate_dps:.1f} °/s{extra}{flag}"]
+        c = r.against_command
+        left = f"; {c.statement}" if c is not None and not c.settled else ""
+        return [f"{r.label}: peak rate {r.peak_rate_dps:.1f} °/s{extra}{flag}{left}"]
 
     @override
     def plot(self, ra: RecordAnalysis, r: StepResponse, path: Path) -> bool:
         d = ra.data
         y = getattr(d, r.output)
         dt = ra.sample_s()
-        settle = r.settling_s if r.settling_s else 0.4
-        stop = min(r.stop, r.edge + max(round(1.5 * settle / dt), round(0.3 / dt), 12))
-        sl = slice(r.start, stop)
+        sl = plot_window(ra, r)
         tt = 1e3 * (d.time_s[sl] - r.time_s)
         fig, ax = figure.pyplot().subplots(2, 1, figsize=(7, 5.2), sharex=True,
                                            gridspec_kw={"height_ratios": [3, 1.3]})
         ax[0].step(tt, d.command_deg[sl], where="post", color=figure.COLORS["command"], lw=0.8, label="command")
         ax[0].plot(tt, y[sl], ".-", ms=2.5, color=figure.COLORS.get(r.output, "tab:blue"), lw=1.0, label=r.output)
+        c = r.against_command
+        if c is not None:
+            ax[0].axhspan(c.commanded - c.band, c.commanded + c.band, color="0.9", zorder=0,
+                          label=f"command ± {c.band:.2g} band")
         if r.fit:
             f = r.fit
             model = f.gain.value * simulate(d.command_deg[sl], dt, f.wn_rad_s.value, f.zeta.value, f.delay_s.value) \
@@ -521,7 +620,9 @@ class Steps(Section2Test[StepResponse]):
             ax[1].plot(tt, y[sl] - d.command_deg[sl], lw=0.8, color="tab:red")
             ax[1].set_ylabel("output − command")
         title = r.label + (" (rate-limited)" if r.rate_limited else "")
-        ax[0].set_title(title, fontsize=9)
+        if c is not None:
+            title += f"\nagainst the command: {c.statement}"
+        ax[0].set_title(title, fontsize=8)
         ax[0].set_ylabel("deg")
         ax[1].set_xlabel("ms from the edge")
         ax[0].legend(fontsize=7)

@@ -381,7 +381,7 @@ class Timing(Section2Test[TimingResult]):
         return r.as_dict()
 
     @override
-    def as_json(self, results: list[TimingResult]) -> dict[str, Any]:
+    def as_json(self, results: list[TimingResult], ra: RecordAnalysis) -> dict[str, Any]:
         return {self.key: results[0].as_dict() if results else None}
 
     @override

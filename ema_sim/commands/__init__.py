@@ -16,5 +16,6 @@ COMMANDS: tuple[str, ...] = (
     "bag",
     "ail",
     "montecarlo",
+    "export",
     "listing",
 )

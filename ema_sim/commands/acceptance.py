@@ -10,7 +10,7 @@ from typing import Any
 
 def run(args: argparse.Namespace) -> int:
     """Measure and print the figures; exit 1 when one misses its requirement."""
-    from ema_sim.analysis.acceptance import acceptance, format_acceptance  # noqa: PLC0415
+    from ema_sim.analysis.acceptance import acceptance, format_acceptance  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     figures = acceptance(args.model, args.channel)
     print(f"{args.model}, {args.channel}: table 1 and table A2")

@@ -19,12 +19,12 @@ def run(args: argparse.Namespace) -> int:
     if args.study:
         return _study(args)
     from ema_sim.ail.loop import AilOptions, run_ail  # noqa: PLC0415 - keep `ema --help` fast
-    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure, vehicle_cycle  # noqa: PLC0415
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
-    from ema_sim.analysis.dither import DETECT_DB  # noqa: PLC0415
-    from ema_sim.errors import EmaError  # noqa: PLC0415
-    from ema_sim.io.csv import write_csv  # noqa: PLC0415
-    from ema_sim.progress import ProgressBar  # noqa: PLC0415
+    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure, vehicle_cycle  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.analysis.dither import DETECT_DB  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.errors import EmaError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.io.csv import write_csv  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.progress import ProgressBar  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     cfg = load_ail_config(args.vehicle_config)
     setup = cfg.setup(args.profile, aero_input=args.aero_input, surface_load=args.surface_load,
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         Path(args.json).write_text(json.dumps(doc, indent=2), encoding="utf-8")
         print(f"wrote {args.json}")
     if args.plot:
-        from ema_sim.ail.plot import plot_dither  # noqa: PLC0415
+        from ema_sim.ail.plot import plot_dither  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
         label = f"{args.profile}, {meta['mode']}, {args.model}"
         print(f"wrote {plot_dither([(label, result)], args.plot, channel=args.channel, settle_s=settle)}")
@@ -80,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _study(args: argparse.Namespace) -> int:
     """Section 4.3's table: every case over several seeds (``ema_sim.ail.study``)."""
-    from ema_sim.ail import study  # noqa: PLC0415
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
-    from ema_sim.errors import EmaError  # noqa: PLC0415
+    from ema_sim.ail import study  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.errors import EmaError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     try:
         seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
@@ -111,7 +111,7 @@ def _study(args: argparse.Namespace) -> int:
         Path(args.json).write_text(json.dumps(doc, indent=2), encoding="utf-8")
         print(f"wrote {args.json}")
     if args.plot:
-        from ema_sim.ail.plot import plot_dither  # noqa: PLC0415
+        from ema_sim.ail.plot import plot_dither  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
         shown = [(f"{r.case.name} ({r.model})", r.runs[0]) for r in results if r.runs]
         if shown:

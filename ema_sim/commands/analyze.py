@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 from ema_sim.commands.common import add_data_args, check_channel, rig_format
 from ema_sim.errors import SpecError
+from ema_sim.progress import ProgressBar
+
+PROGRESS_S = 3.0
+"""A record longer than this says on stderr, at once, that it is being analysed, and shows a progress bar."""
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -23,7 +28,8 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def _summary(ra: Any) -> list[str]:
     """A few lines per record for the terminal."""
-    from ema_sim.analysis.registry import TESTS  # noqa: PLC0415
+    from ema_sim.analysis.registry import TESTS  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.analysis.report import slope_statement  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     d = ra.data
     lines = [f"{d.source}: {len(d)} samples at {d.sample_hz:.6g} Hz, channel {ra.channel.channel}; "
@@ -32,6 +38,7 @@ def _summary(ra: Any) -> list[str]:
     counts = {k: v for k, v in ra.resolution_deg.items() if v}
     if counts:
         lines.append("  resolution: " + ", ".join(f"{k} {v:g}" for k, v in counts.items()))
+    lines.append(f"  slope of the rate-limited moves: {slope_statement(ra)}")
     for test in TESTS:
         for r in ra.of(test):
             lines += [f"  {line}" for line in test.summary(ra, r)]
@@ -42,21 +49,42 @@ def _summary(ra: Any) -> list[str]:
     return lines
 
 
+def _progress(d: Any) -> ProgressBar | None:
+    """Say on stderr at once that a long record is being analysed; its bar shows after a second."""
+    span = float(d.time_s[-1] - d.time_s[0])
+    if span <= PROGRESS_S:
+        return None
+    print(f"analysing {d.source}: {len(d):,} samples over {span:.1f} s", file=sys.stderr, flush=True)
+    return ProgressBar(f"  {Path(d.source).name}", delay_s=1.0)
+
+
 def run(args: argparse.Namespace) -> int:
     """Analyse every DATA and write what was asked."""
     from ema_sim.analysis.loading import load_record  # noqa: PLC0415 - keep `ema --help` fast
-    from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415
-    from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415
+    from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
     rig = rig_format(args)
     options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
                       compliance_deg_per_kinlb=args.compliance, channel=args.channel, command=args.command_hold)
     if args.model:
-        from ema_sim.models import model_class  # noqa: PLC0415
+        from ema_sim.models import model_class  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
         model_class(args.model)  # an unknown name is one clear error before any work
-    records = analyze_records([load_record(path, args.channel, rig) for path in args.data], options)
+    data = [load_record(path, args.channel, rig) for path in args.data]
+    bars: dict[int, ProgressBar | None] = {}
+
+    def progress(i: int, share: float) -> None:
+        if i not in bars:
+            bars[i] = _progress(data[i])
+        bar = bars[i]
+        if bar is not None:
+            bar(share)
+            if share >= 1.0:
+                bar.close()
+
+    records = analyze_records(data, options, progress)
     for ra in records:
         print("\n".join(_summary(ra)))
     if args.json:
@@ -65,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         out.write_text(json.dumps(to_json(records), indent=1, allow_nan=False) + "\n", encoding="utf-8")
         print(f"wrote {out}")
     if args.report:
-        from ema_sim.analysis.plots import write_plots  # noqa: PLC0415
+        from ema_sim.analysis.plots import write_plots  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
         folder = Path(args.report)
         plots = write_plots(records, folder)
@@ -82,14 +110,17 @@ def register(sub: Any) -> None:
                     "second-order fits with uncertainty, step metrics, command error, compliance, hysteresis, "
                     "thresholds, crosstalk, timing, free play, regeneration, dither.")
     p.add_argument("data", nargs="+", help="measured-data CSV or rosbag2 directory (several: spread across tests)")
-    p.add_argument("--channel", default=None, help="channel to read from a multi-channel bag (and its config)")
+    p.add_argument("--channel", default=None,
+                   help="the X-43A channel the record is of (its config and tables; without it, and without a "
+                        "channel in the record, no X-43A threshold applies); picks a channel of a multi-channel bag")
     p.add_argument("--json", default=None, help="write every figure as JSON")
     p.add_argument("--report", default=None, help="write report.md and PNG plots into this directory")
     p.add_argument("--model", default=None, help="also simulate this model on the measured command; overlay it")
     p.add_argument("--at-hz", default="1,2,5,7.5,10",
                    help="frequencies for gain and phase, comma-separated (default 1,2,5,7.5,10)")
     p.add_argument("--threshold-deg", type=float, default=None,
-                   help="threshold the crosstalk noise is judged against (default: measured, else table A2)")
+                   help="threshold the crosstalk noise is judged against (default: measured, else table A2 for an "
+                        "X-43A channel; crosstalk is judged only when another channel moves)")
     p.add_argument("--compliance", type=float, default=None, metavar="DEG_PER_KINLB",
                    help="compliance taken out of free-play jumps (default: measured in the same record)")
     p.add_argument("--command", dest="command_hold", default="detect", choices=("detect", "held", "sampled"),

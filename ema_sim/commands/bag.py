@@ -8,7 +8,7 @@ from typing import Any
 
 def _reindex(args: argparse.Namespace) -> int:
     """Rebuild the index, summary, footer and ``metadata.yaml`` of each bag; print what was recovered."""
-    from ema_sim.io.bag import reindex_bag  # noqa: PLC0415
+    from ema_sim.io.bag import reindex_bag  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     for path in args.bags:
         report = reindex_bag(path, keep_original=not args.no_backup)

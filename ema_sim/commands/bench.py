@@ -10,8 +10,9 @@ from typing import Any
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmarks; exit 1 when one misses its target."""
-    from ema_sim.benchmark import discover  # noqa: PLC0415
+    from ema_sim.benchmark import discover, record, recorded  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
+    before = recorded()
     results = []
     failed = 0
     for bench in discover():
@@ -20,10 +21,14 @@ def run(args: argparse.Namespace) -> int:
         res = bench.run()
         failed += not res.passed
         mark = "PASS" if res.passed else "FAIL"
-        print(f"{mark}  {bench.name:34s} {res.value:12.4g} {res.unit:12s} target {bench.target:18s} {res.detail}",
-              flush=True)
+        ref = before.get(bench.name)
+        ratio = f"{res.value / ref:6.3f}× recorded" if ref else "  (none recorded)"
+        print(f"{mark}  {bench.name:34s} {res.value:12.4g} {res.unit:12s} {ratio}  target {bench.target:18s} "
+              f"{res.detail}", flush=True)
         results.append({"name": bench.name, "target": bench.target, "value": res.value, "unit": res.unit,
                         "passed": res.passed, "detail": res.detail})
+    if args.record:
+        print(f"recorded in {record({r['name']: r['value'] for r in results})}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
     return 1 if failed else 0
@@ -34,4 +39,6 @@ def register(sub: Any) -> None:
     p = sub.add_parser("bench", help="run the speed and memory benchmarks under bench/")
     p.add_argument("--only", action="append", help="run benchmarks whose name contains this (repeatable)")
     p.add_argument("--json", default=None, help="write the results as JSON")
+    p.add_argument("--record", action="store_true",
+                   help="record these figures in bench/baseline.json (each run prints its ratio to them)")
     p.set_defaults(func=run)

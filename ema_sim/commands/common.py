@@ -46,8 +46,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
 
 def rig_format(args: argparse.Namespace) -> RigFormat | None:
     """The rig-file layout the arguments describe (None: a data-contract CSV or a bag)."""
-    from ema_sim.errors import DataError  # noqa: PLC0415
-    from ema_sim.io.csv import RigFormat, parse_columns  # noqa: PLC0415
+    from ema_sim.errors import DataError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.io.csv import RigFormat, parse_columns  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     if args.crank_arm_in is not None and not args.crank_arm_in > 0:
         raise DataError(f"--crank-arm-in must be positive, got {args.crank_arm_in:g}")
@@ -59,8 +59,8 @@ def rig_format(args: argparse.Namespace) -> RigFormat | None:
 
 def check_channel(name: str | None) -> None:
     """An unknown ``--channel`` is one clear error (exit 2), never a silent stand-in."""
-    from ema_sim.config import CHANNELS  # noqa: PLC0415
-    from ema_sim.errors import UnknownNameError  # noqa: PLC0415
+    from ema_sim.config import CHANNELS  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.errors import UnknownNameError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     if name is not None and name not in CHANNELS:
         raise UnknownNameError("channel", name, CHANNELS)

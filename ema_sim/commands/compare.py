@@ -13,8 +13,8 @@ from ema_sim.errors import SpecError
 
 def run(args: argparse.Namespace) -> int:
     """Print the error table (and write JSON)."""
-    from ema_sim.analysis import model_error  # noqa: PLC0415
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415
+    from ema_sim.analysis import model_error  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     candidates: list[tuple[str, float | None]] = []
     for item in args.models.split(","):
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: Any) -> None:
     """Add ``compare`` to the ``ema`` parser."""
-    from ema_sim.analysis.model_error import TABLE6_CANDIDATES, TABLE6_MANEUVER  # noqa: PLC0415
+    from ema_sim.analysis.model_error import TABLE6_CANDIDATES, TABLE6_MANEUVER  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     p = sub.add_parser("compare", help="error of discrete models against a reference (table 6)",
                        description="Mean, spread and maximum |error| of each model against the reference.")

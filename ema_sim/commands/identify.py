@@ -12,19 +12,19 @@ from ema_sim.commands.common import add_data_args, check_channel, parse_override
 
 def load_measured(path: Path, channel: str | None, rig: Any = None) -> Any:
     """A measured record from a data-contract CSV, a rig's own file (``rig``), or a rosbag2."""
-    from ema_sim import io as ema_io  # noqa: PLC0415
+    from ema_sim import io as ema_io  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     return ema_io.load_data(path, channel=channel, rig=rig)
 
 
 def run(args: argparse.Namespace) -> int:
     """Identify and print the summary; write JSON, the report and the residuals when asked."""
-    from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415
-    from ema_sim.errors import UnknownNameError  # noqa: PLC0415
-    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415
-    from ema_sim.identify.identification import identify  # noqa: PLC0415
-    from ema_sim.identify.record import prepare  # noqa: PLC0415
-    from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415
+    from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.errors import UnknownNameError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.identify.identification import identify  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.identify.record import prepare  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
     if args.model.strip().lower() not in DECLARED:
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: Any) -> None:
     """Add ``identify`` to the ``ema`` parser."""
-    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415
+    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     p = sub.add_parser(
         "identify", help="fit a model to measured data and add the effects it lacks",

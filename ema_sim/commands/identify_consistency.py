@@ -9,8 +9,8 @@ from typing import Any
 
 def run(args: argparse.Namespace) -> int:
     """Compare the reports, print the table, write the JSON when asked; 0 even when parameters disagree."""
-    from ema_sim.identify.consistency import compare, format_table, read_reports  # noqa: PLC0415
-    from ema_sim.identify.report import write_json  # noqa: PLC0415
+    from ema_sim.identify.consistency import compare, format_table, read_reports  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.identify.report import write_json  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     result = compare(read_reports(args.reports), sigma=args.sigma)
     print(format_table(result))

@@ -13,7 +13,7 @@ from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
 
 def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
     """The run's description (validated once, as it is made), what it is, on what, for how long."""
-    from ema_sim.run import RunDescription  # noqa: PLC0415
+    from ema_sim.run import RunDescription  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     cfg = RunDescription(
         bag=Path(args.bag) if args.bag else None, model=args.model, profile=args.profile, test=args.test,
@@ -29,8 +29,8 @@ def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
 
 def run(args: argparse.Namespace) -> int:
     """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
-    from ema_sim.io.bag import bag_info  # noqa: PLC0415
-    from ema_sim.suite import Suite  # noqa: PLC0415
+    from ema_sim.io.bag import bag_info  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.suite import Suite  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     cfg, test, what, duration = _config(args)
     bag = cfg.bag
@@ -76,9 +76,9 @@ def _report(suite: Any, bag: Path, bag_info: Any) -> None:
 
 def _report_dither(bag: Path) -> None:
     """Each surface's limit cycle in the recorded run, as ``ema ail`` prints it."""
-    from ema_sim.ail.bag import run_from_bag  # noqa: PLC0415
-    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure  # noqa: PLC0415
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
+    from ema_sim.ail.bag import run_from_bag  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     run = run_from_bag(bag)
     settle = load_ail_config().settle_s
@@ -139,8 +139,8 @@ def register(sub: Any) -> None:
 
 
 def _tests(args: argparse.Namespace) -> int:  # noqa: ARG001
-    from ema_sim.emac.failures import failure_help  # noqa: PLC0415
-    from ema_sim.signals.plans import test_help  # noqa: PLC0415
+    from ema_sim.emac.failures import failure_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.signals.plans import test_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     print("tests (--test name[:field=value,...]):")
     print(test_help())

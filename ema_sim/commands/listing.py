@@ -8,7 +8,7 @@ from typing import Any
 
 def models(args: argparse.Namespace) -> int:  # noqa: ARG001
     """List the registered models."""
-    from ema_sim.models import model_class, model_names  # noqa: PLC0415
+    from ema_sim.models import model_class, model_names  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     for name in model_names():
         cls = model_class(name)
@@ -19,8 +19,8 @@ def models(args: argparse.Namespace) -> int:  # noqa: ARG001
 
 def maneuvers(args: argparse.Namespace) -> int:  # noqa: ARG001
     """List maneuver and load specs with their defaults."""
-    from ema_sim.signals.loads import load_help  # noqa: PLC0415
-    from ema_sim.signals.maneuvers import maneuver_help  # noqa: PLC0415
+    from ema_sim.signals.loads import load_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.signals.maneuvers import maneuver_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     print("maneuvers (--maneuver kind:field=value,...):")
     print(maneuver_help())

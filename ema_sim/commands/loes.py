@@ -12,7 +12,7 @@ from ema_sim.commands.common import add_model_args, parse_overrides
 
 def run(args: argparse.Namespace) -> int:
     """Dwell HOAD3, fit the LOES, print it (and write it to the channel's YAML)."""
-    from ema_sim.analysis.loes import fit_loes, write_loes  # noqa: PLC0415
+    from ema_sim.analysis.loes import fit_loes, write_loes  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     fit = fit_loes(args.channel, load_inlb=args.load_inlb, **parse_overrides(args.overrides))
     c = fit.coefficients

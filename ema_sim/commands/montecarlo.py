@@ -8,9 +8,9 @@ from typing import Any
 
 def run(args: argparse.Namespace) -> int:
     """Run (or resume) a campaign and print where its results are."""
-    from ema_sim.commands.common import check_channel  # noqa: PLC0415
-    from ema_sim.montecarlo import load_campaign, run_campaign  # noqa: PLC0415
-    from ema_sim.progress import ProgressBar  # noqa: PLC0415
+    from ema_sim.commands.common import check_channel  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.montecarlo import load_campaign, run_campaign  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.progress import ProgressBar  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
     campaign = load_campaign(args.campaign, channel=args.channel, analysis=args.analysis or ())
@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: Any) -> None:
     """Add ``montecarlo`` to the ``ema`` parser."""
-    from ema_sim.montecarlo.builtin import BUILTIN  # noqa: PLC0415
+    from ema_sim.montecarlo.builtin import BUILTIN  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     p = sub.add_parser("montecarlo", help="a Monte Carlo campaign on Dask (local cluster, or --scheduler)",
                        description="Run a campaign: a built-in one (" + ", ".join(BUILTIN) + ") or a YAML file.")

@@ -12,9 +12,9 @@ from ema_sim.commands.common import add_model_args, parse_overrides
 def run(args: argparse.Namespace) -> int:
     """Simulate and write the CSV."""
     from ema_sim.io.csv import write_csv  # noqa: PLC0415 - keep `ema --help` fast
-    from ema_sim.progress import ProgressBar  # noqa: PLC0415
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415
-    from ema_sim.simulation import csv_columns, simulate  # noqa: PLC0415
+    from ema_sim.progress import ProgressBar  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.simulation import csv_columns, simulate  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     maneuver = parse_maneuver(args.maneuver)
     load = parse_load(args.load) if args.load else None

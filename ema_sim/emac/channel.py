@@ -58,6 +58,13 @@ class EmacSettings:
     failure: str = param("-", "failure mode: none, stuck, hard_over:direction=±1, zero, power_loss, "
                          "stall:load_factor=X", default="none")
     seed: int = param("-", "crosstalk noise seed", default=0, min=0, max=2**62)
+    stamp_tolerance_s: float = param("s", "real time: a command stamped further ahead of the last one taken than "
+                                     "the wall time since it came plus this is dropped (future_stamp; a burst of "
+                                     "commands may run ahead of the wall clock by less)", default=10.0, min=0.0,
+                                     max=86400.0)
+    resync_commands: int = param("-", "real time: consecutive commands that misfit the last one taken but fit each "
+                                 "other, after which the EMAC follows their clock (an FMU restart, a stepped clock)",
+                                 default=5, min=2, max=10000)
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "emac") -> EmacSettings:

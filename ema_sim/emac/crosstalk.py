@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from ema_sim.errors import ConfigError
+
 
 class ActivityMeter:
     """Activity of the other channels, from their successive feedback voltages."""
@@ -48,7 +50,7 @@ class Crosstalk:
 
     def __init__(self, noise_pp_v: float, seed: int = 0, stream: int = 0) -> None:
         if not (math.isfinite(noise_pp_v) and noise_pp_v >= 0.0):
-            raise ValueError(f"crosstalk noise must be a non-negative number of volts, got {noise_pp_v!r}")
+            raise ConfigError(f"crosstalk noise must be a non-negative number of volts, got {noise_pp_v!r}")
         self.noise_pp_v = float(noise_pp_v)
         self._rng = np.random.default_rng([int(seed), int(stream), 2])
 

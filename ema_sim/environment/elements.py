@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.errors import ConfigError
 from ema_sim.models.stages import lag_gain, quantize, quantize_array
 
 Signal = Any
@@ -83,9 +84,9 @@ class TransportDelay(Element):
 
     def __init__(self, delay_s: float, frame_s: float, initial: Signal = 0.0) -> None:
         if not (math.isfinite(delay_s) and delay_s >= 0.0):
-            raise ValueError(f"delay_s must be a non-negative number, got {delay_s!r}")
+            raise ConfigError(f"delay_s must be a non-negative number, got {delay_s!r}")
         if not (math.isfinite(frame_s) and frame_s > 0.0):
-            raise ValueError(f"frame_s must be positive, got {frame_s!r}")
+            raise ConfigError(f"frame_s must be positive, got {frame_s!r}")
         self.delay_s = float(delay_s)
         frames = self.delay_s / frame_s
         self.whole = math.floor(frames + 1e-9)
@@ -136,7 +137,7 @@ class FirstOrderLag(Element):
 
     def __init__(self, corner_hz: float, frame_s: float, initial: Signal = 0.0) -> None:
         if not (math.isfinite(corner_hz) and corner_hz >= 0.0):
-            raise ValueError(f"corner_hz must be a non-negative number, got {corner_hz!r}")
+            raise ConfigError(f"corner_hz must be a non-negative number, got {corner_hz!r}")
         self.corner_hz = float(corner_hz)
         self.gain = lag_gain(self.corner_hz, frame_s)
         self._y: Signal = _copy(initial)
@@ -173,7 +174,7 @@ class Quantizer(Element):
 
     def __init__(self, step_v: float, full_scale_v: float = 10.0) -> None:
         if not (math.isfinite(step_v) and step_v >= 0.0):
-            raise ValueError(f"step_v must be a non-negative number, got {step_v!r}")
+            raise ConfigError(f"step_v must be a non-negative number, got {step_v!r}")
         self.step_v = float(step_v)
         self.full_scale_v = float(full_scale_v)
 
@@ -219,7 +220,7 @@ class Noise(Element):
 
     def __init__(self, rms_v: float, seed: int = 0, stream: Sequence[int] = ()) -> None:
         if not (math.isfinite(rms_v) and rms_v >= 0.0):
-            raise ValueError(f"rms_v must be a non-negative number, got {rms_v!r}")
+            raise ConfigError(f"rms_v must be a non-negative number, got {rms_v!r}")
         self.rms_v = float(rms_v)
         self._rng = np.random.default_rng([int(seed), *map(int, stream)])
         self._drawn: list[float] = []

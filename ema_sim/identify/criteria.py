@@ -21,8 +21,8 @@ from dataclasses import replace
 import numpy as np
 
 from ema_sim.identify.effects import FREE, KEYS, Context, Effect, Free
-from ema_sim.identify.fit import Fit
-from ema_sim.identify.outcome import TINY, Verdict, rms
+from ema_sim.identify.fit import TINY, Fit, rms
+from ema_sim.identify.outcome import Verdict
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.stages import trade, worse
 from ema_sim.models.second_order import SecondOrderParams

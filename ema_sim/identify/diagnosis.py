@@ -224,8 +224,13 @@ class OutputDiagnosis:
                 f"{self.noise:.3g}{u}")
         if self.jitter_s is not None:
             return head + ": " + self.jitter_statement()
-        if not self.structured:
-            return head + (", white" if self.white else ", within 1.5× the floor") + ": nothing left to explain"
+        if self.white:
+            return head + ", white: nothing left to explain"
+        if not self.structured:  # small, but a whiteness test that fails is never "nothing left"
+            said = [f"it correlates with the {c.name} (a short filter of it explains {100 * c.explained:.0f} % of "
+                    "the residual's variance)" for c in self.correlates] or ["no input explains it"]
+            return (head + ", within 1.5× the floor but not white (Ljung-Box, 1 %): structure is left that the noise "
+                    "nearly hides; " + "; ".join(said))
         bits = []
         for p in self.named_parts():
             bits.append(f"{100 * p.excess_share:.0f} % of the error above the noise falls {p.name} "
@@ -613,6 +618,8 @@ def diagnose(result: Identification) -> Diagnosis:
         d = OutputDiagnosis(o, rms, sigma, white, stamp_scatter_s=scatter)
         if not white and rms > STRUCTURED * sigma:
             d.jitter_s = _jitter(e, sigma, fit.sim[p.mask, O_RATE], len(fit.free))
+        if not white and not d.structured and d.jitter_s is None:
+            d.correlates = _correlates(e, {k: x[p.mask] for k, x in _regressors(p, fit).items()}, fs)
         if d.structured:
             excess = e**2 - sigma**2
             d.parts = _parts(p, fit, excess, bw)

@@ -35,9 +35,8 @@ from scipy.optimize import least_squares
 
 from ema_sim.analysis.noise import whiteness
 from ema_sim.identify.effects import FREE
-from ema_sim.identify.fit import Fit, block_covariance, difference_points, finite
+from ema_sim.identify.fit import TINY, Fit, block_covariance, difference_points, finite, rms
 from ema_sim.identify.library import describe, library
-from ema_sim.identify.outcome import TINY, rms
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.regression import Regression, Selected, Term, stepwise
 from ema_sim.identify.stages import worse

@@ -15,8 +15,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from ema_sim.identify.criteria import MIN_EXCESS_SHARE
-from ema_sim.identify.fit import Fit
-from ema_sim.identify.outcome import AS_DECLARED, TINY, AsDeclared, Identification, Removal, rms
+from ema_sim.identify.fit import TINY, Fit, rms
+from ema_sim.identify.outcome import AS_DECLARED, AsDeclared, Identification, Removal
 from ema_sim.identify.physical import ESCALATE_TO, PhysicalFit
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, IN_LOOP_SHARE, Problem, in_loop_share
 from ema_sim.identify.stages import trade, worse

@@ -31,6 +31,10 @@ DIVERGED = 1e6
 (it backs off), not a crash."""
 
 
+TINY = 1e-300
+"""Floor on a residual sum of squares in a ratio (a noise-free record can be matched exactly)."""
+
+
 def finite(residual: FloatArray) -> FloatArray:
     """``residual`` with every non-finite entry replaced by :data:`DIVERGED`.
 
@@ -83,6 +87,9 @@ class _Objective:
         self.free = list(free)
         self.flip = flip
         self._cache: tuple[bytes, FloatArray] | None = None
+        self._jac: tuple[bytes, FloatArray] | None = None
+        """The last simulation and the last Jacobian, each with the point it was made at: the optimiser's
+        final point has both already, so the fit's summary reuses them instead of simulating again."""
 
     def params(self, x: FloatArray) -> SecondOrderParams:
         return self.base.replace(**{f.field: f.from_x(float(v)) for f, v in zip(self.free, x, strict=True)})
@@ -90,13 +97,22 @@ class _Objective:
     def _simulate(self, xs: Sequence[FloatArray]) -> FloatArray:
         return self.problem.simulate([self.params(x) for x in xs], [self.flip] * len(xs))
 
-    def residual(self, x: FloatArray) -> FloatArray:
+    def sim(self, x: FloatArray) -> FloatArray:
         key = x.tobytes()
         if self._cache is None or self._cache[0] != key:
             self._cache = (key, self._simulate([x])[0])
-        return finite(self.problem.weighted_residual(self._cache[1]))
+        return self._cache[1]
+
+    def residual(self, x: FloatArray) -> FloatArray:
+        return finite(self.problem.weighted_residual(self.sim(x)))
 
     def jacobian(self, x: FloatArray) -> FloatArray:
+        key = x.tobytes()
+        if self._jac is None or self._jac[0] != key:
+            self._jac = (key, self._jacobian(x))
+        return self._jac[1]
+
+    def _jacobian(self, x: FloatArray) -> FloatArray:
         _, hi = zip(*(f.x_bounds() for f in self.free), strict=True)
         points, steps = difference_points(x, np.asarray(hi, dtype=float))
         sims = self._simulate(points)
@@ -194,7 +210,7 @@ def evaluate(problem: Problem, params: SecondOrderParams, free_fields: Sequence[
 def _at(obj: _Objective, x: FloatArray, free_fields: tuple[str, ...]) -> Fit:
     problem, free = obj.problem, obj.free
     params = obj.params(x)
-    sim = obj._simulate([x])[0]
+    sim = obj.sim(x)
     residual = problem.weighted_residual(sim)
     jac = obj.jacobian(x) if free else np.zeros((residual.size, 0))
     cov = covariance(problem, residual, jac)
@@ -260,3 +276,21 @@ def block_covariance(residuals: Sequence[FloatArray], jacobians: Sequence[FloatA
         middle += j.T @ rj
     out[np.ix_(moved, moved)] = inv @ middle @ inv
     return out
+
+
+def rms(problem: Problem, f: Fit) -> dict[str, float]:
+    """Each output's rms error of a fit, over the fitted samples.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    f : Fit
+        The fit.
+
+    Returns
+    -------
+    dict
+        Output → rms (deg).
+    """
+    return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(f.sim).items()}

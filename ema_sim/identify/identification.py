@@ -33,8 +33,8 @@ from ema_sim.identify.criteria import MAX_DELTA_BIC, simulator_error
 from ema_sim.identify.declared import HIGH_ORDER, declared
 from ema_sim.identify.discovery import Discovery, discover
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
-from ema_sim.identify.fit import Fit, evaluate
-from ema_sim.identify.outcome import REFERENCE, TINY, AsDeclared, Identification, Removal, rms
+from ema_sim.identify.fit import TINY, Fit, evaluate, rms
+from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal
 from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
 from ema_sim.identify.record import Record, prepare

@@ -24,10 +24,6 @@ REFERENCE = "position = command"
 """The trivial model every report compares with (and falls back on)."""
 AS_DECLARED = " (as declared)"
 """How a model name reads when the declared model, run as it is, is the final model (no parameters fitted)."""
-TINY = 1e-300
-"""Floor on a residual sum of squares in a ratio (a noise-free record can be matched exactly)."""
-
-
 @dataclass(frozen=True)
 class Step:
     """One accepted effect and the error before and after it."""
@@ -131,24 +127,6 @@ class Identification:
     """Explanations the record cannot choose between, one line each."""
     warnings: list[str] = field(default_factory=list)
     """What the stages flag (a trade not kept, a stage that failed), one line each, for the report's warnings."""
-
-
-def rms(problem: Problem, f: Fit) -> dict[str, float]:
-    """Each output's rms error of a fit, over the fitted samples.
-
-    Parameters
-    ----------
-    problem : Problem
-        The record as fitted.
-    f : Fit
-        The fit.
-
-    Returns
-    -------
-    dict
-        Output → rms (deg).
-    """
-    return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(f.sim).items()}
 
 
 def model_name(result: Identification) -> str:

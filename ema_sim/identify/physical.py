@@ -95,8 +95,9 @@ MAX_DELAY_S = 0.05
 SEEDS = (7, 8, 9)
 """The model's own noise is run with these seeds: the first for the fit, the others for the two fits from
 shifted starts, so their spread carries the noise inside the loop as well."""
-WORKERS = max(1, min(len(os.sched_getaffinity(0)), 8))
-"""Threads for a Jacobian's columns (the discrete kernels release the GIL)."""
+WORKERS = max(1, min(int(os.environ.get("NUMBA_NUM_THREADS") or len(os.sched_getaffinity(0))), 8))
+"""Threads for a Jacobian's columns (the discrete kernels release the GIL); ``NUMBA_NUM_THREADS`` bounds them
+as it bounds numba's own, so one setting keeps a process to its share of the cores."""
 
 
 @dataclass

@@ -33,8 +33,8 @@ from ema_sim.analysis import slew
 from ema_sim.identify.criteria import DONE_EXCESS, MAX_DELTA_BIC, bic, blocks, excess, gain, judge
 from ema_sim.identify.declared import not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Context, Effect, report_values
-from ema_sim.identify.fit import Fit, evaluate, fit
-from ema_sim.identify.outcome import TINY, AsDeclared, Identification, Removal, Step, Verdict, rms
+from ema_sim.identify.fit import TINY, Fit, evaluate, fit, rms
+from ema_sim.identify.outcome import AsDeclared, Identification, Removal, Step, Verdict
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ema_sim.config import ChannelConfig, load_channel
-from ema_sim.errors import EmaError
+from ema_sim.errors import ConfigError, DataError, EmaError
 from ema_sim.models import stages
 from ema_sim.parameters import ParameterInfo, Slots, describe, elements, switched_off
 
@@ -139,7 +139,7 @@ def _as_batch(value: ArrayLike, n: int, what: str) -> FloatArray:
     if arr.ndim == 0:
         return np.full(n, float(arr))
     if arr.shape != (n,):
-        raise ValueError(f"{what}: expected a scalar or {n} values, got shape {arr.shape}")
+        raise DataError(f"{what}: expected a scalar or {n} values, got shape {arr.shape}")
     return arr.copy()
 
 
@@ -148,7 +148,7 @@ def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
     if arr.ndim == 1 and arr.shape[0] == m:
         return np.broadcast_to(arr, (n, m)).copy()
     if arr.shape != (n, m):
-        raise ValueError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
+        raise DataError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
     return arr
 
 
@@ -177,6 +177,8 @@ class ActuatorModel(ABC):
     """Internal integration rate of a discrete model; 0 for the continuous ones."""
     has_current: ClassVar[bool] = False
     """True when the model knows motor current and bus voltage."""
+    one_system: ClassVar[bool] = False
+    """True for a linear model: one LTI system for every instance, no per-instance parameters to disperse."""
     _buf_t: FloatArray
     _buf_u: FloatArray
     _buf_h: FloatArray
@@ -196,7 +198,7 @@ class ActuatorModel(ABC):
 
     def __init__(self, channel: str | ChannelConfig = "left_wing", *, n: int = 1, rate_hz: float | None = None) -> None:
         if n < 1:
-            raise ValueError("n must be at least 1")
+            raise ConfigError("n must be at least 1")
         self.channel = load_channel(channel) if isinstance(channel, str) else channel
         self.n = int(n)
         rate = self.default_rate_hz if rate_hz is None else float(rate_hz)
@@ -409,7 +411,7 @@ class ActuatorModel(ABC):
     def _advance(self, command_deg: float | ArrayLike, hinge_moment_inlb: float | ArrayLike,
                  frame_s: float) -> FloatArray:
         if not (math.isfinite(frame_s) and frame_s > 0.0):
-            raise ValueError(f"frame_s must be positive, got {frame_s!r}")
+            raise ConfigError(f"frame_s must be positive, got {frame_s!r}")
         hi = self._h_hi
         if hi == self._buf_t.shape[0]:
             self._set_history(self._hist_t, self._hist_u, self._hist_h)  # compacts (and grows when needed)
@@ -477,13 +479,13 @@ class ActuatorModel(ABC):
         """
         bp_t, u, hm, samples = self._validate_record(time_s, command_deg, hinge_moment_inlb, sample_times)
         out = self._run_block(bp_t, u, hm, samples, end_s, progress)
-        held = np.clip(np.searchsorted(bp_t, samples + stages.TIME_EPS_S, side="right") - 1, 0, None)
+        held = stages.held_indices(bp_t, samples)
         return Record(
             model=self.name,
             channel=self.channel.channel,
             time_s=samples,
-            command_deg=u[:, held],
-            hinge_moment_inlb=hm[:, held],
+            command_deg=np.take(u, held, axis=1),
+            hinge_moment_inlb=np.take(hm, held, axis=1),
             position_deg=out[:, :, O_POS],
             surface_deg=out[:, :, O_SURF],
             rate_dps=out[:, :, O_RATE],
@@ -717,6 +719,6 @@ def batch_params(params: object | Sequence[object] | None, n: int, default: Call
         return [default()] * n
     if isinstance(params, Sequence) and not isinstance(params, str | bytes):
         if len(params) != n:
-            raise ValueError(f"got {len(params)} parameter sets for {n} instances")
+            raise ConfigError(f"got {len(params)} parameter sets for {n} instances")
         return list(params)
     return [params] * n

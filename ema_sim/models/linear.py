@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike
 
 from ema_sim import parameters as pm
 from ema_sim.config import ChannelConfig, load_channel
+from ema_sim.errors import ConfigError
 from ema_sim.models import stages as st
 from ema_sim.models.arrays import FloatArray, IntArray
 from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel
@@ -143,7 +144,7 @@ class LinearModel(ActuatorModel):
     """
 
     default_rate_hz = 10_000.0
-    linear: ClassVar[bool] = True
+    one_system: ClassVar[bool] = True
     switchable: ClassVar[bool] = False
 
     def __init__(
@@ -158,9 +159,9 @@ class LinearModel(ActuatorModel):
     ) -> None:
         super().__init__(channel, n=n, rate_hz=rate_hz)
         if system.ninputs != 2 or system.noutputs != 2 or not system.isctime():
-            raise ValueError("a linear actuator model is a continuous system with 2 inputs and 2 outputs")
+            raise ConfigError("a linear actuator model is a continuous system with 2 inputs and 2 outputs")
         if not (delay_s >= 0.0 and position_delay_s >= 0.0):
-            raise ValueError("delays must not be negative")
+            raise ConfigError("delays must not be negative")
         self.system = system
         self.delay_s = float(delay_s)
         self.position_delay_s = float(position_delay_s)

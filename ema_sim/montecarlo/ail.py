@@ -15,7 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from ema_sim.montecarlo.campaign import Campaign
+from ema_sim.ail.loop import AilOptions, run_ail
+from ema_sim.ail.measure import measure
+from ema_sim.ail.params import WINGS, load_ail_config
+from ema_sim.environment import load_profile
+from ema_sim.models import model_class
+from ema_sim.models.high_order.models import HighOrderModel
+from ema_sim.montecarlo.campaign import Campaign, nominal_values
 from ema_sim.montecarlo.dispersions import FloatArray, run_seed
 
 WING_COLUMNS = ("dither", "freq_hz", "pp_deg", "peak_db")
@@ -41,12 +47,6 @@ def ail_options(c: Campaign, seed: int, run: int, values: Mapping[str, float]) -
     AilOptions
         What :func:`~ema_sim.ail.loop.run_ail` takes.
     """
-    from ema_sim.ail.loop import AilOptions  # noqa: PLC0415
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
-    from ema_sim.environment import load_profile  # noqa: PLC0415
-    from ema_sim.models import model_class  # noqa: PLC0415
-    from ema_sim.models.high_order.models import HighOrderModel  # noqa: PLC0415
-
     s = run_seed(seed, run)
     profile = load_profile(c.profile).with_seed(s % (2**31))
     paths = {"command": dict(profile.command.as_dict()), "feedback": dict(profile.feedback.as_dict())}
@@ -94,11 +94,6 @@ def ail_runs(c: Campaign, seed: int, runs: Sequence[int], values: Mapping[str, F
     nominal : dict
         The nominal run's (empty without it).
     """
-    from ema_sim.ail.loop import run_ail  # noqa: PLC0415
-    from ema_sim.ail.measure import measure  # noqa: PLC0415
-    from ema_sim.ail.params import WINGS, load_ail_config  # noqa: PLC0415
-    from ema_sim.montecarlo.runs import nominal_values  # noqa: PLC0415
-
     settle = load_ail_config().settle_s
     todo: list[tuple[int, dict[str, float]]] = []
     if with_nominal:

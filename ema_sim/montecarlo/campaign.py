@@ -575,3 +575,19 @@ def analysis_spread(paths: Sequence[str | Path]) -> dict[str, tuple[float, float
                 lows[key] = min(lows.get(key, math.inf), -mag)
                 highs[key] = max(highs.get(key, -math.inf), mag)
     return {k: (lows[k], highs[k]) for k in lows}
+
+
+def nominal_values(c: Campaign) -> dict[str, float]:
+    """Every dispersed parameter's nominal value (the campaign's fixed value, or the declared default).
+
+    Parameters
+    ----------
+    c : Campaign
+        The campaign.
+
+    Returns
+    -------
+    dict
+        Parameter → nominal value.
+    """
+    return {t.name: t.nominal for d in c.dispersions for t in d.targets}

@@ -20,10 +20,16 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.config import load_channel
 from ema_sim.errors import ConfigError
-from ema_sim.montecarlo.campaign import Campaign, Experiment, parse_campaign
+from ema_sim.models import model_class
+from ema_sim.models.high_order.models import HighOrderModel
+from ema_sim.montecarlo.campaign import Campaign, Experiment, nominal_values, parse_campaign
 from ema_sim.montecarlo.dispersions import FloatArray, run_seed, sample
 from ema_sim.montecarlo.metrics import RecordData, ResponseData, compute, fourier_coefficients
+from ema_sim.signals import parse_load, parse_maneuver
+from ema_sim.signals.maneuvers import Staircase
+from ema_sim.simulation import dau_times, frame_inputs
 
 
 @dataclass
@@ -137,7 +143,7 @@ def _campaign(campaign_json: str) -> Campaign:
 
 def _worker_address() -> str:
     try:
-        from distributed import get_worker  # noqa: PLC0415
+        from distributed import get_worker  # noqa: PLC0415 - Dask is needed only when a worker runs the block
 
         return str(get_worker().address)
     except (ImportError, ValueError):
@@ -167,7 +173,8 @@ def run_block(campaign_json: str, seed: int, start: int, stop: int) -> Block:
     values = sample(c.dispersions, seed, runs)
     columns: dict[str, np.ndarray] = {"run": np.arange(start, stop, dtype=np.int64), **values}
     if c.kind == "ail":
-        from ema_sim.montecarlo.ail import ail_runs  # noqa: PLC0415
+
+        from ema_sim.montecarlo.ail import ail_runs  # noqa: PLC0415 - the loop and its bag I/O only for kind: ail
 
         metrics, nominal = ail_runs(c, seed, runs, values, with_nominal=start == 0)
         envelopes: dict[str, Envelope] = {}
@@ -185,28 +192,12 @@ def peak_rss_mb() -> float:
     float
         MiB.
     """
-    import resource  # noqa: PLC0415
+    import resource  # noqa: PLC0415 - POSIX only: the rest of the module runs anywhere
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 # ------------------------------------------------------------------------------------------ model runs
-def nominal_values(c: Campaign) -> dict[str, float]:
-    """Every dispersed parameter's nominal value (the campaign's fixed value, or the declared default).
-
-    Parameters
-    ----------
-    c : Campaign
-        The campaign.
-
-    Returns
-    -------
-    dict
-        Parameter → nominal value.
-    """
-    return {t.name: t.nominal for d in c.dispersions for t in d.targets}
-
-
 def _with_nominal(c: Campaign, values: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
     """Each parameter's values with the nominal first (row 0 of every batch)."""
     nom = nominal_values(c)
@@ -235,17 +226,12 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
     ActuatorModel
         The model, ``len(row_runs)·repeat`` instances.
     """
-    from ema_sim.config import load_channel  # noqa: PLC0415
-    from ema_sim.models import model_class  # noqa: PLC0415
-    from ema_sim.models.high_order.models import HighOrderModel  # noqa: PLC0415
-    from ema_sim.models.linear import LinearModel  # noqa: PLC0415
-
     cls = model_class(c.model)
     ch = load_channel(c.channel)
     n_rows = len(row_runs)
     own = [n for n in rows if n in {p.name for p in cls.parameters()}]
     kwargs: dict[str, Any] = dict(c.options)
-    if issubclass(cls, LinearModel):
+    if cls.one_system:
         if own or "bound" in rows:
             raise ConfigError(f"{c.model} is one linear system for every instance: disperse a time-domain model")
         linear: Any = cls  # each linear model has its own keywords
@@ -262,8 +248,6 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
 
 def _spec_rows(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int) -> tuple[list[Any], list[Any]]:
     """The maneuver and load of every row (the experiment's, with its dispersed fields replaced)."""
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415
-
     man, load = parse_maneuver(exp.maneuver), parse_load(exp.load)
     mk = {k.rsplit(".", 1)[1]: v for k, v in rows.items() if k.startswith(f"{exp.name}.maneuver.")}
     lk = {k.rsplit(".", 1)[1]: v for k, v in rows.items() if k.startswith(f"{exp.name}.load.")}
@@ -280,8 +264,6 @@ def _spec_rows(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int) -> 
 def _inputs(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int
             ) -> tuple[FloatArray, FloatArray, FloatArray, float, Any]:
     """Frame times, command and load of every row (shared rows when nothing of them is dispersed)."""
-    from ema_sim.simulation import frame_inputs  # noqa: PLC0415
-
     mans, loads = _spec_rows(exp, rows, n_rows)
     duration = exp.duration_s if exp.duration_s is not None else max(max(m.duration_s, ld.duration_s)
                                                                       for m, ld in zip(mans, loads, strict=True))
@@ -300,9 +282,6 @@ def _first(a: FloatArray) -> FloatArray:
 def _record(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray]
             ) -> tuple[RecordData, Any]:
     """A record experiment of every row."""
-    from ema_sim.signals.maneuvers import Staircase  # noqa: PLC0415
-    from ema_sim.simulation import dau_times  # noqa: PLC0415
-
     model = build_model(c, seed, [-1, *runs], rows)
     t, cmd, hm, duration, man = _inputs(exp, rows, model.n)
     model.trim(_first(cmd), _first(hm))
@@ -316,8 +295,7 @@ def _record(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: 
 def _multisine(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray]
                ) -> ResponseData:
     """A Schroeder multisine of every row, read at its harmonics over its last period (hold divided out)."""
-    from ema_sim.analysis.frequency_response import zoh_factor  # noqa: PLC0415
-
+    from ema_sim.analysis.frf import zoh_factor  # noqa: PLC0415 - scipy.signal only for responses
     model = build_model(c, seed, [-1, *runs], rows)
     t, cmd, hm, duration, man = _inputs(exp, rows, model.n)
     model.trim(_first(cmd), _first(hm))
@@ -335,8 +313,7 @@ def _multisine(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], row
 def _dwell(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray],
            with_nominal: bool) -> ResponseData:
     """Sine dwells of every row: one batch run per row, one instance per frequency (NaN: the nominal not run)."""
-    from ema_sim.analysis.sine_dwell import sine_dwell  # noqa: PLC0415
-
+    from ema_sim.analysis.sine_dwell import sine_dwell  # noqa: PLC0415 - scipy.signal only for responses
     freq = np.asarray(exp.freq_hz)
     loads = rows.get(f"{exp.name}.load_inlb")
     row_runs = [-1, *runs]

@@ -3,7 +3,7 @@
 The executor is rclpy's ``EventsExecutor`` driven by ``spin_once`` calls from our own loop, which
 also keeps every deadline itself (no rclpy timers): measured here, taking a message costs 12 µs raw
 and 38 µs deserialized with it against 200–290 µs with the ``SingleThreadedExecutor``, and its
-``spin()`` does not fire timers in this wheel (see README, "Executor").
+``spin()`` does not fire timers in this wheel (see docs/nodes.md, "Executor").
 """
 
 from __future__ import annotations
@@ -36,6 +36,25 @@ SUMMARY_PREFIX = "EMA_SUMMARY "
 """Each node prints one line with this prefix and a JSON summary when it stops."""
 MAX_SPIN_S = 0.05
 """Longest wait in one spin, so a stop request is seen within it."""
+_process_argv: list[str] = []
+"""The process's command line, ROS arguments included, as :func:`run_nodes` gave it to ``rclpy.init``."""
+
+
+def command_line(options: dict[str, Any]) -> list[str]:
+    """The command line a node's ROS arguments come from: its process's, then its own ``cli_args``.
+
+    Parameters
+    ----------
+    options : dict
+        The node's rclpy options (``cli_args``, ``use_global_arguments``).
+
+    Returns
+    -------
+    list of str
+        The arguments (the process's are left out when the node does not use them).
+    """
+    own = list(options.get("cli_args") or [])
+    return own if options.get("use_global_arguments") is False else [*_process_argv, *own]
 
 
 def make_executor(context: Any = None) -> Any:
@@ -52,8 +71,11 @@ class SuiteNode(Node):
     Every node declares its parameters (:mod:`ema_sim.nodes.params`) in its constructor, ``peers`` here.
     """
 
-    def __init__(self, name: str, args: argparse.Namespace | None = None, **kwargs: Any) -> None:
-        super().__init__(name, parameter_overrides=cli_overrides(args) if args is not None else [], **kwargs)
+    def __init__(self, name: str, args: argparse.Namespace | None = None, *, exclude: tuple[str, ...] = (),
+                 **kwargs: Any) -> None:
+        """``exclude``: flags of ``args`` the node resolves itself (not parameter overrides)."""
+        overrides = cli_overrides(args, exclude) if args is not None else []
+        super().__init__(name, parameter_overrides=overrides, **kwargs)
         self.params = Declared(self)
         self.done = False
         self.ends_process = True
@@ -124,11 +146,18 @@ class SuiteNode(Node):
             self.announce_ready()
 
     def throttled(self, key: str, message: str, *, period_s: float = 1.0, level: str = "warning") -> None:
-        """Log at most once per ``period_s`` (wall time) per key."""
+        """Log at most once per ``period_s`` (wall time) per key, at ``level`` (``info``, ``warning`` or ``error``)."""
         now = time.monotonic()
         if now - self._last_log.get(key, -math.inf) >= period_s:
             self._last_log[key] = now
-            getattr(self.get_logger(), level)(message)
+            # one call site per severity: rclpy's logger refuses a call site whose severity changes
+            logger = self.get_logger()
+            if level == "info":
+                logger.info(message)
+            elif level == "error":
+                logger.error(message)
+            else:
+                logger.warning(message)
 
 
 def _join_lists(args: argparse.Namespace) -> None:
@@ -166,6 +195,7 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     message from outside, at most until the earliest deadline a node asked for.
     """
     full = ros_args(argv)
+    _process_argv[:] = full
     parser.add_argument("--peers", action="append", type=names_list, default=argparse.SUPPRESS,
                         help="suite node names to see in the graph (and be matched with) before calling ready")
     parser.add_argument("--rt-priority", type=int, default=0,

@@ -2,7 +2,7 @@
 
 The ROS 2 component-container pattern, for rclpy, which has neither component containers nor
 intra-process communication. Each composed node is a whole node: its own name, parameters (a channel's
-``config/<channel>.yaml`` addresses ``emac_<channel>``), failure topic, diagnostics and readiness, the
+``config/<channel>.yaml`` addresses ``/**/emac_<channel>``), failure topic, diagnostics and readiness, the
 same classes as the one-process-per-node layout. What changes is how per-frame messages travel:
 
 * between composed nodes they are handed over in-process as :class:`~ema_msgs_py.cdr.JointFrame`
@@ -174,7 +174,10 @@ class Outlet:
 def _merge(stamp: int, frames: list[JointFrame]) -> JointFrame:
     if len(frames) == 1:
         return frames[0]
-    out = JointFrame(stamp, [], [], [], [], frames[0].frame_id)
+    fid = frames[0].frame_id
+    if any(f.frame_id != fid for f in frames):
+        fid = "emac"  # channel nodes' frames merged: the EMAC box's frame
+    out = JointFrame(stamp, [], [], [], [], fid)
     for f in frames:
         out.name.extend(f.name)
         out.position.extend(f.position)

@@ -6,11 +6,18 @@ Subscribes to ``/ema/emac/command`` (its FMU command, after the test environment
 ``/ema/sensor/bus``, once per FMU frame. Two clocks:
 
 * real time: each command message is one frame, stepped and answered at once (the FMU's frame is
-  the clock); when no command comes for 1.5 frames the channel steps on with the held command and
-  the watchdog brakes it after ``watchdog_timeout_s``;
+  the clock); when no command comes for :data:`IDLE_AFTER_FRAMES` frames the channel steps on with the
+  held command and the watchdog brakes it after ``watchdog_timeout_s``. Every frame is stepped once: a
+  command that comes after its frame was stepped without it is applied from the next frame and counted
+  (``late_commands``), and the feedback stamps increase strictly. The command stamps are judged by
+  :class:`ema_sim.emac.stamps.CommandClock`: an out-of-order or implausibly future stamp is dropped and
+  counted, and after ``emac.resync_commands`` consecutive commands of a clock that moved (an FMU restart)
+  the node follows them (``command_resyncs``, a WARN line);
 * lockstep (``use_sim_time``): the model advances exactly one frame per frame of ``/clock``, with the
   inputs stamped for that frame; it waits for them while their publishers are alive, so a run is
-  reproducible whatever the machine's load.
+  reproducible whatever the machine's load. A ``/clock`` that jumps backwards (a reset, a replay)
+  restarts the node's time base there (``clock_resets``, a WARN line), the brake engaged until the new
+  time's commands come.
 
 Run-time failures: ``std_msgs/String`` on ``/ema/emac/<channel>/failure`` or the ``emac.failure``
 parameter (``stuck``, ``hard_over:direction=-1``, ``zero``, ``power_loss``, ``stall``, ``none``).
@@ -23,6 +30,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
@@ -36,11 +44,21 @@ from ema_msgs_py.ros import qos
 from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
 from ema_sim.emac.channel import RUN_TIME
-from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.emac.stamps import CommandClock, FrameGate, Lateness, Verdict
+from ema_sim.errors import ConfigError, EmaError, UnknownNameError
 from ema_sim.models import create, model_names
 from ema_sim.models.registry import model_parameters
-from ema_sim.nodes.common import DurationHistogram, SuiteNode, run
-from ema_sim.nodes.params import Spec, config_specs, names_list, nested
+from ema_sim.nodes.common import DurationHistogram, SuiteNode, command_line, run
+from ema_sim.nodes.params import (
+    Spec,
+    config_specs,
+    file_entries,
+    key_matches,
+    names_list,
+    nested,
+    params_files,
+    remapped,
+)
 from ema_sim.nodes.ports import Ports
 from ema_sim.parameters import ParameterInfo, metas
 from ema_sim.signals.plans import channel_list
@@ -48,15 +66,110 @@ from ema_sim.switches import element_names, model_overrides
 
 NS = 1_000_000_000
 KNOWN = frozenset(CHANNELS)
-DROPS = ("malformed", "unknown_names", "no_names", "lost_commands", "out_of_order")
+DROPS = ("malformed", "unknown_names", "no_names", "lost_commands", "out_of_order", "future_stamp")
 """Why an input was dropped: a message whose arrays do not match its names; names that are no channel; a
 message without names; commands missing from the stream (a gap in the stamps: lost in the middleware or
-never sent); a command older than the last one taken."""
+never sent); a command older than the last one taken; an input stamped implausibly far ahead (real time:
+of the last command and the wall time since, :class:`~ema_sim.emac.stamps.CommandClock`; lockstep: of the
+node's clock by more than :data:`LOCKSTEP_LEAD_FRAMES`)."""
+LOCKSTEP_LEAD_FRAMES = 20
+"""Lockstep: how far ahead of the node's clock an input may be stamped (inputs come frame by frame)."""
+IDLE_AFTER_FRAMES = 2.0
+"""Real time: a frame without a command is stepped this many frames after the last command came (a frame of
+grace for a late command: the FMU's publishing jitter), then every frame."""
 CATCH_UP = 20
 """Idle frames a late loop steps to catch up (0.1 s at 200 Hz); beyond that it skips to the present frame."""
 FAULT_HOLD_S = 2.0
 """``/diagnostics`` warns for this long (wall time) after the last dropped input, then is OK again."""
 STRINGS = ParameterType.PARAMETER_STRING_ARRAY
+
+
+@dataclass(frozen=True)
+class Section:
+    """A parameter file section that applies to an EMAC node of a namespace (:func:`emac_sections`)."""
+
+    node: str | None
+    """The one EMAC node name it is keyed for (``emac_<channel>``, ``emac``); None: a wildcard key."""
+    channels: list[str] | None
+    """The channels its ``channels`` or ``channel`` parameter names (None: neither)."""
+    where: str
+    """``<file>: <key>``, for messages."""
+
+
+def emac_sections(argv: Sequence[str], namespace: str) -> list[Section]:
+    """The sections of a command line's parameter files that apply to an EMAC node named as the suite names them.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        The node's command line (ROS arguments included).
+    namespace : str
+        The node's namespace (``/`` or ``/aircraft2``).
+
+    Returns
+    -------
+    list of Section
+        In file order: those keyed for one of ``emac_<channel>`` and ``emac`` there, and wildcard ones.
+    """
+    ns = namespace.rstrip("/")
+    ns = ns if not ns or ns.startswith("/") else f"/{ns}"
+    out = []
+    for path in params_files(argv):
+        for key, params in file_entries(path):
+            nodes = [n for n in (*(f"emac_{ch}" for ch in CHANNELS), "emac") if key_matches(key, f"{ns}/{n}")]
+            if not nodes:
+                continue
+            value = params.get("channels", params.get("channel"))
+            channels = None if value is None else channel_list([value] if isinstance(value, str) else value)
+            out.append(Section(nodes[0] if len(nodes) == 1 else None, channels, f"{path}: {key}"))
+    return out
+
+
+def default_name(flag: list[str] | None, argv: Sequence[str], namespace: str | None = None) -> str:
+    """The EMAC node's name before any remapping: ``emac_<channel>``, or ``emac`` for a box of several.
+
+    Its channels are ``--channel``'s; else the one channel the command line's parameter files give the node:
+    a section keyed for ``emac_<channel>`` in its namespace (a channel file, ``config/<channel>.yaml``), or a
+    ``channel`` or ``channels`` parameter in a section that applies to any EMAC node (``/**``). Without either,
+    the left wing. A ``-r __node:=`` remapping names the node anyway (its name then gives its channel).
+
+    Parameters
+    ----------
+    flag : list of str or None
+        ``--channel``'s channels.
+    argv : sequence of str
+        The node's command line (ROS arguments included).
+    namespace : str or None
+        The node's namespace when not remapped (None: the root).
+
+    Returns
+    -------
+    str
+        The node name.
+
+    Raises
+    ------
+    ConfigError
+        The parameter files give the node different channels and nothing says which.
+    """
+    def named(channels: list[str]) -> str:
+        return f"emac_{channels[0]}" if len(channels) == 1 else "emac"
+
+    if flag:
+        return named(flag)
+    if remapped(argv, "__node") is not None:
+        return "emac"
+    found: dict[tuple[str, ...], str] = {}
+    for sec in emac_sections(argv, remapped(argv, "__ns") or namespace or "/"):
+        if sec.channels is not None:
+            found.setdefault(tuple(sec.channels), sec.where)
+        elif sec.node is not None and sec.node != "emac":
+            found.setdefault((sec.node[len("emac_"):],), sec.where)
+    if len(found) > 1:
+        said = "; ".join(f"{', '.join(chs)} ({where})" for chs, where in found.items())
+        raise ConfigError(f"emac: the parameter files give different channels ({said}): say which with --channel or "
+                          "-r __node:=emac_<channel>")
+    return named(list(next(iter(found)))) if found else "emac_left_wing"
 
 
 def node_specs(channels: list[str]) -> list[Spec]:
@@ -67,6 +180,8 @@ def node_specs(channels: list[str]) -> list[Spec]:
         Spec("rate_hz", 0.0, "integration rate of a discrete model (0: the model's default)", "Hz", 0.0, 1e7),
         Spec("disable", [], "model elements switched off: dead_band, quantization, noise (others are the test "
              "environment's and ignored here)", kind=STRINGS),
+        Spec("frame_id", channels[0] if len(channels) == 1 else "emac", "header frame_id of the feedback, surface and "
+             "bus messages (default: the channel's name; an EMAC box's: emac)"),
     ]
 
 
@@ -149,6 +264,21 @@ class Stream:
         """A message for frame ``t_ns`` (or later) has arrived."""
         return self.last_stamp is not None and self.last_stamp >= t_ns
 
+    def restart(self, t_ns: int) -> None:
+        """Time restarted at ``t_ns``: keep what is stamped at or before it (the new time's), drop the rest.
+
+        Parameters
+        ----------
+        t_ns : int
+            The new time, ns.
+        """
+        kept = [item for item in self.queue if item[0] <= t_ns]
+        self.queue.clear()
+        self.queue.extend(kept)
+        self.last_stamp = max((stamp for stamp, _ in kept), default=None)
+        self.waiting_since = None
+        self.gave_up = False
+
     def take_until(self, t_ns: int) -> list[tuple[int, Any]]:
         """(stamp, item) stamped at or before ``t_ns``, in arrival order.
 
@@ -184,18 +314,27 @@ class SourceStream(Stream):
         """The sources every frame waits for (empty: any source's message counts); known before the first message."""
         self._latest: dict[str, int] = {}
 
-    def push_from(self, stamp: int, item: list[tuple[str, float]]) -> None:
-        """A message arrived carrying these sources' values."""
+    def restart(self, t_ns: int) -> None:  # noqa: D102
+        super().restart(t_ns)
+        self._latest = {}
+        for stamp, item in self.queue:
+            self._note(stamp, item)
+
+    def _note(self, stamp: int, item: list[tuple[str, float]]) -> None:
         for name, _ in item:
             if stamp > self._latest.get(name, -1):
                 self._latest[name] = stamp
-        self.queue.append((stamp, item))
-        self.gave_up = False
         if self.expected:
             latest = [self._latest.get(name) for name in self.expected]
             self.last_stamp = None if any(x is None for x in latest) else min(latest)  # type: ignore[type-var]
         else:
             self.last_stamp = stamp if self.last_stamp is None else max(self.last_stamp, stamp)
+
+    def push_from(self, stamp: int, item: list[tuple[str, float]]) -> None:
+        """A message arrived carrying these sources' values."""
+        self.queue.append((stamp, item))
+        self.gave_up = False
+        self._note(stamp, item)
 
 
 class EmacNode(SuiteNode):
@@ -204,14 +343,30 @@ class EmacNode(SuiteNode):
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None,
                  **options: Any) -> None:
         """``options``: rclpy node options (``context``, ``cli_args``), as a process's ROS arguments give them."""
-        given = channel_list(getattr(args, "channels", None) or ["left_wing"])
-        super().__init__(name or (f"emac_{given[0]}" if len(given) == 1 else "emac"), args, **options)
+        flag = channel_list(getattr(args, "channels", None) or []) or None
+        argv = command_line(options)
+        if name is None:
+            name = default_name(flag, argv, options.get("namespace"))
+        super().__init__(name, args, exclude=("channels",), **options)
+        try:
+            self._build(flag, argv, ports)
+        except BaseException:  # a user error (one line, from run) or a bug: the node leaves the graph first
+            self.destroy_node()
+            raise
+
+    def _build(self, flag: list[str] | None, argv: list[str], ports: Any) -> None:
+        """The node's parameters, channels, streams and topics (the constructor's work once the node exists)."""
         name = self.get_name()
+        given = self._resolve_channels(flag)
+        self._check_files(argv)
         self.ports = ports(self)
         own = self.params.declare(node_specs(given), name)
         if own["model"] not in model_names():
             raise UnknownNameError("model", own["model"], model_names())
         self.channels = channel_list(own["channels"])
+        self.frame_id = str(own["frame_id"])
+        self.fqn = self.get_fully_qualified_name()
+        """The node's full name: its diagnostics' status names are ``<full name>: <channel>``."""
         self.lockstep = self.sim_time
         base = ros_parameters(config_dir() / "emac.yaml").get("emac", {})
         settings = self.params.declare(emac_specs(base), f"{name}: emac")
@@ -242,7 +397,7 @@ class EmacNode(SuiteNode):
         self.clock_ns: int | None = None
         self.model_ns: int | None = None
         self.last_step_wall = time.monotonic()
-        self.next_idle = self.last_step_wall + 1.5 * self.frame_s
+        self.next_idle = self.last_step_wall + IDLE_AFTER_FRAMES * self.frame_s
         """Real time: when the next frame without a command is due (frames keep the frame rate when idle)."""
         self._init_counters()
         self._make_topics()
@@ -255,9 +410,78 @@ class EmacNode(SuiteNode):
                 f"lockstep: no emac_<channel> peers name the crosstalk sources ({', '.join(self.sources)}); each "
                 "frame takes whichever source feedback has come, so the crosstalk may differ from run to run")
 
+    def _resolve_channels(self, flag: list[str] | None) -> list[str]:
+        """The hosted channels, from every place that names them; one :class:`ConfigError` when two disagree.
+
+        ``--channel`` (a shorthand), the node's name after remapping (``emac_<channel>``), and the ``channels``
+        and ``channel`` parameters of the parameter files and ``-p`` arguments that apply to the node
+        (``channel``: a channel file's, ``config/<channel>.yaml``). None of them: the left wing.
+        """
+        sources: list[tuple[str, list[str]]] = []
+        if flag:
+            sources.append(("--channel", flag))
+        name = self.get_name()
+        if name.startswith("emac_") and name[len("emac_"):] in KNOWN:
+            sources.append((f"the node's name {name}", [name[len("emac_"):]]))
+        over = self._parameter_overrides
+        for key in ("channels", "channel"):
+            p = over.get(key)
+            if p is not None and p.value is not None:
+                value = [p.value] if isinstance(p.value, str) else [str(v) for v in p.value]
+                sources.append((f"parameter {key} (a parameter file or -p)", channel_list(value)))
+        if not sources:
+            return ["left_wing"]
+        first = sources[0][1]
+        if any(channels != first for _, channels in sources[1:]):
+            said = "; ".join(f"{where}: {', '.join(channels)}" for where, channels in sources)
+            raise ConfigError(f"{self.get_fully_qualified_name()}: the channel is given differently ({said}); give it "
+                              "one way (a parameter file's channel, the node name emac_<channel>, or --channel)")
+        return first
+
+    def _check_files(self, argv: list[str]) -> None:
+        """Parameter files keyed for other EMAC nodes and not for this one: one error, or a warning.
+
+        A file keyed for ``emac_right_wing`` given to a node that runs as ``emac_left_wing`` (``--channel``,
+        ``-r __node:=``) would leave every value of it unapplied: an error, as is any disagreement on the
+        channel (:meth:`_resolve_channels`). A section keyed with the node's name alone (no leading ``/``)
+        applies in the root namespace only (rcl's rule): in another namespace it is not applied, with a warning.
+        """
+        ns, name = self.get_namespace(), self.get_name()
+        sections = emac_sections(argv, ns)
+        others = sorted({sec.node for sec in sections if sec.node is not None} - {name})
+        if others and not any(sec.node in (name, None) for sec in sections):
+            where = "; ".join(sorted({sec.where for sec in sections}))
+            raise ConfigError(f"{self.get_fully_qualified_name()}: the parameter files are keyed for "
+                              f"{', '.join(others)} ({where}), not for this node: none of their values would apply; "
+                              "run it as that node (drop --channel, or -r __node:= to that name) or key the file for "
+                              "this node")
+        if ns == "/":
+            return
+        for path in params_files(argv):
+            for key, _ in file_entries(path):
+                if key == name:
+                    self.get_logger().warning(
+                        f"{path}: section {key!r} applies to /{key} only (a key without a namespace is in the root "
+                        f"namespace), not to this node, {self.get_fully_qualified_name()}: its parameters are not "
+                        f"applied; key it '/**/{key}' (any namespace) or '{ns}/{key}'")
+
     def _init_counters(self) -> None:
         """What the node counts: frames late or skipped, waits, messages, inputs dropped."""
-        self.last_command_ns: int | None = None
+        self.command_clock = CommandClock(self.frame_ns, self.settings.stamp_tolerance_s,
+                                          self.settings.resync_commands)
+        """Real time: which command stamps are taken (see :mod:`ema_sim.emac.stamps`)."""
+        self.gate = FrameGate(self.frame_ns, self.settings.resync_commands)
+        """Real time: whether a command steps its frame or came after it was stepped (see :class:`FrameGate`)."""
+        self.first_command = True
+        self.arrivals = 0
+        """Input messages taken from the executor (every topic): an idle frame waits until none is pending."""
+        self._idle_check: int | None = None
+        self.command_resyncs = 0
+        """Real time: times the command clock re-anchored on a clock that moved."""
+        self.clock_resets = 0
+        """Lockstep: times ``/clock`` jumped backwards and the node's time base restarted."""
+        self.last_clock_topic_ns: int | None = None
+        """Lockstep: the last value ``/clock`` itself gave (inputs' stamps aside)."""
         self.late_frames = 0
         self.skipped_frames = 0
         self.turnaround = DurationHistogram()
@@ -347,62 +571,121 @@ class EmacNode(SuiteNode):
 
     # ----------------------------------------------------------------- callbacks (never raise)
     def _on_command(self, msg: JointFrame) -> None:
+        self.arrivals += 1
         try:
             values = self._pick(msg, msg.position, "position", "command")
             stamp = msg.stamp_ns
+            now = time.monotonic()
+            fresh = False
             if self.lockstep:  # a command for frame t: the suite's time has reached t
-                self._on_clock(stamp)
-            elif not stamp:  # an unstamped command in real time: now
-                stamp = self.get_clock().now().nanoseconds
-            if values and not self.lockstep and msg.stamp_ns and not self._in_sequence(stamp):
-                return
+                if not self._on_input_stamp(stamp, "command"):
+                    return
+            elif stamp and values:  # real time: an unstamped command (0) is the next frame's, stamped when stepped
+                check = self.command_clock.check(stamp, now)
+                if not self._stamp_taken(check, stamp):
+                    return
+                fresh = check.verdict is Verdict.RESYNC
             if values:
-                self.commands.push(stamp, (values, time.monotonic()))
+                self.commands.push(stamp, (values, now, fresh))
                 self.commands_taken += 1
                 self.mark_running()
         except Exception as exc:  # a bad message never kills the node
             self._drop("malformed", f"command message dropped: {exc}")
 
-    def _in_sequence(self, stamp: int) -> bool:
-        """Real time: count the frames missing between two commands' stamps; drop a command older than the last."""
-        last = self.last_command_ns
-        if last is not None:
-            if stamp <= last:
-                self._drop("out_of_order", f"command stamped {stamp / NS:.6f} s after one stamped {last / NS:.6f} s: "
-                           "dropped (an older frame's command)")
-                return False
-            missing = round((stamp - last) / self.frame_ns) - 1
-            if missing > 0:
-                self._drop("lost_commands", f"{missing} frame(s) of commands missing before the one stamped "
-                           f"{stamp / NS:.6f} s (lost on the way, or never sent)", missing)
-        self.last_command_ns = stamp
-        return True
+    def _stamp_taken(self, check: Any, stamp: int) -> bool:
+        """Real time: count, log and say whether to take a command the command clock judged (``check``)."""
+        verdict = check.verdict
+        if verdict is Verdict.TAKEN:
+            if check.missing > 0:
+                self._drop("lost_commands", f"{check.missing} frame(s) of commands missing before the one stamped "
+                           f"{stamp / NS:.6f} s (lost on the way, or never sent)", check.missing)
+            return True
+        last = check.previous_ns / NS
+        if verdict is Verdict.RESYNC:
+            self.command_resyncs += 1
+            self.last_fault_wall = time.monotonic()
+            self._diagnose_now = True
+            n = self.command_clock.resync_after
+            self.get_logger().warning(
+                f"command stamps jumped from {last:.6f} s to {stamp / NS:.6f} s and {n} consecutive commands agree on "
+                f"the new clock (an FMU restart or a stepped clock): the command clock follows it from here (the "
+                f"{n - 1} before this one were dropped; {self.command_resyncs} resynchronisation(s) so far)")
+            return True
+        if verdict is Verdict.OUT_OF_ORDER:
+            text = (f"command stamped {stamp / NS:.6f} s after one stamped {last:.6f} s: dropped (an older frame's "
+                    "command)")
+        else:
+            text = (f"command stamped {stamp / NS:.6f} s, {(stamp - check.previous_ns) / NS:.3f} s after the last "
+                    f"one taken ({last:.6f} s), further than the wall time since allows: dropped (implausible stamp)")
+        self._drop(verdict.value, f"{text}; {self.command_clock.resync_after} consecutive such commands that agree "
+                   "re-anchor the command clock")
+        return False
 
     def _on_load(self, msg: JointFrame) -> None:
+        self.arrivals += 1
         try:
             values = self._pick(msg, msg.effort, "effort", "hinge moment")
-            if self.lockstep:
-                self._on_clock(msg.stamp_ns)
+            if self.lockstep and not self._on_input_stamp(msg.stamp_ns, "hinge moment"):
+                return
             if values:
                 self.loads.push(msg.stamp_ns, values)
         except Exception as exc:
             self._bad(f"hinge-moment message dropped: {exc}")
 
     def _on_source(self, msg: JointFrame) -> None:
+        self.arrivals += 1
         try:
             pos = msg.position
             seen = [(name, float(pos[i])) for i, name in enumerate(msg.name) if name in self.sources and i < len(pos)]
-            if seen:
+            # the other EMACs stepped the frame ending here: the clock got there
+            if seen and (not self.lockstep or self._on_input_stamp(msg.stamp_ns, "feedback")):
                 self.source_fb.push_from(msg.stamp_ns, seen)
-                if self.lockstep:  # the other EMACs stepped the frame ending here: the clock got there
-                    self._on_clock(msg.stamp_ns)
         except Exception as exc:
             self._bad(f"feedback message dropped: {exc}")
 
     def _on_clock(self, ns: int) -> None:
-        """Lockstep time: from ``/clock``, and from any input stamped for a frame (its frame has come)."""
+        """Lockstep time from ``/clock``: forward to any value; a jump backwards restarts the time base there."""
+        last = self.last_clock_topic_ns
+        self.last_clock_topic_ns = ns
+        if last is not None and ns < last:
+            self._restart_time(last, ns)
         if self.clock_ns is None or ns > self.clock_ns:
             self.clock_ns = ns
+
+    def _on_input_stamp(self, ns: int, what: str) -> bool:
+        """Lockstep time from an input stamped for a frame (its frame has come); False: drop the input.
+
+        An input stamped more than :data:`LOCKSTEP_LEAD_FRAMES` ahead of the node's clock is dropped
+        (``future_stamp``): inputs come frame by frame, each at most a frame ahead of the clock it raised, so
+        it is no frame of this run (an input of the time before a ``/clock`` reset, still on its way), and the
+        node's clock does not jump on its word.
+        """
+        clock = self.clock_ns
+        if clock is not None and ns > clock + LOCKSTEP_LEAD_FRAMES * self.frame_ns:
+            self._drop("future_stamp", f"{what} stamped {ns / NS:.6f} s, more than {LOCKSTEP_LEAD_FRAMES} frames "
+                       f"ahead of the clock ({clock / NS:.6f} s): dropped")
+            return False
+        if clock is None or ns > clock:
+            self.clock_ns = ns
+        return True
+
+    def _restart_time(self, old: int, ns: int) -> None:
+        """``/clock`` went back from ``old`` to ``ns`` (a reset, a replay): the node's time restarts at ``ns``.
+
+        The model keeps its state; the next poll reports it at ``ns`` (as the first frame of a run does),
+        inputs queued for the time before are dropped, and the brake holds until the new time's commands come.
+        """
+        self.clock_resets += 1
+        self.clock_ns = ns
+        self.model_ns = None
+        for s in self._stream_list:
+            s.restart(ns)
+        self.last_good_ns = dict.fromkeys(self.channels)
+        self._diagnose_now = True
+        self.last_fault_wall = time.monotonic()
+        self.get_logger().warning(
+            f"/clock jumped back from {old / NS:.6f} s to {ns / NS:.6f} s (a reset or a replay): the time base "
+            f"restarts there, inputs of the time before are dropped ({self.clock_resets} reset(s) so far)")
 
     def _on_failure(self, channel: str, text: str) -> None:
         try:
@@ -449,7 +732,7 @@ class EmacNode(SuiteNode):
 
     # ----------------------------------------------------------------- inputs into the channels
     def _apply_commands(self, items: list[tuple[int, Any]]) -> None:
-        for stamp, (values, wall) in items:
+        for stamp, (values, wall, _) in items:
             for ch, v in values.items():
                 status = self.units[ch].set_command(v)
                 if status is not InputStatus.REJECTED:
@@ -478,10 +761,18 @@ class EmacNode(SuiteNode):
     def _poll_realtime(self) -> float:
         """Each command is a frame, answered at once; without commands the frames go on at the frame rate.
 
-        An idle frame is due 1.5 frames after the last command's (half a frame of grace for a late command),
-        then every frame, its stamp one frame after the last: the feedback keeps the frame rate and its stamps
-        stay on the frame grid of the last command, advancing as the wall clock does. A loop that fell
-        behind catches up (at most :data:`CATCH_UP` frames at once) and beyond that skips frames (counted).
+        A command stamped for a frame not yet stepped is applied and its frame stepped (the feedback stamped
+        one frame after it); an unstamped one is the next frame's. A command whose frame was already stepped
+        without it (an idle frame stood in) is applied from the next frame and counted as late, never stepped
+        again (:class:`~ema_sim.emac.stamps.FrameGate`): every frame is stepped once and the feedback stamps
+        increase strictly while commands come. The first command, and the first after a resynchronisation,
+        starts a stream: the frames follow its stamp from there (the idle frames before it were the node's
+        own); so do commands that stay late without catching up (a clock that lags the frames). An idle frame
+        is due :data:`IDLE_AFTER_FRAMES` after the last command came, once the executor has handed over every
+        input waiting in it, then every frame, its stamp one frame after the last: the feedback keeps the frame
+        rate and its stamps stay on the frame grid of the last command, advancing as the wall clock does. A
+        loop that fell behind catches up (at most :data:`CATCH_UP` frames at once) and beyond that skips frames
+        (counted).
         """
         now = time.monotonic()
         if self.loads.queue:
@@ -489,19 +780,28 @@ class EmacNode(SuiteNode):
         if self.source_fb.queue:
             self._observe_sources(self.source_fb.take_until(1 << 62))
         if self.commands.queue:
+            stepped = False
             while self.commands.queue:
-                stamp, item = self.commands.queue.popleft()
-                self._apply_commands([(stamp, item)])
-                self._step_all(stamp, {ch: self._age_wall(ch, now) for ch in self.units})
-                self.turnaround.add(time.monotonic() - item[1])  # command received → feedback published
-            self.last_step_wall = now
-            self.next_idle = now + 1.5 * self.frame_s
-            return 1.5 * self.frame_s
+                stepped = self._take_command(*self.commands.queue.popleft(), now) or stepped
+            self._idle_check = None
+            if stepped:
+                self.last_step_wall = now
+                self.next_idle = now + IDLE_AFTER_FRAMES * self.frame_s
+            return max(self.next_idle - now, 0.0)
         if now < self.next_idle:
             return self.next_idle - now
+        # An idle frame is due. Inputs that came while the node was held up wait in the executor, which hands
+        # over one per spin: take them first (an idle frame stepped before its command, waiting there, would
+        # make the command late, and the frames would run ahead of every command after it).
+        if self._idle_check != self.arrivals:
+            self._idle_check = self.arrivals
+            return 0.0
+        self._idle_check = None
         if self.model_ns is None:  # no frame yet: start on the ROS clock's frame grid, the schedule from now
+            # The feedback is stamped with the present frame's start (not the next one's): the first command of
+            # an FMU on the same clock, stamped for the present frame, is answered one frame later, after it.
             now_ns = self.get_clock().now().nanoseconds
-            self.model_ns = now_ns - now_ns % self.frame_ns
+            self.model_ns = now_ns - now_ns % self.frame_ns - self.frame_ns
             self.next_idle = now
         behind = int((now - self.next_idle) / self.frame_s)
         if behind > CATCH_UP:  # the process was held up: jump to the present frame, stamps on the grid
@@ -515,6 +815,45 @@ class EmacNode(SuiteNode):
         self.last_step_wall = now
         self.next_idle += self.frame_s
         return max(self.next_idle - time.monotonic(), 0.0)
+
+    def _take_command(self, stamp: int, item: tuple[dict[str, float], float, bool], now: float) -> bool:
+        """Real time: apply a command and step its frame unless it was stepped without it; True when stepped."""
+        self._apply_commands([(stamp, item)])
+        if item[2] or self.first_command:  # the idle frames before were the node's own: follow its stamp
+            self.first_command = False
+            self.model_ns = None
+        if not stamp:  # unstamped: the next frame, or now when the frames fell behind the ROS clock
+            now_ns = self.get_clock().now().nanoseconds
+            stamp = now_ns if self.model_ns is None else max(self.model_ns, now_ns)
+        else:
+            lateness = self.gate.judge(stamp, self.model_ns)
+            if lateness is Lateness.LATE:
+                self.throttled("late", f"command for the frame at {stamp / NS:.6f} s came after that frame was "
+                               f"stepped with the held command: applied from the next frame "
+                               f"({self.late_commands} late so far)", level="info")
+                return False
+            if lateness is Lateness.FOLLOW:
+                self._follow(stamp)
+        self._step_all(stamp, {ch: self._age_wall(ch, now) for ch in self.units})
+        self.turnaround.add(time.monotonic() - item[1])  # command received → feedback published
+        return True
+
+    def _follow(self, stamp: int) -> None:
+        """Commands stayed late without catching up (their clock lags the frames): follow their stamps."""
+        self.command_resyncs += 1
+        self.last_fault_wall = time.monotonic()
+        self._diagnose_now = True
+        self.get_logger().warning(
+            f"{self.gate.follow_after} commands in a row came after their frames were stepped without catching up "
+            f"(the last stamped {stamp / NS:.6f} s, {(self.model_ns - stamp) / NS:.3f} s behind the frames; a "
+            "clock that stopped or lags): the frames follow their stamps from here "
+            f"({self.command_resyncs} resynchronisation(s) so far)")
+        self.model_ns = None
+
+    @property
+    def late_commands(self) -> int:
+        """Real time: commands that came after their frame was stepped without them (applied from the next)."""
+        return self.gate.late
 
     def _age_wall(self, ch: str, now: float) -> float | None:
         last = self.last_good_wall[ch]
@@ -607,21 +946,23 @@ class EmacNode(SuiteNode):
                 self.meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
 
     def _publish(self, stamp: int, out: dict[str, Feedback]) -> None:
-        names = self.channels
+        names, fid = self.channels, self.frame_id
         if len(names) == 1:
             f = out[names[0]]
-            self.fb_pub.publish(JointFrame(stamp, names, [f.position_v], [], [f.current_a] if self.has_current else []))
-            self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg], [f.rate_dps], [f.hinge_moment_inlb]))
+            self.fb_pub.publish(JointFrame(stamp, names, [f.position_v], [], [f.current_a] if self.has_current else [],
+                                           fid))
+            self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg], [f.rate_dps], [f.hinge_moment_inlb],
+                                                fid))
             if self.bus_pub is not None:
-                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v]))
+                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v], frame_id=fid))
         else:
             fbs = [out[c] for c in names]
             self.fb_pub.publish(JointFrame(stamp, names, [f.position_v for f in fbs],
-                                           [], [f.current_a for f in fbs] if self.has_current else []))
+                                           [], [f.current_a for f in fbs] if self.has_current else [], fid))
             self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg for f in fbs],
-                                                [f.rate_dps for f in fbs], [f.hinge_moment_inlb for f in fbs]))
+                                                [f.rate_dps for f in fbs], [f.hinge_moment_inlb for f in fbs], fid))
             if self.bus_pub is not None:
-                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v for f in fbs]))
+                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v for f in fbs], frame_id=fid))
         self.published += 1
 
     def _publish_diagnostics(self) -> None:
@@ -637,11 +978,12 @@ class EmacNode(SuiteNode):
             text = (f"failure {unit.failure.spec()}" if failing else "brake engaged" if unit.last.braked else
                     f"inputs dropped in the last {FAULT_HOLD_S:g} s" if recent else "nominal")
             st.update({"commands": str(self.commands_taken), "late_frames": str(self.late_frames),
-                       "skipped_frames": str(self.skipped_frames),
+                       "late_commands": str(self.late_commands), "command_resyncs": str(self.command_resyncs),
+                       "clock_resets": str(self.clock_resets), "skipped_frames": str(self.skipped_frames),
                        "bad_messages": str(self.bad_messages), "waits_given_up": str(self.waits_given_up),
                        **{f"dropped_{k}": str(v) for k, v in self.drops.items()}})
             msg.status.append(DiagnosticStatus(
-                level=level, name=f"emac/{ch}", message=text, hardware_id=unit.model.name,
+                level=level, name=f"{self.fqn}: {ch}", message=text, hardware_id=unit.model.name,
                 values=[KeyValue(key=k, value=v) for k, v in st.items()]))
         self.diag_pub.publish(msg)
 
@@ -651,6 +993,8 @@ class EmacNode(SuiteNode):
             "frames_published": self.published, "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
             "skipped_frames": self.skipped_frames, "dropped": dict(self.drops), "commands": self.commands_taken,
+            "late_commands": self.late_commands, "command_resyncs": self.command_resyncs,
+            "clock_resets": self.clock_resets,
             "turnaround_p50_ms": self.turnaround.percentile_ms(50),
             "turnaround_p99_ms": self.turnaround.percentile_ms(99),
             "turnaround_max_ms": self.turnaround.percentile_ms(100),

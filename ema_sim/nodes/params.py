@@ -12,11 +12,14 @@ parameter``); a value outside the declared range is refused the same way.
 from __future__ import annotations
 
 import copy
+import re
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
@@ -24,6 +27,10 @@ from rclpy.parameter import Parameter
 
 from ema_sim.errors import ConfigError, EmaError
 
+ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_INTEGER_ARRAY,
+                    ParameterType.PARAMETER_DOUBLE_ARRAY, ParameterType.PARAMETER_STRING_ARRAY,
+                    ParameterType.PARAMETER_BYTE_ARRAY})
+"""The list parameter types."""
 HUGE = sys.float_info.max
 """Open end of a range (a ROS range needs both ends)."""
 
@@ -159,18 +166,35 @@ class Declared:
         node = self.node
         overrides = node._parameter_overrides  # a file's 25 for a double parameter becomes 25.0
         batch: list[tuple[str, Any, ParameterDescriptor]] = []
+        empty: list[Parameter] = []  # lists declared empty (by default, or by a file's [], which rcl gives untyped)
         for spec in specs:
             d = spec.descriptor()
             given = overrides.get(spec.name)
+            if given is not None and given.type_ == Parameter.Type.NOT_SET and d.type in ARRAYS:
+                del overrides[spec.name]  # a file's [] (rcl gives it no type): the list is empty
+                given, is_empty = None, True
+            else:
+                is_empty = given is None and isinstance(spec.default, list | tuple) and not spec.default
             if given is not None:
                 overrides[spec.name] = _coerced(given, d.type)
             value: Any = _plain(spec.default)
-            if isinstance(value, list) and not value:  # an empty list tells no type: declare the type itself
-                value = Parameter.Type(d.type) if given is None else overrides[spec.name].value
+            if is_empty:  # an empty list tells no type: declare the type, then set the empty value
+                value = Parameter.Type(d.type)
+                empty.append(Parameter(spec.name, Parameter.Type(d.type), []))
+            elif isinstance(value, list) and not value:
+                value = overrides[spec.name].value
             batch.append((spec.name, value, d))
             self.specs[spec.name] = spec
         try:
             node.declare_parameters("", batch)
+            # A list declared empty has a value, not only a type, so GetParameters, a dump and rqt show it:
+            # rclpy types a bare [] as a byte array, so it is set with its declared type (as the declaration's
+            # own value: without the read-only check).
+            if empty:
+                done = node._set_parameters_atomically_common(
+                    empty, {p.name: node.describe_parameter(p.name) for p in empty})
+                if not done.successful:
+                    raise InvalidParameterValueException(", ".join(p.name for p in empty), [], done.reason)
         except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
             raise ConfigError(f"{node.get_name()} parameters ({origin}): {exc}") from None
         return {spec.name: self.value(spec.name) for spec in specs}
@@ -195,6 +219,11 @@ class Declared:
     def _on_set(self, params: Sequence[Parameter]) -> SetParametersResult:
         applied = []
         for p in params:
+            if p.name == "use_sim_time" and self.node.has_parameter(p.name) \
+                    and p.value != self.node.get_parameter(p.name).value:
+                return SetParametersResult(successful=False, reason=(
+                    "use_sim_time is read when the node starts (true: lockstep on /clock, frame by frame); restart "
+                    "the node with -p use_sim_time:=true or false"))
             apply = self.appliers.get(p.name)
             if apply is None:
                 continue
@@ -216,3 +245,131 @@ def _coerced(param: Parameter, kind: int) -> Parameter:
         return Parameter(param.name, value=[float(v) for v in value])
     return param
 
+
+
+# --------------------------------------------------------------------------- parameter files as rcl reads them
+def ros_arguments(argv: Sequence[str]) -> list[str]:
+    """The ROS arguments of a command line: what follows each ``--ros-args`` (up to its ``--``).
+
+    Parameters
+    ----------
+    argv : sequence of str
+        A command line (a process's, or a node's ``cli_args``).
+
+    Returns
+    -------
+    list of str
+        The ROS arguments, in order.
+    """
+    out: list[str] = []
+    inside = False
+    for arg in argv:
+        if arg == "--ros-args":
+            inside = True
+        elif arg == "--":
+            inside = False
+        elif inside:
+            out.append(arg)
+    return out
+
+
+def params_files(argv: Sequence[str]) -> list[Path]:
+    """The ``--params-file`` paths among a command line's ROS arguments, in order.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        A command line (a process's, or a node's ``cli_args``).
+
+    Returns
+    -------
+    list of Path
+        The parameter files, in the order given.
+    """
+    args = ros_arguments(argv)
+    return [Path(args[i + 1]) for i, a in enumerate(args[:-1]) if a == "--params-file"]
+
+
+def remapped(argv: Sequence[str], key: str) -> str | None:
+    """The last process-wide remapping of ``key`` (``__node``, ``__ns``) among a command line's ROS arguments.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        A command line.
+    key : str
+        ``__node`` or ``__ns``.
+
+    Returns
+    -------
+    str or None
+        The value remapped to, or None when there is none.
+    """
+    args = ros_arguments(argv)
+    found = None
+    for i, a in enumerate(args[:-1]):
+        if a in ("-r", "--remap") and args[i + 1].startswith(f"{key}:="):
+            found = args[i + 1].split(":=", 1)[1]
+    return found
+
+
+def key_matches(key: str, fqn: str) -> bool:
+    """Whether a parameter file's node key applies to the node named ``fqn``, as rcl matches it.
+
+    A key without a leading ``/`` is in the root namespace; ``/*`` stands for one name and ``/**`` for any
+    number of them (``/**`` applies to every node, ``/**/emac_left_wing`` to that name in any namespace).
+
+    Parameters
+    ----------
+    key : str
+        The node key of a parameter file (the path down to its ``ros__parameters``).
+    fqn : str
+        The node's fully qualified name (``/aircraft2/emac_left_wing``).
+
+    Returns
+    -------
+    bool
+        True when the file's parameters under ``key`` are the node's.
+    """
+    pattern = key if key.startswith("/") else f"/{key}"
+    pattern = re.escape(pattern).replace(r"/\*\*", r"(/\w+)*").replace(r"/\*", r"(/\w+)")
+    return re.fullmatch(pattern, fqn) is not None
+
+
+def file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
+    """(node key, ``ros__parameters`` flattened to ROS names) of every node section of a parameter file.
+
+    Parameters
+    ----------
+    path : Path
+        A ROS 2 parameter file.
+
+    Returns
+    -------
+    list of (str, dict)
+        The sections in file order; nested namespace keys are joined with ``/``.
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read or is no parameter file.
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"parameter file {path}: cannot read ({exc})") from None
+    out: list[tuple[str, dict[str, Any]]] = []
+
+    def walk(mapping: Mapping[str, Any], prefix: str) -> None:
+        for key, value in mapping.items():
+            if not isinstance(value, Mapping):
+                continue
+            name = f"{prefix}/{key}" if prefix else str(key)
+            if isinstance(value.get("ros__parameters"), Mapping):
+                out.append((name, dict(flatten(value["ros__parameters"]))))
+            else:
+                walk(value, name)
+
+    if isinstance(doc, Mapping):
+        walk(doc, "")
+    return out

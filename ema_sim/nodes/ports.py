@@ -129,7 +129,7 @@ def own_time_source(node: Node) -> Any:
     found = False
     for sub in list(node.subscriptions):
         owner = getattr(sub.callback, "__self__", None)
-        if isinstance(owner, TimeSource) and sub.topic_name == ct.CLOCK_TOPIC:
+        if isinstance(owner, TimeSource):  # its /clock subscription, wherever a remapping put it
             node.destroy_subscription(sub)
             found = True
     return node.get_clock() if found else None

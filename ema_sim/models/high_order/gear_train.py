@@ -302,7 +302,7 @@ def hysteresis_average_stiffness(peak_force_lbf: float, curve: tuple[float, ...]
 @nb.njit(cache=True)
 def three_segment_curve(force: np.ndarray, f1: float, f2: float, d1: float, d2: float, c1: float, c2: float,
                         c3: float) -> np.ndarray:
-    """:func:`three_segment_deflection` for an array of forces (for plots, tests and the README table).
+    """:func:`three_segment_deflection` for an array of forces (for plots, tests and the table in docs/models.md).
 
     Parameters
     ----------

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ema_sim.config import ChannelConfig
-from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.errors import ConfigError, EmaError, UnknownNameError
 from ema_sim.models import noise as nz
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
@@ -105,7 +105,7 @@ class HighOrderModel(ActuatorModel):
     ) -> None:
         super().__init__(channel, n=n, rate_hz=rate_hz)
         if params is not None and overrides:
-            raise ValueError("give either params or keyword overrides, not both")
+            raise ConfigError("give either params or keyword overrides, not both")
         bounds = list(bound) if isinstance(bound, Sequence) and not isinstance(bound, str) else [bound] * self.n
         if len(bounds) != self.n:
             raise EmaError(f"got {len(bounds)} compliance bounds for {self.n} instances")

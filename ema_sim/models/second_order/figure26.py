@@ -43,6 +43,7 @@ import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF
+from ema_sim.models.second_order import stage_set
 from ema_sim.models.second_order.figure21 import load_rate_limits, rate_loop, velocity_command
 from ema_sim.models.second_order.figure29 import free_play_accel
 from ema_sim.models.second_order.params import P, X
@@ -164,7 +165,7 @@ def compliance_deflection(hinge_moment_inlb: float, deg_per_kinlb: float, knee_i
 
 
 @jit
-def surface_compliance(p: FloatArray, hinge_moment_inlb: float) -> float:
+def surface_compliance(p: FloatArray, hinge_moment_inlb: float, on: int = stage_set.ALL) -> float:
     """Stage 16's static deflection (deg).
 
     Parameters
@@ -173,12 +174,16 @@ def surface_compliance(p: FloatArray, hinge_moment_inlb: float) -> float:
         Kernel parameters.
     hinge_moment_inlb : float
         Hinge moment (in·lb).
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
     float
         The deflection outside the servo loop (deg).
     """
+    if not on & stage_set.COMPLIANCE:
+        return 0.0
     return compliance_deflection(hinge_moment_inlb, p[P.compliance_deg_per_kinlb], p[P.compliance_knee_inlb],
                                  p[P.compliance_stiff_deg_per_kinlb])
 
@@ -222,8 +227,70 @@ def drive_on(p: FloatArray) -> bool:
 
 
 @jit
+def stages_on(p: FloatArray) -> int:
+    """The optional stages this parameter set runs (:mod:`.stage_set`): each bit where its parameter is not off.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Kernel parameters.
+
+    Returns
+    -------
+    int
+        The set, as bits.
+    """
+    on = 0
+    if p[P.kcp_per_kinlb] != 0.0:
+        on |= stage_set.KCP
+    if p[P.threshold_deg] > 0.0:
+        on |= stage_set.THRESHOLD
+    if p[P.integral_hz] > 0.0:
+        on |= stage_set.INTEGRAL
+    if p[P.servo_compliance_deg_per_kinlb] != 0.0:
+        on |= stage_set.SERVO_COMPLIANCE
+    if drive_on(p):
+        on |= stage_set.DRIVE
+    if p[P.lvdt_compliance_deg_per_kinlb] != 0.0 or p[P.lvdt_compliance_stiff_deg_per_kinlb] != 0.0:
+        on |= stage_set.LVDT_COMPLIANCE
+    if p[P.feedback_delay_s] > 0.0:
+        on |= stage_set.FEEDBACK_DELAY
+    if p[P.feedback_filter_in_loop] > 0.5:
+        on |= stage_set.IN_LOOP_FILTER
+    if p[P.free_play_deg] > 0.0:
+        on |= stage_set.FREE_PLAY
+    if p[P.compliance_deg_per_kinlb] != 0.0 or p[P.compliance_stiff_deg_per_kinlb] != 0.0:
+        on |= stage_set.COMPLIANCE
+    if compliance_time_constant_s(p) > 0.0:
+        on |= stage_set.COMPLIANCE_LAG
+    if p[P.linkage_freq_hz] > 0.0:
+        on |= stage_set.LINKAGE
+    return on
+
+
+@nb.njit(cache=True)
+def stages_on_any(params: FloatArray) -> int:
+    """The optional stages any instance of a batch runs: the union of :func:`stages_on` over its rows.
+
+    Parameters
+    ----------
+    params : numpy.ndarray
+        Kernel parameters, one row per instance.
+
+    Returns
+    -------
+    int
+        The set, as bits.
+    """
+    on = 0
+    for i in range(params.shape[0]):
+        on |= stages_on(params[i])
+    return on
+
+
+@jit
 def velocity_demand(p: FloatArray, u_in: float, x: float, integral_deg_s: float,
-                    hinge_moment_inlb: float) -> tuple[float, float, int, int, float]:
+                    hinge_moment_inlb: float, on: int = stage_set.ALL) -> tuple[float, float, int, int, float]:
     """Stages 5–8: the limited velocity command, the load's droop rate, flags, smooth piece, integrand.
 
     Parameters
@@ -238,6 +305,8 @@ def velocity_demand(p: FloatArray, u_in: float, x: float, integral_deg_s: float,
         The integral of the servo error (deg·s).
     hinge_moment_inlb : float
         Hinge moment (in·lb).
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
@@ -253,19 +322,23 @@ def velocity_demand(p: FloatArray, u_in: float, x: float, integral_deg_s: float,
         The servo error while the integral runs (outside the threshold, rate unlimited), else 0.
     """
     wn, zeta = p[P.wn_rad_s], p[P.zeta]
-    u_eff = compliance_correction(u_in, hinge_moment_inlb, p[P.kcp_per_kinlb])
+    u_eff = compliance_correction(u_in, hinge_moment_inlb, p[P.kcp_per_kinlb]) if on & stage_set.KCP else u_in
     e = u_eff - x
-    e_dz, dz = dead_zone(e, p[P.threshold_deg])
+    thresholded = bool(on & stage_set.THRESHOLD) and p[P.threshold_deg] > 0.0
+    if thresholded:
+        e_dz, dz = dead_zone(e, p[P.threshold_deg])
+    else:  # the zero-width dead zone, e − 0
+        e_dz, dz = e, 0
     up, down = load_rate_limits(p[P.rate_limit_dps], p[P.k2_dps_per_lb], hinge_moment_inlb, p[P.moment_arm_in])
-    wi = TWO_PI * p[P.integral_hz]
-    vc, side = velocity_command(x + e_dz + wi * integral_deg_s, x, wn, zeta, up, down)
-    droop = wn / (2.0 * zeta) * p[P.servo_compliance_deg_per_kinlb] * hinge_moment_inlb * 1e-3
+    wi = TWO_PI * p[P.integral_hz] if on & stage_set.INTEGRAL else 0.0
+    target = x + e_dz + wi * integral_deg_s if wi > 0.0 else x + e_dz
+    vc, side = velocity_command(target, x, wn, zeta, up, down)
+    droop = 0.0
+    if on & stage_set.SERVO_COMPLIANCE:
+        droop = wn / (2.0 * zeta) * p[P.servo_compliance_deg_per_kinlb] * hinge_moment_inlb * 1e-3
     flags = FLAG_RATE if side != 0 else 0
-    thresholded = p[P.threshold_deg] > 0.0
     if thresholded and e_dz == 0.0:
         flags |= FLAG_THRESHOLD
-    if not thresholded:
-        dz = 0
     integrand = e if (wi > 0.0 and side == 0 and (not thresholded or dz != 0)) else 0.0
     return vc, droop, flags, 3 * side + dz, integrand
 
@@ -343,7 +416,7 @@ def current_limited_drive(p: FloatArray, command_dps: float, droop_dps: float, v
 
 @jit
 def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray, hinge_moment_inlb: float,
-          dt: float = 0.0) -> tuple[float, int, int, float, float]:
+          dt: float = 0.0, on: int = stage_set.ALL) -> tuple[float, int, int, float, float]:
     """Stages 5–10: the actuator's acceleration, its limit flags, its smooth piece and two state rates.
 
     Parameters
@@ -362,6 +435,8 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray, hinge_m
         Hinge moment (in·lb).
     dt : float
         The fixed step (s) stage 9 is discretised for; 0 in continuous time.
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
@@ -376,8 +451,8 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray, hinge_m
     drive_accel : float
         d/dt of the drive's rate (°/s²; 0 when stage 9 is off).
     """
-    vc, droop, flags, piece, integrand = velocity_demand(p, u_in, x, y[X.integral_deg_s], hinge_moment_inlb)
-    if drive_on(p):
+    vc, droop, flags, piece, integrand = velocity_demand(p, u_in, x, y[X.integral_deg_s], hinge_moment_inlb, on)
+    if on & stage_set.DRIVE and drive_on(p):
         wv, lead = drive_step(p, dt)
         drive_accel, cside = current_limited_drive(p, vc, droop, y[X.drive_rate_dps], wv)
         v_drive = y[X.drive_rate_dps]
@@ -394,7 +469,7 @@ def servo(p: FloatArray, u_in: float, x: float, v: float, y: FloatArray, hinge_m
 
 
 @jit
-def lvdt(p: FloatArray, x_pos: float, hinge_moment_inlb: float) -> float:
+def lvdt(p: FloatArray, x_pos: float, hinge_moment_inlb: float, on: int = stage_set.ALL) -> float:
     """Stage 12: what the LVDT reads, the servo position plus the compliance the loop does not remove.
 
     Parameters
@@ -405,18 +480,22 @@ def lvdt(p: FloatArray, x_pos: float, hinge_moment_inlb: float) -> float:
         Servo position (deg).
     hinge_moment_inlb : float
         Hinge moment (in·lb).
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
     float
         The LVDT reading (deg).
     """
+    if not on & stage_set.LVDT_COMPLIANCE:
+        return x_pos
     return x_pos + compliance_deflection(hinge_moment_inlb, p[P.lvdt_compliance_deg_per_kinlb],
                                          p[P.lvdt_compliance_knee_inlb], p[P.lvdt_compliance_stiff_deg_per_kinlb])
 
 
 @jit
-def actuator_position(p: FloatArray, x: float, v: float) -> float:
+def actuator_position(p: FloatArray, x: float, v: float, on: int = stage_set.ALL) -> float:
     """Where the actuator is: the position, or ahead of it by ẋ/(2ζωn) when the loop closes on a filtered LVDT.
 
     Parameters
@@ -427,13 +506,15 @@ def actuator_position(p: FloatArray, x: float, v: float) -> float:
         The position state (deg).
     v : float
         Its rate (°/s).
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
     float
         The actuator's position (deg).
     """
-    if p[P.feedback_filter_in_loop] > 0.5:
+    if on & stage_set.IN_LOOP_FILTER and p[P.feedback_filter_in_loop] > 0.5:
         return float(x + v / (2.0 * p[P.zeta] * p[P.wn_rad_s]))
     return x
 
@@ -653,7 +734,8 @@ def linkage_step(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuato
 
 
 @jit
-def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, dydt: FloatArray) -> None:
+def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, dydt: FloatArray,
+                on: int = stage_set.ALL) -> None:
     """Stages 4–17 in continuous time: the state's derivatives into ``dydt`` (position limits are the integrator's).
 
     Parameters
@@ -668,13 +750,15 @@ def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float
         Hinge moment (in·lb).
     dydt : numpy.ndarray
         Filled with the derivatives.
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
     """
     if p[P.command_lag_hz] > 0.0:
         dydt[X.command_lag_deg] = TWO_PI * p[P.command_lag_hz] * (u - y[X.command_lag_deg])
     else:
         dydt[X.command_lag_deg] = 0.0
     a, _, _, integrand, drive_accel = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], y,
-                                            hinge_moment_inlb)
+                                            hinge_moment_inlb, 0.0, on)
     dydt[X.position_deg] = y[X.rate_dps]
     dydt[X.rate_dps] = a
     dydt[X.integral_deg_s] = integrand
@@ -682,16 +766,16 @@ def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float
     dydt[X.free_play_deg] = y[X.free_play_rate_dps]
     dydt[X.free_play_rate_dps] = free_play_accel(hinge_moment_inlb, p[P.surface_inertia_inlbs2])
     if p[P.feedback_lag_hz] > 0.0:
-        target = lvdt(p, y[X.position_deg], hinge_moment_inlb)
+        target = lvdt(p, y[X.position_deg], hinge_moment_inlb, on)
         dydt[X.feedback_lag_deg] = TWO_PI * p[P.feedback_lag_hz] * (target - y[X.feedback_lag_deg])
     else:
         dydt[X.feedback_lag_deg] = 0.0
-    tau_c = compliance_time_constant_s(p)
+    tau_c = compliance_time_constant_s(p) if on & stage_set.COMPLIANCE_LAG else 0.0
     if tau_c > 0.0 and p[P.linkage_freq_hz] <= 0.0:
-        dydt[X.compliance_deg] = (surface_compliance(p, hinge_moment_inlb) - y[X.compliance_deg]) / tau_c
+        dydt[X.compliance_deg] = (surface_compliance(p, hinge_moment_inlb, on) - y[X.compliance_deg]) / tau_c
     else:
         dydt[X.compliance_deg] = 0.0
-    if p[P.linkage_freq_hz] > 0.0:
+    if on & stage_set.LINKAGE and p[P.linkage_freq_hz] > 0.0:
         actuator_accel = drive_accel if p[P.feedback_filter_in_loop] > 0.5 else a
         dydt[X.linkage_deg] = y[X.linkage_rate_dps]
         dydt[X.linkage_rate_dps] = linkage_accel(p, y, hinge_moment_inlb, actuator_accel)
@@ -825,7 +909,7 @@ def history_read(y: FloatArray, hist: FloatArray, t: float) -> float:
 
 @jit
 def write_outputs(p: FloatArray, x: FloatArray, position_fb: float, hinge_moment_inlb: float, flags: int,
-                  row: FloatArray) -> None:
+                  row: FloatArray, on: int = stage_set.ALL) -> None:
     """Stages 12–17 seen from outside: LVDT position, surface angle, rate and flags into one output row.
 
     Parameters
@@ -842,16 +926,18 @@ def write_outputs(p: FloatArray, x: FloatArray, position_fb: float, hinge_moment
         The servo's flags (position and free-play flags are added here).
     row : numpy.ndarray
         The output row (:data:`~ema_sim.models.base.OUTPUT_FIELDS`).
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
     """
     row[O_POS] = position_fb
-    actuator = lvdt(p, actuator_position(p, x[X.position_deg], x[X.rate_dps]), hinge_moment_inlb)
-    half = 0.5 * p[P.free_play_deg]
-    if p[P.linkage_freq_hz] > 0.0:
+    actuator = lvdt(p, actuator_position(p, x[X.position_deg], x[X.rate_dps], on), hinge_moment_inlb, on)
+    half = 0.5 * p[P.free_play_deg] if on & stage_set.FREE_PLAY else 0.0
+    if on & stage_set.LINKAGE and p[P.linkage_freq_hz] > 0.0:
         row[O_SURF] = actuator + x[X.linkage_deg]
         in_free_play = half > 0.0 and abs(x[X.linkage_deg]) <= half
     else:
-        damped = compliance_time_constant_s(p) > 0.0
-        compliance = x[X.compliance_deg] if damped else surface_compliance(p, hinge_moment_inlb)
+        damped = bool(on & stage_set.COMPLIANCE_LAG) and compliance_time_constant_s(p) > 0.0
+        compliance = x[X.compliance_deg] if damped else surface_compliance(p, hinge_moment_inlb, on)
         row[O_SURF] = actuator + x[X.free_play_deg] + compliance
         in_free_play = half > 0.0 and abs(x[X.free_play_deg]) < half
     row[O_RATE] = x[X.rate_dps]

@@ -14,14 +14,18 @@ diverges at 800 Hz), the linkage mode by its exact step on each segment of its s
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.second_order import stage_set
 from ema_sim.models.second_order.figure26 import (
     command_path,
     compliance_gain,
+    compliance_time_constant_s,
+    drive_on,
     free_play_subsystem,
     history_read,
     history_write,
@@ -56,13 +60,17 @@ Kernel = Callable[[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, F
 """``kernel(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)``."""
 
 
-def make_euler(backward: bool) -> Kernel:
-    """The fixed-step kernel of one method, compiled with ``backward`` a constant (no per-step test of it).
+def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compiled loop
+    """The fixed-step kernel of one method and stage set, both compiled in as constants.
+
+    Neither is tested per step: the stages outside ``on`` are not in the machine code at all.
 
     Parameters
     ----------
     backward : bool
         LOADF's backward Euler with the look-ahead feedback, rather than LOADA's forward Euler.
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
@@ -70,8 +78,10 @@ def make_euler(backward: bool) -> Kernel:
         The compiled kernel (see :func:`run_discrete` for its arguments).
     """
 
-    def kernel(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
-               bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
+    def kernel(  # noqa: PLR0915 - the stages in diagram order, one step
+        params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
+        bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray,
+    ) -> None:
         k_samples = sample_t.shape[0]
         for i in range(params.shape[0]):
             p = params[i]
@@ -83,14 +93,18 @@ def make_euler(backward: bool) -> Kernel:
             g_cmd = lag_gain(p[P.command_lag_hz], dt)
             g_fb = lag_gain(p[P.feedback_lag_hz], dt)
             g_c = compliance_gain(p, dt)
-            half = 0.5 * p[P.free_play_deg] if free_play_subsystem(p) else 0.0
+            free_play = bool(on & stage_set.FREE_PLAY) and free_play_subsystem(p)
+            half = 0.5 * p[P.free_play_deg] if free_play else 0.0
             fp_acc_per_inlb = free_play_accel(1.0, p[P.surface_inertia_inlbs2])
-            linkage = p[P.linkage_freq_hz] > 0.0
+            linkage = bool(on & stage_set.LINKAGE) and p[P.linkage_freq_hz] > 0.0
             link_steps = linkage_steps(p, dt) if linkage else np.empty((3, 6))
-            in_loop = p[P.feedback_filter_in_loop] > 0.5
-            fb_delay = p[P.feedback_delay_s]
+            in_loop = bool(on & stage_set.IN_LOOP_FILTER) and p[P.feedback_filter_in_loop] > 0.5
+            fb_delay = p[P.feedback_delay_s] if on & stage_set.FEEDBACK_DELAY else 0.0
+            integral = bool(on & stage_set.INTEGRAL) and p[P.integral_hz] > 0.0
+            drive = bool(on & stage_set.DRIVE) and drive_on(p)
+            damped = bool(on & stage_set.COMPLIANCE_LAG) and compliance_time_constant_s(p) > 0.0
             hm = bp_h[i, zoh_index(bp_t, t0, 0)]
-            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt)
+            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt, on)
             fb_prev = x[X.feedback_lag_deg]
             for k in range(n_steps + 1):
                 t = t0 + k * dt
@@ -101,7 +115,7 @@ def make_euler(backward: bool) -> Kernel:
                 while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
                     if fb_delay > 0.0:
                         fb = history_read(x, hist, sample_t[js] - fb_delay)
-                    write_outputs(p, x, fb, hm, flags, out[i, js])
+                    write_outputs(p, x, fb, hm, flags, out[i, js], on)
                     js += 1
                 if k == n_steps:
                     break
@@ -113,34 +127,53 @@ def make_euler(backward: bool) -> Kernel:
                 # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
                 pos, rate = x[X.position_deg], x[X.rate_dps]
                 a, flags, _, integrand, drive_accel = servo(p, x[X.command_lag_deg],
-                                                            pos + dt * rate if backward else pos, rate, x, hm, dt)
+                                                            pos + dt * rate if backward else pos, rate, x, hm, dt, on)
                 pos, rate = euler_pair(pos, rate, a, dt, backward)
                 x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
                                                                            p[P.position_max_deg])
-                x[X.integral_deg_s] += dt * integrand
-                x[X.drive_rate_dps] += dt * drive_accel
+                if integral:
+                    x[X.integral_deg_s] += dt * integrand
+                if drive:
+                    x[X.drive_rate_dps] += dt * drive_accel
                 # stage 15: free play; 17: the linkage mode (its exact step on the spring's segment)
-                x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
-                    x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
+                if free_play:
+                    x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
+                        x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
                 if linkage:
                     x[X.linkage_deg], x[X.linkage_rate_dps] = linkage_step(p, x, hm, drive_accel if in_loop else a,
                                                                            link_steps)
                 # stages 12-13: LVDT and its feedback lag (gain 1 when off); 16: compliance
                 fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
-                x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm), g_fb)
-                x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm), g_c)
+                x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm, on), g_fb)
+                if damped:  # read only when damped (an undamped compliance is its static deflection)
+                    x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm, on), g_c)
 
-    compiled: Kernel = compile_closure(kernel, "backward" if backward else "forward")
+    compiled: Kernel = compile_closure(kernel, f"{'backward' if backward else 'forward'}_{on}")
     return compiled
 
 
-KERNELS: dict[int, Kernel] = {METHOD_FORWARD_EULER: make_euler(False), METHOD_LOADF: make_euler(True)}
-"""The compiled kernel of each method."""
+@functools.cache
+def kernel(method: int, on: int) -> Kernel:
+    """The compiled kernel of a method and a stage set (compiled on first use, then cached on disk).
+
+    Parameters
+    ----------
+    method : int
+        :data:`METHOD_FORWARD_EULER` (LOADA) or :data:`METHOD_LOADF`.
+    on : int
+        The stages that may be on (:func:`~.stage_set.kernel_set`).
+
+    Returns
+    -------
+    callable
+        The kernel (see :func:`run_discrete` for its arguments).
+    """
+    return make_euler(method == METHOD_LOADF, on)
 
 
 def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
                  bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, method: int,
-                 out: FloatArray) -> None:
+                 out: FloatArray, on: int = stage_set.ALL) -> None:
     """Fixed-step LOADA/LOADF kernel: every instance through ``n_steps`` steps from ``t0``.
 
     A sample at time s reads the state of the last step at or before s (a DAU sampling a
@@ -172,5 +205,8 @@ def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp
         :data:`METHOD_FORWARD_EULER` (LOADA) or :data:`METHOD_LOADF`.
     out : numpy.ndarray
         Output block ``(instances, samples, outputs)``, filled.
+    on : int
+        The stages that may be on (:func:`~.stage_set.kernel_set`; :data:`~.stage_set.ALL` decides each
+        by its parameter).
     """
-    KERNELS[method](params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)
+    kernel(method, on)(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out)

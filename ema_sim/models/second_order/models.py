@@ -17,10 +17,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ema_sim.config import ChannelConfig, load_channel
-from ema_sim.errors import EmaError
+from ema_sim.errors import ConfigError, EmaError
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
-from ema_sim.models.second_order.figure26 import HISTORY_SIZE, trim
+from ema_sim.models.second_order import stage_set
+from ema_sim.models.second_order.figure26 import HISTORY_SIZE, stages_on_any, trim
 from ema_sim.models.second_order.loac import run_continuous
 from ema_sim.models.second_order.loada import METHOD_FORWARD_EULER, METHOD_LOADF, run_discrete
 from ema_sim.models.second_order.params import N_STATE, SECTION, P, SecondOrderParams, X
@@ -62,13 +63,15 @@ class SecondOrderModel(ActuatorModel):
             n = len(params)
         super().__init__(channel, n=n, rate_hz=rate_hz)
         if params is not None and overrides:
-            raise ValueError("give either params or keyword overrides, not both")
+            raise ConfigError("give either params or keyword overrides, not both")
         self.params: list[SecondOrderParams] = batch_params(
             params, self.n, lambda: self.default_params(self.channel, **overrides)
         )
         for prm in self.params:
             prm.validate()
         self._P = np.stack([prm.vector() for prm in self.params])
+        self._on = stage_set.kernel_set(int(stages_on_any(self._P)))
+        """The stage set the fixed-step kernel is compiled for."""
         self._max_delay_s = float(self._P[:, P.delay_s].max())
         self._X = np.zeros((self.n, N_STATE))
         delayed = bool(np.any(self._P[:, P.feedback_delay_s] > 0.0))
@@ -127,7 +130,7 @@ class Loada(SecondOrderModel):
         t0 = self._steps * dt
         n_steps = max(math.floor((t_end - t0) / dt + 1e-6), 0)
         out = np.empty((self.n, sample_t.size, N_OUT))
-        run_discrete(self._P, self._X, self._H, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, self.method, out)
+        run_discrete(self._P, self._X, self._H, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, self.method, out, self._on)
         self._steps += n_steps
         return out
 

@@ -9,26 +9,31 @@ parameters, so identification can fit it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.second_order import stage_set
 from ema_sim.models.second_order.figure26 import (
+    derivatives,
     max_step_s,
     servo,
     servo_input,
+    stages_on,
 )
 from ema_sim.models.second_order.figure29 import free_play_exact
-from ema_sim.models.second_order.loac import at_stop, rhs
+from ema_sim.models.second_order.loac import at_stop
 from ema_sim.models.second_order.params import P, X
-from ema_sim.models.stages import TIME_EPS_S, limited_integrator, zoh_index
+from ema_sim.models.stages import TIME_EPS_S, compile_closure, limited_integrator, zoh_index
 
 SWITCH_TOL_S = 1e-10
 """How closely a switch of the rate limit or dead zone is located inside an RK4 step."""
 
 
 @nb.njit(cache=True)
-def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray) -> int:
+def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray, on: int = stage_set.ALL) -> int:
     """Which smooth piece of the right-hand side ``y`` is on (rate limit side × dead-zone side).
 
     Parameters
@@ -39,19 +44,21 @@ def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray) -> int:
         State.
     u : numpy.ndarray
         ``[command after stages 1–3, hinge moment]``.
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
 
     Returns
     -------
     int
         The piece (see :func:`~ema_sim.models.second_order.figure26.servo`).
     """
-    _, _, piece, _, _ = servo(p, servo_input(p, y, u[0]), y[X.position_deg], y[X.rate_dps], y, u[1])
+    _, _, piece, _, _ = servo(p, servo_input(p, y, u[0]), y[X.position_deg], y[X.rate_dps], y, u[1], 0.0, on)
     return piece
 
 
 @nb.njit(cache=True)
 def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArray, k2: FloatArray, k3: FloatArray,
-             k4: FloatArray, yt: FloatArray, out: FloatArray) -> None:
+             k4: FloatArray, yt: FloatArray, out: FloatArray, on: int = stage_set.ALL) -> None:
     """One RK4 step of the actuator states from ``y`` into ``out``; free play solved exactly.
 
     Parameters
@@ -68,18 +75,20 @@ def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArr
         Work arrays, one state long.
     out : numpy.ndarray
         The state at the end of the step.
+    on : int
+        The stages that may be on (:mod:`.stage_set`).
     """
     n = y.shape[0]
-    rhs(0.0, y, p, u, k1)
+    derivatives(p, y, u[0], u[1], k1, on)
     for a in range(n):
         yt[a] = y[a] + 0.5 * h * k1[a]
-    rhs(0.0, yt, p, u, k2)
+    derivatives(p, yt, u[0], u[1], k2, on)
     for a in range(n):
         yt[a] = y[a] + 0.5 * h * k2[a]
-    rhs(0.0, yt, p, u, k3)
+    derivatives(p, yt, u[0], u[1], k3, on)
     for a in range(n):
         yt[a] = y[a] + h * k3[a]
-    rhs(0.0, yt, p, u, k4)
+    derivatives(p, yt, u[0], u[1], k4, on)
     for a in range(n):
         out[a] = y[a] + h / 6.0 * (k1[a] + 2.0 * k2[a] + 2.0 * k3[a] + k4[a])
     out[X.free_play_deg] = y[X.free_play_deg]
@@ -89,10 +98,85 @@ def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArr
                                                                  p[P.position_min_deg], p[P.position_max_deg])
 
 
-@nb.njit(cache=True, parallel=True)
+PARALLEL_SPAN_S = 0.05
+"""A batch runs its instances on parallel threads only over at least this much simulated time: a thread pool's
+start and join cost more than a trim or a frame (under load, the other thread may not be scheduled for
+milliseconds), and the outputs are the same bit for bit either way."""
+
+
+def make_rk4(parallel: bool) -> Callable[..., None]:
+    """The RK4 kernel compiled with its instances in parallel threads or in one.
+
+    Parameters
+    ----------
+    parallel : bool
+        Run the instances on Numba's thread pool.
+
+    Returns
+    -------
+    callable
+        The kernel (see :func:`run_rk4` for its arguments).
+    """
+
+    def kernel(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
+               bp_h: FloatArray, t0: float, t_end: float, h_max: float, sample_t: FloatArray, out: FloatArray) -> None:
+        for i in nb.prange(params.shape[0]):
+            p = params[i]
+            y = states[i]
+            hist = history[i]
+            on = stages_on(p)
+            n = y.shape[0]
+            u = np.empty(2)
+            k1 = np.empty(n)
+            k2 = np.empty(n)
+            k3 = np.empty(n)
+            k4 = np.empty(n)
+            yt = np.empty(n)
+            y1 = np.empty(n)
+            t = t0
+            jd = zoh_index(bp_t, t - p[P.delay_s], 0)
+            jh = zoh_index(bp_t, t, 0)
+            js = 0
+            jf = 0
+            while True:
+                js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, js, jf, sample_t,
+                                         out[i], u)
+                if t >= t_end - TIME_EPS_S:
+                    break
+                while t_next - t > TIME_EPS_S:
+                    h = min(h_max, max_step_s(p), t_next - t)
+                    s0 = smooth_piece(p, y, u, on)
+                    rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)
+                    if smooth_piece(p, y1, u, on) != s0 and h > SWITCH_TOL_S:
+                        lo = 0.0  # the step to the switch: last length still on s0's piece
+                        hi = h
+                        while hi - lo > SWITCH_TOL_S:
+                            mid = 0.5 * (lo + hi)
+                            rk4_step(p, y, u, mid, k1, k2, k3, k4, yt, y1, on)
+                            if smooth_piece(p, y1, u, on) == s0:
+                                lo = mid
+                            else:
+                                hi = mid
+                        h = hi
+                        rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)
+                    for a in range(n):
+                        y[a] = y1[a]
+                    t += h
+                t = t_next
+                jd = zoh_index(bp_t, t - p[P.delay_s], jd)
+                jh = zoh_index(bp_t, t, jh)
+
+    compiled: Callable[..., None] = compile_closure(kernel, "parallel" if parallel else "serial", parallel=parallel)
+    return compiled
+
+
+_SERIAL = make_rk4(False)
+_PARALLEL = make_rk4(True)
+
+
 def run_rk4(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
             bp_h: FloatArray, t0: float, t_end: float, h_max: float, sample_t: FloatArray, out: FloatArray) -> None:
-    """Second-order kernel for identification; instances run in parallel threads.
+    """Second-order kernel for identification; a batch over a long span runs its instances in parallel threads.
 
     Parameters
     ----------
@@ -119,46 +203,5 @@ def run_rk4(params: FloatArray, states: FloatArray, history: FloatArray, bp_t: F
     out : numpy.ndarray
         Output block ``(instances, samples, outputs)``, filled.
     """
-    for i in nb.prange(params.shape[0]):
-        p = params[i]
-        y = states[i]
-        hist = history[i]
-        n = y.shape[0]
-        u = np.empty(2)
-        k1 = np.empty(n)
-        k2 = np.empty(n)
-        k3 = np.empty(n)
-        k4 = np.empty(n)
-        yt = np.empty(n)
-        y1 = np.empty(n)
-        t = t0
-        jd = zoh_index(bp_t, t - p[P.delay_s], 0)
-        jh = zoh_index(bp_t, t, 0)
-        js = 0
-        jf = 0
-        while True:
-            js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, js, jf, sample_t, out[i], u)
-            if t >= t_end - TIME_EPS_S:
-                break
-            while t_next - t > TIME_EPS_S:
-                h = min(h_max, max_step_s(p), t_next - t)
-                s0 = smooth_piece(p, y, u)
-                rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1)
-                if smooth_piece(p, y1, u) != s0 and h > SWITCH_TOL_S:
-                    lo = 0.0  # the step to the switch: last length still on s0's piece
-                    hi = h
-                    while hi - lo > SWITCH_TOL_S:
-                        mid = 0.5 * (lo + hi)
-                        rk4_step(p, y, u, mid, k1, k2, k3, k4, yt, y1)
-                        if smooth_piece(p, y1, u) == s0:
-                            lo = mid
-                        else:
-                            hi = mid
-                    h = hi
-                    rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1)
-                for a in range(n):
-                    y[a] = y1[a]
-                t += h
-            t = t_next
-            jd = zoh_index(bp_t, t - p[P.delay_s], jd)
-            jh = zoh_index(bp_t, t, jh)
+    kernel = _PARALLEL if params.shape[0] > 1 and t_end - t0 >= PARALLEL_SPAN_S else _SERIAL
+    kernel(params, states, history, bp_t, bp_u, bp_h, t0, t_end, h_max, sample_t, out)

@@ -1,0 +1,310 @@
+"""What an export carries: the model, its parameter values, its rate and method, and where they come from.
+
+An :class:`ExportTarget` is resolved from a registry model (``loada``, ``loadf``; ``loac`` and
+``second_order`` discretised as LOADA) or from an identification report (the JSON ``ema identify
+--json`` writes): its final model's fitted parameters on the declared model's others. It names the
+*truth*, the ema_sim model the artefact is verified against, and travels with the artefact as a
+manifest (:meth:`ExportTarget.manifest`), so ``ema verify`` rebuilds the same truth from the artefact
+alone. What cannot be exported is said in :data:`NOT_EXPORTABLE`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ema_sim import __version__
+from ema_sim.config import load_channel
+from ema_sim.errors import EmaError
+from ema_sim.export.csource import ModelValues
+from ema_sim.models import ActuatorModel, create
+from ema_sim.models.second_order.params import SecondOrderParams
+
+DISCRETE: dict[str, tuple[float, bool]] = {"loada": (800.0, False), "loadf": (200.0, True)}
+"""The exported kernels: registry name → (default rate, backward Euler)."""
+CONTINUOUS = ("loac", "second_order")
+"""Second-order models exported through LOADA's kernel at a fixed rate (their discretisation error is measured)."""
+NOT_EXPORTABLE: dict[str, str] = {
+    "hoac1": "the continuous high-order model (figure 30: motor, current loop, PWM, gear backlash, friction, brake, "
+             "bus) is integrated by an adaptive Dormand-Prince with located events; no fixed-step C transcription "
+             "of its kernel exists yet",
+    "hoad2": "the high-order discrete kernel (figures 30, 32) is not transcribed to C yet; its command and feedback "
+             "noise come from numpy's random streams, which a C port reproduces only with the noise off",
+    "hoad3": "the high-order discrete kernel with figure 33's three-segment compliance curves and the feedback delay "
+             "is not transcribed to C yet (a 10 kHz kernel of many states and switches; the second-order family came "
+             "first); its noise comes from numpy's random streams, which a C port reproduces only with the noise off",
+    "sloac": "a linear model built with python-control: exportable as its zero-order-hold state space, not done yet",
+    "hoalm": "a linear model (HOAD3 linearised with python-control): exportable as its zero-order-hold state space, "
+             "not done yet",
+    "loes": "a linear second order with a pure delay fitted to HOAD3 (python-control): exportable as its "
+            "zero-order-hold state space and a delay line, not done yet",
+}
+"""Registry models ``ema export`` refuses, and why."""
+
+
+class ExportError(EmaError):
+    """A model or report that cannot be exported, or an artefact that cannot be read."""
+
+
+@dataclass(frozen=True)
+class ExportTarget:
+    """One model to export: the kernel, its values, and the truth it is verified against.
+
+    Parameters
+    ----------
+    model : str
+        The exported kernel: ``loada`` or ``loadf``.
+    truth : str
+        The registry model that is the truth (``loada``, ``loadf``, ``loac``, ``second_order``).
+    channel : str
+        The channel.
+    params : SecondOrderParams
+        Every parameter's value.
+    rate_hz : float
+        The model's rate (its fixed step is ``1/rate_hz``).
+    backward : bool
+        LOADF's backward Euler with the look-ahead feedback.
+    source : str
+        Where the values come from (``registry``, or the report's path).
+    notes : list of str
+        What a user must know (a reversed hinge moment, a discretised continuous model).
+    """
+
+    model: str
+    truth: str
+    channel: str
+    params: SecondOrderParams
+    rate_hz: float
+    backward: bool
+    source: str = "registry"
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def description(self) -> str:
+        """One line: the model, channel, rate and source."""
+        method = "backward Euler, feedback one frame ahead (LOADF)" if self.backward else "forward Euler (LOADA)"
+        truth = "" if self.truth == self.model else f"; truth {self.truth}"
+        return (f"X-43A EMA {self.model} ({self.channel}) at {self.rate_hz:g} Hz, {method}, NASA/TM-2008-214637 "
+                f"figure 26; values from {self.source}{truth}; exported by ema_sim {__version__}")
+
+    def values(self) -> ModelValues:
+        """What the C sources hold.
+
+        Returns
+        -------
+        ModelValues
+            Name, description, parameters, rate, method.
+        """
+        return ModelValues(self.model, self.description, self.params, self.rate_hz, self.backward)
+
+    def truth_model(self) -> ActuatorModel:
+        """The ema_sim model the artefact is verified against, with the same values.
+
+        Returns
+        -------
+        ActuatorModel
+            One instance.
+        """
+        if self.truth in CONTINUOUS:
+            return create(self.truth, self.channel, params=self.params)
+        return create(self.truth, self.channel, params=self.params, rate_hz=self.rate_hz)
+
+    def manifest(self, artefact: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The provenance an artefact carries (what ``ema verify`` reads back).
+
+        Parameters
+        ----------
+        artefact : str
+            ``fmu``, ``c`` or ``jsbsim``.
+        extra : dict, optional
+            More keys (the stages a JSBSim system leaves out...).
+
+        Returns
+        -------
+        dict
+            JSON-ready (infinite values as strings).
+        """
+        return {
+            "artefact": artefact, "model": self.model, "truth": self.truth, "channel": self.channel,
+            "rate_hz": self.rate_hz, "backward": self.backward, "source": self.source, "notes": self.notes,
+            "params": {k: _json_float(v) for k, v in self.params.as_dict().items()},
+            "ema_sim": __version__, **(extra or {}),
+        }
+
+
+def _json_float(x: float) -> float | str:
+    return x if math.isfinite(x) else ("inf" if x > 0 else "-inf")
+
+
+def _from_json_float(x: float | str) -> float:
+    return float(x)
+
+
+def from_manifest(doc: dict[str, Any]) -> ExportTarget:
+    """The target an artefact's manifest describes.
+
+    Parameters
+    ----------
+    doc : dict
+        :meth:`ExportTarget.manifest`'s dict.
+
+    Returns
+    -------
+    ExportTarget
+        The same target.
+    """
+    try:
+        params = SecondOrderParams(**{k: _from_json_float(v) for k, v in doc["params"].items()})
+        params.validate()
+        return ExportTarget(model=str(doc["model"]), truth=str(doc["truth"]), channel=str(doc["channel"]),
+                            params=params, rate_hz=float(doc["rate_hz"]), backward=bool(doc["backward"]),
+                            source=str(doc.get("source", "registry")), notes=list(doc.get("notes", [])))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ExportError(f"the artefact's ema_sim manifest is incomplete or malformed ({exc})") from None
+
+
+def resolve(spec: str, channel: str | None = None, *, rate_hz: float | None = None,
+            overrides: dict[str, float] | None = None) -> ExportTarget:
+    """The target of ``ema export MODEL_OR_REPORT``: a registry name, or the path of an identification report.
+
+    Parameters
+    ----------
+    spec : str
+        ``loada``, ``loadf``, ``loac``, ``second_order``, or a ``.json`` report.
+    channel : str, optional
+        The channel (a report's own by default; ``left_wing`` for a registry model).
+    rate_hz : float, optional
+        The rate (the model's own by default; 800 Hz for a continuous model).
+    overrides : dict, optional
+        Parameter values that replace the model's.
+
+    Returns
+    -------
+    ExportTarget
+        The target.
+    """
+    path = Path(spec)
+    if spec.lower().endswith(".json") or path.is_file():
+        target = from_report(path, channel, rate_hz=rate_hz)
+    else:
+        target = from_registry(spec, channel or "left_wing", rate_hz=rate_hz)
+    if overrides:
+        unknown = set(overrides) - set(target.params.as_dict())
+        if unknown:
+            raise ExportError(f"unknown second-order parameter(s): {', '.join(sorted(unknown))}")
+        target = ExportTarget(target.model, target.truth, target.channel, target.params.replace(**overrides),
+                              target.rate_hz, target.backward, target.source,
+                              [*target.notes, "overrides: " + ", ".join(f"{k}={v:g}" for k, v in overrides.items())])
+    return target
+
+
+def _kernel_for(truth: str, rate_hz: float | None) -> tuple[str, float, bool]:
+    if truth in DISCRETE:
+        rate, backward = DISCRETE[truth]
+        return truth, rate if rate_hz is None else float(rate_hz), backward
+    return "loada", 800.0 if rate_hz is None else float(rate_hz), False
+
+
+def _check_model(name: str) -> None:
+    if name in NOT_EXPORTABLE:
+        raise ExportError(f"{name} is not exportable: {NOT_EXPORTABLE[name]}")
+    if name not in (*DISCRETE, *CONTINUOUS):
+        known = ", ".join((*DISCRETE, *CONTINUOUS))
+        raise ExportError(f"unknown model {name!r}; exportable: {known} (or an `ema identify --json` report)")
+
+
+def from_registry(name: str, channel: str, *, rate_hz: float | None = None) -> ExportTarget:
+    """A registry model with its channel's values.
+
+    Parameters
+    ----------
+    name : str
+        Registry name.
+    channel : str
+        The channel.
+    rate_hz : float, optional
+        The rate (the model's own by default).
+
+    Returns
+    -------
+    ExportTarget
+        The target.
+    """
+    key = name.strip().lower()
+    _check_model(key)
+    if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        raise ExportError(f"the rate must be a positive number of Hz, got {rate_hz!r}")
+    kernel, rate, backward = _kernel_for(key, rate_hz)
+    model = create(key, channel)
+    params = model.params[0]  # type: ignore[attr-defined]
+    notes = []
+    if key in CONTINUOUS:
+        notes.append(f"{key} is continuous: exported as LOADA's forward Euler at {rate:g} Hz; `ema verify` measures "
+                     f"that discretisation against {key}")
+    return ExportTarget(kernel, key, model.channel.channel, params, rate, backward, "registry", notes)
+
+
+def from_report(path: Path, channel: str | None = None, *, rate_hz: float | None = None) -> ExportTarget:
+    """An identification report's final model: its fitted parameters on the declared model's others.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The JSON ``ema identify --json`` wrote.
+    channel : str, optional
+        Must be the report's channel when given.
+    rate_hz : float, optional
+        The rate (the declared model's own; 800 Hz for a continuous one).
+
+    Returns
+    -------
+    ExportTarget
+        The target.
+    """
+    from ema_sim.identify.effects import KEYS  # noqa: PLC0415 - the identify package only for reports
+
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        final = doc["final"]
+        declared = str(doc["baseline"]["model"])
+        report_channel = str(doc["channel"])
+        fitted = {str(k): float(v) for k, v in final["params"].items()}
+        fields = {str(k): str(v) for k, v in final.get("fields", {}).items()}
+    except FileNotFoundError:
+        raise ExportError(f"{path}: no such report") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ExportError(f"{path}: not an `ema identify --json` report ({exc})") from None
+    if channel is not None and channel != report_channel:
+        raise ExportError(f"{path} identifies channel {report_channel}, not {channel}")
+    name = str(final.get("model", declared))
+    if "curves" in final or "physical" in name:
+        raise ExportError(f"{path}: the final model {name!r} is the high-order model's physics; "
+                          f"{NOT_EXPORTABLE['hoad3']}")
+    if "discovered" in name:
+        raise ExportError(f"{path}: the final model {name!r} has a term discovery found beyond the vocabulary; it has "
+                          "no stage in the exported C model")
+    _check_model(declared)
+    base: SecondOrderParams = create(declared, load_channel(report_channel)).params[0]  # type: ignore[attr-defined]
+    values: dict[str, float] = {}
+    for reported, value in fitted.items():
+        key = fields.get(reported, "hysteresis_freq_hz" if reported == "load_freq_hz" else reported)
+        if key not in base.as_dict():
+            raise ExportError(f"{path}: the final model's parameter {reported!r} is not a second-order parameter")
+        factor = KEYS[key].factor(base) if key in KEYS and reported != key else 1.0
+        values[key] = value / factor
+    try:
+        params = base.replace(**values)
+    except EmaError as exc:
+        raise ExportError(f"{path}: {exc}") from None
+    kernel, rate, backward = _kernel_for(declared, rate_hz)
+    notes = [f"identified: {name}"]
+    if final.get("hinge_moment_reversed"):
+        notes.append("the report found the record's hinge moment reversed: the export takes ema_sim's convention "
+                     "(positive aids positive deflection); feed it the hinge moment with that sign")
+    if declared in CONTINUOUS:
+        notes.append(f"declared model {declared} is continuous: exported as LOADA's forward Euler at {rate:g} Hz; "
+                     f"`ema verify` measures that discretisation against {declared}")
+    return ExportTarget(kernel, declared, report_channel, params, rate, backward, str(path), notes)
