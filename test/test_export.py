@@ -19,11 +19,11 @@ from ema_sim import parameters as pm
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.errors import EmaError
-from ema_sim.export import csource, fmu, harness, jsbsim_system
+from ema_sim.export import csource, fmu, harness, jsbsim_system, lti
 from ema_sim.export.artefacts import open_artefact
 from ema_sim.export.cstages import STAGES
 from ema_sim.export.diagnose import diagnose
-from ema_sim.export.target import ExportError, resolve
+from ema_sim.export.target import LINEAR, NOT_EXPORTABLE, ExportError, resolve
 from ema_sim.export.verify import compare, sign_and_units, verify
 from ema_sim.io.csv import MeasuredData, write_csv
 from ema_sim.models import create
@@ -668,7 +668,7 @@ def test_a_final_model_without_a_c_stage_is_refused(tmp_path, final, words):
         resolve(str(_report(tmp_path, final)))
 
 
-@pytest.mark.parametrize("name", ["hoad3", "hoac1", "loes"])
+@pytest.mark.parametrize("name", ["hoad3", "hoac1", "hoad2"])
 def test_a_model_not_exportable_says_why_in_one_line(tmp_path, capsys, name):
     assert main(["export", name, "--c", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
@@ -689,3 +689,81 @@ def test_the_cli_exports_and_verifies(tmp_path, capsys):
     assert report["model"] == "loada"
     assert main(["verify", str(xml), "--channel", "left_wing"]) == 2
     assert "right_rudder" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------ linear models
+@pytest.fixture(scope="module")
+def linear_exports(tmp_path_factory):
+    """LOES's, HOALM's and SLOAC's FMUs and C exports for left_wing (built once)."""
+    d = tmp_path_factory.mktemp("linear")
+    out = {}
+    for name in LINEAR:
+        target = resolve(name, "left_wing")
+        harness.write_c(target, d / f"{name}_c")
+        out[name] = (fmu.build_fmu(target, d / f"{name}.fmu"), d / f"{name}_c")
+    return out
+
+
+@pytest.mark.parametrize("name", LINEAR)
+def test_a_linear_models_fmu_and_c_are_its_zoh_kernel_bit_for_bit(linear_exports, name):
+    """The state space, the delay lines and the sampling of run_lti: every difference 0, the checks passed."""
+    path, c_dir = linear_exports[name]
+    assert validate_fmu(str(path)) == []
+    assert name not in NOT_EXPORTABLE
+    for where in (path, c_dir):
+        art = open_artefact(where)
+        try:
+            assert art.target.model == art.target.truth == name
+            result = verify(art, SHORT[1:])
+        finally:
+            art.close()
+        assert result.passed, "\n".join(result.lines())
+        assert result.tolerance_deg == 1e-9
+        assert all(v == 0.0 for c in result.comparisons for v in c.max_abs_deg.values()), "\n".join(result.lines())
+
+
+def test_a_linear_fmu_declares_its_delays_fixed_and_refuses_another_value(linear_exports, capsys):
+    path, _ = linear_exports["hoalm"]
+    md = fmpy.read_model_description(str(path))
+    params = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
+    assert set(params) == {"delay_s", "position_delay_s"}
+    assert all(v.variability == "fixed" for v in params.values())
+    assert float(params["delay_s"].start) == 0.004
+    assert float(params["position_delay_s"].start) == 0.002
+    assert float(md.defaultExperiment.stepSize) == 1e-4
+    capsys.readouterr()
+    with pytest.raises(Exception, match="ExitInitializationMode"):
+        fmpy.simulate_fmu(str(path), stop_time=0.01, output_interval=1e-4, start_values={"delay_s": 0.01})
+    assert "export the model again" in capsys.readouterr().out
+
+
+def test_a_linear_models_delays_are_whole_steps_as_the_kernel_reads_them():
+    assert lti.delay_steps(0.004, 1e-4) == 40
+    assert lti.delay_steps(0.0, 1e-4) == 0
+    assert lti.delay_steps(0.00852325, 1e-4) == 86  # the latest breakpoint at or before k·dt − delay
+    assert lti.delay_steps(0.00123, 1.0 / 3000.0) == 4
+
+
+def test_a_linear_model_has_no_jsbsim_system_and_says_why(tmp_path, capsys):
+    assert main(["export", "loes", "--jsbsim", str(tmp_path / "loes.xml"), "--c", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "no discrete state-space component" in err
+    assert not (tmp_path / "loes.xml").exists()
+    with pytest.raises(ExportError, match="no JSBSim system"):
+        jsbsim_system.system_xml(resolve("sloac"))
+
+
+def test_a_linear_models_overrides_and_rate_reach_its_truth(tmp_path):
+    target = resolve("loes", "left_wing", rate_hz=3000.0, overrides={"delay_s": 0.00123})
+    assert target.truth_model().delay_s == 0.00123
+    harness.write_c(target, tmp_path / "c")
+    art = open_artefact(tmp_path / "c")
+    try:
+        assert art.target.options == {"delay_s": 0.00123}
+        assert art.rate_hz == 3000.0
+        result = verify(art, [("hold:value_deg=2,hold_s=0.2", None), SHORT[0]])
+    finally:
+        art.close()
+    assert result.passed, "\n".join(result.lines())
+    with pytest.raises(ExportError, match="unknown LOES parameter"):
+        resolve("loes", overrides={"nope": 1.0})

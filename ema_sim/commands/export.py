@@ -20,6 +20,10 @@ def run_export(args: argparse.Namespace) -> int:
     if not (args.fmu or args.jsbsim or args.c):
         raise ExportError("say what to write: --fmu OUT.fmu, --jsbsim OUT.xml and/or --c DIR")
     target = resolve(args.model, args.channel, rate_hz=args.rate, overrides=parse_overrides(args.overrides))
+    if args.jsbsim and target.linear:
+        from ema_sim.export.target import LINEAR_NO_JSBSIM  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+
+        raise ExportError(f"{target.model}: {LINEAR_NO_JSBSIM}")
     print(target.description)
     for note in target.notes:
         print(f"  note: {note}")
@@ -103,8 +107,10 @@ def register(sub: Any) -> None:
     """Add ``export`` and ``verify`` to the ``ema`` parser."""
     p = sub.add_parser("export", help="export a model as an FMI 2.0 FMU, a JSBSim system or C sources",
                        description="Export a second-order model (loada, loadf; loac and second_order through LOADA's "
-                                   "kernel) or an `ema identify --json` report's final model.")
-    p.add_argument("model", metavar="MODEL_OR_REPORT", help="loada, loadf, loac, second_order, or a report .json")
+                                   "kernel), a linear model (loes, hoalm, sloac: its zero-order-hold state space; "
+                                   "FMU and C) or an `ema identify --json` report's final model.")
+    p.add_argument("model", metavar="MODEL_OR_REPORT",
+                   help="loada, loadf, loac, second_order, loes, hoalm, sloac, or a report .json")
     p.add_argument("--channel", default=None, help="EMAC channel (default left_wing; a report's own)")
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="override a model parameter (repeatable)")

@@ -125,6 +125,15 @@ def header() -> str:
     return "\n".join(lines)
 
 
+PARAM_INDEX = r"""int ema_param_index(const char *name) {
+    for (int i = 0; i < EMA_N_PARAMS; i++) {
+        if (strcmp(name, ema_param_names[i]) == 0) return i;
+    }
+    return -1;
+}
+"""
+"""The C API's parameter lookup by name, shared by every kernel an export writes (figure 26's, the linear models')."""
+
 API = r"""/* ---- the model's own values (ema_config.c) ---- */
 extern const char *const ema_model_name;        /* "loada", "loadf" */
 extern const char *const ema_model_description;
@@ -221,13 +230,7 @@ struct ema_model {
     double out[EMA_N_OUT];
 };
 
-int ema_param_index(const char *name) {
-    for (int i = 0; i < EMA_N_PARAMS; i++) {
-        if (strcmp(name, ema_param_names[i]) == 0) return i;
-    }
-    return -1;
-}
-
+""" + PARAM_INDEX + r"""
 int ema_check_params(const double *p, double rate_hz, char *msg, size_t msg_size) {
     if (!(isfinite(rate_hz) && rate_hz > 0.0)) {
         snprintf(msg, msg_size, "rate must be a positive number of Hz, got %g", rate_hz);

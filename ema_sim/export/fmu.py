@@ -27,7 +27,7 @@ from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
 from ema_sim import parameters as pm
-from ema_sim.export import csource
+from ema_sim.export import csource, harness, lti
 from ema_sim.export.target import ExportError, ExportTarget
 from ema_sim.models.second_order.params import P, SecondOrderParams
 
@@ -470,6 +470,8 @@ def guid(target: ExportTarget) -> str:
     """
     key = f"{target.model}|{target.channel}|{target.rate_hz!r}|{target.backward}|" + ",".join(
         repr(float(v)) for v in target.params.vector())
+    if target.options:
+        key += "|" + ",".join(f"{k}={v!r}" for k, v in sorted(target.options.items()))
     return "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "ema_sim:" + key)) + "}"
 
 
@@ -548,7 +550,12 @@ def model_description(target: ExportTarget) -> str:
     variables.append(f'    <ScalarVariable name="flags" valueReference="{FLAGS_VR}" causality="output" '
                      'variability="discrete" initial="calculated" description="limit flags: 1 rate, 2 position, '
                      '4 free-play stop, 8 threshold, 16 current">\n      <Integer/>\n    </ScalarVariable>')
-    metas = pm.metas(SecondOrderParams)
+    if target.linear:
+        for slot, (name, unit, desc, value) in enumerate(lti.parameter_rows(target)):
+            units.add(unit)
+            variables.append(_real(name, PARAM_VR0 + slot, "parameter", "fixed", desc, unit=unit, start=value,
+                                   initial="exact", lo=value, hi=value))
+    metas = {} if target.linear else pm.metas(SecondOrderParams)
     vector = target.params.vector()
     for name, m in metas.items():
         if m.kernel is None:
@@ -566,7 +573,7 @@ def model_description(target: ExportTarget) -> str:
     outputs = "".join(f'      <Unknown index="{n_in + j + 1}"/>\n' for j in range(len(OUTPUTS) + 1))
     unit_defs = "".join(
         f"    <Unit name={quoteattr(u)}>{UNITS.get(u, '')}</Unit>\n" for u in sorted(units))
-    sources = "".join(f'      <File name="{f}"/>\n' for f in (*csource.SOURCES, WRAPPER_FILE))
+    sources = "".join(f'      <File name="{f}"/>\n' for f in (*harness.sources(target), WRAPPER_FILE))
     return (
         '<?xml version="1.0" encoding="UTF-8"?>\n'
         f'<fmiModelDescription fmiVersion="2.0" modelName={quoteattr(ident)} guid="{guid(target)}"\n'
@@ -628,14 +635,14 @@ def build_fmu(target: ExportTarget, out: Path) -> Path:
     with tempfile.TemporaryDirectory(prefix="ema_fmu_") as tmp:
         root = Path(tmp)
         src = root / "sources"
-        csource.write_sources(src, target.values())
+        harness.model_sources(src, target)
         (src / WRAPPER_FILE).write_text(wrapper(), encoding="utf-8")
         for h in FMI_HEADERS:
             shutil.copy(headers / h, src / h)
         binary = root / "binaries" / PLATFORM / f"{ident}.so"
         binary.parent.mkdir(parents=True)
-        csource.compile_c([src / f for f in (*csource.SOURCES, WRAPPER_FILE)], binary, shared=True, include=[src],
-                          defines=[f'EMA_GUID="{guid(target)}"'])
+        csource.compile_c([src / f for f in (*harness.sources(target), WRAPPER_FILE)], binary, shared=True,
+                          include=[src], defines=[f'EMA_GUID="{guid(target)}"'])
         (root / "modelDescription.xml").write_text(model_description(target), encoding="utf-8")
         (src / "README.txt").write_text(build_note(target), encoding="utf-8")
         resources = root / "resources"
@@ -662,7 +669,7 @@ def build_note(target: ExportTarget) -> str:
     str
         A short text.
     """
-    files = " ".join((*csource.SOURCES, WRAPPER_FILE))
+    files = " ".join((*harness.sources(target), WRAPPER_FILE))
     return (f"{escape(target.description)}\n\nRebuild the binary (the flags keep its arithmetic the model's):\n"
             f"  gcc {' '.join(csource.CFLAGS)} -fPIC -shared -DEMA_GUID='\"{guid(target)}\"' "
             f"-o {model_identifier(target)}.so {files} -lm\n")

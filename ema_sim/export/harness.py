@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.export import csource
+from ema_sim.export import csource, lti
 from ema_sim.export.target import ExportError, ExportTarget
 from ema_sim.models.arrays import FloatArray
 
@@ -118,15 +118,56 @@ int main(int argc, char **argv) {
 """``ema_harness.c``."""
 
 
-def makefile() -> str:
+def sources(target: ExportTarget) -> tuple[str, ...]:
+    """The model's C files of an export (figure 26's kernel, or a linear model's state space).
+
+    Parameters
+    ----------
+    target : ExportTarget
+        What is exported.
+
+    Returns
+    -------
+    tuple of str
+        File names (the header besides).
+    """
+    return lti.SOURCES if target.linear else csource.SOURCES
+
+
+def model_sources(directory: Path, target: ExportTarget) -> list[Path]:
+    """Write the header and the model's C files (:func:`sources`) into ``directory``.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+        Where (created).
+    target : ExportTarget
+        What is exported.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written, header first.
+    """
+    if target.linear:
+        return lti.write_sources(directory, target)
+    return csource.write_sources(directory, target.values())
+
+
+def makefile(srcs_: tuple[str, ...] = csource.SOURCES) -> str:
     """A Makefile that builds the harness and a static library with the flags that keep the arithmetic.
+
+    Parameters
+    ----------
+    srcs_ : tuple of str
+        The model's C files.
 
     Returns
     -------
     str
         Makefile text.
     """
-    srcs = " ".join(csource.SOURCES)
+    srcs = " ".join(srcs_)
     return (
         "# The exported EMA model. The flags keep its arithmetic bit for bit the model's: no fast-math, no\n"
         "# fused multiply-adds (-ffp-contract=off; GCC fuses by default).\n"
@@ -188,8 +229,8 @@ def write_c(target: ExportTarget, directory: Path) -> list[Path]:
     list of pathlib.Path
         The files written.
     """
-    files = csource.write_sources(directory, target.values())
-    extra = {HARNESS_FILE: HARNESS, "Makefile": makefile(), "README.md": readme(target),
+    files = model_sources(directory, target)
+    extra = {HARNESS_FILE: HARNESS, "Makefile": makefile(sources(target)), "README.md": readme(target),
              MANIFEST: json.dumps(target.manifest("c"), indent=2) + "\n"}
     for name, text in extra.items():
         path = directory / name
@@ -213,11 +254,12 @@ def build_harness(directory: Path, out: Path | None = None) -> Path:
     pathlib.Path
         The program.
     """
-    missing = [f for f in (*csource.SOURCES, csource.HEADER, HARNESS_FILE) if not (directory / f).is_file()]
+    srcs = lti.SOURCES if (directory / lti.LTI_FILE).is_file() else csource.SOURCES
+    missing = [f for f in (*srcs, csource.HEADER, HARNESS_FILE) if not (directory / f).is_file()]
     if missing:
         raise ExportError(f"{directory} is not an `ema export --c` directory (missing {', '.join(missing)})")
     exe = out or directory / HARNESS_EXE
-    return csource.compile_c([directory / f for f in (*csource.SOURCES, HARNESS_FILE)], exe, shared=False,
+    return csource.compile_c([directory / f for f in (*srcs, HARNESS_FILE)], exe, shared=False,
                              include=[directory])
 
 

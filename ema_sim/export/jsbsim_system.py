@@ -32,7 +32,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from ema_sim.export.target import ExportError, ExportTarget
+from ema_sim.export.target import LINEAR_NO_JSBSIM, ExportError, ExportTarget
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order.figure26 import (
     HISTORY_SIZE,
@@ -265,6 +265,8 @@ def system_xml(target: ExportTarget) -> str:  # noqa: PLR0912, PLR0915 - figure 
     str
         The XML text, its manifest in a comment.
     """
+    if target.linear:
+        raise ExportError(f"{target.model}: {LINEAR_NO_JSBSIM}")
     dropped = not_expressed(target.params)
     prm = expressed_params(target.params)
     p = prm.vector()

@@ -1,7 +1,8 @@
 """What an export carries: the model, its parameter values, its rate and method, and where they come from.
 
 An :class:`ExportTarget` is resolved from a registry model (``loada``, ``loadf``; ``loac`` and
-``second_order`` discretised as LOADA) or from an identification report (the JSON ``ema identify
+``second_order`` discretised as LOADA; the linear ``loes``, ``hoalm`` and ``sloac`` as their own
+zero-order-hold state space, :mod:`ema_sim.export.lti`) or from an identification report (the JSON ``ema identify
 --json`` writes): its final model's fitted parameters on the declared model's others. It names the
 *truth*, the ema_sim model the artefact is verified against, and travels with the artefact as a
 manifest (:meth:`ExportTarget.manifest`), so ``ema verify`` rebuilds the same truth from the artefact
@@ -27,6 +28,13 @@ DISCRETE: dict[str, tuple[float, bool]] = {"loada": (800.0, False), "loadf": (20
 """The exported kernels: registry name → (default rate, backward Euler)."""
 CONTINUOUS = ("loac", "second_order")
 """Second-order models exported through LOADA's kernel at a fixed rate (their discretisation error is measured)."""
+LINEAR = ("loes", "hoalm", "sloac")
+"""Linear models exported as their own zero-order-hold state space and delay lines (:mod:`ema_sim.export.lti`)."""
+LINEAR_NO_JSBSIM = ("a linear model has no JSBSim system: JSBSim has no discrete state-space component (its filters "
+                    "are Tustin first and second orders, its integrators rectangular, trapezoidal or Adams-Bashforth, "
+                    "none the zero-order hold), and a transcription into one summer and one-frame delay per state is "
+                    "not written; export it as an FMU or C (exact)")
+"""Why ``ema export --jsbsim`` refuses ``loes``, ``hoalm`` and ``sloac``."""
 NOT_EXPORTABLE: dict[str, str] = {
     "hoac1": "the continuous high-order model (figure 30: motor, current loop, PWM, gear backlash, friction, brake, "
              "bus) is integrated by an adaptive Dormand-Prince with located events; no fixed-step C transcription "
@@ -36,11 +44,6 @@ NOT_EXPORTABLE: dict[str, str] = {
     "hoad3": "the high-order discrete kernel with figure 33's three-segment compliance curves and the feedback delay "
              "is not transcribed to C yet (a 10 kHz kernel of many states and switches; the second-order family came "
              "first); its noise comes from numpy's random streams, which a C port reproduces only with the noise off",
-    "sloac": "a linear model built with python-control: exportable as its zero-order-hold state space, not done yet",
-    "hoalm": "a linear model (HOAD3 linearised with python-control): exportable as its zero-order-hold state space, "
-             "not done yet",
-    "loes": "a linear second order with a pure delay fitted to HOAD3 (python-control): exportable as its "
-            "zero-order-hold state space and a delay line, not done yet",
 }
 """Registry models ``ema export`` refuses, and why."""
 
@@ -56,13 +59,13 @@ class ExportTarget:
     Parameters
     ----------
     model : str
-        The exported kernel: ``loada`` or ``loadf``.
+        The exported kernel: ``loada``, ``loadf``, or a linear model (``loes``, ``hoalm``, ``sloac``).
     truth : str
-        The registry model that is the truth (``loada``, ``loadf``, ``loac``, ``second_order``).
+        The registry model that is the truth (``loada``, ``loadf``, ``loac``, ``second_order``, a linear one).
     channel : str
         The channel.
     params : SecondOrderParams
-        Every parameter's value.
+        Every parameter's value (a linear model's: the channel's second-order values, unused).
     rate_hz : float
         The model's rate (its fixed step is ``1/rate_hz``).
     backward : bool
@@ -71,6 +74,8 @@ class ExportTarget:
         Where the values come from (``registry``, or the report's path).
     notes : list of str
         What a user must know (a reversed hinge moment, a discretised continuous model).
+    options : dict
+        A linear model's parameter overrides (its truth is built with them; ``params`` is then unused).
     """
 
     model: str
@@ -81,10 +86,20 @@ class ExportTarget:
     backward: bool
     source: str = "registry"
     notes: list[str] = field(default_factory=list)
+    options: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def linear(self) -> bool:
+        """A linear model (its zero-order-hold state space), not figure 26's kernel."""
+        return self.model in LINEAR
 
     @property
     def description(self) -> str:
         """One line: the model, channel, rate and source."""
+        if self.linear:
+            return (f"X-43A EMA {self.model} ({self.channel}) at {self.rate_hz:g} Hz, zero-order-hold state space "
+                    f"with delay lines, NASA/TM-2008-214637 sections 3.4, 4.2.7; values from {self.source}; "
+                    f"exported by ema_sim {__version__}")
         method = "backward Euler, feedback one frame ahead (LOADF)" if self.backward else "forward Euler (LOADA)"
         truth = "" if self.truth == self.model else f"; truth {self.truth}"
         return (f"X-43A EMA {self.model} ({self.channel}) at {self.rate_hz:g} Hz, {method}, NASA/TM-2008-214637 "
@@ -108,6 +123,8 @@ class ExportTarget:
         ActuatorModel
             One instance.
         """
+        if self.truth in LINEAR:
+            return create(self.truth, self.channel, rate_hz=self.rate_hz, **self.options)
         if self.truth in CONTINUOUS:
             return create(self.truth, self.channel, params=self.params)
         return create(self.truth, self.channel, params=self.params, rate_hz=self.rate_hz)
@@ -131,6 +148,7 @@ class ExportTarget:
             "artefact": artefact, "model": self.model, "truth": self.truth, "channel": self.channel,
             "rate_hz": self.rate_hz, "backward": self.backward, "source": self.source, "notes": self.notes,
             "params": {k: _json_float(v) for k, v in self.params.as_dict().items()},
+            "options": {k: _json_float(v) for k, v in self.options.items()},
             "ema_sim": __version__, **(extra or {}),
         }
 
@@ -161,7 +179,8 @@ def from_manifest(doc: dict[str, Any]) -> ExportTarget:
         params.validate()
         return ExportTarget(model=str(doc["model"]), truth=str(doc["truth"]), channel=str(doc["channel"]),
                             params=params, rate_hz=float(doc["rate_hz"]), backward=bool(doc["backward"]),
-                            source=str(doc.get("source", "registry")), notes=list(doc.get("notes", [])))
+                            source=str(doc.get("source", "registry")), notes=list(doc.get("notes", [])),
+                            options={str(k): _from_json_float(v) for k, v in doc.get("options", {}).items()})
     except (KeyError, TypeError, ValueError) as exc:
         raise ExportError(f"the artefact's ema_sim manifest is incomplete or malformed ({exc})") from None
 
@@ -173,7 +192,7 @@ def resolve(spec: str, channel: str | None = None, *, rate_hz: float | None = No
     Parameters
     ----------
     spec : str
-        ``loada``, ``loadf``, ``loac``, ``second_order``, or a ``.json`` report.
+        ``loada``, ``loadf``, ``loac``, ``second_order``, ``loes``, ``hoalm``, ``sloac``, or a ``.json`` report.
     channel : str, optional
         The channel (a report's own by default; ``left_wing`` for a registry model).
     rate_hz : float, optional
@@ -191,7 +210,16 @@ def resolve(spec: str, channel: str | None = None, *, rate_hz: float | None = No
         target = from_report(path, channel, rate_hz=rate_hz)
     else:
         target = from_registry(spec, channel or "left_wing", rate_hz=rate_hz)
-    if overrides:
+    if overrides and target.linear:
+        target = ExportTarget(target.model, target.truth, target.channel, target.params, target.rate_hz,
+                              target.backward, target.source,
+                              [*target.notes, "overrides: " + ", ".join(f"{k}={v:g}" for k, v in overrides.items())],
+                              {**target.options, **overrides})
+        try:
+            target.truth_model()
+        except (EmaError, TypeError) as exc:
+            raise ExportError(f"{target.model}: {exc}") from None
+    elif overrides:
         unknown = set(overrides) - set(target.params.as_dict())
         if unknown:
             raise ExportError(f"unknown second-order parameter(s): {', '.join(sorted(unknown))}")
@@ -211,8 +239,8 @@ def _kernel_for(truth: str, rate_hz: float | None) -> tuple[str, float, bool]:
 def _check_model(name: str) -> None:
     if name in NOT_EXPORTABLE:
         raise ExportError(f"{name} is not exportable: {NOT_EXPORTABLE[name]}")
-    if name not in (*DISCRETE, *CONTINUOUS):
-        known = ", ".join((*DISCRETE, *CONTINUOUS))
+    if name not in (*DISCRETE, *CONTINUOUS, *LINEAR):
+        known = ", ".join((*DISCRETE, *CONTINUOUS, *LINEAR))
         raise ExportError(f"unknown model {name!r}; exportable: {known} (or an `ema identify --json` report)")
 
 
@@ -237,6 +265,12 @@ def from_registry(name: str, channel: str, *, rate_hz: float | None = None) -> E
     _check_model(key)
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0.0):
         raise ExportError(f"the rate must be a positive number of Hz, got {rate_hz!r}")
+    if key in LINEAR:
+        model = create(key, channel, **({} if rate_hz is None else {"rate_hz": rate_hz}))
+        return ExportTarget(key, key, model.channel.channel, SecondOrderParams.from_channel(model.channel),
+                            model.rate_hz, False, "registry",
+                            [f"{key} is linear: exported as its zero-order-hold state space at {model.rate_hz:g} Hz "
+                             "with its delays as delay lines (the matrices computed by ema_sim, fixed)"])
     kernel, rate, backward = _kernel_for(key, rate_hz)
     model = create(key, channel)
     params = model.params[0]  # type: ignore[attr-defined]
@@ -287,6 +321,9 @@ def from_report(path: Path, channel: str | None = None, *, rate_hz: float | None
         raise ExportError(f"{path}: the final model {name!r} has a term discovery found beyond the vocabulary; it has "
                           "no stage in the exported C model")
     _check_model(declared)
+    if declared in LINEAR:
+        raise ExportError(f"{path}: the declared model {declared} is linear; export it from the registry "
+                          f"(`ema export {declared} --set NAME=VALUE`)")
     base: SecondOrderParams = create(declared, load_channel(report_channel)).params[0]  # type: ignore[attr-defined]
     values: dict[str, float] = {}
     for reported, value in fitted.items():

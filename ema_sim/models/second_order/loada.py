@@ -106,10 +106,12 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
             hm = bp_h[i, zoh_index(bp_t, t0, 0)]
             _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt, on)
             fb_prev = x[X.feedback_lag_deg]
+            k0 = int(t0 / dt + 0.5)  # t0 is on the model's step grid: time from the step count, as one run has it
             for k in range(n_steps + 1):
-                t = t0 + k * dt
+                t = (k0 + k) * dt
                 fb = x[X.feedback_lag_deg]
-                if fb_delay > 0.0:
+                # (a call that continues a run finds its first entry written by the one before, rate and all)
+                if fb_delay > 0.0 and (k > 0 or t > x[X.history_last_s] + TIME_EPS_S):
                     history_write(p, x, hist, t, fb, (fb - fb_prev) / dt, False)
                 fb_prev = fb
                 while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):

@@ -26,6 +26,7 @@ from ema_sim.models.second_order.loac import run_continuous
 from ema_sim.models.second_order.loada import METHOD_FORWARD_EULER, METHOD_LOADF, run_discrete
 from ema_sim.models.second_order.params import N_STATE, SECTION, P, SecondOrderParams, X
 from ema_sim.models.second_order.rk4 import run_rk4
+from ema_sim.models.stages import TIME_EPS_S
 from ema_sim.parameters import Slots
 
 
@@ -124,11 +125,21 @@ class Loada(SecondOrderModel):
         super()._trim_states(command_deg, hinge_moment_inlb)
         self._steps = 0  # the model's own clock, in steps: a frame's remainder carries over
 
-    def _integrate(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float,
-                   sample_t: FloatArray) -> FloatArray:
+    def _last_step(self, t_end: float) -> tuple[float, float, int]:
+        """The step, the time of the next step of the model's own clock, and the steps a call to ``t_end`` takes."""
         dt = 1.0 / self.rate_hz
         t0 = self._steps * dt
-        n_steps = max(math.floor((t_end - t0) / dt + 1e-6), 0)
+        return dt, t0, max(math.floor((t_end - t0) / dt + 1e-6), 0)
+
+    def _written_before(self, t_stop: float) -> float:
+        # a sample reads the last step at or before it: the call ending on step n writes every sample before
+        # step n + 1, as the kernel computes that instant
+        dt, t0, n_steps = self._last_step(t_stop)
+        return t0 + n_steps * dt + dt - TIME_EPS_S
+
+    def _integrate(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float,
+                   sample_t: FloatArray) -> FloatArray:
+        dt, t0, n_steps = self._last_step(t_end)
         out = np.empty((self.n, sample_t.size, N_OUT))
         run_discrete(self._P, self._X, self._H, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, self.method, out, self._on)
         self._steps += n_steps
