@@ -401,14 +401,24 @@ def test_every_dropped_command_is_counted_and_logged_and_diagnostics_recover(cli
         faulted = [s for m in diag for s in m.status if s.level == DiagnosticStatus.WARN and "dropped" in s.message]
         assert faulted
         t_good = base + 10_001 * FRAME_NS
-        end = time.monotonic() + 3.5  # good commands only: the warning ages out
+        # good commands only: the warning ages out FAULT_HOLD_S (2 s) after the last drop. On a loaded machine a
+        # stalled node may still lose a good command from its queue (counted, and it restarts the hold), so the
+        # status must read nominal within 15 s, and must do so 2 s after the last drop the node counted.
+        start_good = time.monotonic()
+        end = start_good + 15.0
         k = 0
+
+        def status():
+            return next(s for s in diag[-1].status if s.name == STATUS)
+
         while time.monotonic() < end:
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_good + k * FRAME_NS, NS)
             cmd.publish(msg)
             k += 1
             client.spin(0.005)
-        last = next(s for s in diag[-1].status if s.name == STATUS)
+            if time.monotonic() - start_good > 2.5 and status().level == DiagnosticStatus.OK:
+                break
+        last = status()
         assert (last.level, last.message) == (DiagnosticStatus.OK, "nominal")
         values = {v.key: v.value for v in last.values}
     finally:
