@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
-from ema_sim.analysis.loes import fit_loes
-from ema_sim.analysis.model_error import FIGURE40_RATES_HZ, figure40
+from ema_sim.analysis.studies.loes import fit_loes
+from ema_sim.analysis.studies.model_error import FIGURE40_RATES_HZ, figure40
 from ema_sim.benchmark import Benchmark, Result, timed
 from ema_sim.models import create
 from ema_sim.signals import parse_maneuver

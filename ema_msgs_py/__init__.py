@@ -19,7 +19,7 @@ from ema_msgs_py.contract import (
     canonical,
     endpoint,
     failure_topic,
-    scaling,
+    scaling_of,
     topic,
 )
 
@@ -37,6 +37,6 @@ __all__ = [
     "canonical",
     "endpoint",
     "failure_topic",
-    "scaling",
+    "scaling_of",
     "topic",
 ]

@@ -26,11 +26,17 @@ class JointFrame:
     """One ``sensor_msgs/JointState``: ``name`` lists channels; an empty array means "not measured"."""
 
     stamp_ns: int
+    """Header stamp, ns: the FMU frame the values belong to."""
     name: list[str]
+    """The channels (or states) the arrays list."""
     position: list[float] = field(default_factory=list)
+    """One value per name, or empty."""
     velocity: list[float] = field(default_factory=list)
+    """One value per name, or empty."""
     effort: list[float] = field(default_factory=list)
+    """One value per name, or empty."""
     frame_id: str = ""
+    """Header frame id (empty on the contract's messages)."""
 
 
 def _string(out: bytearray, text: str) -> None:
@@ -69,7 +75,18 @@ def _layout(frame_id: str, names: tuple[str, ...], counts: tuple[int, int, int])
 
 
 def encode(frame: JointFrame) -> bytes:
-    """CDR bytes of a JointState, as rmw_fastrtps serializes it."""
+    """CDR bytes of a JointState, as rmw_fastrtps serializes it.
+
+    Parameters
+    ----------
+    frame : JointFrame
+        The message.
+
+    Returns
+    -------
+    bytes
+        Its XCDR1 little-endian serialization, encapsulation header first.
+    """
     pos, vel, eff = frame.position, frame.velocity, frame.effort
     body, prefix = _layout(frame.frame_id, tuple(frame.name), (len(pos), len(vel), len(eff)))
     ns = frame.stamp_ns
@@ -77,14 +94,38 @@ def encode(frame: JointFrame) -> bytes:
 
 
 def encode_clock(stamp_ns: int) -> bytes:
-    """CDR bytes of a ``rosgraph_msgs/Clock``."""
+    """CDR bytes of a ``rosgraph_msgs/Clock``.
+
+    Parameters
+    ----------
+    stamp_ns : int
+        The clock's time, ns.
+
+    Returns
+    -------
+    bytes
+        The serialized message.
+    """
     return CDR_LE + _HEAD.pack(stamp_ns // NS, stamp_ns % NS)
 
 
 def stamp_ns(raw: bytes | memoryview) -> int | None:
-    """The stamp at the start of a CDR message (Header, Clock, DiagnosticArray); None if too short."""
+    """The stamp at the start of a CDR message (Header, Clock, DiagnosticArray).
+
+    Parameters
+    ----------
+    raw : bytes or memoryview
+        The serialized message, either endianness.
+
+    Returns
+    -------
+    int or None
+        The stamp in ns; None when the message is too short to hold one.
+    """
     if len(raw) < 12:
         return None
+    sec: int
+    nsec: int
     sec, nsec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)
     return sec * NS + nsec
 
@@ -96,7 +137,23 @@ _KNOWN_MAX = 512
 
 
 def decode(raw: bytes | memoryview) -> JointFrame:
-    """A JointFrame from the CDR bytes of a JointState (either endianness); ValueError when malformed."""
+    """A JointFrame from the CDR bytes of a JointState (either endianness).
+
+    Parameters
+    ----------
+    raw : bytes or memoryview
+        The serialized message as a subscription takes it.
+
+    Returns
+    -------
+    JointFrame
+        The message.
+
+    Raises
+    ------
+    ValueError
+        The bytes are not a JointState (a node counts and drops the message: it never stops on one).
+    """
     raw = bytes(raw)
     for prefix, body, names, frame_id, counts in _KNOWN.get(len(raw), ()):
         if raw[1] == 1 and raw.startswith(prefix, 12):

@@ -15,12 +15,13 @@ ROS joint states do); the header stamp is the FMU frame the values belong to. An
 
 from __future__ import annotations
 
-import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cache
+from typing import Protocol
 
-from ema_sim.config import CHANNELS, load_channel
-
+CHANNELS: tuple[str, ...] = ("left_wing", "right_wing", "left_rudder", "right_rudder", "cowl_door")
+"""The five EMAC channels (section 1.4), in this order: the ``name`` entries of the per-frame JointStates
+and the stem of each ``config/<channel>.yaml``."""
 FRAME_HZ = 200.0
 """The FMU frame rate: feedback is published once per frame (table 5)."""
 FULL_SCALE_V = 10.0
@@ -37,11 +38,14 @@ class QosSpec:
     """A QoS profile as plain data (``rclpy`` and ``rosbags`` forms in :mod:`.ros` / :mod:`.typestore`)."""
 
     reliability: str = "reliable"
+    """``reliable`` or ``best_effort``."""
     durability: str = "volatile"
+    """``volatile`` or ``transient_local``."""
     depth: int = 1000
+    """History depth (keep last)."""
 
     def describe(self) -> str:
-        """E.g. ``reliable, volatile, keep last 1000``."""
+        """The profile in words, e.g. ``reliable, volatile, keep last 1000``."""
         return f"{self.reliability}, {self.durability}, keep last {self.depth}"
 
 
@@ -67,13 +71,19 @@ class TopicSpec:
     """One topic of the contract."""
 
     name: str
+    """The contract name (in the root namespace)."""
     msgtype: str
+    """``pkg/msg/Type``."""
     qos: QosSpec
+    """The QoS its publisher offers."""
     publisher: str
+    """Who publishes it, in words."""
     subscribers: str
+    """Who takes it, in words."""
     fields: dict[str, str] = field(default_factory=dict)
     """Message field → meaning and unit."""
     per_frame: bool = True
+    """Published once per FMU frame (False: events and metadata)."""
 
 
 TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
@@ -115,7 +125,18 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
 
 
 def topic(name: str) -> TopicSpec:
-    """A contract topic by name."""
+    """A contract topic by name.
+
+    Parameters
+    ----------
+    name : str
+        The topic's contract name, e.g. ``/ema/fmu/command``.
+
+    Returns
+    -------
+    TopicSpec
+        Its type, QoS, publisher, subscribers and fields.
+    """
     return TOPICS[name]
 
 
@@ -131,6 +152,16 @@ def endpoint(name: str) -> str:
     A relative name resolves in the node's namespace: ``-r __ns:=/aircraft2`` moves every topic of the suite
     to ``/aircraft2/ema/...``; ``/clock`` and ``/diagnostics`` stay where ROS has them (a run that wants a
     clock of its own per namespace remaps ``/clock``, e.g. ``-r /clock:=/aircraft2/clock``).
+
+    Parameters
+    ----------
+    name : str
+        The topic's contract name.
+
+    Returns
+    -------
+    str
+        The name to create the endpoint with.
     """
     return name if name in GLOBAL else name.lstrip("/")
 
@@ -138,8 +169,19 @@ def endpoint(name: str) -> str:
 def canonical(resolved: str, namespace: str = "/") -> str | None:
     """A resolved topic name as the contract (and a bag) names it: the node's namespace taken off.
 
-    ``/aircraft2/ema/fmu/command`` in ``/aircraft2`` → ``/ema/fmu/command``; None for a topic outside the
-    namespace (another vehicle's).
+    ``/aircraft2/ema/fmu/command`` in ``/aircraft2`` → ``/ema/fmu/command``.
+
+    Parameters
+    ----------
+    resolved : str
+        The fully resolved topic name.
+    namespace : str, optional
+        The node's namespace.
+
+    Returns
+    -------
+    str or None
+        The contract name; None for a topic outside the namespace (another vehicle's).
     """
     ns = namespace.rstrip("/")
     if not ns:
@@ -164,7 +206,18 @@ DIAGNOSTICS = "/diagnostics"
 
 
 def failure_topic(channel: str) -> str:
-    """Run-time failure injection of one channel (``std_msgs/String``, a failure spec such as ``stuck``)."""
+    """The topic of one channel's run-time failure injection.
+
+    Parameters
+    ----------
+    channel : str
+        One of :data:`CHANNELS`.
+
+    Returns
+    -------
+    str
+        ``/ema/emac/<channel>/failure`` (``std_msgs/String``, a failure spec such as ``stuck``).
+    """
     return f"/ema/emac/{channel}/failure"
 
 
@@ -181,9 +234,13 @@ class Scaling:
     """
 
     channel: str
+    """One of :data:`CHANNELS`."""
     command: tuple[float, float, float, float]
+    """Command curve ``c0..c3``: surface degrees → volts."""
     feedback: tuple[float, float, float, float]
+    """Feedback curve ``c0..c3``: LVDT volts → surface degrees."""
     full_scale_v: float = FULL_SCALE_V
+    """Commands and feedback span ±this, V."""
 
     @property
     def sign(self) -> int:
@@ -191,19 +248,63 @@ class Scaling:
         return 1 if self.command[1] >= 0.0 else -1
 
     def command_deg_to_v(self, deg: float) -> float:
-        """Volts the FMU sends for a surface command."""
+        """Volts the FMU sends for a surface command.
+
+        Parameters
+        ----------
+        deg : float
+            The surface command, deg.
+
+        Returns
+        -------
+        float
+            The command, V.
+        """
         return _cubic(self.command, deg)
 
     def command_v_to_deg(self, volts: float) -> float:
-        """The surface command a command voltage stands for (inverse command curve)."""
+        """The surface command a command voltage stands for (inverse command curve).
+
+        Parameters
+        ----------
+        volts : float
+            The command, V.
+
+        Returns
+        -------
+        float
+            The surface command, deg.
+        """
         return _inverse(self.command, volts)
 
     def feedback_v_to_deg(self, volts: float) -> float:
-        """Surface degrees the FMU reads from LVDT volts."""
+        """Surface degrees the FMU reads from LVDT volts.
+
+        Parameters
+        ----------
+        volts : float
+            The LVDT feedback, V.
+
+        Returns
+        -------
+        float
+            The surface position, deg.
+        """
         return _cubic(self.feedback, volts)
 
     def feedback_deg_to_v(self, deg: float) -> float:
-        """LVDT volts that read back as ``deg`` (inverse feedback curve)."""
+        """LVDT volts that read back as ``deg`` (inverse feedback curve).
+
+        Parameters
+        ----------
+        deg : float
+            The surface position, deg.
+
+        Returns
+        -------
+        float
+            The LVDT feedback, V.
+        """
         return _inverse(self.feedback, deg)
 
     @property
@@ -227,23 +328,65 @@ def _inverse(c: tuple[float, float, float, float], y: float) -> float:
     return x
 
 
-@cache
-def scaling(channel: str) -> Scaling:
-    """The scaling of a channel from its ``config/<channel>.yaml``."""
-    cfg = load_channel(channel)
-    return scaling_of(cfg)
+class Curve(Protocol):
+    """A third-order calibration curve that lists its coefficients (``ema_sim.calibration.Cubic``)."""
+
+    def coefficients(self) -> Sequence[float]:
+        """``[c0, c1, c2, c3]`` of ``y = c0 + c1·x + c2·x² + c3·x³``."""
+        ...
 
 
-def scaling_of(cfg: object) -> Scaling:
-    """The scaling of a :class:`~ema_sim.config.ChannelConfig` (e.g. one built from ROS parameters)."""
-    command = tuple(cfg.command_cal.coefficients())  # type: ignore[attr-defined]
-    feedback = tuple(cfg.feedback_cal.coefficients())  # type: ignore[attr-defined]
-    if not all(math.isfinite(v) for v in (*command, *feedback)):
-        raise ValueError("calibration coefficients must be finite")
-    return Scaling(cfg.channel, command, feedback, float(cfg.full_scale_v))  # type: ignore[attr-defined, arg-type]
+class Calibrated(Protocol):
+    """What :func:`scaling_of` reads from a channel's configuration (``ema_sim.config.ChannelConfig``)."""
+
+    @property
+    def channel(self) -> str:
+        """The channel's name (one of :data:`CHANNELS`)."""
+        ...
+
+    @property
+    def command_cal(self) -> Curve:
+        """Surface degrees → command volts."""
+        ...
+
+    @property
+    def feedback_cal(self) -> Curve:
+        """LVDT volts → surface degrees."""
+        ...
+
+    @property
+    def full_scale_v(self) -> float:
+        """The ±full scale of commands and feedback, V."""
+        ...
+
+
+def _four(curve: Curve) -> tuple[float, float, float, float]:
+    c0, c1, c2, c3 = (float(c) for c in curve.coefficients())
+    return c0, c1, c2, c3
+
+
+def scaling_of(cfg: Calibrated) -> Scaling:
+    """The scaling of a channel's configuration.
+
+    The contract reads no file: ``ema_sim.config.scaling`` gives a channel's scaling from its
+    ``config/<channel>.yaml``, and a node builds one from its ROS parameters. The configuration's loader
+    has checked the curves (four finite coefficients each).
+
+    Parameters
+    ----------
+    cfg : Calibrated
+        The channel's configuration: its name, both calibration curves and the full scale
+        (an ``ema_sim.config.ChannelConfig``).
+
+    Returns
+    -------
+    Scaling
+        The channel's degree↔volt conversions on scalars.
+    """
+    return Scaling(cfg.channel, _four(cfg.command_cal), _four(cfg.feedback_cal), float(cfg.full_scale_v))
 
 
 __all__ = [
     "CHANNELS", "CLOCK_QOS", "FRAME_HZ", "FRAME_QOS", "FULL_SCALE_V", "GLOBAL", "LATCHED_QOS", "TOPICS", "QosSpec",
-    "Scaling", "TopicSpec", "canonical", "endpoint", "failure_topic", "scaling", "scaling_of", "topic",
+    "Scaling", "TopicSpec", "canonical", "endpoint", "failure_topic", "scaling_of", "topic",
 ]

@@ -11,10 +11,21 @@ from ema_msgs_py.contract import TOPICS, QosSpec
 
 
 def qos(spec: QosSpec | str) -> QoSProfile:
-    """The rclpy profile of a QoS spec or of a contract topic's name."""
+    """The rclpy profile of a QoS spec or of a contract topic's name.
+
+    Parameters
+    ----------
+    spec : QosSpec or str
+        A QoS spec, or the name of a contract topic (its spec).
+
+    Returns
+    -------
+    QoSProfile
+        Keep last ``depth``, with the spec's reliability and durability.
+    """
     if isinstance(spec, str):
         spec = TOPICS[spec].qos
-    return QoSProfile(
+    return QoSProfile(  # type: ignore[no-untyped-call]  # rclpy's QoSProfile(**kwargs) carries no annotations
         history=HistoryPolicy.KEEP_LAST,
         depth=spec.depth,
         reliability=ReliabilityPolicy.RELIABLE if spec.reliability == "reliable" else ReliabilityPolicy.BEST_EFFORT,
@@ -24,17 +35,48 @@ def qos(spec: QosSpec | str) -> QoSProfile:
 
 
 def message_class(msgtype: str) -> type:
-    """The rclpy message class of ``pkg/msg/Type``."""
+    """The rclpy message class of a message type.
+
+    Parameters
+    ----------
+    msgtype : str
+        ``pkg/msg/Type``, e.g. ``sensor_msgs/msg/JointState``.
+
+    Returns
+    -------
+    type
+        The generated Python class.
+    """
     pkg, kind, name = msgtype.split("/")
-    return getattr(import_module(f"{pkg}.{kind}"), name)
+    cls: type = getattr(import_module(f"{pkg}.{kind}"), name)
+    return cls
 
 
 def set_stamp(msg: Any, ns: int) -> None:
-    """Set ``msg.header.stamp`` from nanoseconds."""
+    """Set ``msg.header.stamp`` from nanoseconds.
+
+    Parameters
+    ----------
+    msg : Any
+        An rclpy message with a ``header``.
+    ns : int
+        The stamp, ns.
+    """
     msg.header.stamp.sec = int(ns // 1_000_000_000)
     msg.header.stamp.nanosec = int(ns % 1_000_000_000)
 
 
 def stamp_ns(msg: Any) -> int:
-    """``msg.header.stamp`` in nanoseconds."""
+    """``msg.header.stamp`` in nanoseconds.
+
+    Parameters
+    ----------
+    msg : Any
+        An rclpy message with a ``header``.
+
+    Returns
+    -------
+    int
+        The stamp, ns.
+    """
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)

@@ -30,45 +30,141 @@ def _time(ns: int) -> Any:
 
 
 def header(stamp_ns: int, frame_id: str = "") -> Any:
-    """A ``std_msgs/Header``."""
+    """A ``std_msgs/Header``.
+
+    Parameters
+    ----------
+    stamp_ns : int
+        The stamp, ns.
+    frame_id : str, optional
+        The frame id (empty on the contract's messages).
+
+    Returns
+    -------
+    Any
+        The typestore message.
+    """
     return typestore().types["std_msgs/msg/Header"](stamp=_time(stamp_ns), frame_id=frame_id)
 
 
 def joint_state(stamp_ns: int, names: Sequence[str], position: Sequence[float] = (),
                 velocity: Sequence[float] = (), effort: Sequence[float] = ()) -> Any:
-    """A ``sensor_msgs/JointState`` (empty arrays: not measured)."""
+    """A ``sensor_msgs/JointState`` (empty arrays: not measured).
+
+    Parameters
+    ----------
+    stamp_ns : int
+        The FMU frame the values belong to, ns.
+    names : Sequence[str]
+        The channels (or states) the arrays list.
+    position, velocity, effort : Sequence[float], optional
+        One value per name, or empty when not measured.
+
+    Returns
+    -------
+    Any
+        The typestore message.
+    """
     cls = typestore().types[JOINT_STATE]
     return cls(header=header(stamp_ns), name=list(names), position=np.asarray(position, dtype=np.float64),
                velocity=np.asarray(velocity, dtype=np.float64), effort=np.asarray(effort, dtype=np.float64))
 
 
 def clock(stamp_ns: int) -> Any:
-    """A ``rosgraph_msgs/Clock``."""
+    """A ``rosgraph_msgs/Clock``.
+
+    Parameters
+    ----------
+    stamp_ns : int
+        The clock's time, ns.
+
+    Returns
+    -------
+    Any
+        The typestore message.
+    """
     return typestore().types[CLOCK](clock=_time(stamp_ns))
 
 
 def string(text: str) -> Any:
-    """A ``std_msgs/String``."""
+    """A ``std_msgs/String``.
+
+    Parameters
+    ----------
+    text : str
+        Its ``data``.
+
+    Returns
+    -------
+    Any
+        The typestore message.
+    """
     return typestore().types[STRING](data=text)
 
 
 def serialize(msg: Any) -> bytes:
-    """CDR bytes of a typestore message, as rclpy would publish them."""
+    """CDR bytes of a typestore message, as rclpy would publish them.
+
+    Parameters
+    ----------
+    msg : Any
+        A message built by this module (or read from a bag).
+
+    Returns
+    -------
+    bytes
+        Little-endian CDR with its encapsulation header.
+    """
     return bytes(typestore().serialize_cdr(msg, msg.__msgtype__))
 
 
 def deserialize(raw: bytes | memoryview, msgtype: str) -> Any:
-    """A typestore message from CDR bytes."""
+    """A typestore message from CDR bytes.
+
+    Parameters
+    ----------
+    raw : bytes or memoryview
+        The serialized message.
+    msgtype : str
+        Its type, ``pkg/msg/Type``.
+
+    Returns
+    -------
+    Any
+        The typestore message.
+    """
     return typestore().deserialize_cdr(raw, msgtype)
 
 
 def stamp_ns(msg: Any) -> int:
-    """Header stamp of a message in nanoseconds."""
+    """Header stamp of a message in nanoseconds.
+
+    Parameters
+    ----------
+    msg : Any
+        A typestore message with a ``header``.
+
+    Returns
+    -------
+    int
+        The stamp, ns.
+    """
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 def qos_profiles(spec: QosSpec) -> list[Qos]:
-    """The offered QoS of a contract topic, for a bag's metadata."""
+    """The offered QoS of a contract topic, for a bag's metadata.
+
+    Parameters
+    ----------
+    spec : QosSpec
+        The topic's QoS.
+
+    Returns
+    -------
+    list[Qos]
+        One profile, as ``ros2 bag`` records a topic's offered QoS.
+    """
     zero = QosTime(sec=0, nsec=0)
     return [Qos(
         history=QosHistory.KEEP_LAST,

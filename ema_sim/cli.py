@@ -39,7 +39,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``ema``; returns the exit status."""
+    """Run ``ema``.
+
+    Parameters
+    ----------
+    argv : Sequence[str], optional
+        The arguments after ``ema`` (default: the command line's).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success, 2 for a user error (one line on stderr), 130 when interrupted.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,

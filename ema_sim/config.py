@@ -11,18 +11,21 @@ import math
 import os
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from functools import cache
+from dataclasses import dataclass
+from functools import cache, cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import yaml
 
+from ema_msgs_py import contract
+from ema_msgs_py.contract import Scaling, scaling_of
+from ema_sim import parameters as pm
 from ema_sim.calibration import Cubic
 from ema_sim.errors import ConfigError, UnknownNameError
 
-CHANNELS: tuple[str, ...] = ("left_wing", "right_wing", "left_rudder", "right_rudder", "cowl_door")
-"""The five EMAC channels (section 1.4)."""
+CHANNELS: tuple[str, ...] = contract.CHANNELS
+"""The five EMAC channels (section 1.4), as the topic contract names them: one ``config/<channel>.yaml`` each."""
 
 RAD2DEG = 180.0 / math.pi
 
@@ -45,29 +48,59 @@ def config_dir() -> Path:
     raise ConfigError(f"no ema_sim config directory found (looked in {', '.join(map(str, candidates))})")
 
 
+SURFACES: tuple[str, ...] = ("wing", "rudder", "cowl")
+"""The kinds of surface the channels move."""
+POS: dict[str, Any] = {"min": 0.0, "min_exclusive": True}
+"""A positive quantity."""
+
+
+@pm.documented
 @dataclass(frozen=True)
 class ChannelConfig:
-    """Physical and signal data of one EMAC channel (tables 1, A2; sections 1.4, 2.4, 2.6)."""
+    """Physical and signal data of one EMAC channel (tables 1, A2; sections 1.4, 2.4, 2.6).
 
-    channel: str
-    surface: str
-    surface_inertia_inlbs2: float
-    stroke_in: float
-    slew_rate_in_s: float
-    slew_rate_dps: float
-    crank_arm_in: float
-    stall_force_lbf: float
-    rated_force_lbf: float
-    rated_rate_in_s: float
-    backlash_in: float
-    static_stiffness_lbf_per_in: float
-    position_min_deg: float
-    position_max_deg: float
-    free_play_deg: float
-    full_scale_v: float
-    command_cal: Cubic
-    feedback_cal: Cubic
-    sections: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    Each value is declared once here (:func:`ema_sim.parameters.param`): the model families' parameters
+    that come from the channel are :func:`~ema_sim.parameters.linked` to these declarations. The model
+    families' own sections (``second_order``, ``high_order``, ``loes``...) are carried as given.
+    """
+
+    channel: str = pm.param("-", "the EMAC channel (section 1.4)", choices=CHANNELS)
+    surface: str = pm.param("-", "the kind of surface it moves (its hinge-moment model)", choices=SURFACES)
+    surface_inertia_inlbs2: float = pm.param("in·lb·s²", "surface inertia Is (table A2 inertial load)", **POS)
+    stroke_in: float = pm.param("in", "ball-screw stroke (table 1)", **POS)
+    slew_rate_in_s: float = pm.param("in/s", "unloaded slew rate at the ball screw (table 1)", **POS)
+    slew_rate_dps: float = pm.param("deg/s", "unloaded slew rate of the surface (table 1)", min=1.0, max=2000.0)
+    crank_arm_in: float = pm.param("in", "servo crank arm: force ↔ hinge moment, travel ↔ angle (tables 1, A2)",
+                                   **POS)
+    stall_force_lbf: float = pm.param("lbf", "stall force at 125 Vdc (table 1)", **POS)
+    rated_force_lbf: float = pm.param("lbf", "force of table A2's force-versus-rate point at 125 Vdc", **POS)
+    rated_rate_in_s: float = pm.param("in/s", "rate of table A2's force-versus-rate point at 125 Vdc", **POS)
+    backlash_in: float = pm.param("in", "backlash specification (table 1: ≤ 0.005 in)", min=0.0)
+    static_stiffness_lbf_per_in: float = pm.param("lbf/in", "static stiffness specification (table 1)", **POS)
+    position_min_deg: float = pm.param("deg", "lower position limit, the mechanical stop (3.1.2.1)")
+    position_max_deg: float = pm.param("deg", "upper position limit, the mechanical stop (3.1.2.1)")
+    free_play_deg: float = pm.param(
+        "deg", "free play width of the surface (2.4, 3.1.2.3)", min=0.0, max=3.0, uncertainty=(0.171, 0.200),
+        uncertainty_source="section 2.4: 0.171° and 0.179° on vehicle 1, ≈ 0.200° on vehicles 2 and 3")
+    full_scale_v: float = pm.param("V", "full scale of the command and feedback signals (1.4: ±10 V)", **POS)
+    command_cal_v: tuple[float, float, float, float] = pm.param(
+        "V", "command curve, degrees → volts: V = c0 + c1·deg + c2·deg² + c3·deg³ (2.6, 3.1.2.2)", size=4)
+    feedback_cal_deg: tuple[float, float, float, float] = pm.param(
+        "deg", "feedback curve, volts → degrees: deg = c0 + c1·V + c2·V² + c3·V³ (2.6, 3.1.2.2)", size=4)
+    sections: Mapping[str, Mapping[str, Any]] = pm.carried(
+        "the model families' sections (``second_order``, ``high_order``, ``loes``...)", default_factory=dict)
+
+    RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("position_min_deg", "<", "position_max_deg"),)
+
+    @cached_property
+    def command_cal(self) -> Cubic:
+        """The command curve, degrees → volts."""
+        return Cubic(*self.command_cal_v)
+
+    @cached_property
+    def feedback_cal(self) -> Cubic:
+        """The feedback curve, volts → degrees."""
+        return Cubic(*self.feedback_cal_deg)
 
     @property
     def deg_per_in(self) -> float:
@@ -93,14 +126,6 @@ class ChannelConfig:
     def position_deg_to_v(self, deg: Any) -> Any:
         """The LVDT feedback voltage that reads back as ``deg`` (inverse feedback curve)."""
         return self.feedback_cal.inverse(deg)
-
-
-_SCALARS = (
-    "surface_inertia_inlbs2", "stroke_in", "slew_rate_in_s", "slew_rate_dps", "crank_arm_in",
-    "stall_force_lbf", "rated_force_lbf", "rated_rate_in_s", "backlash_in",
-    "static_stiffness_lbf_per_in", "position_min_deg", "position_max_deg", "free_play_deg",
-    "full_scale_v",
-)
 
 
 def ros_parameters(path: Path) -> dict[str, Any]:
@@ -132,26 +157,26 @@ def finite_parameter(params: Mapping[str, Any], key: str, origin: str) -> float:
 
 
 def parse_channel(params: Mapping[str, Any], origin: str = "<params>") -> ChannelConfig:
-    """Validate a channel's parameter mapping into a :class:`ChannelConfig`."""
-    values: dict[str, Any] = {key: finite_parameter(params, key, origin) for key in _SCALARS}
-    try:
-        command_cal = Cubic.from_list(params["command_cal_v"])
-        feedback_cal = Cubic.from_list(params["feedback_cal_deg"])
-    except (KeyError, ValueError) as exc:
-        raise ConfigError(f"{origin}: calibration curves: {exc}") from exc
-    if values["position_min_deg"] >= values["position_max_deg"]:
-        raise ConfigError(f"{origin}: position_min_deg must be below position_max_deg")
-    if command_cal.sign != feedback_cal.sign:
+    """A channel's parameter mapping as a :class:`ChannelConfig`, loaded and validated by its declaration.
+
+    Parameters
+    ----------
+    params : mapping
+        The ``ros__parameters`` of a channel file (or the node's declared values, nested).
+    origin : str
+        Where they come from, for messages.
+
+    Returns
+    -------
+    ChannelConfig
+        The validated channel.
+    """
+    values = {k: v for k, v in params.items() if not isinstance(v, Mapping)}
+    sections = {k: dict(v) for k, v in params.items() if isinstance(v, Mapping)}
+    cfg = pm.load(ChannelConfig, values, origin=origin, family="channel", carry={"sections": sections})
+    if cfg.command_cal.sign != cfg.feedback_cal.sign:
         raise ConfigError(f"{origin}: command and feedback curves disagree in sign")
-    sections = {k: dict(v) for k, v in params.items() if isinstance(v, dict)}
-    return ChannelConfig(
-        channel=str(params.get("channel", "?")),
-        surface=str(params.get("surface", "?")),
-        command_cal=command_cal,
-        feedback_cal=feedback_cal,
-        sections=sections,
-        **values,
-    )
+    return cfg
 
 
 @cache
@@ -161,3 +186,9 @@ def load_channel(channel: str = "left_wing") -> ChannelConfig:
         raise UnknownNameError("channel", channel, CHANNELS)
     path = config_dir() / f"{channel}.yaml"
     return parse_channel(ros_parameters(path), origin=str(path))
+
+
+@cache
+def scaling(channel: str) -> Scaling:
+    """The degree↔volt scaling of one of the five channels, from ``config/<channel>.yaml`` (the contract's form)."""
+    return scaling_of(load_channel(channel))

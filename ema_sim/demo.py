@@ -19,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.analysis.model_error import format_table, table6
+from ema_sim.analysis.studies.model_error import format_table, table6
 from ema_sim.cli import main as ema
 from ema_sim.io.bag import bag_info, read_bag
+from ema_sim.io.csv import FloatArray
 
 BAGS = Path("bags")
 OUT = Path("out/demo")
@@ -30,12 +31,18 @@ RUNS = {
     "sweep": ["--maneuver", "sweep:f0_hz=0.2,f1_hz=18,amp_deg=1,sweep_s=58,lead_s=1"],
     "steps": ["--test", "steps"],
 }
-AIL_RUNS = {"ail": [], "flight": []}
+AIL_RUNS: dict[str, list[str]] = {"ail": [], "flight": []}
 AIL_DURATION_S = "16"
 
 
 def summarize(bag: Path) -> None:
-    """Messages per topic, duration, and the left wing's tracking, FMU side against EMAC side."""
+    """Print messages per topic, duration, and the left wing's tracking, FMU side against EMAC side.
+
+    Parameters
+    ----------
+    bag : Path
+        A bag ``ema launch`` recorded.
+    """
     info = bag_info(bag)
     print(f"\n{bag}: {info.message_count} messages, {info.duration_s:.2f} s, channels {', '.join(info.channels)}")
     for topic, (msgtype, count) in info.topics.items():
@@ -47,9 +54,13 @@ def summarize(bag: Path) -> None:
     corr = [np.dot(a[: a.size - k], b[k:]) for k in lags]
     frame_ms = 1e3 * float(np.median(np.diff(emac.time_s)))
     print(f"  left wing: {len(emac)} frames on the EMAC side, {len(fmu)} on the FMU side; command peak "
-          f"{np.abs(emac.command_deg).max():.2f}°, LVDT peak {np.abs(emac.position_deg).max():.2f}°, surface peak "
-          f"{np.abs(emac.surface_deg).max():.2f}°; the AIL environment delays the command by "
+          f"{_peak(emac.command_deg)}, LVDT peak {_peak(emac.position_deg)}, surface peak "
+          f"{_peak(emac.surface_deg)}; the AIL environment delays the command by "
           f"{lags[int(np.argmax(corr))] * frame_ms:.0f} ms (best correlation) on its way to the EMAC")
+
+
+def _peak(values: FloatArray | None) -> str:
+    return "not recorded" if values is None else f"{float(np.abs(values).max()):.2f}°"
 
 
 def _step(title: str) -> None:

@@ -19,9 +19,20 @@ PACKAGE = "ema_sim"
 
 
 def generate(layout: str) -> Any:
-    """The launch description of one layout (``single``, ``container``, ``processes``)."""
-    from launch import LaunchDescription  # noqa: PLC0415
-    from launch.actions import DeclareLaunchArgument, OpaqueFunction  # noqa: PLC0415
+    """The launch description of one layout.
+
+    Parameters
+    ----------
+    layout : str
+        ``single``, ``container`` or ``processes`` (:data:`~ema_sim.run.LAYOUTS`).
+
+    Returns
+    -------
+    Any
+        A ``launch.LaunchDescription``: the arguments declared, the nodes made once their values are known.
+    """
+    from launch import LaunchDescription  # noqa: PLC0415 - a ROS 2 install's, not in the pip requirements
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction  # noqa: PLC0415 - the same
 
     declared = [DeclareLaunchArgument(name, default_value=default, description=text)
                 for name, (default, text) in LAUNCH_ARGUMENTS.items()]
@@ -30,9 +41,9 @@ def generate(layout: str) -> Any:
 
 def _nodes(context: Any, layout: str) -> list[Any]:
     """The run's processes as ``Node`` actions, once the launch arguments are known."""
-    from launch.actions import Shutdown  # noqa: PLC0415
-    from launch.substitutions import LaunchConfiguration  # noqa: PLC0415
-    from launch_ros.actions import Node  # noqa: PLC0415
+    from launch.actions import Shutdown  # noqa: PLC0415 - a ROS 2 install's, not in the pip requirements
+    from launch.substitutions import LaunchConfiguration  # noqa: PLC0415 - the same
+    from launch_ros.actions import Node  # noqa: PLC0415 - the same
 
     values = {name: LaunchConfiguration(name).perform(context) for name in LAUNCH_ARGUMENTS}
     run = from_launch_arguments(values, layout)

@@ -1,17 +1,22 @@
 """Parameter metadata: every parameter declared once, everything else read from that declaration.
 
 A parameter set is a frozen dataclass whose fields are declared with :func:`param`: unit, range,
-description, where its default comes from (a channel's YAML section or its physical data), its
+description, where its default comes from (a channel's YAML section or its physical data, whose
+declaration a linked field shares: :func:`linked`), its
 conversion into the numba kernel's units and the kernel slot it fills, the value that switches its
 stage off and the element name that does so by name (``--disable``), and the report's uncertainty
 bounds where the report gives them. From that one declaration come
 
 * the loader, :func:`load` (channel data, YAML section and subsections, then overrides),
-* the validator, :func:`validate` (range, finiteness, switch-off value, declared relations),
+* the validator, :func:`validate` (range, finiteness, switch-off value, a text's choices, declared relations,
+  and the relations of the set linked fields come from),
 * the kernel layout, :func:`kernel_layout` and :func:`kernel_vector` (slots generated from the
   declared kernel names, never numbered by hand), and :func:`slots` for any other index layout,
 * the listing, :func:`describe` (:class:`ParameterInfo`), which identification bounds, Monte Carlo
-  dispersions and ROS parameter descriptors read.
+  dispersions and ROS parameter descriptors (units, ranges) read.
+
+A set may carry data that are not parameters (a channel's model-family sections): such a field is
+declared with :func:`carried`, loaded as given and listed nowhere.
 
 Numba's on-disk cache does not follow changes in other modules: after changing a layout, remove the
 ``__pycache__`` directories so every kernel recompiles against it.
@@ -35,10 +40,14 @@ from ema_sim.errors import ConfigError, UnknownNameError
 
 META_KEY = "ema_sim"
 """The key of a field's ``metadata`` that holds its :class:`Meta`."""
+CARRIED_KEY = "ema_sim.carried"
+"""The key of a field's ``metadata`` that marks it carried, not a parameter (:func:`carried`)."""
 
 P = TypeVar("P")
-Value = float | tuple[float, ...]
-"""A parameter's value: a number, or a fixed number of them (a curve's breakpoints)."""
+Value = float | tuple[float, ...] | str
+"""A parameter's value: a number, a fixed number of them (a curve's breakpoints), or a text (a name)."""
+Relation = tuple[str, str, str]
+"""``(a, "<" or "<=", b)``: a declared relation between two parameters of a set."""
 
 
 @dataclass(frozen=True)
@@ -73,8 +82,12 @@ class Meta:
         (low, high) the report gives for it, in ``unit``; None where the report gives none.
     uncertainty_source : str
         Where the report gives ``uncertainty``.
+    choices : tuple of str or None
+        A text parameter (a name), one of these; None for a number.
     channel : str or None
-        Attribute of :class:`~ema_sim.config.ChannelConfig` the default comes from.
+        Attribute of :class:`~ema_sim.config.ChannelConfig` the default comes from (see :func:`linked`).
+    source : type or None
+        The parameter set that declares the ``channel`` attribute; its relations apply to the linked fields.
     section : str or None
         YAML subsection of the family's section it lives in (``"hoad3"``); None: the top level.
     variants : tuple of str
@@ -94,12 +107,16 @@ class Meta:
     to_kernel: float | Callable[[Any], float] = 1.0
     uncertainty: tuple[float, float] | None = None
     uncertainty_source: str = ""
+    choices: tuple[str, ...] | None = None
     channel: str | None = None
+    source: type | None = None
     section: str | None = None
     variants: tuple[str, ...] = ()
 
     def range_text(self) -> str:
         """The range in words, for messages and listings."""
+        if self.choices is not None:
+            return "one of " + ", ".join(self.choices)
         low = "(" if self.min_exclusive else "["
         return f"{low}{self.min:g}, {self.max:g}] {self.unit}"
 
@@ -125,6 +142,53 @@ def param(unit: str, description: str, *, default: Any = MISSING, **meta: Any) -
     """
     info = Meta(unit, description, **meta)
     return dataclasses.field(default=default, metadata={META_KEY: info})
+
+
+def linked(source: type, name: str, *, description: str | None = None, **meta: Any) -> Any:
+    """A field whose default is attribute ``name`` of a ``source`` set, sharing that declaration.
+
+    Unit, range, size, uncertainty and description come from the source's field (declared once there);
+    ``meta`` adds what the linking set does with the value (its kernel slot, conversion, switch-off value).
+    The source's declared relations between linked attributes hold for the linked fields too.
+
+    Parameters
+    ----------
+    source : type
+        The parameter set that declares the value (:class:`~ema_sim.config.ChannelConfig`).
+    name : str
+        Its field in ``source``.
+    description : str, optional
+        The value's role in the linking set (default: the source's description).
+    **meta
+        Further :class:`Meta` fields (``kernel``, ``to_kernel``, ``off``, ``element``...).
+
+    Returns
+    -------
+    dataclasses.Field
+        The field, for a dataclass body.
+    """
+    shared = metas(source)[name]
+    info = dataclasses.replace(shared, channel=name, source=source,
+                               description=shared.description if description is None else description, **meta)
+    return dataclasses.field(default=MISSING, metadata={META_KEY: info})
+
+
+def carried(description: str, *, default_factory: Callable[[], Any]) -> Any:
+    """A field a parameter set carries that is no parameter (not loaded by name, checked or listed).
+
+    Parameters
+    ----------
+    description : str
+        What it holds.
+    default_factory : callable
+        Its default (an empty mapping...).
+
+    Returns
+    -------
+    dataclasses.Field
+        The field, for a dataclass body.
+    """
+    return dataclasses.field(default_factory=default_factory, metadata={CARRIED_KEY: description})
 
 
 def meta_of(field: dataclasses.Field[Any]) -> Meta:
@@ -164,7 +228,34 @@ def metas(cls: Any) -> dict[str, Meta]:
 
 @functools.cache
 def _metas(cls: type) -> dict[str, Meta]:
-    return {f.name: meta_of(f) for f in fields(cls)}
+    return {f.name: meta_of(f) for f in fields(cls) if CARRIED_KEY not in f.metadata}
+
+
+def relations(cls: Any) -> tuple[Relation, ...]:
+    """The declared relations of a set: its own ``RELATIONS``, then its linked sources' between linked fields.
+
+    Parameters
+    ----------
+    cls : type or instance
+        A parameter dataclass (or an instance).
+
+    Returns
+    -------
+    tuple of Relation
+        Each ``(a, "<" or "<=", b)`` in the set's own field names.
+    """
+    return _relations(cls if isinstance(cls, type) else type(cls))
+
+
+@functools.cache
+def _relations(cls: type) -> tuple[Relation, ...]:
+    own: tuple[Relation, ...] = tuple(getattr(cls, "RELATIONS", ()))
+    out = list(own)
+    sources = dict.fromkeys(m.source for m in metas(cls).values() if m.source is not None)
+    for source in sources:
+        local = {m.channel: n for n, m in metas(cls).items() if m.source is source}
+        out += [(local[a], rel, local[b]) for a, rel, b in relations(source) if a in local and b in local]
+    return tuple(dict.fromkeys(out))
 
 
 # ---------------------------------------------------------------------------------------- layouts
@@ -289,9 +380,13 @@ def coerce(name: str, m: Meta, value: Any, origin: str, family: str) -> Value:
 
     Returns
     -------
-    float or tuple of float
+    float, tuple of float or str
         The value.
     """
+    if m.choices is not None:
+        if not isinstance(value, str) or (m.choices and value not in m.choices):
+            raise ConfigError(f"{origin}: {family} parameter {name} must be {m.range_text()}, got {value!r}")
+        return value
     bad = ConfigError(f"{origin}: {family} parameter {name} must be a number, got {value!r}")
     try:
         if m.size == 1:
@@ -316,7 +411,8 @@ def load(
     overrides: Mapping[str, Any] | None = None,
     options: Iterable[str] = (),
     variant: str | None = None,
-    base: Mapping[str, Any] | None = None,
+    source: Any = None,
+    carry: Mapping[str, Any] | None = None,
 ) -> P:
     """The one loader: a parameter set from a YAML mapping (with subsections) and overrides, validated.
 
@@ -339,8 +435,11 @@ def load(
         Names the caller accepts besides the parameters (listed with them when a name is unknown).
     variant : str, optional
         Which variant subsection the ``variants`` fields come from.
-    base : mapping, optional
-        Values taken before the file's (a channel's physical data).
+    source : parameter set, optional
+        The set the :func:`linked` fields take their values from before the file's (a channel's
+        :class:`~ema_sim.config.ChannelConfig`).
+    carry : mapping, optional
+        The values of the :func:`carried` fields, as they are.
 
     Returns
     -------
@@ -349,7 +448,8 @@ def load(
     """
     info = metas(cls)
     where = section or family
-    chosen: dict[str, Any] = dict(base or {})
+    chosen: dict[str, Any] = {n: getattr(source, m.channel) for n, m in info.items()
+                              if source is not None and m.channel is not None}
     for key, value in values.items():
         if isinstance(value, Mapping):
             fixed = [n for n, m in info.items() if m.section == key]
@@ -370,11 +470,11 @@ def load(
         if key not in info:
             raise UnknownNameError(f"{family} parameter", key, [*info, *options])
         chosen[key] = value
-    required = {f.name for f in fields(cls) if f.default is MISSING}  # type: ignore[arg-type]
+    required = {f.name for f in fields(cls) if f.default is MISSING and f.name in info}  # type: ignore[arg-type]
     missing = sorted(required - chosen.keys())
     if missing:
         raise ConfigError(f"{origin}: {where} is missing {', '.join(missing)}")
-    out = cls(**{k: coerce(k, info[k], v, origin, family) for k, v in chosen.items()})
+    out = cls(**{k: coerce(k, info[k], v, origin, family) for k, v in chosen.items()}, **(carry or {}))
     validate(out, family, origin)
     return out
 
@@ -398,9 +498,6 @@ def _bad(value: float, m: Meta) -> str | None:
     return why
 
 
-Relation = tuple[str, str, str]
-"""``(a, "<" or "<=", b)``: a declared relation between two parameters of a set."""
-
 
 _VALID = "_validated"
 """The attribute a frozen parameter set carries once it has passed :func:`validate` (not a field)."""
@@ -413,7 +510,8 @@ def validate(params: Any, family: str, origin: str = "") -> None:
     ----------
     params : dataclass instance
         A parameter set declared with :func:`param`; its class may declare ``RELATIONS``
-        (a tuple of :data:`Relation`).
+        (a tuple of :data:`Relation`), and the sets its :func:`linked` fields come from theirs
+        (:func:`relations`).
     family : str
         The family's name in messages.
     origin : str
@@ -430,6 +528,10 @@ def validate(params: Any, family: str, origin: str = "") -> None:
     where = f"{origin}: " if origin else ""
     for name, m in metas(params).items():
         value = getattr(params, name)
+        if m.choices is not None:
+            if not isinstance(value, str) or (m.choices and value not in m.choices):
+                raise ConfigError(f"{where}{family} parameter {name} must be {m.range_text()}, got {value!r}")
+            continue
         items = value if isinstance(value, tuple) else (value,)
         for item in items:
             why = _bad(item, m)
@@ -437,7 +539,7 @@ def validate(params: Any, family: str, origin: str = "") -> None:
                 raise ConfigError(f"{where}{family} parameter {name} {why}")
         if m.increasing and not all(a < b for a, b in itertools.pairwise(items)):
             raise ConfigError(f"{where}{family} parameter {name} must be {m.size} increasing values, got {items}")
-    for a, rel, b in getattr(type(params), "RELATIONS", ()):
+    for a, rel, b in relations(params):
         va, vb = getattr(params, a), getattr(params, b)
         if rel == "<" and not va < vb:
             raise ConfigError(f"{where}{family} parameter {a} must be below {b}")
@@ -596,7 +698,7 @@ def parameters_doc(cls: type) -> str:
     """
     lines = ["", "Parameters", "----------"]
     for name, m in metas(cls).items():
-        kind = "float" if m.size == 1 else f"tuple of {m.size} float"
+        kind = "str" if m.choices is not None else "float" if m.size == 1 else f"tuple of {m.size} float"
         extra = f"; off: {m.off:g}" if m.off is not None else ""
         lines += [f"{name} : {kind}", f"    {m.description} ({m.range_text()}{extra})."]
     return "\n".join(lines)

@@ -20,8 +20,12 @@ from typing import Any
 
 import yaml
 
+from ema_sim.ail.params import load_ail_config
 from ema_sim.config import CHANNELS
+from ema_sim.environment import load_profile
 from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.models import model_names
+from ema_sim.signals.plans import build_plan, channel_list
 
 LAYOUTS = ("single", "container", "processes")
 DEFAULT_LAYOUT = "single"
@@ -100,10 +104,15 @@ class RunDescription:
     bag: Path | None
     """The bag directory to create (None: ``bags/<test>_<UTC time>``)."""
     model: str = "loada"
+    """The model in every EMAC (``ema models``)."""
     profile: str = "none"
+    """The test environment: ``ail``, ``flight`` or ``none``."""
     test: str | None = None
+    """A section-2 test spec (``ema tests``)."""
     maneuver: str | None = None
+    """A maneuver spec of the driven channels (``ema maneuvers``)."""
     load: str | None = None
+    """A hinge-moment spec of the driven channels."""
     channels: list[str] = field(default_factory=lambda: ["left_wing"])
     """Driven channels."""
     emac_channels: list[str] = field(default_factory=lambda: list(CHANNELS))
@@ -111,6 +120,7 @@ class RunDescription:
     duration_s: float | None = None
     """Seconds (None: the test's length)."""
     lockstep: bool = False
+    """Every node on the suite's clock, frame by frame (``use_sim_time``)."""
     emac_box: bool | None = None
     """Shorthand: True for ``emac="box"``, False for ``emac="channels"``."""
     layout: str = DEFAULT_LAYOUT
@@ -119,10 +129,13 @@ class RunDescription:
     emac: str = DEFAULT_EMAC
     """``box``: one EMAC node for every channel; ``channels``: one EMAC node per channel."""
     frame_hz: float = 200.0
+    """The FMU frame rate, Hz."""
     domain_id: int | None = None
+    """``ROS_DOMAIN_ID`` of the run (None: a free one, :func:`ema_sim.suite.free_domain_id`)."""
     disable: list[str] = field(default_factory=list)
     """Elements switched off (the test environment's and the model's, :mod:`ema_sim.switches`)."""
     window: int = 1
+    """Lockstep: frames the clock may run ahead of the slowest EMAC."""
     rt_priority: int = 0
     """Real time: every process at this SCHED_FIFO priority, memory locked, CPUs kept from idle halts."""
     measure_busy: bool = False
@@ -132,17 +145,17 @@ class RunDescription:
     fmu_args: list[str] = field(default_factory=list)
     """``--open-loop``, ``--bungee INLB``: read once into :attr:`open_loop` and :attr:`bungee_inlb`."""
     open_loop: bool = False
+    """Aircraft in the loop: the simulation flies its own model actuators."""
     bungee_inlb: float | None = None
+    """Aircraft in the loop: a bungee on the wings, in·lb."""
     seed: int | None = None
     """The test environment's noise seed (default: the profile's)."""
     namespace: str = ""
     """ROS namespace of every node (``/aircraft2``): every topic of the run moves with it."""
 
     def __post_init__(self) -> None:
-        from ema_sim.environment import load_profile  # noqa: PLC0415
-        from ema_sim.models import model_names  # noqa: PLC0415
-        from ema_sim.signals.plans import channel_list  # noqa: PLC0415
-        from ema_sim.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415
+        # `ema` imports this module at every start (commands/launch.py); the switches import python-control
+        from ema_sim.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415 - 1.2 s
 
         if self.emac_box is not None:
             self.emac = "box" if self.emac_box else "channels"
@@ -169,18 +182,14 @@ class RunDescription:
         self.namespace = _namespace(self.namespace)
         self._check_driver()
         if self.bag is None:
-            from ema_sim.nodes.driver import stamped_bag  # noqa: PLC0415
+            from ema_sim.nodes.driver import stamped_bag  # noqa: PLC0415 - imports rclpy: only when a bag is named here
 
             self.bag = stamped_bag(f"ail_{self.profile}" if self.fmu else self.test_name)
         self.bag = Path(self.bag)
 
     def _check_driver(self) -> None:
         """The driver's part: the aircraft-in-the-loop set-up, or the test and its length."""
-        from ema_sim.signals.plans import build_plan  # noqa: PLC0415
-
         if self.fmu:
-            from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
-
             if self.maneuver or self.test:
                 raise EmaError("--fmu drives the suite with the vehicle and autopilot: no --maneuver or --test with it")
             if self.duration_s is None or not (math.isfinite(self.duration_s) and self.duration_s > 0.0):
@@ -201,6 +210,13 @@ class RunDescription:
             self.test_name = plan.test
 
     # ----------------------------------------------------------------- nodes and processes
+    @property
+    def bag_dir(self) -> Path:
+        """The bag directory: :attr:`bag`, named when the run was made if none was given."""
+        if self.bag is None:  # __post_init__ names it: only a caller that set it back to None gets here
+            raise EmaError("the run has no bag directory")
+        return self.bag
+
     @property
     def driver(self) -> str:
         """The node that drives the test and records the bag: ``maneuver``, or ``fmu`` in the loop."""
@@ -236,7 +252,7 @@ class RunDescription:
     # ----------------------------------------------------------------- parameters
     def parameters(self) -> dict[str, dict[str, Any]]:
         """Node name → its parameters (``ros__parameters``) for this run."""
-        from ema_sim.switches import environment_elements  # noqa: PLC0415
+        from ema_sim.switches import environment_elements  # noqa: PLC0415 - python-control, see __post_init__
 
         peers = self.node_names()
         common = {"peers": peers}
@@ -281,14 +297,38 @@ class RunDescription:
         return head + yaml.dump(doc, Dumper=_PlainDumper, sort_keys=False, default_flow_style=None, width=120)
 
     def write(self, path: str | Path) -> Path:
-        """Write :meth:`parameter_file` to ``path``."""
+        """Write :meth:`parameter_file` to ``path``.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file (its directory is created).
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         p.write_text(self.parameter_file(), encoding="utf-8")
         return p
 
     def ros_arguments(self, proc: Process, params_file: str | Path) -> list[str]:
-        """``--ros-args …`` of one process: the run's parameter file, its node name, the namespace."""
+        """``--ros-args …`` of one process: the run's parameter file, its node name, the namespace.
+
+        Parameters
+        ----------
+        proc : Process
+            One of :meth:`processes`.
+        params_file : str or Path
+            Where :meth:`write` put the run's parameter file.
+
+        Returns
+        -------
+        list[str]
+            The arguments, ``--ros-args`` first.
+        """
         out = ["--ros-args", "--params-file", str(params_file)]
         if proc.node_name is not None:
             out += ["-r", f"__node:={proc.node_name}"]
@@ -325,7 +365,25 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
 
 
 def from_launch_arguments(values: dict[str, str], layout: str) -> RunDescription:
-    """A run from launch arguments (strings, as ``ros2 launch`` gives them); the same checks as ``ema launch``."""
+    """A run from launch arguments (strings, as ``ros2 launch`` gives them); the same checks as ``ema launch``.
+
+    Parameters
+    ----------
+    values : dict[str, str]
+        Launch argument → its value (:data:`LAUNCH_ARGUMENTS`; a missing one takes its default).
+    layout : str
+        One of :data:`LAYOUTS` (the launch file's).
+
+    Returns
+    -------
+    RunDescription
+        The run, validated.
+
+    Raises
+    ------
+    EmaError
+        A flag that is not true or false, a number that is not one, or any check of :class:`RunDescription`.
+    """
     def text(name: str) -> str:
         return str(values.get(name, LAUNCH_ARGUMENTS[name][0])).strip()
 

@@ -49,18 +49,37 @@ __all__ = ["DEFAULT_EMAC", "DEFAULT_LAYOUT", "EMAC_HOSTING", "LAYOUTS", "Suite",
 
 
 def free_domain_id(seed: int | None = None) -> int:
-    """A ROS domain id in 1–101 derived from the pid (so parallel runs on one machine do not meet)."""
+    """A ROS domain id in 1–101 derived from the pid (so parallel runs on one machine do not meet).
+
+    Parameters
+    ----------
+    seed : int, optional
+        Derive it from this number instead of the pid.
+
+    Returns
+    -------
+    int
+        The domain id.
+    """
     return 1 + ((os.getpid() if seed is None else seed) % 101)
 
 
 class Suite:
-    """The processes of one run."""
+    """The processes of one run.
+
+    Parameters
+    ----------
+    cfg : RunDescription
+        The run: what runs in which process, and its parameters.
+    """
 
     def __init__(self, cfg: RunDescription) -> None:
         self.cfg = cfg
         self.domain_id = cfg.domain_id if cfg.domain_id is not None else int(
             os.environ.get("ROS_DOMAIN_ID") or free_domain_id())
-        self.log_dir = Path(f"{cfg.bag}.logs")
+        self.bag = cfg.bag_dir
+        """The bag the driver records."""
+        self.log_dir = Path(f"{self.bag}.logs")
         self.params_file = self.log_dir / "run.yaml"
         """The run's one parameter file (:meth:`~ema_sim.run.RunDescription.parameter_file`)."""
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
@@ -99,8 +118,8 @@ class Suite:
     def start(self) -> None:
         """Write the run's parameter file and start every process (returns at once; the nodes find each other)."""
         cfg = self.cfg
-        if cfg.bag.exists():
-            raise EmaError(f"{cfg.bag} exists already; give a new bag directory")
+        if self.bag.exists():
+            raise EmaError(f"{self.bag} exists already; give a new bag directory")
         self.log_dir.mkdir(parents=True, exist_ok=True)
         cfg.write(self.params_file)
         self.started = time.monotonic()
@@ -116,7 +135,23 @@ class Suite:
                                                      start_new_session=True)
 
     def wait(self, timeout_s: float | None = None) -> int:
-        """Wait for the maneuver node to finish (its bag closed); returns its exit status."""
+        """Wait for the driver to finish (its bag closed).
+
+        Parameters
+        ----------
+        timeout_s : float, optional
+            Give up (and stop every process) after this long, s; None waits as long as it takes.
+
+        Returns
+        -------
+        int
+            The driver's exit status.
+
+        Raises
+        ------
+        EmaError
+            Another node exited with an error, or the timeout passed (the suite is stopped either way).
+        """
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         man = self.procs[self.fmu_process]
         while man.poll() is None:
@@ -166,7 +201,18 @@ class Suite:
         return out
 
     def run(self, timeout_s: float | None = None) -> None:
-        """Start, wait for the test, stop (also when interrupted); one error when the driver failed."""
+        """Start, wait for the test, stop (also when interrupted).
+
+        Parameters
+        ----------
+        timeout_s : float, optional
+            As in :meth:`wait`.
+
+        Raises
+        ------
+        EmaError
+            The bag exists already, a node failed, the timeout passed, or the driver exited with an error.
+        """
         try:
             self.start()
             status = self.wait(timeout_s)
@@ -187,7 +233,20 @@ class Suite:
 
 
 def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dict[str, Any]]:
-    """Start, wait for the test, stop; the nodes' summaries."""
+    """Start, wait for the test, stop.
+
+    Parameters
+    ----------
+    cfg : SuiteConfig
+        The run.
+    timeout_s : float, optional
+        As in :meth:`Suite.wait`.
+
+    Returns
+    -------
+    dict[str, dict[str, Any]]
+        The nodes' summaries, by node name.
+    """
     suite = Suite(cfg)
     suite.run(timeout_s)
     return suite.summaries()

@@ -34,9 +34,16 @@ set (:mod:`ema_sim.models.second_order.stage_set`), the report's and the one wit
 
 
 def warm_model(name: str) -> None:
-    """Trim, run and step model ``name`` on one instance and on a batch of two, in each of its :data:`VARIANTS`."""
+    """Trim, run and step model ``name`` on one instance and on a batch of two, in each of its :data:`VARIANTS`.
+
+    A variant's batch also runs 60 s at once, long enough for the fixed-step kernels' parallel twin
+    (:data:`ema_sim.models.second_order.loada.PARALLEL_STEPS`).
+    """
     for overrides in VARIANTS.get(name, [{}]):
         _warm_variant(name, overrides)
+        if name in VARIANTS:
+            t = np.arange(0.0, 60.0, 0.005)
+            create(name, n=2, **overrides).run(t, np.zeros_like(t), np.zeros_like(t))
 
 
 def _warm_variant(name: str, overrides: dict[str, float]) -> None:

@@ -8,15 +8,23 @@ import pytest
 FRAME_S = 0.005
 
 
+SHARED_FIXTURES = {"test_montecarlo": "scheduler", "test_identify_rig": "rig"}
+"""Module → its expensive module fixture (a real Dask cluster; the rig records identified through the CLI): the
+tests that use it run in one worker, so it is built once; the module's other tests go to whichever worker is free."""
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """A module whose tests start processes runs in one pytest-xdist worker, its tests one after another.
+    """A module's tests that start processes run in one pytest-xdist worker, one after another.
 
     ``make test`` runs the suite on two workers (``--dist loadgroup``): other tests go to whichever worker
     is free. The ROS tests measure frame rates, drops and latencies of real processes, so two of one
-    module never run against each other; the Monte Carlo tests share their module's real Dask cluster.
+    module never run against each other; the tests that share a module's :data:`SHARED_FIXTURES` (the Monte
+    Carlo tests' real Dask cluster, the rig records identified once) run where it was built.
     """
     for item in items:
-        if item.get_closest_marker("ros") is not None or item.module.__name__.endswith("test_montecarlo"):
+        module = item.module.__name__.rpartition(".")[2]
+        shared = SHARED_FIXTURES.get(module)
+        if item.get_closest_marker("ros") is not None or (shared is not None and shared in item.fixturenames):
             item.add_marker(pytest.mark.xdist_group(item.module.__name__))
 
 

@@ -11,11 +11,14 @@ from ema_sim.ail.autopilot import Autopilot
 from ema_sim.ail.bag import run_from_bag
 from ema_sim.ail.loop import AilOptions, run_ail
 from ema_sim.ail.measure import measure
-from ema_sim.ail.params import WINGS, load_ail_config
+from ema_sim.ail.params import WINGS, config_path, load_ail_config
 from ema_sim.ail.vehicle import Vehicle, discretize, matrices
 from ema_sim.cli import main as ema
+from ema_sim.config import ros_parameters
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.io.csv import read_csv
+from ema_sim.nodes.fmu import _declared
+from ema_sim.nodes.params import config_specs
 from ema_sim.suite import SuiteConfig, free_domain_id, run_suite
 
 CFG = load_ail_config()
@@ -192,3 +195,18 @@ def test_the_lockstep_suite_flies_the_offline_run_frame_for_frame(tmp_path, layo
             np.testing.assert_array_equal(ros.signals[ch][sig], off.signals[ch][sig], err_msg=f"{ch} {sig}")
     for state in off.vehicle:
         np.testing.assert_array_equal(ros.vehicle[state], off.vehicle[state], err_msg=state)
+
+
+def test_every_number_of_the_vehicle_file_is_declared_with_its_unit():
+    """The fmu node's descriptors take units from the declarations (no suffix table): none is left without."""
+    values = ros_parameters(config_path())
+    specs = config_specs(values, "ail_vehicle.yaml", known=_declared(values))
+    numbers = [s for s in specs if isinstance(s.default, int | float) and not isinstance(s.default, bool)]
+    assert len(numbers) > 30
+    assert [s.name for s in numbers if not s.unit] == []
+    units = {s.name: s.unit for s in numbers}
+    assert units["frame_hz"] == "Hz"
+    assert units["measure.settle_s"] == "s"
+    assert units["setup.ail.bungee_inlb"] == "in·lb"
+    assert all(units[n] == "deg" for n in units if n.startswith("held_deg."))
+    assert any(n.startswith("held_deg.") for n in units)

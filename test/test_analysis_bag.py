@@ -14,6 +14,7 @@ import pytest
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
 from ema_sim.analysis.pipeline import analyze_record
+from ema_sim.config import scaling
 from ema_sim.io import load_data
 from ema_sim.io.bag import BagWriter
 from ema_sim.models import create
@@ -28,7 +29,7 @@ def suite_bag(path, maneuver="steps:amps_deg=0.5/1/20,lead_s=0.5,hold_s=1.5", *,
     man = parse_maneuver(maneuver)
     t = np.arange(int(man.duration_s * FRAME_HZ)) / FRAME_HZ
     fmu = man.command_deg(t)
-    sc = ct.scaling(CHANNEL)
+    sc = scaling(CHANNEL)
     rng = np.random.default_rng(seed)
     delayed = np.interp(t - ENV_DELAY_S, t, fmu, left=fmu[0])
     alpha = 1.0 - np.exp(-2 * np.pi * 50.0 / FRAME_HZ)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from analysis_data import measured
 
-from ema_sim.analysis import frf
-from ema_sim.analysis import second_order_fit as sof
+from ema_sim.analysis.estimation import frf
+from ema_sim.analysis.estimation import second_order_fit as sof
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.signals import parse_maneuver
 from ema_sim.simulation import simulate

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from ema_sim.analysis.noise import autocorrelation, input_independence, noise_floor, whiteness
-from ema_sim.analysis.second_order_fit import fit_step
-from ema_sim.analysis.uncertainty import coloured_covariance
+from ema_sim.analysis.estimation.noise import autocorrelation, input_independence, noise_floor, whiteness
+from ema_sim.analysis.estimation.second_order_fit import fit_step
+from ema_sim.analysis.estimation.uncertainty import coloured_covariance
 from ema_sim.signals import parse_maneuver
 from ema_sim.simulation import simulate
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from analysis_data import measured
 
-from ema_sim.analysis import series
 from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.analysis.recognize import recognize
+from ema_sim.analysis.records import series
 from ema_sim.io.csv import MeasuredData
 from ema_sim.signals import parse_maneuver
 

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from rig_data import Actuator, rig_record, sine_sweep, square_wave, trapezoid_moves
 
-from ema_sim.analysis.command_hold import detect_command_hold
-from ema_sim.analysis.noise import detect_resolution, output_noise
+from ema_sim.analysis.estimation.noise import detect_resolution, output_noise
+from ema_sim.analysis.estimation.second_order_fit import fit_step
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.analysis.plots import has_load, write_plots
+from ema_sim.analysis.records.command_hold import detect_command_hold
 from ema_sim.analysis.report import to_json, to_markdown
-from ema_sim.analysis.second_order_fit import fit_step
 from ema_sim.cli import main
 from ema_sim.io.csv import MeasuredData
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from analysis_data import measured
 
-from ema_sim.analysis.hysteresis import hysteretic_damping_constant
 from ema_sim.analysis.pipeline import Options, analyze_record, analyze_records
+from ema_sim.analysis.section2.hysteresis import hysteretic_damping_constant
 from ema_sim.calibration import command_error
 from ema_sim.config import load_channel
 from ema_sim.io.csv import MeasuredData

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from analysis_data import delayed, measured
 
+from ema_sim.analysis.estimation.second_order_fit import response
 from ema_sim.analysis.pipeline import analyze_record
-from ema_sim.analysis.second_order_fit import response
-from ema_sim.analysis.steps import slew_rates
+from ema_sim.analysis.section2.steps import slew_rates
 
 STEPS = "steps:amps_deg=0.5/1/20"
 

@@ -9,7 +9,7 @@ import pytest
 from analysis_data import measured
 
 import ema_sim.io
-from ema_sim.analysis import loading
+from ema_sim.analysis.records import loading
 from ema_sim.cli import main
 from ema_sim.errors import DataError
 from ema_sim.io.csv import write_csv

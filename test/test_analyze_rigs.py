@@ -18,11 +18,13 @@ import numpy as np
 import pytest
 from rigs import STEP_S, Drive, corpus, log, write_rig_csv
 
-from ema_sim.analysis import grid, pipeline, steps
-from ema_sim.analysis.frf import COHERENCE_GOOD
-from ema_sim.analysis.noise import detect_resolution, output_noise
+from ema_sim.analysis import pipeline
+from ema_sim.analysis.estimation import grid
+from ema_sim.analysis.estimation.frf import COHERENCE_GOOD
+from ema_sim.analysis.estimation.noise import detect_resolution, output_noise
 from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.analysis.report import record_json
+from ema_sim.analysis.section2 import steps
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.io.csv import read_csv

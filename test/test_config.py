@@ -1,11 +1,15 @@
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from ema_sim import parameters as pm
 from ema_sim.calibration import command_error
-from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
+from ema_sim.config import CHANNELS, ChannelConfig, config_dir, load_channel, parse_channel, ros_parameters
 from ema_sim.errors import ConfigError, UnknownNameError
+from ema_sim.models.high_order.params import HighOrderParams
+from ema_sim.models.second_order.params import SecondOrderParams
 
 UNIT = re.compile(
     r"_(deg|v|inlb|inlbs2|s|hz|in|in_s|dps|lbf|lbf_per_in|rad_s|dps_per_lb|per_kinlb|deg_per_kinlb|a|ohm"
@@ -71,3 +75,53 @@ def test_malformed_channel_parameters_name_the_problem():
     missing = {k: v for k, v in good.items() if k != "stroke_in"}
     with pytest.raises(ConfigError, match="stroke_in"):
         parse_channel(missing)
+
+
+def _leaves(mapping, prefix=""):
+    for key, value in mapping.items():
+        if isinstance(value, dict):
+            yield from _leaves(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+@pytest.mark.parametrize("channel", CHANNELS)
+def test_each_value_appears_once_in_a_channel_file(channel):
+    params = ros_parameters(config_dir() / f"{channel}.yaml")
+    # a value a model family takes from the channel's data is not repeated in the family's section
+    for cls, section in ((SecondOrderParams, "second_order"), (HighOrderParams, "high_order")):
+        linked = {name for name, m in pm.metas(cls).items() if m.channel is not None}
+        assert linked
+        keys = {path.rsplit(".", 1)[-1] for path, _ in _leaves(params[section])}
+        assert not linked & keys, (section, linked & keys)
+    # the channel's data are declared once, every one of them (ChannelConfig), and nothing else is at the top
+    top = {k for k, v in params.items() if not isinstance(v, dict)}
+    assert top == set(pm.metas(ChannelConfig))
+
+
+@pytest.mark.parametrize("channel", CHANNELS)
+def test_the_second_order_rate_limit_is_the_channels_unloaded_slew(channel):
+    cfg = load_channel(channel)
+    assert SecondOrderParams.from_channel(cfg).rate_limit_dps == cfg.slew_rate_dps == 115.8  # table 1
+    assert SecondOrderParams.from_channel(replace(cfg, slew_rate_dps=100.0)).rate_limit_dps == 100.0
+    assert SecondOrderParams.from_channel(cfg, rate_limit_dps=90.0).rate_limit_dps == 90.0
+
+
+def test_the_channel_is_checked_by_its_declaration():
+    good = ros_parameters(config_dir() / "left_wing.yaml")
+    cases = {
+        "position_min_deg must be below position_max_deg": {"position_min_deg": 43.0},
+        "surface must be one of wing, rudder, cowl": {"surface": "flap"},
+        "crank_arm_in must be positive": {"crank_arm_in": 0.0},
+        "command_cal_v needs 4 values, got 3": {"command_cal_v": [0.0, 1.0, 0.0]},
+        "feedback_cal_deg must be finite": {"feedback_cal_deg": [0.0, float("nan"), 0.0, 0.0]},
+        "free_play_deg must not exceed 3": {"free_play_deg": 4.0},
+        "unknown parameter 'slew_dps'": {"slew_dps": 1.0},
+        "command and feedback curves disagree in sign": {"command_cal_v": [0.0, 0.2357, 0.0, 0.0]},
+    }
+    for message, change in cases.items():
+        with pytest.raises(ConfigError, match=message):
+            parse_channel({**good, **change}, "left_wing.yaml")
+    cfg = parse_channel(good)
+    assert cfg == load_channel("left_wing")
+    assert cfg.command_cal.coefficients() == list(good["command_cal_v"])

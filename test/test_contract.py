@@ -3,9 +3,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ema_msgs_py import CHANNELS, TOPICS, cdr, failure_topic, scaling
+from ema_msgs_py import CHANNELS, TOPICS, cdr, failure_topic
 from ema_msgs_py import typestore as ts
-from ema_sim.config import load_channel, parse_channel, ros_parameters
+from ema_sim.config import load_channel, parse_channel, ros_parameters, scaling
 from ema_sim.nodes.params import merged, nested
 
 ROOT = Path(__file__).resolve().parents[1]

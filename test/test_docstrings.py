@@ -5,7 +5,8 @@ entry (``name : type``, several names may share one: ``c0, c1 : float``) in the 
 methods may inherit from the method they override. Compiled (numba) functions are checked through the
 Python function they compile. Names starting with ``_`` are private and not checked; a dataclass's
 generated ``__init__`` is documented by its fields (attribute docstrings or, for parameter sets, the
-section :func:`ema_sim.parameters.documented` generates from their metadata).
+section :func:`ema_sim.parameters.documented` generates from their metadata), and a ``typing.Protocol`` has
+no constructor of its own to document.
 """
 
 import importlib
@@ -16,14 +17,16 @@ import re
 import pytest
 
 PACKAGES = ["ema_sim.models", "ema_sim.signals", "ema_sim.environment", "ema_sim.io", "ema_sim.analysis",
-            "ema_sim.identify", "ema_sim.montecarlo", "ema_sim.export"]
-"""The packages kept documented (add a package here once its docstrings are complete)."""
+            "ema_sim.identify", "ema_sim.montecarlo", "ema_sim.export", "ema_msgs_py", "ema_sim.ail",
+            "ema_sim.commands", "ema_sim.run", "ema_sim.suite", "ema_sim.launching", "ema_sim.demo", "ema_sim.cli",
+            "ema_sim.nodes", "ema_sim.emac"]
+"""The packages (and single modules) kept documented (add one here once its docstrings are complete)."""
 
 
 def _modules(package):
     pkg = importlib.import_module(package)
     yield pkg
-    for info in pkgutil.walk_packages(pkg.__path__, f"{package}."):
+    for info in pkgutil.walk_packages(getattr(pkg, "__path__", []), f"{package}."):  # a module has no __path__
         yield importlib.import_module(info.name)
 
 
@@ -64,7 +67,8 @@ def _targets(module):
             yield f"{module.__name__}.{name}", func, func
         elif inspect.isclass(obj):
             init = obj.__dict__.get("__init__")
-            if init is not None and not getattr(obj, "__dataclass_fields__", None):
+            if init is not None and not getattr(obj, "__dataclass_fields__", None) \
+                    and not getattr(obj, "_is_protocol", False):  # a Protocol is never built: no __init__ to document
                 yield f"{module.__name__}.{name}", init, obj
             for attr, member in obj.__dict__.items():
                 target = member.__func__ if isinstance(member, classmethod | staticmethod) else member

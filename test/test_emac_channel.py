@@ -3,8 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from ema_msgs_py import scaling
-from ema_sim.config import load_channel
+from ema_sim.config import load_channel, scaling
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, InputStatus, parse_failure
 from ema_sim.errors import ConfigError, SpecError
 from ema_sim.models import Flags, create

@@ -24,6 +24,7 @@ from rclpy.parameter import Parameter
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.errors import ConfigError, EmaError
 from ema_sim.nodes.emac import EmacNode
+from ema_sim.nodes.emac_params import check_files
 from ema_sim.nodes.params import key_matches
 from ema_sim.nodes.ports import Ports
 from ema_sim.run import from_launch_arguments
@@ -141,8 +142,8 @@ def test_a_copied_and_edited_file_applies_under_a_namespace_and_a_remapped_name(
     bare = _copy(tmp_path, "left_wing", "emac_left_wing", free_play_deg=0.555)  # a bare key: the root namespace's
     node = emac("--params-file", bare, "-r", "__ns:=/vehicle1")
     warned = []
-    node.get_logger = lambda: SimpleNamespace(warning=warned.append)
-    node._check_files(["--ros-args", "--params-file", bare])
+    check_files(["--ros-args", "--params-file", bare], node.get_namespace(), node.get_name(),
+                node.get_fully_qualified_name(), SimpleNamespace(warning=warned.append))
     assert node.get_parameter("free_play_deg").value == 0.2  # rcl's rule, said out loud
     assert "applies to /emac_left_wing only" in warned[0]
     assert "'/**/emac_left_wing'" in warned[0]

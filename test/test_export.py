@@ -174,7 +174,7 @@ def _hm(rng):
 
 
 def _p(rng):
-    return random_params(rng).vector()
+    return random_params(rng).kernel_vector()
 
 
 def _dt(rng):
@@ -314,7 +314,7 @@ def _write_outputs(lib, a):
     return row, list(row1)
 
 
-@case("ema_trim", lambda r: (random_params(r).vector(), _u(r), _hm(r)))
+@case("ema_trim", lambda r: (random_params(r).kernel_vector(), _u(r), _hm(r)))
 def _trim(lib, a):
     _, _, (_, x, hist) = ccall(lib, "ema_trim", V, a[0], a[1], a[2], np.zeros(N_STATE), np.zeros((HISTORY_SIZE, 3)),
                                Long(HISTORY_SIZE))
@@ -382,13 +382,13 @@ def test_the_c_kernel_is_loada_and_loadf_bit_for_bit(clib, name, rate, backward)
         model = create(name, "left_wing", params=prm)
         model.trim(cmd[0], hm[0])
         want = model.run_outputs(np.arange(n) * dt, cmd, hm, sample_times=np.arange(n + 1) * dt, end_s=n * dt)[0]
-        got = _c_kernel(clib, prm.vector(), rate, backward, cmd, hm)
+        got = _c_kernel(clib, prm.kernel_vector(), rate, backward, cmd, hm)
         assert np.all(np.isfinite(want[:, :3])), trial
         assert same_bits(got, want), (trial, np.max(np.abs(got - want), axis=0))
 
 
 def test_the_c_model_rejects_a_parameter_outside_its_range(clib):
-    p = resolve("loada").params.vector()
+    p = resolve("loada").params.kernel_vector()
     p[P.zeta] = 7.0
     msg = ctypes.create_string_buffer(256)
     clib.ema_check_params.restype = ctypes.c_int

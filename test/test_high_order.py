@@ -6,18 +6,18 @@ import numpy as np
 import pytest
 from conftest import FRAME_S, frames
 
-from ema_sim.analysis import acceptance as acc
-from ema_sim.analysis import hysteresis_study as hyst
-from ema_sim.analysis.hysteresis import hysteretic_damping_constant
-from ema_sim.analysis.model_error import figure40
+from ema_sim.analysis.section2.hysteresis import hysteretic_damping_constant
+from ema_sim.analysis.studies import acceptance as acc
+from ema_sim.analysis.studies import hysteresis_study as hyst
+from ema_sim.analysis.studies.model_error import figure40
 from ema_sim.config import load_channel
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import Flags, create
 from ema_sim.models import noise as nz
-from ema_sim.models.high_order import HighOrderParams, Hoac1, Hoad3, K, equilibrium
+from ema_sim.models.high_order import HighOrderParams, Hoac1, Hoad3, P, equilibrium
 from ema_sim.models.high_order import gear_train as gt
 
-K_T_D1, K_T_F1, K_T_K1 = K.total_d1_in, K.total_f1_lbf, K.total_k1_lbf_per_in  # kernel slots, renamed with units
+K_T_D1, K_T_F1, K_T_K1 = P.total_d1_in, P.total_f1_lbf, P.total_k1_lbf_per_in  # kernel slots, renamed with units
 
 ARM_IN = 1.7317
 DEG_PER_IN = math.degrees(1.0) / ARM_IN

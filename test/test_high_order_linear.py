@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from conftest import frames
 
-from ema_sim.analysis.loes import fit_loes, write_loes
-from ema_sim.analysis.sine_dwell import sine_dwell
-from ema_sim.analysis.tf_fit import fit_transfer_function, levy_sk, loes_cost, second_order_coefficients
+from ema_sim.analysis.estimation.tf_fit import fit_transfer_function, levy_sk, loes_cost, second_order_coefficients
+from ema_sim.analysis.section2.sine_dwell import sine_dwell
+from ema_sim.analysis.studies.loes import fit_loes, write_loes
 from ema_sim.cli import main
 from ema_sim.config import config_dir, load_channel
 from ema_sim.errors import EmaError, UnknownNameError

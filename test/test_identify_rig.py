@@ -35,8 +35,8 @@ from ema_sim.identify.trust import frequency_hz, on_bound
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import Loac
 
-# One worker runs the module: the records are identified once (the module fixture), not once per worker.
-pytestmark = pytest.mark.xdist_group("test_identify_rig")
+# The tests of the module fixture ``rig`` run in one worker (test/conftest.py's SHARED_FIXTURES): the records are
+# identified once, not once per worker; the module's other tests go to whichever worker is free.
 
 WING = load_channel("left_wing")
 
@@ -221,7 +221,7 @@ def test_a_stop_in_the_record_sets_the_travel_there():
     cmd = np.where(t < 5, 0.0, np.where(t < 10, 60.0, np.where(t < 15, -80.0, 0.0)))
     pos = np.clip(cmd, -70.0, 70.0) + np.random.default_rng(1).normal(0, 0.002, t.size)
     data = MeasuredData(time_s=t, command_deg=cmd, position_deg=pos)
-    from ema_sim.analysis.noise import output_noise  # noqa: PLC0415
+    from ema_sim.analysis.estimation.noise import output_noise  # noqa: PLC0415
     travel = travel_limits(data, WING, {"position_deg": output_noise(pos)}, stand_in=False)
     assert travel.outside
     assert travel.source == "data, stop seen"

@@ -4,12 +4,12 @@ Read from the source, imports inside functions and under ``TYPE_CHECKING`` inclu
 cannot hide an upward edge or a loop from the check. Layers, lowest first (a package may import its own
 modules and any package of a lower layer, never a sibling of its own layer):
 
-0  errors                                         the one exception tree
+0  errors, ema_msgs_py                            the one exception tree; the topic contract (stands on its own)
 1  ema_sim (its version), calibration, progress,  the data every layer reads
    benchmark
 2  parameters                                     one declaration of every parameter
 3  config                                         channel files
-4  ema_msgs_py, models, signals                   topic contract; pure models; test signals (no ROS, no io)
+4  models, signals                                pure models; test signals (no ROS, no io)
 5  environment, simulation, io                    the test environment; running models on signals; CSV and bags
 6  switches, analysis, emac                       elements switched off by name; section-2 analysis; one channel
 7  identify, ail                                  closing the loop; the aircraft in the loop
@@ -22,6 +22,8 @@ modules and any package of a lower layer, never a sibling of its own layer):
 """
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -30,11 +32,11 @@ import ema_sim
 
 ROOT = Path(ema_sim.__file__).resolve().parent.parent
 LAYERS: list[tuple[str, ...]] = [
-    ("ema_sim.errors",),
+    ("ema_sim.errors", "ema_msgs_py"),
     ("ema_sim", "ema_sim.calibration", "ema_sim.progress", "ema_sim.benchmark"),
     ("ema_sim.parameters",),
     ("ema_sim.config",),
-    ("ema_msgs_py", "ema_sim.models", "ema_sim.signals"),
+    ("ema_sim.models", "ema_sim.signals"),
     ("ema_sim.environment", "ema_sim.simulation", "ema_sim.io"),
     ("ema_sim.switches", "ema_sim.analysis", "ema_sim.emac"),
     ("ema_sim.identify", "ema_sim.ail"),
@@ -48,8 +50,10 @@ LAYERS: list[tuple[str, ...]] = [
 LAYER = {package: k for k, packages in enumerate(LAYERS) for package in packages}
 PURE = ("ema_sim.models", "ema_sim.signals", "ema_sim.environment", "ema_sim.switches", "ema_sim.parameters",
         "ema_sim.config", "ema_sim.calibration", "ema_sim.errors")
-FOREIGN = ("rclpy", "rosbags", "mcap", "ema_msgs_py")
-"""What no module of the pure layers may import (the models are pure: no ROS, no bag I/O)."""
+FOREIGN = ("rclpy", "rosbags", "mcap", "ema_msgs_py.ros", "ema_msgs_py.typestore")
+"""What no module of the pure layers may import (the models are pure: no ROS, no bag I/O). The contract's pure
+modules (``ema_msgs_py.contract``: the channel names, the scaling) are allowed: they import nothing but the
+standard library."""
 
 
 def modules() -> dict[str, Path]:
@@ -150,8 +154,36 @@ def test_no_import_circle(graph):
 def test_the_pure_layers_import_no_ros_and_no_bag_io(pure):
     known = modules()
     bad = sorted(f"{m} → {n}" for m, p in known.items() if package(m) == pure
-                 for n in imports(p, known) if n.split(".")[0] in FOREIGN)
+                 for n in imports(p, known) if any(n == f or n.startswith(f"{f}.") for f in FOREIGN))
     assert bad == []
+
+
+def test_the_topic_contract_imports_nothing_from_ema_sim():
+    """``ema_msgs_py`` stands on its own: no import of ``ema_sim`` anywhere in it (inside functions included),
+    and importing every one of its modules loads no ``ema_sim`` module (nor ROS for the pure ones)."""
+    known = modules()
+    bad = sorted(f"{m} → {n}" for m, p in known.items() if package(m) == "ema_msgs_py"
+                 for n in imports(p, known) if n.split(".")[0] == "ema_sim")
+    assert bad == []
+    ours = sorted(m for m in known if package(m) == "ema_msgs_py")
+    assert {"ema_msgs_py.contract", "ema_msgs_py.cdr", "ema_msgs_py.ros", "ema_msgs_py.typestore"} <= set(ours)
+    probe = (
+        "import importlib, sys\n"
+        "importlib.import_module('ema_msgs_py.contract'); importlib.import_module('ema_msgs_py.cdr')\n"
+        "ros = sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'rosbags', 'numpy'))\n"
+        f"for m in {ours!r}: importlib.import_module(m)\n"
+        "print(ros, sorted(m for m in sys.modules if m.split('.')[0] == 'ema_sim'))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["[]", "[]"]
+
+
+def test_the_channel_files_load_without_ros_or_bag_io():
+    """The pure layers import the contract's pure modules only: loading a channel file loads no ROS."""
+    probe = ("import sys\nfrom ema_sim.config import load_channel, scaling\nload_channel('left_wing')\n"
+             "scaling('cowl_door')\nprint(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'rosbags')))\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["[]"]
 
 
 def test_the_check_sees_lazy_imports_upward_and_circles(tmp_path):

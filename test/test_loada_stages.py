@@ -9,6 +9,9 @@ error the same fixed step makes on figure 26's own stages on the same record.
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -85,7 +88,7 @@ def test_oscillator_step_is_the_matrix_exponential(k, c, dt):
 def test_drive_step_is_the_exact_step_of_the_velocity_loop():
     """Stage 9 over one step with its command held: the gain moves the rate as the exponential does, the
     lead gives its mean over the step (quadrature); in continuous time ωv and no lead."""
-    p = SecondOrderParams.from_channel(load_channel("left_wing"), velocity_loop_hz=300.0).vector()
+    p = SecondOrderParams.from_channel(load_channel("left_wing"), velocity_loop_hz=300.0).kernel_vector()
     wv = 2.0 * math.pi * 300.0
     assert drive_step(p, 0.0) == (wv, 0.0)
     v0, c = 3.0, 50.0
@@ -109,7 +112,7 @@ def test_figure_26s_own_stages_do_not_see_stage_9s_parameters(name, rich_inputs)
     for extra in ({}, {"linkage_freq_hz": 29.0, "feedback_delay_s": 0.004, "feedback_filter_in_loop": 0.0}):
         for hz in (5.0, 1000.0):
             prm = base.replace(velocity_loop_hz=hz, **extra)
-            assert prm.vector()[P.accel_limit_dps2] == math.inf
+            assert prm.kernel_vector()[P.accel_limit_dps2] == math.inf
             model = create(name, "left_wing", params=prm)
             model.trim(cmd[0], hm[0])
             outs.append(model.run_outputs(t, cmd, hm, sample_times=frames(6.0), end_s=float(t[-1]))[0])
@@ -150,8 +153,8 @@ def test_stage_sets_name_each_stage_once():
     assert (1 << len(bits)) - 1 == stage_set.ALL
     assert stage_set.REPORT & ~stage_set.ALL == 0
     base = SecondOrderParams.from_channel(load_channel("left_wing"))
-    assert stages_on(base.vector()) & ~stage_set.REPORT == 0
-    assert stages_on(base.replace(linkage_freq_hz=30.0).vector()) & stage_set.LINKAGE
+    assert stages_on(base.kernel_vector()) & ~stage_set.REPORT == 0
+    assert stages_on(base.replace(linkage_freq_hz=30.0).kernel_vector()) & stage_set.LINKAGE
     assert stage_set.kernel_set(stage_set.KCP | stage_set.INTEGRAL) == stage_set.ALL
     assert stage_set.kernel_set(stage_set.KCP) == stage_set.REPORT
 
@@ -172,3 +175,40 @@ def test_a_run_in_chunks_equals_one_run_bit_for_bit(name, rich_inputs):
         assert len(calls) == 6
         for field in ("position_deg", "surface_deg", "rate_dps", "flags"):
             np.testing.assert_array_equal(getattr(chunked, field), getattr(one, field), err_msg=f"{extra} {field}")
+
+
+PARALLEL_CHECK = """
+import sys, numpy as np
+from ema_sim.models import create
+from ema_sim.models.second_order import loada
+assert loada.nb.get_num_threads() == 2
+t = np.arange(0.0, 4.0, 1.0 / 800.0)
+u = 5.0 * np.sin(2.0 * np.pi * 1.3 * t) + np.where(t > 2.0, 3.0, 0.0)
+h = 900.0 * np.sin(2.0 * np.pi * 0.7 * t)
+out = {}
+for parallel in (True, False):
+    chosen = []
+    kernel = loada.kernel
+    def pick(method, on, p=False, _want=parallel):
+        chosen.append(p)
+        return kernel(method, on, _want)
+    loada.kernel = pick
+    m = create(sys.argv[1], n=64, free_play_deg=0.15, integral_hz=float(sys.argv[2]))
+    r = m.run(t, u, h)
+    loada.kernel = kernel
+    assert True in chosen, chosen  # 64 x 3,200 steps: the run_discrete rule picks the parallel kernel
+    out[parallel] = np.stack([r.position_deg, r.surface_deg, r.rate_dps])
+assert np.array_equal(out[True], out[False], equal_nan=True)
+assert np.ptp(out[True][0][:, -1]) == 0.0 and np.ptp(out[True][0]) > 5.0  # the same inputs: every instance moves alike
+print("same")
+"""
+
+
+@pytest.mark.parametrize(("name", "integral_hz"), [("loada", 0.0), ("loadf", 1.0)])
+def test_the_parallel_batch_kernel_equals_the_serial_one_bit_for_bit(name, integral_hz):
+    """`make test` runs numba on one thread, where a batch never takes the parallel kernel: two threads here."""
+    env = {**os.environ, "NUMBA_NUM_THREADS": "2"}
+    done = subprocess.run([sys.executable, "-c", PARALLEL_CHECK, name, str(integral_hz)], env=env,
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip() == "same"

@@ -15,10 +15,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ema_msgs_py import scaling
 from ema_msgs_py.ros import qos
 from ema_sim.cli import main as ema
-from ema_sim.config import CHANNELS
+from ema_sim.config import CHANNELS, scaling
 from ema_sim.emac import EmacChannel, EmacSettings
 from ema_sim.environment import load_profile
 from ema_sim.io.bag import bag_info, read_bag

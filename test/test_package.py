@@ -65,7 +65,8 @@ ROSDEP_KEYS = {
     "launch_ros": "launch_ros", "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
     "matplotlib": "python3-matplotlib", "numba": "python3-numba-pip", "control": "python3-control-pip",
     "rosbags": "python3-rosbags-pip", "mcap": "python3-mcap-pip", "typing_extensions": "python3-typing-extensions",
-    "distributed": "python3-dask-distributed-pip", "pyarrow": "python3-pyarrow-pip",
+    "distributed": "python3-dask-distributed-pip", "dask": "python3-dask-distributed-pip",  # distributed needs dask
+    "pyarrow": "python3-pyarrow-pip",
     "fmpy": "python3-fmpy-pip", "jsbsim": "python3-jsbsim-pip",
 }
 """Top-level import → its rosdep key (a new import without one fails the test below)."""

@@ -7,18 +7,19 @@ import numpy as np
 import pytest
 
 from ema_sim import parameters as pm
-from ema_sim.config import CHANNELS, load_channel
+from ema_sim.config import CHANNELS, ChannelConfig, load_channel
 from ema_sim.environment import ELEMENTS as ENV_ELEMENTS
 from ema_sim.environment import PathSpec, Profile
 from ema_sim.errors import ConfigError, UnknownNameError
 from ema_sim.identify.effects import FREE
 from ema_sim.models import create, model_class, model_names
-from ema_sim.models.high_order.params import KERNEL_EXTRA, HighOrderParams, K
+from ema_sim.models.high_order import params as high_order
+from ema_sim.models.high_order.params import KERNEL_EXTRA, HighOrderParams
 from ema_sim.models.linear import LoesParams
 from ema_sim.models.second_order.params import P, SecondOrderParams
 from ema_sim.switches import ELEMENTS, element_names, model_overrides
 
-PARAMETER_SETS = (SecondOrderParams, HighOrderParams, LoesParams, PathSpec)
+PARAMETER_SETS = (ChannelConfig, SecondOrderParams, HighOrderParams, LoesParams, PathSpec)
 # The unit a name's suffix promises, for every suffix the configuration uses.
 SUFFIX_UNITS = {
     "_rad_s": "rad/s", "_hz": "Hz", "_s": "s", "_deg": "deg", "_dps": "deg/s", "_dps2": "deg/s²",
@@ -40,7 +41,9 @@ def _suffix_unit(name):
 
 @pytest.mark.parametrize("cls", PARAMETER_SETS)
 def test_every_field_is_declared_once_with_unit_range_and_description(cls):
-    for f in fields(cls):
+    parameters = [f for f in fields(cls) if pm.CARRIED_KEY not in f.metadata]  # carried data: no parameters
+    assert len(parameters) == len(pm.metas(cls)) >= len(fields(cls)) - 1
+    for f in parameters:
         m = pm.meta_of(f)  # raises for a field declared without metadata
         assert m.unit, f.name
         assert m.description, f.name
@@ -48,7 +51,7 @@ def test_every_field_is_declared_once_with_unit_range_and_description(cls):
         assert m.off is not None or m.element is None, f"{f.name}: an element name needs a switch-off value"
         if m.uncertainty is not None:
             assert m.uncertainty_source, f.name
-    assert cls.__doc__.count(" : ") >= len(fields(cls))  # the docstring's Parameters are generated from them
+    assert cls.__doc__.count(" : ") >= len(parameters)  # the docstring's Parameters are generated from them
 
 
 @pytest.mark.parametrize("cls", PARAMETER_SETS)
@@ -65,9 +68,9 @@ def test_kernel_slots_are_generated_from_the_declared_names_in_order():
     assert P._fields == tuple(f.name for f in fields(SecondOrderParams))  # second order: one slot per field
     assert tuple(P) == tuple(range(len(fields(SecondOrderParams))))
     declared = tuple(m.kernel for m in pm.metas(HighOrderParams).values() if m.kernel is not None)
-    assert K._fields == (*declared, *KERNEL_EXTRA)
-    assert tuple(K) == tuple(range(len(K)))
-    for name in K._fields:
+    assert high_order.P._fields == (*declared, *KERNEL_EXTRA)
+    assert tuple(high_order.P) == tuple(range(len(high_order.P)))
+    for name in high_order.P._fields:
         assert name == "figure33" or name.endswith(KERNEL_SUFFIXES), f"kernel slot {name} has no unit in its name"
 
 
@@ -75,7 +78,7 @@ def test_kernel_slots_are_generated_from_the_declared_names_in_order():
 def test_kernel_vectors_hold_each_parameter_converted_in_its_declared_slot(channel):
     cfg = load_channel(channel)
     so = SecondOrderParams.from_channel(cfg)
-    v = so.vector()
+    v = so.kernel_vector()
     for name in P._fields:
         assert v[getattr(P, name)] == getattr(so, name)
     ho = HighOrderParams.from_channel(cfg, "hoad3")
@@ -85,10 +88,10 @@ def test_kernel_vectors_hold_each_parameter_converted_in_its_declared_slot(chann
             continue
         conv = m.to_kernel
         want = conv(ho) if callable(conv) else getattr(ho, name) * conv
-        assert v[getattr(K, m.kernel)] == want, name
-    assert v[K.lvdt_filter_rad_s] == pytest.approx(2 * math.pi * ho.lvdt_filter_hz)
-    assert v[K.inductance_h] == pytest.approx(ho.inductance_mh * 1e-3)
-    assert v[K.position_max_in] == pytest.approx(ho.position_max_deg * ho.crank_arm_in / math.degrees(1.0))
+        assert v[getattr(high_order.P, m.kernel)] == want, name
+    assert v[high_order.P.lvdt_filter_rad_s] == pytest.approx(2 * math.pi * ho.lvdt_filter_hz)
+    assert v[high_order.P.inductance_h] == pytest.approx(ho.inductance_mh * 1e-3)
+    assert v[high_order.P.position_max_in] == pytest.approx(ho.position_max_deg * ho.crank_arm_in / math.degrees(1.0))
 
 
 @pytest.mark.parametrize("name", ["loada", "second_order", "hoad3", "hoac1", "hoalm", "loes"])
@@ -168,8 +171,7 @@ def test_one_loader_for_every_set_names_unknown_and_missing_parameters():
         pm.load(HighOrderParams, section, origin="x", family="high-order", section="high_order")
     with pytest.raises(ConfigError, match=r"must be a number, got '5\.0e6'"):  # what YAML 1.1 makes of 5.0e6
         pm.load(SecondOrderParams, {**cfg.section("second_order"), "wn_rad_s": "5.0e6"}, origin="x",
-                family="second-order", base={"moment_arm_in": 1.0, "position_min_deg": -1.0, "position_max_deg": 1.0,
-                                             "free_play_deg": 0.0, "surface_inertia_inlbs2": 1.0})
+                family="second-order", source=cfg)
     with pytest.raises(ConfigError, match="needs 3 values"):
         HighOrderParams.from_channel(cfg, total_mean_stiffness_lbf_per_in=(1.0, 2.0))
     assert HighOrderParams.from_channel(cfg, "hoac1").command_delay_s == 0.0  # HOAC1: no flight/test environment
@@ -210,3 +212,53 @@ def test_every_model_lists_its_parameters_for_every_channel():
         for name in model_names():
             listing = model_class(name).parameters(channel)
             assert all(p.default is not None for p in listing), (channel, name)
+
+
+@pytest.mark.parametrize("cls", [SecondOrderParams, HighOrderParams])
+def test_a_value_from_the_channel_shares_the_channels_one_declaration(cls):
+    channel = pm.metas(ChannelConfig)
+    linked = {name: m for name, m in pm.metas(cls).items() if m.channel is not None}
+    assert {"position_min_deg", "position_max_deg", "surface_inertia_inlbs2"} <= set(linked)
+    for name, m in linked.items():
+        src = channel[m.channel]
+        assert m.source is ChannelConfig, name
+        assert (m.unit, m.min, m.max, m.min_exclusive, m.size, m.uncertainty) == (
+            src.unit, src.min, src.max, src.min_exclusive, src.size, src.uncertainty), name
+        assert m.kernel is not None, name  # what the family adds: its kernel slot
+    assert pm.relations(cls).count(("position_min_deg", "<", "position_max_deg")) == 1  # from the channel
+
+
+def test_the_position_limit_check_is_declared_once_and_holds_for_the_channel_and_both_families():
+    assert ChannelConfig.RELATIONS == (("position_min_deg", "<", "position_max_deg"),)
+    assert "RELATIONS" not in vars(SecondOrderParams)
+    assert all("position_min_deg" not in r for r in HighOrderParams.RELATIONS)
+    cfg = load_channel("left_wing")
+    with pytest.raises(ConfigError, match="channel parameter position_min_deg must be below position_max_deg"):
+        pm.validate(replace(cfg, position_min_deg=50.0), "channel")
+    with pytest.raises(ConfigError, match="second-order parameter position_min_deg must be below position_max_deg"):
+        SecondOrderParams.from_channel(cfg, position_min_deg=50.0)
+    with pytest.raises(ConfigError, match="high-order parameter position_min_deg must be below position_max_deg"):
+        HighOrderParams.from_channel(cfg, position_max_deg=-50.0)
+    so = SecondOrderParams.from_channel(cfg)
+    with pytest.raises(ConfigError, match="position_min_deg must be below"):
+        so.replace(position_max_deg=-44.0)
+
+
+def test_a_text_parameter_is_one_of_its_choices():
+    cfg = load_channel("left_wing")
+    m = pm.metas(ChannelConfig)["surface"]
+    assert m.choices == ("wing", "rudder", "cowl")
+    assert pm.coerce("surface", m, "rudder", "x", "channel") == "rudder"
+    with pytest.raises(ConfigError, match="surface must be one of wing, rudder, cowl, got 'flap'"):
+        pm.coerce("surface", m, "flap", "x", "channel")
+    with pytest.raises(ConfigError, match="channel parameter channel must be one of left_wing, right_wing"):
+        pm.validate(replace(cfg, channel="tail"), "channel")
+    assert [p.default for p in pm.describe(ChannelConfig, defaults=cfg)][:2] == ["left_wing", "wing"]
+
+
+def test_carried_data_are_loaded_as_given_and_listed_nowhere():
+    cfg = load_channel("left_wing")
+    assert "sections" not in pm.metas(ChannelConfig)
+    assert {"second_order", "high_order", "loes"} <= set(cfg.sections)
+    assert all(p.name != "sections" for p in pm.describe(ChannelConfig))
+    assert "sections" not in ChannelConfig.__doc__.split("Parameters\n----------")[1]

@@ -377,6 +377,29 @@ def test_idle_feedback_keeps_the_frame_rate_with_stamps_on_the_frame_grid(client
 
 
 # --------------------------------------------------------------------------- 10. drops counted
+def _good_commands_until_nominal(client, cmd, msg, t_good, diag):
+    """Good commands only, until the drop warning ages out; the count sent and the last status.
+
+    The warning ages out FAULT_HOLD_S (2 s) after the last drop. On a loaded machine a stalled node may still
+    lose a good command from its queue (counted, and it restarts the hold), so the status must read nominal
+    within 15 s, 2 s after the last drop the node counted.
+    """
+    start_good = time.monotonic()
+    k = 0
+
+    def status():
+        return next(s for s in diag[-1].status if s.name == STATUS)
+
+    while time.monotonic() < start_good + 15.0:
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_good + k * FRAME_NS, NS)
+        cmd.publish(msg)
+        k += 1
+        client.spin(0.005)
+        if time.monotonic() - start_good > 2.5 and status().level == DiagnosticStatus.OK:
+            break
+    return k, status()
+
+
 def test_every_dropped_command_is_counted_and_logged_and_diagnostics_recover(client, tmp_path):
     log = tmp_path / "emac.log"
     proc = start(client.did, "ema_sim.nodes.emac", "--channel", "left_wing", log=log)
@@ -400,25 +423,7 @@ def test_every_dropped_command_is_counted_and_logged_and_diagnostics_recover(cli
         client.spin(0.5)
         faulted = [s for m in diag for s in m.status if s.level == DiagnosticStatus.WARN and "dropped" in s.message]
         assert faulted
-        t_good = base + 10_001 * FRAME_NS
-        # good commands only: the warning ages out FAULT_HOLD_S (2 s) after the last drop. On a loaded machine a
-        # stalled node may still lose a good command from its queue (counted, and it restarts the hold), so the
-        # status must read nominal within 15 s, and must do so 2 s after the last drop the node counted.
-        start_good = time.monotonic()
-        end = start_good + 15.0
-        k = 0
-
-        def status():
-            return next(s for s in diag[-1].status if s.name == STATUS)
-
-        while time.monotonic() < end:
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_good + k * FRAME_NS, NS)
-            cmd.publish(msg)
-            k += 1
-            client.spin(0.005)
-            if time.monotonic() - start_good > 2.5 and status().level == DiagnosticStatus.OK:
-                break
-        last = status()
+        k, last = _good_commands_until_nominal(client, cmd, msg, base + 10_001 * FRAME_NS, diag)
         assert (last.level, last.message) == (DiagnosticStatus.OK, "nominal")
         values = {v.key: v.value for v in last.values}
     finally:

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from conftest import FRAME_S, frames
 
-from ema_sim.analysis.model_error import table6
+from ema_sim.analysis.studies.model_error import table6
 from ema_sim.config import load_channel
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import Flags, create, model_names

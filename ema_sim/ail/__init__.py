@@ -5,5 +5,5 @@ both illustrative (``config/ail_vehicle.yaml``), close the loop through the actu
 test environment (:mod:`ema_sim.environment`) in both directions. :mod:`.fmu` is one frame of the
 flight computer and its vehicle simulation, shared by the ``fmu`` node and the offline loop
 (:mod:`.loop`, ``ema ail``); :mod:`.measure` turns a run into the dither finding with
-:mod:`ema_sim.analysis.dither`.
+:mod:`ema_sim.analysis.section2.dither`.
 """

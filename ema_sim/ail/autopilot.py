@@ -27,9 +27,13 @@ class SurfaceCommand:
     """One frame's wing commands and the axes they came from (degrees)."""
 
     left_deg: float
+    """Left wing command."""
     right_deg: float
+    """Right wing command."""
     elevon_deg: float
+    """The pitch axis's command (trim included), limited about the trim."""
     aileron_deg: float
+    """The roll axis's command, limited about zero."""
 
 
 def _limit(value: float, centre: float, half_range: float) -> tuple[float, bool]:
@@ -42,7 +46,15 @@ def _limit(value: float, centre: float, half_range: float) -> tuple[float, bool]
 
 
 class Autopilot:
-    """The control law (see the module docstring)."""
+    """The control law (see the module docstring).
+
+    Parameters
+    ----------
+    params : AutopilotParams
+        Gains, trim and limits (``config/ail_vehicle.yaml``).
+    frame_s : float
+        The FMU frame, s: the integrals' time step.
+    """
 
     def __init__(self, params: AutopilotParams, frame_s: float) -> None:
         self.params = params
@@ -60,7 +72,18 @@ class Autopilot:
         self.pitch_integral = self.roll_integral = 0.0
 
     def command(self, s: VehicleState) -> SurfaceCommand:
-        """This frame's wing commands from the sensed vehicle state; advances the integrals."""
+        """This frame's wing commands from the sensed vehicle state; advances the integrals.
+
+        Parameters
+        ----------
+        s : VehicleState
+            The vehicle as the FMU senses it at the frame (the first call captures the references).
+
+        Returns
+        -------
+        SurfaceCommand
+            Both wings' commands and the limited elevon and aileron they came from.
+        """
         p = self.params
         if self.theta_ref_deg is None or self.phi_ref_deg is None:
             self.theta_ref_deg, self.phi_ref_deg = s.theta_deg, s.phi_deg

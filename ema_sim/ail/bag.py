@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ema_msgs_py import contract as ct
-from ema_sim.ail.loop import SIGNALS, AilRun
+from ema_sim.ail.loop import SIGNALS, AilRun, FloatArray
 from ema_sim.ail.vehicle import STATES
 from ema_sim.config import CHANNELS
 from ema_sim.errors import DataError
@@ -21,7 +21,23 @@ from ema_sim.io.bag import bag_info, read_bag, read_joint_topic
 
 
 def run_from_bag(path: str | Path) -> AilRun:
-    """Read the bag (every channel, both sides, the vehicle) into rows per FMU frame."""
+    """Read the bag (every channel, both sides, the vehicle) into rows per FMU frame.
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag directory ``ema launch --fmu`` recorded.
+
+    Returns
+    -------
+    AilRun
+        The run, its signals the offline run's (NaN where the bag does not carry one).
+
+    Raises
+    ------
+    DataError
+        A channel's feedback is missing, or the two sides' frames differ.
+    """
     info = bag_info(path)
     missing = [ch for ch in CHANNELS if ch not in info.channels]
     if missing:
@@ -36,18 +52,15 @@ def run_from_bag(path: str | Path) -> AilRun:
             if side.time_s.size != n or not np.allclose(side.time_s, emac[CHANNELS[0]].time_s, atol=1e-9):
                 raise DataError(f"{path}: {ch}: the frames of the two sides differ")
     nan = np.full(n, np.nan)
-    signals: dict[str, dict[str, np.ndarray]] = {}
+    signals: dict[str, dict[str, FloatArray]] = {}
     for ch in CHANNELS:
-        e, f = emac[ch], fmu[ch]
-        sig = {name: nan.copy() for name in SIGNALS}
-        sig.update(command_v=e.command_v, command_deg=e.command_deg, position_v=e.position_v,
-                   position_deg=e.position_deg, fmu_command_v=f.command_v, fmu_command_deg=f.command_deg,
-                   fmu_position_v=f.position_v, fmu_position_deg=f.position_deg)
+        sig: dict[str, FloatArray | None] = {name: nan.copy() for name in SIGNALS}
+        for prefix, side in (("", emac[ch]), ("fmu_", fmu[ch])):
+            for name in ("command_v", "command_deg", "position_v", "position_deg"):
+                sig[prefix + name] = getattr(side, name)
         for name in ("surface_deg", "hinge_moment_inlb", "current_a"):
-            value = getattr(e, name)
-            if value is not None:
-                sig[name] = value
-        signals[ch] = {k: np.asarray(v, dtype=float) for k, v in sig.items()}
+            sig[name] = getattr(emac[ch], name)
+        signals[ch] = {k: nan.copy() if v is None else np.asarray(v, dtype=float) for k, v in sig.items()}
     vehicle = {name: nan.copy() for name in STATES}
     if ct.VEHICLE in info.topics:
         series = read_joint_topic(path, ct.VEHICLE)

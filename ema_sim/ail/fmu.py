@@ -20,11 +20,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ema_msgs_py.contract import Scaling, scaling
+from ema_msgs_py.contract import Scaling
 from ema_sim.ail.autopilot import Autopilot, SurfaceCommand
 from ema_sim.ail.params import WINGS, AilConfig, Setup
 from ema_sim.ail.vehicle import Vehicle, VehicleState
-from ema_sim.config import CHANNELS, load_channel
+from ema_sim.config import CHANNELS, load_channel, scaling
 from ema_sim.errors import EmaError
 from ema_sim.models import create
 from ema_sim.models.base import O_POS, ActuatorModel
@@ -50,7 +50,9 @@ class FrameOutputs:
     """What one frame produced."""
 
     command_v: dict[str, float]
+    """Commands sent for the frame, V (through each channel's command curve)."""
     command_deg: dict[str, float]
+    """The same commands, surface degrees."""
     hinge_moment_inlb: dict[str, float]
     """Applied to the real surfaces over the frame."""
     aero_hinge_moment_inlb: dict[str, float]
@@ -60,10 +62,30 @@ class FrameOutputs:
     vehicle: VehicleState
     """The vehicle at the frame (what the FMU sensed)."""
     autopilot: SurfaceCommand
+    """The control law's output at the frame."""
 
 
 class Fmu:
-    """The flight computer, its vehicle simulation and (open loop) its model actuators."""
+    """The flight computer, its vehicle simulation and (open loop) its model actuators.
+
+    Parameters
+    ----------
+    cfg : AilConfig
+        The vehicle, autopilot, hinge moments and held commands.
+    setup : Setup
+        What the aerodynamics sees and what loads the real surfaces.
+    open_loop : bool, optional
+        The simulation flies its own model actuators (2.10, 4.3) instead of the feedback.
+    sim_model : str, optional
+        The simulation's model actuator (open loop); default ``cfg.sim_model``.
+    channels : tuple[str, ...], optional
+        The channels the FMU commands (both wings needed).
+
+    Raises
+    ------
+    EmaError
+        A wing is missing, or the set-up is not valid.
+    """
 
     def __init__(self, cfg: AilConfig, setup: Setup, *, open_loop: bool = False, sim_model: str | None = None,
                  channels: tuple[str, ...] = CHANNELS) -> None:
@@ -116,7 +138,18 @@ class Fmu:
         return {ch: float(inputs.surface_deg[ch]) for ch in self.channels}
 
     def frame(self, inputs: FrameInputs) -> FrameOutputs:
-        """One frame (see the module docstring)."""
+        """One frame (see the module docstring).
+
+        Parameters
+        ----------
+        inputs : FrameInputs
+            What the FMU side has at the frame's start (:attr:`needs` says which fields it uses).
+
+        Returns
+        -------
+        FrameOutputs
+            The commands for the frame, the hinge moments, the deflections seen and the vehicle.
+        """
         seen = self._seen(inputs)
         state = self.vehicle.state
         ap = self.autopilot.command(state)

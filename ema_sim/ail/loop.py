@@ -28,11 +28,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_msgs_py.contract import scaling
-from ema_sim.ail.fmu import Fmu, FrameInputs
+from ema_sim.ail.fmu import Fmu, FrameInputs, FrameOutputs
 from ema_sim.ail.params import AilConfig, Setup, load_ail_config
 from ema_sim.ail.vehicle import STATES
-from ema_sim.config import CHANNELS, config_dir, load_channel, ros_parameters
+from ema_sim.config import CHANNELS, config_dir, load_channel, ros_parameters, scaling
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings
 from ema_sim.environment import Profile, SignalPath, load_profile
 from ema_sim.errors import EmaError, UnknownNameError
@@ -52,7 +51,13 @@ aerodynamics used."""
 
 
 def emac_settings() -> tuple[EmacSettings, dict[str, float]]:
-    """The EMAC node's settings and crosstalk levels from ``config/emac.yaml`` (as the node reads them)."""
+    """The EMAC node's settings and crosstalk levels from ``config/emac.yaml`` (as the node reads them).
+
+    Returns
+    -------
+    tuple[EmacSettings, dict[str, float]]
+        The settings, and each channel's crosstalk noise, V peak to peak.
+    """
     params = ros_parameters(config_dir() / "emac.yaml").get("emac", {})
     settings = EmacSettings.from_parameters({k: v for k, v in params.items() if not isinstance(v, dict)}, "emac")
     crosstalk = params.get("crosstalk", {})
@@ -64,17 +69,23 @@ class AilOptions:
     """One run of the loop."""
 
     profile: str = "ail"
+    """The test environment's profile (``config/<profile>.yaml``) and the vehicle set-up of that name."""
     model: str = "hoad3"
+    """The actuator model in every EMAC."""
     open_loop: bool = False
+    """The simulation flies its own model actuators (2.10, 4.3)."""
     duration_s: float = 20.0
+    """Length of the run, s."""
     seed: int | None = None
     """Test-environment noise seed (default: the profile's)."""
     disable: tuple[str, ...] = ()
+    """Elements switched off by name (:mod:`ema_sim.switches`)."""
     setup: Setup | None = None
     """Override of the profile's vehicle setup (``setup.<profile>`` of the parameter file)."""
     sim_model: str | None = None
     """Open loop: the simulation's model actuator (default the file's ``open_loop.sim_model``)."""
     config: AilConfig | None = None
+    """The vehicle's parameter set (default ``config/ail_vehicle.yaml``)."""
     environment: Profile | None = None
     """An explicit test environment instead of the named profile's (a Monte Carlo run's dispersed elements;
     ``disable`` still applies to it)."""
@@ -87,15 +98,29 @@ class AilRun:
     """A recorded run: one row per FMU frame (the command over the frame, the state at its start)."""
 
     time_s: FloatArray
+    """Frame start times from zero, s."""
     signals: dict[str, dict[str, FloatArray]]
     """channel → signal (:data:`SIGNALS`) → values."""
     vehicle: dict[str, FloatArray]
     """State name (:data:`~ema_sim.ail.vehicle.STATES`) → values."""
     metadata: dict[str, str] = field(default_factory=dict)
+    """How the run was made (profile, model, set-up, paths, seed...), as text."""
     wall_s: float = 0.0
+    """Wall time the loop took, s."""
 
     def channel(self, ch: str) -> dict[str, FloatArray]:
-        """One channel's signals."""
+        """One channel's signals.
+
+        Parameters
+        ----------
+        ch : str
+            The channel.
+
+        Returns
+        -------
+        dict[str, FloatArray]
+            Signal name (:data:`SIGNALS`) → values.
+        """
         return self.signals[ch]
 
     def csv_columns(self, channel: str = "left_wing") -> dict[str, FloatArray]:
@@ -103,6 +128,21 @@ class AilRun:
 
         Then every channel's signals as ``<channel>.<signal>`` and the vehicle states (columns the contract
         reader ignores).
+
+        Parameters
+        ----------
+        channel : str, optional
+            The channel whose signals take the contract's column names.
+
+        Returns
+        -------
+        dict[str, FloatArray]
+            Column name → values, ``time_s`` first; signals with a NaN (not measured) are left out.
+
+        Raises
+        ------
+        UnknownNameError
+            ``channel`` is not in the run.
         """
         if channel not in self.signals:
             raise UnknownNameError("channel", channel, self.signals)
@@ -180,7 +220,7 @@ class _Loop:
         self._observe()
 
 
-def _record(rec: dict[str, dict[str, FloatArray]], k: int, loop: _Loop, out: Any, fmu_fb: dict[str, float],
+def _record(rec: dict[str, dict[str, FloatArray]], k: int, loop: _Loop, out: FrameOutputs, fmu_fb: dict[str, float],
             emac_cmd: dict[str, float]) -> None:
     for ch in CHANNELS:
         r, fb, sc = rec[ch], loop.feedback[ch], scaling(ch)
@@ -202,7 +242,27 @@ def _record(rec: dict[str, dict[str, FloatArray]], k: int, loop: _Loop, out: Any
 
 
 def run_ail(options: AilOptions, progress: Callable[[float], None] | None = None) -> AilRun:
-    """Run the loop (see the module docstring); ``progress`` gets the fraction done about once a second."""
+    """Run the loop (see the module docstring).
+
+    Parameters
+    ----------
+    options : AilOptions
+        What to run.
+    progress : Callable[[float], None], optional
+        Called with the fraction done about once a second, and with 1.0 at the end.
+
+    Returns
+    -------
+    AilRun
+        One row per FMU frame.
+
+    Raises
+    ------
+    UnknownNameError
+        An unknown model, profile or element name.
+    EmaError
+        A duration that is not a positive number, or an FMU frame that differs from the EMAC's.
+    """
     if options.model not in model_names():
         raise UnknownNameError("model", options.model, model_names())
     if not (math.isfinite(options.duration_s) and options.duration_s > 0.0):
@@ -245,4 +305,4 @@ def run_ail(options: AilOptions, progress: Callable[[float], None] | None = None
         "feedback_path": profile.feedback_path(frame_s).describe(),
         "model_overrides": ",".join(f"{k}={v}" for k, v in overrides.items()) or "none",
     }
-    return AilRun(np.arange(n) * frame_s, rec, veh, meta, wall)
+    return AilRun(np.arange(n, dtype=np.float64) * frame_s, rec, veh, meta, wall)

@@ -1,12 +1,12 @@
 """The dither finding from a run: limit-cycle frequency and size per surface, and a verdict.
 
 Each surface's LVDT position (EMAC side, the signal of figures 41 and 43) is searched over the trimmed
-stretch after ``settle_s`` with :func:`ema_sim.analysis.dither.detect_dither`: the largest spectral peak
+stretch after ``settle_s`` with :func:`ema_sim.analysis.section2.dither.detect_dither`: the largest spectral peak
 between 1 and 50 Hz, its level above the median spectral floor, and the synchronous (folded) peak to
 peak at its frequency, taken over windows of :data:`FOLD_PERIODS` periods (median window): noise kicks
 the limit cycle's frequency about by a few per cent, which would average a 20 s fold down.
 
-**Dither** means both: a peak at least :data:`~ema_sim.analysis.dither.DETECT_DB` (15 dB) above the
+**Dither** means both: a peak at least :data:`~ema_sim.analysis.section2.dither.DETECT_DB` (15 dB) above the
 floor, and a synchronous peak to peak of at least :data:`DITHER_MIN_PP_DEG` (0.05°, the lower end of
 the AIL's 0.05–0.2°, more than two 5 mV converter steps of ≈ 0.021°). **None** is everything else: no
 peak stands out, or what stands out is smaller than that: a quantizer's own one-step hunting (a 5 mV
@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ema_sim.ail.loop import AilRun
-from ema_sim.analysis.dither import DETECT_DB, DitherResult, detect_dither
+from ema_sim.analysis.section2.dither import DETECT_DB, DitherResult, detect_dither
 from ema_sim.config import CHANNELS
 from ema_sim.errors import EmaError
 
@@ -37,6 +37,7 @@ class SurfaceDither:
     """One surface's measurement."""
 
     channel: str
+    """The surface's channel."""
     result: DitherResult | None
     """None when the stretch is too short to search (under 4 s)."""
 
@@ -83,7 +84,29 @@ class SurfaceDither:
 
 def measure(run: AilRun, settle_s: float, *, signal: str = "position_deg",
             channels: tuple[str, ...] = CHANNELS) -> dict[str, SurfaceDither]:
-    """Each surface's dither over the run after ``settle_s`` (see the module docstring)."""
+    """Each surface's dither over the run after ``settle_s`` (see the module docstring).
+
+    Parameters
+    ----------
+    run : AilRun
+        An offline or bag run.
+    settle_s : float
+        Time to leave out at the start (the engagement transient), s.
+    signal : str, optional
+        The signal searched (a key of ``run.signals[channel]``).
+    channels : tuple[str, ...], optional
+        The surfaces measured.
+
+    Returns
+    -------
+    dict[str, SurfaceDither]
+        The measurement per channel.
+
+    Raises
+    ------
+    EmaError
+        Fewer than two samples remain after ``settle_s``.
+    """
     keep = run.time_s >= settle_s
     if int(keep.sum()) < 2:
         raise EmaError(f"nothing to measure after {settle_s:g} s of a {run.time_s[-1]:.3g} s run")
@@ -93,7 +116,22 @@ def measure(run: AilRun, settle_s: float, *, signal: str = "position_deg",
 
 
 def vehicle_cycle(run: AilRun, settle_s: float, state: str) -> DitherResult | None:
-    """The same search on a vehicle state (pitch rate, roll rate...): where the dither shows in the flight data."""
+    """The same search on a vehicle state (pitch rate, roll rate...): where the dither shows in the flight data.
+
+    Parameters
+    ----------
+    run : AilRun
+        An offline or bag run.
+    settle_s : float
+        Time to leave out at the start, s.
+    state : str
+        One of :data:`~ema_sim.ail.vehicle.STATES`.
+
+    Returns
+    -------
+    DitherResult or None
+        The search's result (None when the stretch is too short).
+    """
     keep = run.time_s >= settle_s
     return detect_dither(run.time_s[keep], np.asarray(run.vehicle[state])[keep], output=state, fold_always=True,
                          fold_periods=FOLD_PERIODS)

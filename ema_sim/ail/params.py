@@ -13,6 +13,7 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
+from ema_sim import parameters as pm
 from ema_sim.config import CHANNELS, config_dir, finite_parameter, load_channel, ros_parameters
 from ema_sim.errors import ConfigError, UnknownNameError
 
@@ -37,20 +38,38 @@ def _numbers(cls: type, values: Mapping[str, Any], origin: str) -> dict[str, flo
 class VehicleParams:
     """Rigid-body short period and roll about a trimmed flight condition (degrees and seconds)."""
 
-    trim_alpha_deg: float
-    trim_theta_deg: float
-    trim_elevon_deg: float
-    z_alpha_per_s: float
-    z_elevon_per_s: float
-    m_alpha_per_s2: float
-    m_q_per_s: float
-    m_elevon_per_s2: float
-    l_p_per_s: float
-    l_aileron_per_s2: float
+    trim_alpha_deg: float = pm.param("deg", "trimmed angle of attack the run starts at")
+    trim_theta_deg: float = pm.param("deg", "trimmed pitch attitude the run starts at")
+    trim_elevon_deg: float = pm.param("deg", "symmetric wing deflection that trims the vehicle")
+    z_alpha_per_s: float = pm.param("1/s", "short period: α' = Zα·α + q + Zδ·δe, the lift-curve term Zα")
+    z_elevon_per_s: float = pm.param("1/s", "short period: the elevon's lift on the flight path Zδ")
+    m_alpha_per_s2: float = pm.param("1/s²", "short period: q' = Mα·α + Mq·q + Mδ·δe, the static stability Mα")
+    m_q_per_s: float = pm.param("1/s", "short period: the pitch damping Mq")
+    m_elevon_per_s2: float = pm.param("1/s²", "short period: the elevon's control power Mδ (negative)")
+    l_p_per_s: float = pm.param("1/s", "roll: p' = Lp·p + Lδa·δa, the roll damping Lp")
+    l_aileron_per_s2: float = pm.param("1/s²", "roll: the differential wings' control power Lδa (positive)")
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], origin: str = "vehicle") -> VehicleParams:
-        """Validated: the sign conventions the autopilot relies on hold."""
+        """Validated: the sign conventions the autopilot relies on hold.
+
+        Parameters
+        ----------
+        values : Mapping[str, Any]
+            The ``vehicle`` section: every field, finite, nothing else.
+        origin : str, optional
+            Where the values come from, for the error message.
+
+        Returns
+        -------
+        VehicleParams
+            The parameters.
+
+        Raises
+        ------
+        ConfigError
+            A missing, unknown or non-finite value, or a sign the autopilot cannot fly with.
+        """
         out = cls(**_numbers(cls, values, origin))
         if out.m_elevon_per_s2 >= 0.0:
             raise ConfigError(f"{origin}: m_elevon_per_s2 must be negative (a trailing-edge-down elevon "
@@ -64,19 +83,37 @@ class VehicleParams:
 class AutopilotParams:
     """Attitude hold in pitch and roll with trim (gains in degrees of surface per unit of error)."""
 
-    trim_elevon_deg: float
-    pitch_attitude_gain_deg_per_deg: float
-    pitch_integral_gain_per_s: float
-    pitch_rate_gain_s: float
-    roll_attitude_gain_deg_per_deg: float
-    roll_integral_gain_per_s: float
-    roll_rate_gain_s: float
-    elevon_limit_deg: float
-    aileron_limit_deg: float
+    trim_elevon_deg: float = pm.param("deg", "the flight computer's trim: the pitch integrator's start")
+    pitch_attitude_gain_deg_per_deg: float = pm.param("deg/deg", "pitch attitude gain Kθ (degrees of elevon)")
+    pitch_integral_gain_per_s: float = pm.param("1/s", "pitch attitude integral gain")
+    pitch_rate_gain_s: float = pm.param("s", "pitch rate gain Kq (degrees of elevon per deg/s)")
+    roll_attitude_gain_deg_per_deg: float = pm.param("deg/deg", "roll attitude gain Kφ (degrees of aileron)")
+    roll_integral_gain_per_s: float = pm.param("1/s", "roll attitude integral gain")
+    roll_rate_gain_s: float = pm.param("s", "roll rate gain Kp (degrees of aileron per deg/s)")
+    elevon_limit_deg: float = pm.param("deg", "elevon authority about trim")
+    aileron_limit_deg: float = pm.param("deg", "aileron authority")
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], origin: str = "autopilot") -> AutopilotParams:
-        """Validated: gains and limits are not negative."""
+        """Validated: gains and limits are not negative.
+
+        Parameters
+        ----------
+        values : Mapping[str, Any]
+            The ``autopilot`` section: every field, finite, nothing else.
+        origin : str, optional
+            Where the values come from, for the error message.
+
+        Returns
+        -------
+        AutopilotParams
+            The parameters.
+
+        Raises
+        ------
+        ConfigError
+            A missing, unknown, non-finite or negative value.
+        """
         out = cls(**_numbers(cls, values, origin))
         for f in fields(out):
             if f.name != "trim_elevon_deg" and getattr(out, f.name) < 0.0:
@@ -88,17 +125,48 @@ class AutopilotParams:
 class HingeMomentParams:
     """Aerodynamic hinge moment of one surface kind: ``h0 + hα·α + hδ·δ`` (in·lb)."""
 
-    h0_inlb: float
-    h_alpha_inlb_per_deg: float
-    h_delta_inlb_per_deg: float
+    h0_inlb: float = pm.param("in·lb", "hinge moment at zero angle of attack and deflection")
+    h_alpha_inlb_per_deg: float = pm.param("in·lb/deg", "hinge moment per degree of angle of attack")
+    h_delta_inlb_per_deg: float = pm.param("in·lb/deg", "hinge moment per degree of the surface's deflection")
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], origin: str) -> HingeMomentParams:
-        """Validated."""
+        """Validated: the three coefficients, finite, nothing else.
+
+        Parameters
+        ----------
+        values : Mapping[str, Any]
+            One ``hinge_moment.<kind>`` section.
+        origin : str
+            Where the values come from, for the error message.
+
+        Returns
+        -------
+        HingeMomentParams
+            The model.
+
+        Raises
+        ------
+        ConfigError
+            A missing, unknown or non-finite value.
+        """
         return cls(**_numbers(cls, values, origin))
 
     def at(self, alpha_deg: float, delta_deg: float) -> float:
-        """The hinge moment at angle of attack ``alpha_deg`` and surface deflection ``delta_deg``."""
+        """The hinge moment at an angle of attack and a surface deflection.
+
+        Parameters
+        ----------
+        alpha_deg : float
+            Angle of attack, deg.
+        delta_deg : float
+            Surface deflection, deg.
+
+        Returns
+        -------
+        float
+            Hinge moment, in·lb (positive aids positive deflection).
+        """
         return self.h0_inlb + self.h_alpha_inlb_per_deg * alpha_deg + self.h_delta_inlb_per_deg * delta_deg
 
 
@@ -106,13 +174,39 @@ class HingeMomentParams:
 class Setup:
     """What a test-environment profile means for the vehicle loop (``setup.<profile>``)."""
 
-    aero_input: str
-    surface_load: str
-    bungee_inlb: float = 0.0
+    aero_input: str = pm.param("-", "what drives the aerodynamics: the LVDT feedback or the true surface angle",
+                               choices=AERO_INPUTS)
+    """One of :data:`AERO_INPUTS`."""
+    surface_load: str = pm.param("-", "the surfaces' load: aerodynamic hinge moments or a bungee",
+                                 choices=SURFACE_LOADS)
+    """One of :data:`SURFACE_LOADS`."""
+    bungee_inlb: float = pm.param("in·lb", "the bungee's hinge moment on each wing (surface_load bungee)",
+                                  default=0.0)
+    """The bungee's hinge moment on each wing (``surface_load="bungee"``), in·lb."""
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], origin: str) -> Setup:
-        """Validated."""
+        """Validated (:meth:`validate`).
+
+        Parameters
+        ----------
+        values : Mapping[str, Any]
+            One ``setup.<profile>`` section: ``aero_input``, ``surface_load`` and optionally ``bungee_inlb``.
+        origin : str
+            Where the values come from, for the error message.
+
+        Returns
+        -------
+        Setup
+            The set-up.
+
+        Raises
+        ------
+        ConfigError
+            A missing or unknown key, or a bungee that is not a finite number.
+        UnknownNameError
+            An unknown ``aero_input`` or ``surface_load``.
+        """
         unknown = sorted(set(values) - {"aero_input", "surface_load", "bungee_inlb"})
         if unknown:
             raise ConfigError(f"{origin}: unknown parameter {unknown[0]!r}")
@@ -126,7 +220,20 @@ class Setup:
         return out
 
     def validate(self, origin: str = "setup") -> None:
-        """One clear error for a bad choice."""
+        """One clear error for a bad choice.
+
+        Parameters
+        ----------
+        origin : str, optional
+            Where the set-up comes from, for the error message.
+
+        Raises
+        ------
+        UnknownNameError
+            An unknown ``aero_input`` or ``surface_load``.
+        ConfigError
+            A bungee that is not finite.
+        """
         if self.aero_input not in AERO_INPUTS:
             raise UnknownNameError(f"{origin} aero_input", self.aero_input, AERO_INPUTS)
         if self.surface_load not in SURFACE_LOADS:
@@ -143,23 +250,75 @@ class Setup:
 
 
 @dataclass(frozen=True)
+class HeldCommand:
+    """The declaration of one ``held_deg.<channel>`` value (a channel the autopilot leaves alone)."""
+
+    held_deg: float = pm.param("deg", "command of a channel the autopilot leaves alone (rudders, cowl door)",
+                               default=0.0)
+    """Its command, deg."""
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """The declaration of the file's top-level ``frame_hz``."""
+
+    frame_hz: float = pm.param("Hz", "the FMU frame rate", default=200.0, min=0.0, min_exclusive=True)
+    """The FMU frame rate, Hz."""
+
+
+@dataclass(frozen=True)
+class MeasureParams:
+    """The declaration of the ``measure`` section."""
+
+    settle_s: float = pm.param("s", "time left out before measuring (the engagement transient)", default=0.0,
+                               min=0.0)
+    """Time left out before measuring, s."""
+
+
+@dataclass(frozen=True)
 class AilConfig:
     """The whole ``fmu`` parameter set."""
 
     frame_hz: float
+    """The FMU frame rate, Hz."""
     vehicle: VehicleParams
+    """The vehicle."""
     autopilot: AutopilotParams
+    """The flight computer's control law."""
     hinge_moment: dict[str, HingeMomentParams]
     """Surface kind (``wing``, ``rudder``, ``cowl``: the channel file's ``surface``) → hinge-moment model."""
     held_deg: dict[str, float]
+    """Commands of the channels the autopilot leaves alone (rudders, cowl door), deg."""
     setups: dict[str, Setup]
+    """Test-environment profile → vehicle set-up."""
     sim_model: str
+    """Open loop: the simulation's model actuator."""
     settle_s: float
+    """Time left out before measuring (the engagement transient), s."""
     source: str = ""
+    """The file the parameters came from."""
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> AilConfig:
-        """Validate the ``ros__parameters`` mapping of ``config/ail_vehicle.yaml``."""
+        """Validate the ``ros__parameters`` mapping of ``config/ail_vehicle.yaml``.
+
+        Parameters
+        ----------
+        params : Mapping[str, Any]
+            The mapping (the node's ROS overrides merged over the file).
+        origin : str, optional
+            Where it comes from, for the error messages.
+
+        Returns
+        -------
+        AilConfig
+            The parameter set.
+
+        Raises
+        ------
+        ConfigError
+            A section, value or channel that is missing or malformed.
+        """
         def section(name: str) -> Mapping[str, Any]:
             value = params.get(name)
             if not isinstance(value, Mapping):
@@ -206,7 +365,26 @@ class AilConfig:
               bungee_inlb: float | None = None) -> Setup:
         """The setup of a profile (one clear error when the file has none), with any of its choices changed.
 
-        A bungee implies ``surface_load="bungee"``.
+        Parameters
+        ----------
+        profile : str
+            The test-environment profile.
+        aero_input : str, optional
+            Replaces the set-up's ``aero_input``.
+        surface_load : str, optional
+            Replaces the set-up's ``surface_load``.
+        bungee_inlb : float, optional
+            A bungee on the wings, in·lb; implies ``surface_load="bungee"``.
+
+        Returns
+        -------
+        Setup
+            The set-up, validated.
+
+        Raises
+        ------
+        UnknownNameError
+            The file has no set-up for ``profile``, or a choice is unknown.
         """
         if profile not in self.setups:
             raise UnknownNameError("vehicle setup (setup.<profile> in the fmu parameters)", profile, self.setups)
@@ -222,12 +400,41 @@ class AilConfig:
 
 
 def config_path(path: str | Path | None = None) -> Path:
-    """The parameter file: ``path`` or ``config/ail_vehicle.yaml``."""
+    """The parameter file.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        An explicit file.
+
+    Returns
+    -------
+    Path
+        ``path``, or ``config/ail_vehicle.yaml``.
+    """
     return Path(path) if path is not None else config_dir() / CONFIG_NAME
 
 
 def load_ail_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> AilConfig:
-    """Read (and validate) the vehicle and flight-computer parameters; ``overrides`` merge over the file."""
+    """Read (and validate) the vehicle and flight-computer parameters.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        The parameter file (default ``config/ail_vehicle.yaml``).
+    overrides : Mapping[str, Any], optional
+        Nested values merged over the file's (:func:`deep_merged`).
+
+    Returns
+    -------
+    AilConfig
+        The parameter set.
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read or holds a bad value.
+    """
     p = config_path(path)
     params = ros_parameters(p)
     if overrides:
@@ -236,7 +443,20 @@ def load_ail_config(path: str | Path | None = None, overrides: Mapping[str, Any]
 
 
 def deep_merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
-    """Nested mappings merged, ``override`` winning (as the nodes merge ROS parameters over a file)."""
+    """Nested mappings merged, ``override`` winning (as the nodes merge ROS parameters over a file).
+
+    Parameters
+    ----------
+    base : Mapping[str, Any]
+        The file's mapping.
+    override : Mapping[str, Any]
+        Values that replace ``base``'s, key by key, nested mappings merged in turn.
+
+    Returns
+    -------
+    dict[str, Any]
+        A new mapping (neither argument changes).
+    """
     out = dict(base)
     for key, value in override.items():
         old = out.get(key)

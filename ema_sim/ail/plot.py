@@ -2,7 +2,7 @@
 
 The left panel is what figures 41 and 43 show (the wing's position feedback, open against closed loop,
 test against simulation); the right panel is what the measurement sees: the Welch spectrum with the
-median floor and the 15 dB detection level of :mod:`ema_sim.analysis.dither`.
+median floor and the 15 dB detection level of :mod:`ema_sim.analysis.section2.dither`.
 """
 
 from __future__ import annotations
@@ -14,24 +14,43 @@ from typing import Any
 import numpy as np
 
 from ema_sim.ail.loop import AilRun
-from ema_sim.analysis import spectra
-from ema_sim.analysis.dither import BAND_HZ, DETECT_DB
+from ema_sim.analysis.estimation import spectra
+from ema_sim.analysis.section2.dither import BAND_HZ, DETECT_DB
 
 COLORS = ("tab:red", "tab:blue", "tab:green", "tab:purple", "tab:orange", "0.4")
 
 
 def _plt() -> Any:
-    import matplotlib  # noqa: PLC0415
+    import matplotlib  # noqa: PLC0415 - plotting only for the study's figure (pyplot: 0.4 s of import)
 
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    import matplotlib.pyplot as plt  # noqa: PLC0415 - the same
 
     return plt
 
 
 def plot_dither(runs: Sequence[tuple[str, AilRun]], path: str | Path, *, channel: str = "left_wing",
                 settle_s: float = 4.0, show_s: float = 2.0) -> Path:
-    """Write the figure (PNG) for ``runs`` (label, run) and return its path."""
+    """Write the figure (PNG) for ``runs`` and return its path.
+
+    Parameters
+    ----------
+    runs : Sequence[tuple[str, AilRun]]
+        (label, run) pairs, one trace and one spectrum each.
+    path : str or Path
+        The PNG to write (its directory is created).
+    channel : str, optional
+        The surface shown.
+    settle_s : float, optional
+        Time left out at each run's start, s.
+    show_s : float, optional
+        Length of the time traces shown, s.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     plt = _plt()
     fig, (ax_t, ax_f) = plt.subplots(1, 2, figsize=(12, 4.2), gridspec_kw={"width_ratios": [1.25, 1]})
     spacing = 0.0

@@ -24,7 +24,7 @@ import numpy as np
 from ema_sim.ail.loop import AilOptions, AilRun, run_ail
 from ema_sim.ail.measure import SurfaceDither, measure
 from ema_sim.ail.params import WINGS, AilConfig, load_ail_config
-from ema_sim.errors import EmaError
+from ema_sim.errors import EmaError, UnknownNameError
 
 
 @dataclass(frozen=True)
@@ -32,14 +32,19 @@ class Case:
     """One configuration of the study."""
 
     name: str
+    """Its name (``ema ail --study --cases``)."""
     what: str
     """What it shows, for the table."""
     profile: str = "ail"
+    """The test-environment profile."""
     model: str | None = None
     """None: the study's model (hoad3)."""
     open_loop: bool = False
+    """The simulation flies its own model actuators."""
     disable: tuple[str, ...] = ()
+    """Elements switched off by name."""
     bungee_inlb: float | None = None
+    """A bungee on the wings, in·lb."""
 
 
 CASES: tuple[Case, ...] = (
@@ -67,12 +72,15 @@ class CaseResult:
     """One case over its seeds."""
 
     case: Case
+    """The configuration."""
     model: str
+    """The actuator model run."""
     wings: list[SurfaceDither] = field(default_factory=list)
     """Every wing of every seed."""
     runs: list[AilRun] = field(default_factory=list)
     """The runs, kept only when asked for (the figure)."""
     wall_s: float = 0.0
+    """Wall time of the runs, s."""
 
     @property
     def dithers(self) -> bool:
@@ -99,11 +107,25 @@ class CaseResult:
 
 
 def select(names: Sequence[str] | None) -> tuple[Case, ...]:
-    """The cases named (all when none), one clear error for an unknown name."""
+    """The cases named.
+
+    Parameters
+    ----------
+    names : Sequence[str] or None
+        Case names (:data:`CASE_NAMES`); every case when empty or None.
+
+    Returns
+    -------
+    tuple[Case, ...]
+        The cases, in the order named.
+
+    Raises
+    ------
+    UnknownNameError
+        A name that is not a case.
+    """
     if not names:
         return CASES
-    from ema_sim.errors import UnknownNameError  # noqa: PLC0415
-
     by_name = {c.name: c for c in CASES}
     out = []
     for name in names:
@@ -115,7 +137,33 @@ def select(names: Sequence[str] | None) -> tuple[Case, ...]:
 
 def run_case(case: Case, *, model: str = "hoad3", seeds: Sequence[int] = (43,), duration_s: float = 24.0,
              config: AilConfig | None = None, keep_runs: bool = False) -> CaseResult:
-    """Run one case for every seed and measure both wings."""
+    """Run one case for every seed and measure both wings.
+
+    Parameters
+    ----------
+    case : Case
+        The configuration.
+    model : str, optional
+        The actuator model, unless the case names its own.
+    seeds : Sequence[int], optional
+        One run per test-environment noise seed.
+    duration_s : float, optional
+        Length of each run, s (at least the settling time + 4 s).
+    config : AilConfig, optional
+        The vehicle's parameters (default ``config/ail_vehicle.yaml``).
+    keep_runs : bool, optional
+        Keep the runs in the result (for the figure).
+
+    Returns
+    -------
+    CaseResult
+        Both wings of every seed.
+
+    Raises
+    ------
+    EmaError
+        A run too short to measure.
+    """
     cfg = config or load_ail_config()
     if duration_s < cfg.settle_s + 4.0:
         raise EmaError(f"the study needs at least {cfg.settle_s + 4.0:g} s per run (settle + 4 s measured)")
@@ -136,7 +184,30 @@ def run_case(case: Case, *, model: str = "hoad3", seeds: Sequence[int] = (43,), 
 def run_study(cases: Sequence[Case] = CASES, *, model: str = "hoad3", seeds: Sequence[int] = (43, 44, 45),
               duration_s: float = 24.0, config: AilConfig | None = None, keep_runs: Sequence[str] = (),
               progress: Callable[[str], None] | None = None) -> list[CaseResult]:
-    """Every case (see the module docstring); ``keep_runs`` names the cases whose runs are kept."""
+    """Every case (see the module docstring).
+
+    Parameters
+    ----------
+    cases : Sequence[Case], optional
+        The cases run, in order.
+    model : str, optional
+        The actuator model of the cases that name none.
+    seeds : Sequence[int], optional
+        One run per seed and case.
+    duration_s : float, optional
+        Length of each run, s.
+    config : AilConfig, optional
+        The vehicle's parameters (default ``config/ail_vehicle.yaml``).
+    keep_runs : Sequence[str], optional
+        The cases whose runs are kept.
+    progress : Callable[[str], None], optional
+        Called with each case's table row as it finishes.
+
+    Returns
+    -------
+    list[CaseResult]
+        One result per case.
+    """
     out = []
     for case in cases:
         res = run_case(case, model=model, seeds=seeds, duration_s=duration_s, config=config,
@@ -154,7 +225,18 @@ def table_header() -> str:
 
 
 def table_row(res: CaseResult) -> str:
-    """One Markdown row."""
+    """One Markdown row.
+
+    Parameters
+    ----------
+    res : CaseResult
+        A case's result.
+
+    Returns
+    -------
+    str
+        The row of :func:`table_header`'s table.
+    """
     med, top = res.pp_deg()
     f = res.freq_hz()
     return (f"| {res.case.what} | {res.model} | {'**yes**' if res.dithers else 'no'} | "
@@ -163,5 +245,16 @@ def table_row(res: CaseResult) -> str:
 
 
 def table(results: Sequence[CaseResult]) -> str:
-    """The Markdown table."""
+    """The Markdown table.
+
+    Parameters
+    ----------
+    results : Sequence[CaseResult]
+        The rows.
+
+    Returns
+    -------
+    str
+        Header and rows.
+    """
     return "\n".join([table_header(), *(table_row(r) for r in results)])

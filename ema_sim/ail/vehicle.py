@@ -29,17 +29,50 @@ I_ALPHA, I_Q, I_THETA, I_P, I_PHI = range(5)
 
 
 def elevon_aileron(left_deg: float, right_deg: float) -> tuple[float, float]:
-    """Wing deflections → (elevon, aileron) = ((l + r)/2, (l − r)/2)."""
+    """Wing deflections → (elevon, aileron) = ((l + r)/2, (l − r)/2).
+
+    Parameters
+    ----------
+    left_deg, right_deg : float
+        The wings' deflections, deg.
+
+    Returns
+    -------
+    tuple[float, float]
+        Elevon and aileron, deg.
+    """
     return 0.5 * (left_deg + right_deg), 0.5 * (left_deg - right_deg)
 
 
 def wings(elevon_deg: float, aileron_deg: float) -> tuple[float, float]:
-    """(elevon, aileron) → (left, right) wing deflections."""
+    """(elevon, aileron) → (left, right) wing deflections.
+
+    Parameters
+    ----------
+    elevon_deg, aileron_deg : float
+        The two axes, deg.
+
+    Returns
+    -------
+    tuple[float, float]
+        Left and right wing, deg.
+    """
     return elevon_deg + aileron_deg, elevon_deg - aileron_deg
 
 
 def matrices(p: VehicleParams) -> tuple[FloatArray, FloatArray]:
-    """Continuous ``A`` (5×5) and ``B`` (5×2, inputs Δδe and δa)."""
+    """Continuous ``A`` (5×5) and ``B`` (5×2, inputs Δδe and δa).
+
+    Parameters
+    ----------
+    p : VehicleParams
+        The vehicle's stability and control derivatives.
+
+    Returns
+    -------
+    tuple[FloatArray, FloatArray]
+        ``A`` and ``B`` on the states ``[Δα, q, Δθ, p, φ]``.
+    """
     a = np.zeros((5, 5))
     b = np.zeros((5, 2))
     a[I_ALPHA, I_ALPHA] = p.z_alpha_per_s
@@ -56,8 +89,21 @@ def matrices(p: VehicleParams) -> tuple[FloatArray, FloatArray]:
 
 
 def discretize(a: FloatArray, b: FloatArray, frame_s: float) -> tuple[FloatArray, FloatArray]:
-    """Exact zero-order-hold discretization: ``x⁺ = Ad·x + Bd·u``."""
-    import control  # noqa: PLC0415 - heavy; only when a vehicle is built
+    """Exact zero-order-hold discretization: ``x⁺ = Ad·x + Bd·u``.
+
+    Parameters
+    ----------
+    a, b : FloatArray
+        The continuous state and input matrices.
+    frame_s : float
+        The hold, s.
+
+    Returns
+    -------
+    tuple[FloatArray, FloatArray]
+        ``Ad`` and ``Bd``.
+    """
+    import control  # noqa: PLC0415 - python-control (1.2 s of import): only when a vehicle is built
 
     n, m = b.shape
     sysd = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, m))), frame_s, method="zoh")
@@ -69,10 +115,15 @@ class VehicleState:
     """The vehicle at one frame, absolute angles."""
 
     alpha_deg: float
+    """Angle of attack."""
     q_dps: float
+    """Pitch rate."""
     theta_deg: float
+    """Pitch attitude."""
     p_dps: float
+    """Roll rate."""
     phi_deg: float
+    """Bank angle."""
 
     def values(self) -> tuple[float, ...]:
         """In :data:`STATES` order."""
@@ -80,7 +131,15 @@ class VehicleState:
 
 
 class Vehicle:
-    """The vehicle, advanced one FMU frame at a time (see the module docstring)."""
+    """The vehicle, advanced one FMU frame at a time (see the module docstring).
+
+    Parameters
+    ----------
+    params : VehicleParams
+        Trim and derivatives (``config/ail_vehicle.yaml``).
+    frame_s : float
+        The FMU frame, s.
+    """
 
     def __init__(self, params: VehicleParams, frame_s: float) -> None:
         self.params = params
@@ -99,6 +158,12 @@ class Vehicle:
         return VehicleState(p.trim_alpha_deg + x[I_ALPHA], x[I_Q], p.trim_theta_deg + x[I_THETA], x[I_P], x[I_PHI])
 
     def advance(self, left_deg: float, right_deg: float) -> None:
-        """One frame with the wings held at these deflections (as the aerodynamics sees them)."""
+        """One frame with the wings held at these deflections (as the aerodynamics sees them).
+
+        Parameters
+        ----------
+        left_deg, right_deg : float
+            The wings over the frame, deg.
+        """
         de, da = elevon_aileron(left_deg, right_deg)
         self.x = self.ad @ self.x + self.bd @ np.array([de - self.params.trim_elevon_deg, da])

@@ -1,9 +1,17 @@
-"""Offline analysis of records: the report's test results (``ema analyze``) and model-to-model errors.
+"""Offline analysis of records: the report's test results (``ema analyze``) and studies on the models.
 
-``pipeline`` runs a record through ``recognize`` (which section-2 tests it holds) and the analyses:
-``frequency_response`` (on ``spectra``), ``second_order_fit`` (with ``uncertainty``), ``steps`` and
-``timing``, ``calibration_fit``, ``compliance``, ``hysteresis``, ``free_play``, ``threshold``,
-``crosstalk``, ``dither``, ``regeneration``; ``report`` and ``plots`` write the JSON, Markdown and PNGs.
-``noise`` (noise floor, whiteness, input independence) and ``uncertainty`` serve model identification
-too. ``model_error`` compares discrete models with their continuous reference (table 6).
+Grouped so that each group imports only the groups before it (``test/test_analysis_layout.py``):
+
+* ``records``: loading a record, time-series helpers, periodic cycles, held or sampled command;
+* ``estimation``: spectra and frequency responses, sine, transfer-function and second-order fits with
+  their uncertainty, the noise floor and residual tests, readouts of a response, result quality;
+* ``formatting``: what every test's figures and Markdown share;
+* ``section2``: the section-2 tests, one module each, their interface (``base``) and what they read
+  (``segments``);
+* ``registry``, ``recognize``, ``pipeline``, ``report``, ``plots`` (this package): ``ema analyze``
+  recognising a record's tests, running them and writing the JSON, Markdown and PNGs;
+* ``studies``: acceptance tests, the rw13 hysteresis study, the LOES and model-to-model errors
+  (table 6), run on the models.
+
+``estimation.noise`` and ``estimation.uncertainty`` serve model identification too.
 """

@@ -2,16 +2,16 @@
 
 :func:`analyze_record` takes one :class:`~ema_sim.io.csv.MeasuredData` (a rig's CSV or a bag), and
 
-1. measures each output's noise floor and resolution (:func:`ema_sim.analysis.noise.output_noise`)
-   and whether the command is held or sampled (:mod:`ema_sim.analysis.command_hold`), on the samples
+1. measures each output's noise floor and resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`)
+   and whether the command is held or sampled (:mod:`ema_sim.analysis.records.command_hold`), on the samples
    as logged;
-2. puts the record on a uniform grid (:func:`ema_sim.analysis.series.uniform_record`);
+2. puts the record on a uniform grid (:func:`ema_sim.analysis.records.series.uniform_record`);
 3. recognises its segments (:mod:`ema_sim.analysis.recognize`);
 4. runs every test of :data:`ema_sim.analysis.registry.TESTS` in order; a test that finds nothing to
    run on says why in ``not_computed``, and a segment no test runs on gets a note.
 
 :func:`analyze_records` then lets each record use what another record of the same channel measured
-(each test's :meth:`~ema_sim.analysis.section2.Section2Test.share`).
+(each test's :meth:`~ema_sim.analysis.section2.base.Section2Test.share`).
 """
 
 from __future__ import annotations
@@ -21,14 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from ema_sim.analysis import series, slew
-from ema_sim.analysis.command_hold import CommandHold, detect_command_hold, given
-from ema_sim.analysis.noise import NoiseFloor, output_noise
+from ema_sim.analysis.estimation import slew
+from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
+from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
+from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.recognize import recognize
+from ema_sim.analysis.records import series
+from ema_sim.analysis.records.command_hold import CommandHold, detect_command_hold, given
 from ema_sim.analysis.registry import TESTS
-from ema_sim.analysis.second_order_fit import SecondOrderFit
-from ema_sim.analysis.section2 import Options, RecordAnalysis
-from ema_sim.analysis.slew import Slew
+from ema_sim.analysis.section2.base import Options, RecordAnalysis
 from ema_sim.config import CHANNELS, ChannelConfig, load_channel
 from ema_sim.io.csv import MeasuredData
 
@@ -76,7 +77,7 @@ def measure_outputs(data: MeasuredData) -> dict[str, NoiseFloor]:
     Returns
     -------
     dict
-        Output name → its :class:`~ema_sim.analysis.noise.NoiseFloor`.
+        Output name → its :class:`~ema_sim.analysis.estimation.noise.NoiseFloor`.
     """
     given_counts = data.metadata.get("resolution_deg")
     counts = float(given_counts) if given_counts else None
@@ -121,7 +122,7 @@ def record_slew(data: MeasuredData, noise: dict[str, NoiseFloor]) -> Slew:
     Returns
     -------
     Slew
-        :func:`ema_sim.analysis.slew.measure` on the first output (position, else surface).
+        :func:`ema_sim.analysis.estimation.slew.measure` on the first output (position, else surface).
     """
     name = "position_deg" if data.position_deg is not None else "surface_deg"
     y = getattr(data, name)

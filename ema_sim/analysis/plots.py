@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.analysis import figure
+from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.registry import TESTS
-from ema_sim.analysis.section2 import RecordAnalysis
+from ema_sim.analysis.section2.base import RecordAnalysis
 
 SEGMENT_COLORS = ("#e8f0fe", "#fde8e8", "#e8fde9", "#fdf6e3", "#f1e8fd")
 
@@ -35,7 +35,7 @@ def has_load(ra: RecordAnalysis) -> bool:
     bool
         False when there is no hinge-moment column or it reads zero (to ten times its noise).
     """
-    from ema_sim.analysis.noise import output_noise  # noqa: PLC0415
+    from ema_sim.analysis.estimation.noise import output_noise  # noqa: PLC0415
 
     hm = ra.data.hinge_moment_inlb
     if hm is None or hm.size == 0:

@@ -18,11 +18,11 @@ asked, most specific first, what each stretch is:
   compliance), two opposite load levels (*load_reversal*: free play) or a sinusoidal load
   (*load_sine*: hysteresis); with a constant load, a *hold* (crosstalk, dither).
 
-Repeated cycles of the command (:func:`ema_sim.analysis.periodic.find_periodic`) are then one test:
+Repeated cycles of the command (:func:`ema_sim.analysis.records.periodic.find_periodic`) are then one test:
 a periodic stretch that one segment of a matching kind covers keeps it, with the period and cycles
 added to its parameters; one the readers cut into pieces, or read as something else, becomes one
 segment named by its waveform (``square``, ``sine``, ``triangle``, else ``periodic``). Either way its
-``cycles`` parameter has :mod:`ema_sim.analysis.cycles` average it over its cycles.
+``cycles`` parameter has :mod:`ema_sim.analysis.section2.cycles` average it over its cycles.
 
 The metadata's maneuver and load specs (``ema simulate``, the maneuver node's bags) then confirm each
 segment or relabel it, adding the spec's parameters (sweep band, Schroeder period, tone frequency);
@@ -37,12 +37,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis import series
-from ema_sim.analysis.moves import find_moves
-from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
-from ema_sim.analysis.periodic import Periodicity, find_periodic
+from ema_sim.analysis.estimation.noise import COMMAND_COUNTS_SPANNED, detect_resolution
+from ema_sim.analysis.records import series
+from ema_sim.analysis.records.periodic import Periodicity, find_periodic
+from ema_sim.analysis.records.series import Edge
 from ema_sim.analysis.registry import EDGE_READERS, HELD_READERS, MOVE_READERS, MOVING_READERS
-from ema_sim.analysis.segments import (
+from ema_sim.analysis.section2.moves import find_moves
+from ema_sim.analysis.section2.segments import (
     EdgeRun,
     HeldStretch,
     MoveRun,
@@ -51,7 +52,6 @@ from ema_sim.analysis.segments import (
     Recognition,
     Segment,
 )
-from ema_sim.analysis.series import Edge
 from ema_sim.errors import EmaError
 from ema_sim.io.csv import MeasuredData
 from ema_sim.signals import Load, Maneuver, parse_load, parse_maneuver

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from ema_sim.analysis import (
+from ema_sim.analysis.section2 import (
     calibration_fit,
     compliance,
     crosstalk,
@@ -28,8 +28,8 @@ from ema_sim.analysis import (
     threshold,
     timing,
 )
-from ema_sim.analysis.section2 import Section2Test
-from ema_sim.analysis.segments import EdgeRun, HeldStretch, MoveRun, MovingStretch, Reading
+from ema_sim.analysis.section2.base import Section2Test
+from ema_sim.analysis.section2.segments import EdgeRun, HeldStretch, MoveRun, MovingStretch, Reading
 
 TESTS: tuple[Section2Test[Any], ...] = (
     steps.TEST, timing.TEST, frequency_response.TEST, cycles.TEST, sine_dwell.SINE_DWELL, moves.TEST,

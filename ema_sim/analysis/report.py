@@ -14,15 +14,15 @@ from typing import Any
 import numpy as np
 
 from ema_sim import __version__
-from ema_sim.analysis.calibration_fit import TEST as CALIBRATION
-from ema_sim.analysis.calibration_fit import pooled_bounds
-from ema_sim.analysis.hysteresis import RW13_AREA_INLB, RW13_PEAK_IN, hysteretic_damping_constant
-from ema_sim.analysis.markdown import bullets, image, quality, table
+from ema_sim.analysis.estimation.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
+from ema_sim.analysis.formatting.markdown import bullets, image, quality, table
 from ema_sim.analysis.pipeline import spread
 from ema_sim.analysis.plots import plot_key
 from ema_sim.analysis.registry import TESTS
-from ema_sim.analysis.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
-from ema_sim.analysis.section2 import RecordAnalysis
+from ema_sim.analysis.section2.base import RecordAnalysis
+from ema_sim.analysis.section2.calibration_fit import TEST as CALIBRATION
+from ema_sim.analysis.section2.calibration_fit import pooled_bounds
+from ema_sim.analysis.section2.hysteresis import RW13_AREA_INLB, RW13_PEAK_IN, hysteretic_damping_constant
 
 __all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "slope_json", "slope_statement", "to_json", "to_markdown"]
 
@@ -77,8 +77,9 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
 
 
 SLOPE_METHOD = ("slope of the straight middle (20-80 %) of every move of the output that its command outran, "
-                "median over the moves, on the record's own stamps (ema_sim.analysis.slew.measure): the measurement "
-                "ema identify restarts its rate limit from and compares it with, so both reports give one slope")
+                "median over the moves, on the record's own stamps (ema_sim.analysis.estimation.slew.measure): "
+                "the measurement ema identify restarts its rate limit from and compares it with, so both reports "
+                "give one slope")
 
 
 def slope_statement(ra: RecordAnalysis) -> str:
@@ -114,7 +115,7 @@ def slope_json(ra: RecordAnalysis) -> dict[str, Any]:
     Returns
     -------
     dict
-        :meth:`~ema_sim.analysis.slew.Slew.as_dict`, ``statement`` and ``method``.
+        :meth:`~ema_sim.analysis.estimation.slew.Slew.as_dict`, ``statement`` and ``method``.
     """
     base = ra.slew.as_dict() if ra.slew is not None else {}
     return {**base, "statement": slope_statement(ra), "method": SLOPE_METHOD}

@@ -5,12 +5,24 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+
+from ema_sim.commands.common import Subparsers
 
 
 def run(args: argparse.Namespace) -> int:
-    """Measure and print the figures; exit 1 when one misses its requirement."""
-    from ema_sim.analysis.acceptance import acceptance, format_acceptance  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """Measure and print the figures; exit 1 when one misses its requirement.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 when every figure meets its requirement, 1 otherwise.
+    """
+    from ema_sim.analysis.studies.acceptance import acceptance, format_acceptance  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     figures = acceptance(args.model, args.channel)
     print(f"{args.model}, {args.channel}: table 1 and table A2")
@@ -20,8 +32,14 @@ def run(args: argparse.Namespace) -> int:
     return 0 if all(f.passed for f in figures) else 1
 
 
-def register(sub: Any) -> None:
-    """Add ``acceptance`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``acceptance`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("acceptance", help="measure the table 1 / A2 specifications on a high-order model",
                        description="Slew, force versus rate at 125 V, stall, bandwidth, backlash, stiffness, "
                                    "brake and bus regeneration, each as its acceptance test measures it.")

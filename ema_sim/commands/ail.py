@@ -5,7 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+
+from ema_sim.ail.params import load_ail_config
+from ema_sim.commands.common import Subparsers
+from ema_sim.errors import EmaError
+from ema_sim.progress import ProgressBar
 
 MEASURED_STATES = (("q_dps", "pitch rate"), ("p_dps", "roll rate"), ("alpha_deg", "angle of attack"))
 
@@ -15,16 +19,24 @@ FIGURE_CASES = ("ail", "ail_open_loop", "flight", "no_dead_band", "loada")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the loop (or the study), print the dither per surface, write what was asked for."""
+    """Run the loop (or the study), print the dither per surface, write what was asked for.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
     if args.study:
         return _study(args)
     from ema_sim.ail.loop import AilOptions, run_ail  # noqa: PLC0415 - keep `ema --help` fast
     from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure, vehicle_cycle  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.analysis.dither import DETECT_DB  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.errors import EmaError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.analysis.section2.dither import DETECT_DB  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.io.csv import write_csv  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.progress import ProgressBar  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     cfg = load_ail_config(args.vehicle_config)
     setup = cfg.setup(args.profile, aero_input=args.aero_input, surface_load=args.surface_load,
@@ -81,8 +93,6 @@ def run(args: argparse.Namespace) -> int:
 def _study(args: argparse.Namespace) -> int:
     """Section 4.3's table: every case over several seeds (``ema_sim.ail.study``)."""
     from ema_sim.ail import study  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.errors import EmaError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     try:
         seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
@@ -119,8 +129,14 @@ def _study(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``ail`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``ail`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("ail", help="aircraft-in-the-loop: vehicle, autopilot and actuators, offline; the dither",
                        description="Run the closed-loop (or open-loop) aircraft-in-the-loop set-up of sections 2.10 "
                                    "and 4.3 offline, frame by frame as the lockstep node suite does, write a "

@@ -6,11 +6,16 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
-from ema_sim.commands.common import add_data_args, check_channel, rig_format
+from ema_sim.commands.common import Subparsers, add_data_args, check_channel, rig_format
 from ema_sim.errors import SpecError
+from ema_sim.models import model_class
 from ema_sim.progress import ProgressBar
+
+if TYPE_CHECKING:
+    from ema_sim.analysis.section2.base import RecordAnalysis
+    from ema_sim.io.csv import MeasuredData
 
 PROGRESS_S = 3.0
 """A record longer than this says on stderr, at once, that it is being analysed, and shows a progress bar."""
@@ -26,7 +31,7 @@ def _floats(text: str) -> tuple[float, ...]:
     return values
 
 
-def _summary(ra: Any) -> list[str]:
+def _summary(ra: RecordAnalysis) -> list[str]:
     """A few lines per record for the terminal."""
     from ema_sim.analysis.registry import TESTS  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.report import slope_statement  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
@@ -49,7 +54,7 @@ def _summary(ra: Any) -> list[str]:
     return lines
 
 
-def _progress(d: Any) -> ProgressBar | None:
+def _progress(d: MeasuredData) -> ProgressBar | None:
     """Say on stderr at once that a long record is being analysed; its bar shows after a second."""
     span = float(d.time_s[-1] - d.time_s[0])
     if span <= PROGRESS_S:
@@ -59,9 +64,20 @@ def _progress(d: Any) -> ProgressBar | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Analyse every DATA and write what was asked."""
-    from ema_sim.analysis.loading import load_record  # noqa: PLC0415 - keep `ema --help` fast
+    """Analyse every DATA and write what was asked.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
     from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.analysis.records.loading import load_record  # noqa: PLC0415 - keep `ema --help` fast
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
@@ -69,7 +85,6 @@ def run(args: argparse.Namespace) -> int:
     options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
                       compliance_deg_per_kinlb=args.compliance, channel=args.channel, command=args.command_hold)
     if args.model:
-        from ema_sim.models import model_class  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
         model_class(args.model)  # an unknown name is one clear error before any work
     data = [load_record(path, args.channel, rig) for path in args.data]
@@ -102,8 +117,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``analyze`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``analyze`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser(
         "analyze", help="offline analysis of a bag or a rig's CSV: the report's results",
         description="Recognise the section-2 tests in each record and compute their results: frequency response, "

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+
+from ema_sim.commands.common import Subparsers
 
 
 def _reindex(args: argparse.Namespace) -> int:
@@ -22,8 +23,14 @@ def _reindex(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``bag`` (``reindex``) to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``bag`` (``reindex``) to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("bag", help="bag maintenance: reindex a bag whose writer was killed",
                        description="Bag maintenance for rosbag2 (MCAP) bags.")
     cmds = p.add_subparsers(dest="bag_command", required=True)

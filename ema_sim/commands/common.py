@@ -4,16 +4,36 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeAlias
 
-from ema_sim.errors import SpecError
+from ema_sim.config import CHANNELS
+from ema_sim.errors import DataError, SpecError, UnknownNameError
 
 if TYPE_CHECKING:
     from ema_sim.io.csv import RigFormat
 
+Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
+"""What each command's ``register`` adds its parser to (``ArgumentParser.add_subparsers``)."""
+
 
 def parse_overrides(items: Sequence[str] | None) -> dict[str, float]:
-    """``--set name=value`` pairs as model parameter overrides."""
+    """``--set name=value`` pairs as model parameter overrides.
+
+    Parameters
+    ----------
+    items : Sequence[str] or None
+        The ``--set`` values as given.
+
+    Returns
+    -------
+    dict[str, float]
+        Parameter name → value.
+
+    Raises
+    ------
+    SpecError
+        An item that is not ``name=number``.
+    """
     out: dict[str, float] = {}
     for item in items or []:
         key, eq, value = item.partition("=")
@@ -27,14 +47,26 @@ def parse_overrides(items: Sequence[str] | None) -> dict[str, float]:
 
 
 def add_model_args(p: argparse.ArgumentParser) -> None:
-    """``--channel`` and ``--set`` for commands that build a model."""
+    """Add ``--channel`` and ``--set``, for commands that build a model.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The command's parser.
+    """
     p.add_argument("--channel", default="left_wing", help="EMAC channel (default left_wing)")
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="override a model parameter (repeatable), e.g. --set delay_s=0")
 
 
 def add_data_args(p: argparse.ArgumentParser) -> None:
-    """``--columns``, ``--delimiter`` and ``--crank-arm-in`` for commands that read a rig's own file."""
+    """Add ``--columns``, ``--delimiter`` and ``--crank-arm-in``, for commands that read a rig's own file.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The command's parser.
+    """
     p.add_argument("--columns", default=None, metavar="NAME=COLUMN,...",
                    help="map a rig file's columns onto the contract's, with units: e.g. "
                         "time_ms=t,command_deg=demand,position_deg=pos (position_mm, position_in: linear)")
@@ -45,8 +77,23 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
 
 
 def rig_format(args: argparse.Namespace) -> RigFormat | None:
-    """The rig-file layout the arguments describe (None: a data-contract CSV or a bag)."""
-    from ema_sim.errors import DataError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """The rig-file layout the arguments describe.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        A command line with the options of :func:`add_data_args`.
+
+    Returns
+    -------
+    RigFormat or None
+        The layout; None for a data-contract CSV or a bag.
+
+    Raises
+    ------
+    DataError
+        A crank arm that is not positive, or a malformed ``--columns``.
+    """
     from ema_sim.io.csv import RigFormat, parse_columns  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     if args.crank_arm_in is not None and not args.crank_arm_in > 0:
@@ -58,9 +105,17 @@ def rig_format(args: argparse.Namespace) -> RigFormat | None:
 
 
 def check_channel(name: str | None) -> None:
-    """An unknown ``--channel`` is one clear error (exit 2), never a silent stand-in."""
-    from ema_sim.config import CHANNELS  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.errors import UnknownNameError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """An unknown ``--channel`` is one clear error (exit 2), never a silent stand-in.
 
+    Parameters
+    ----------
+    name : str or None
+        The ``--channel`` given (None: none given).
+
+    Raises
+    ------
+    UnknownNameError
+        ``name`` is not one of the five channels.
+    """
     if name is not None and name not in CHANNELS:
         raise UnknownNameError("channel", name, CHANNELS)

@@ -5,16 +5,28 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
 
-from ema_sim.commands.common import add_model_args, parse_overrides
+from ema_sim.commands.common import Subparsers, add_model_args, parse_overrides
 from ema_sim.errors import SpecError
+from ema_sim.signals import parse_load, parse_maneuver
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the error table (and write JSON)."""
-    from ema_sim.analysis import model_error  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """Print the error table (and write JSON).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
+    from ema_sim.analysis.studies import (  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+        model_error,
+    )
 
     candidates: list[tuple[str, float | None]] = []
     for item in args.models.split(","):
@@ -35,9 +47,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``compare`` to the ``ema`` parser."""
-    from ema_sim.analysis.model_error import TABLE6_CANDIDATES, TABLE6_MANEUVER  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+def register(sub: Subparsers) -> None:
+    """Add ``compare`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
+    from ema_sim.analysis.studies.model_error import TABLE6_CANDIDATES, TABLE6_MANEUVER  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     p = sub.add_parser("compare", help="error of discrete models against a reference (table 6)",
                        description="Mean, spread and maximum |error| of each model against the reference.")

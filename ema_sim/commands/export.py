@@ -10,11 +10,22 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ema_sim.commands.common import parse_overrides
+from ema_sim.commands.common import Subparsers, check_channel, parse_overrides
 
 
 def run_export(args: argparse.Namespace) -> int:
-    """Write the artefacts asked for."""
+    """Write the artefacts asked for.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
     from ema_sim.export.target import ExportError, resolve  # noqa: PLC0415 - keep `ema --help` fast
 
     if not (args.fmu or args.jsbsim or args.c):
@@ -64,8 +75,18 @@ def _maneuvers(items: list[str] | None) -> list[tuple[str, str | None]] | None:
 
 
 def run_verify(args: argparse.Namespace) -> int:
-    """Verify an artefact (or diagnose a host's record) and print the report."""
-    from ema_sim.commands.common import check_channel  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """Verify an artefact (or diagnose a host's record) and print the report.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 when the artefact passes, 1 otherwise.
+    """
     from ema_sim.export.target import ExportError, resolve  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.io import is_bag  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
@@ -103,8 +124,14 @@ def run_verify(args: argparse.Namespace) -> int:
     return 0 if passed else 1
 
 
-def register(sub: Any) -> None:
-    """Add ``export`` and ``verify`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``export`` and ``verify`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("export", help="export a model as an FMI 2.0 FMU, a JSBSim system or C sources",
                        description="Export a second-order model (loada, loadf; loac and second_order through LOADA's "
                                    "kernel), a linear model (loes, hoalm, sloac: its zero-order-hold state space; "

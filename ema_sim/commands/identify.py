@@ -5,28 +5,59 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
-from ema_sim.commands.common import add_data_args, check_channel, parse_overrides, rig_format
+from ema_sim.commands.common import Subparsers, add_data_args, check_channel, parse_overrides, rig_format
+from ema_sim.errors import EmaError, UnknownNameError
+
+if TYPE_CHECKING:
+    from ema_sim.io.csv import MeasuredData, RigFormat
 
 
-def load_measured(path: Path, channel: str | None, rig: Any = None) -> Any:
-    """A measured record from a data-contract CSV, a rig's own file (``rig``), or a rosbag2."""
+def load_measured(path: Path, channel: str | None, rig: RigFormat | None = None) -> MeasuredData:
+    """A measured record from a data-contract CSV, a rig's own file, or a rosbag2.
+
+    Parameters
+    ----------
+    path : Path
+        The file or bag directory.
+    channel : str or None
+        The channel to read (a bag holds several; None: the only one).
+    rig : RigFormat, optional
+        A rig file's layout (:func:`~ema_sim.commands.common.rig_format`).
+
+    Returns
+    -------
+    MeasuredData
+        The record.
+    """
     from ema_sim import io as ema_io  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     return ema_io.load_data(path, channel=channel, rig=rig)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Identify and print the summary; write JSON, the report and the residuals when asked."""
+    """Identify and print the summary; write JSON, the report and the residuals when asked.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
     from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.errors import UnknownNameError  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.identify.declared import DECLARED  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.identify.identification import identify  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.identify.record import prepare  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
+    if args.workers < 0:
+        raise EmaError(f"--workers must be 0 or more, got {args.workers}")
     if args.model.strip().lower() not in DECLARED:
         raise UnknownNameError("declared model for identification", args.model, DECLARED)
     overrides = parse_overrides(args.overrides)
@@ -35,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     record = prepare(data, channel, channel_note=note, command=args.command_hold)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
     result = identify(record.data, record.channel, args.model, overrides, max_effects=args.max_effects, log=say,
-                      record=record, escalate=not args.no_escalate)
+                      record=record, escalate=not args.no_escalate, workers=args.workers, scheduler=args.scheduler)
     report = to_json(result, str(args.data))
     print(summary(report))
     if args.json:
@@ -48,8 +79,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``identify`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``identify`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     from ema_sim.identify.declared import DECLARED  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     p = sub.add_parser(
@@ -74,6 +111,12 @@ def register(sub: Any) -> None:
     p.add_argument("--command", dest="command_hold", default="detect", choices=("detect", "held", "sampled"),
                    help="how the rig logged its command: held between samples (the data contract), sampled from a "
                         "running demand, or detect it (a record that cannot tell is fitted both ways)")
+    p.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="fit a round's candidate effects and the physics' extra starts at once on a local Dask "
+                        "cluster of N processes (2; 0 or 1: one after another in this process; a record under "
+                        "40,000 fitted samples is always fitted here); the same result either way")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="send those fits to a running Dask scheduler (e.g. tcp://host:8786) instead")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     add_data_args(p)
     p.set_defaults(func=run)

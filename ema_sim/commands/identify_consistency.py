@@ -4,11 +4,23 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+
+from ema_sim.commands.common import Subparsers
 
 
 def run(args: argparse.Namespace) -> int:
-    """Compare the reports, print the table, write the JSON when asked; 0 even when parameters disagree."""
+    """Compare the reports, print the table, write the JSON when asked; 0 even when parameters disagree.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0, even when parameters disagree (the table says so).
+    """
     from ema_sim.identify.consistency import compare, format_table, read_reports  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.identify.report import write_json  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
@@ -20,8 +32,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``identify-consistency`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``identify-consistency`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser(
         "identify-consistency", help="compare the parameters several `ema identify` reports give one actuator",
         description="For every model parameter fitted in two reports or more: the inverse-variance weighted mean, "

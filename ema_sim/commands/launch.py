@@ -5,16 +5,23 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from types import FrameType
+from typing import TYPE_CHECKING
 
-from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS
+from ema_sim.ail.params import load_ail_config
+from ema_sim.commands.common import Subparsers
+from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS, RunDescription
+from ema_sim.signals.plans import test_help
+
+if TYPE_CHECKING:
+    from ema_sim.io.bag.reader import BagInfo
+    from ema_sim.suite import Suite
 
 
-def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
+def _config(args: argparse.Namespace) -> tuple[RunDescription, str, str, float]:
     """The run's description (validated once, as it is made), what it is, on what, for how long."""
-    from ema_sim.run import RunDescription  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     cfg = RunDescription(
         bag=Path(args.bag) if args.bag else None, model=args.model, profile=args.profile, test=args.test,
         maneuver=args.maneuver, load=args.load, channels=args.channels, emac_channels=args.emacs,
@@ -28,12 +35,23 @@ def _config(args: argparse.Namespace) -> tuple[Any, str, str, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds."""
+    """Bring the suite up, run the test, bring it down; print where the bag is and what it holds.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0, or 130 when interrupted (the bag is closed either way).
+    """
     from ema_sim.io.bag import bag_info  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.suite import Suite  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     cfg, test, what, duration = _config(args)
-    bag = cfg.bag
+    bag = cfg.bag_dir
     suite = Suite(cfg)
     for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the bag
         signal.signal(signum, _interrupt)  # closed (SIGHUP: the terminal closed; SIGKILL: ema_sim.nodes.lifetime)
@@ -53,11 +71,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _interrupt(signum: int, frame: Any) -> None:  # noqa: ARG001
+def _interrupt(signum: int, frame: FrameType | None) -> None:  # noqa: ARG001
     raise KeyboardInterrupt
 
 
-def _report(suite: Any, bag: Path, bag_info: Any) -> None:
+def _report(suite: Suite, bag: Path, bag_info: Callable[[Path], BagInfo]) -> None:
     sums = suite.summaries()
     if bag.exists():
         info = bag_info(bag)
@@ -78,7 +96,6 @@ def _report_dither(bag: Path) -> None:
     """Each surface's limit cycle in the recorded run, as ``ema ail`` prints it."""
     from ema_sim.ail.bag import run_from_bag  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     run = run_from_bag(bag)
     settle = load_ail_config().settle_s
@@ -91,8 +108,14 @@ def _report_dither(bag: Path) -> None:
         print(f"  {ch:13s} {d.statement}")
 
 
-def register(sub: Any) -> None:
-    """Add ``launch`` (and ``tests``, the list of section-2 tests) to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``launch`` (and ``tests``, the list of section-2 tests) to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("launch", help="run the ROS 2 node suite: five EMACs, test environment, clock, maneuver",
                        description="Bring up the five EMAC channels, the test environment, (lockstep) the clock "
                                    "and the maneuver node, run one test, record the bag, stop.")
@@ -140,7 +163,6 @@ def register(sub: Any) -> None:
 
 def _tests(args: argparse.Namespace) -> int:  # noqa: ARG001
     from ema_sim.emac.failures import failure_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.signals.plans import test_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     print("tests (--test name[:field=value,...]):")
     print(test_help())

@@ -5,16 +5,26 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
 
-from ema_sim.commands.common import add_model_args, parse_overrides
+from ema_sim.commands.common import Subparsers, add_model_args, parse_overrides
 
 
 def run(args: argparse.Namespace) -> int:
-    """Dwell HOAD3, fit the LOES, print it (and write it to the channel's YAML)."""
-    from ema_sim.analysis.loes import fit_loes, write_loes  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """Dwell HOAD3, fit the LOES, print it (and write it to the channel's YAML).
 
-    fit = fit_loes(args.channel, load_inlb=args.load_inlb, **parse_overrides(args.overrides))
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
+    from ema_sim.analysis.studies.loes import fit_loes, write_loes  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+
+    fit = fit_loes(args.channel, None, None, load_inlb=args.load_inlb, **parse_overrides(args.overrides))
     c = fit.coefficients
     print(f"LOES of HOAD3, {args.channel}: wn {c['wn_rad_s']:.4g} rad/s, zeta {c['zeta']:.4g}, "
           f"delay {c['delay_s'] * 1e3:.3f} ms, DC gain {c['dc_gain_ratio']:.4g}; J = {fit.cost:.3f} "
@@ -32,8 +42,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``loes`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``loes`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("loes", help="refit a channel's LOES to HOAD3's sine dwells (section 3.4)",
                        description="Sine-dwell HOAD3 (one batch instance per frequency), fit a second order "
                                    "plus delay and report the mismatch cost J.")

@@ -3,14 +3,25 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+
+from ema_sim.commands.common import Subparsers, check_channel
+from ema_sim.progress import ProgressBar
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run (or resume) a campaign and print where its results are."""
-    from ema_sim.commands.common import check_channel  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    """Run (or resume) a campaign and print where its results are.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
     from ema_sim.montecarlo import load_campaign, run_campaign  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.progress import ProgressBar  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
     campaign = load_campaign(args.campaign, channel=args.channel, analysis=args.analysis or ())
@@ -28,8 +39,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``montecarlo`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``montecarlo`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     from ema_sim.montecarlo.builtin import BUILTIN  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     p = sub.add_parser("montecarlo", help="a Monte Carlo campaign on Dask (local cluster, or --scheduler)",

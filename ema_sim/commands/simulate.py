@@ -4,16 +4,26 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
-from ema_sim.commands.common import add_model_args, parse_overrides
+from ema_sim.commands.common import Subparsers, add_model_args, parse_overrides
+from ema_sim.progress import ProgressBar
+from ema_sim.signals import parse_load, parse_maneuver
 
 
 def run(args: argparse.Namespace) -> int:
-    """Simulate and write the CSV."""
+    """Simulate and write the CSV.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (the options :func:`register` adds).
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success.
+    """
     from ema_sim.io.csv import write_csv  # noqa: PLC0415 - keep `ema --help` fast
-    from ema_sim.progress import ProgressBar  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.simulation import csv_columns, simulate  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     maneuver = parse_maneuver(args.maneuver)
@@ -32,8 +42,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: Any) -> None:
-    """Add ``simulate`` to the ``ema`` parser."""
+def register(sub: Subparsers) -> None:
+    """Add ``simulate`` to the ``ema`` parser.
+
+    Parameters
+    ----------
+    sub : Subparsers
+        ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
+    """
     p = sub.add_parser("simulate", help="run a model offline and write the data-contract CSV",
                        description="Run a model through a section-2 maneuver and write a DAU-like CSV.")
     p.add_argument("--model", required=True, help="model name (ema models)")

@@ -68,7 +68,20 @@ class EmacSettings:
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "emac") -> EmacSettings:
-        """Validate a parameter mapping (unknown keys are left to the caller)."""
+        """Validate a parameter mapping (unknown keys are left to the caller).
+
+        Parameters
+        ----------
+        params : mapping of str to Any
+            The ``emac.*`` values, by field name.
+        origin : str
+            Where they come from, for messages.
+
+        Returns
+        -------
+        EmacSettings
+            The checked settings.
+        """
         values: dict[str, Any] = {}
         for f in fields(cls):
             if f.name not in params:
@@ -126,7 +139,21 @@ COUNTERS = ("frames", "rejected_commands", "clamped_commands", "rejected_loads",
 
 
 class EmacChannel:
-    """A model behind one EMAC channel (see the module docstring)."""
+    """A model behind one EMAC channel (see the module docstring).
+
+    Parameters
+    ----------
+    model : ActuatorModel
+        The channel's model (one instance).
+    settings : EmacSettings or None
+        The channel logic's settings (None: the defaults).
+    scaling : Scaling or None
+        The channel's degree↔volt scaling (None: the model's channel's).
+    crosstalk_noise_pp_v : float
+        Peak-to-peak feedback noise while other channels slew, V.
+    stream : int
+        The noise's random stream (one per channel).
+    """
 
     def __init__(self, model: ActuatorModel, settings: EmacSettings | None = None, *,
                  scaling: Scaling | None = None, crosstalk_noise_pp_v: float = 0.0, stream: int = 0) -> None:
@@ -150,7 +177,20 @@ class EmacChannel:
 
     # ----------------------------------------------------------------- inputs
     def start(self, position_deg: float = 0.0, hinge_moment_inlb: float = 0.0) -> Feedback:
-        """Trim the model at rest at ``position_deg`` under the load; the brake holds until commanded."""
+        """Trim the model at rest at ``position_deg`` under the load; the brake holds until commanded.
+
+        Parameters
+        ----------
+        position_deg : float
+            Surface position, deg.
+        hinge_moment_inlb : float
+            Hinge moment, in·lb.
+
+        Returns
+        -------
+        Feedback
+            The held state's feedback.
+        """
         self._load_inlb = float(hinge_moment_inlb)
         self._hold = None
         sample = self.model.trim(position_deg=position_deg, hinge_moment_inlb=self._load_inlb)
@@ -158,7 +198,18 @@ class EmacChannel:
         return self.last
 
     def set_command(self, volts: float) -> InputStatus:
-        """The FMU's command for the coming frames, V: checked, never passed on when bad."""
+        """The FMU's command for the coming frames, V: checked, never passed on when bad.
+
+        Parameters
+        ----------
+        volts : float
+            The command, V.
+
+        Returns
+        -------
+        InputStatus
+            Taken, clamped or rejected.
+        """
         try:
             v = float(volts)
         except (TypeError, ValueError):
@@ -175,7 +226,18 @@ class EmacChannel:
         return InputStatus.OK
 
     def set_load(self, inlb: float) -> InputStatus:
-        """The hinge moment for the coming frames, in·lb: checked like the command."""
+        """The hinge moment for the coming frames, in·lb: checked like the command.
+
+        Parameters
+        ----------
+        inlb : float
+            The hinge moment, in·lb.
+
+        Returns
+        -------
+        InputStatus
+            Taken, clamped or rejected.
+        """
         try:
             h = float(inlb)
         except (TypeError, ValueError):
@@ -192,7 +254,18 @@ class EmacChannel:
         return InputStatus.OK
 
     def set_failure(self, failure: Failure | str) -> Failure:
-        """Switch the failure mode (takes effect at the next frame)."""
+        """Switch the failure mode (takes effect at the next frame).
+
+        Parameters
+        ----------
+        failure : Failure or str
+            The mode, or its spec string (``stuck``, ``hard_over:direction=-1``...).
+
+        Returns
+        -------
+        Failure
+            The mode now in effect.
+        """
         self.failure = parse_failure(failure) if isinstance(failure, str) else failure
         return self.failure
 
@@ -208,7 +281,20 @@ class EmacChannel:
 
     # ----------------------------------------------------------------- one frame
     def step(self, command_age_s: float | None, activity: float = 0.0) -> Feedback:
-        """Advance one frame; ``command_age_s`` is how old the last good command is (None: never)."""
+        """Advance one frame.
+
+        Parameters
+        ----------
+        command_age_s : float or None
+            How old the last good command is, s (None: never commanded).
+        activity : float
+            The other channels' activity (crosstalk), 0 to 1.
+
+        Returns
+        -------
+        Feedback
+            The frame's feedback.
+        """
         stale = command_age_s is None or command_age_s > self.settings.watchdog_timeout_s
         if stale and not self._stale:
             self.counters["watchdog_trips"] += 1

@@ -19,7 +19,13 @@ from ema_sim.errors import ConfigError
 
 
 class ActivityMeter:
-    """Activity of the other channels, from their successive feedback voltages."""
+    """Activity of the other channels, from their successive feedback voltages.
+
+    Parameters
+    ----------
+    frame_s : float
+        The frame period, s.
+    """
 
     def __init__(self, frame_s: float) -> None:
         self.frame_s = float(frame_s)
@@ -27,7 +33,17 @@ class ActivityMeter:
         self._activity: dict[str, float] = {}
 
     def observe(self, source: str, position_v: float, slew_v_per_s: float) -> None:
-        """The feedback of ``source`` at the next frame (its full slew in V/s scales the activity)."""
+        """The feedback of ``source`` at the next frame (its full slew in V/s scales the activity).
+
+        Parameters
+        ----------
+        source : str
+            The channel that sent it.
+        position_v : float
+            Its position feedback, V.
+        slew_v_per_s : float
+            Its full slew rate, V/s.
+        """
         if not math.isfinite(position_v):
             return
         last = self._last.get(source)
@@ -41,12 +57,33 @@ class ActivityMeter:
         return max(self._activity.values(), default=0.0)
 
     def activity_except(self, channel: str) -> float:
-        """Largest activity of the sources other than ``channel`` (an EMAC box observes its own channels)."""
+        """Largest activity of the sources other than ``channel`` (an EMAC box observes its own channels).
+
+        Parameters
+        ----------
+        channel : str
+            The observed channel.
+
+        Returns
+        -------
+        float
+            The activity, 0 to 1.
+        """
         return max((a for name, a in self._activity.items() if name != channel), default=0.0)
 
 
 class Crosstalk:
-    """Noise volts on the observed channel's feedback for a given source activity."""
+    """Noise volts on the observed channel's feedback for a given source activity.
+
+    Parameters
+    ----------
+    noise_pp_v : float
+        Peak-to-peak noise at full activity, V.
+    seed : int
+        The random seed.
+    stream : int
+        The random stream (one per channel).
+    """
 
     def __init__(self, noise_pp_v: float, seed: int = 0, stream: int = 0) -> None:
         if not (math.isfinite(noise_pp_v) and noise_pp_v >= 0.0):
@@ -60,7 +97,18 @@ class Crosstalk:
         return self.noise_pp_v > 0.0
 
     def step(self, activity: float) -> float:
-        """Noise of this frame, volts."""
+        """Noise of this frame, volts.
+
+        Parameters
+        ----------
+        activity : float
+            The sources' activity, 0 to 1.
+
+        Returns
+        -------
+        float
+            The noise, V.
+        """
         if self.noise_pp_v == 0.0 or activity <= 0.0:
             return 0.0
         return self.noise_pp_v * min(activity, 1.0) * (float(self._rng.random()) - 0.5)

@@ -82,7 +82,18 @@ FAILURES: dict[str, type[Failure]] = {c.kind: c for c in (Nominal, Stuck, HardOv
 
 
 def parse_failure(text: str) -> Failure:
-    """A failure mode from its spec string, e.g. ``hard_over:direction=-1``."""
+    """A failure mode from its spec string, e.g. ``hard_over:direction=-1``.
+
+    Parameters
+    ----------
+    text : str
+        The spec.
+
+    Returns
+    -------
+    Failure
+        The mode.
+    """
     return parse(text, FAILURES, "failure")
 
 

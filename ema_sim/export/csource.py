@@ -448,7 +448,7 @@ def config(values: ModelValues) -> str:
         C source text.
     """
     metas = pm.metas(SecondOrderParams)
-    vector = values.params.vector()
+    vector = values.params.kernel_vector()
     names = _fields(P)
     by_slot = {m.kernel: (n, m) for n, m in metas.items() if m.kernel is not None}
     rows = [by_slot[k] for k in names]

@@ -469,7 +469,7 @@ def guid(target: ExportTarget) -> str:
         ``{xxxxxxxx-...}``.
     """
     key = f"{target.model}|{target.channel}|{target.rate_hz!r}|{target.backward}|" + ",".join(
-        repr(float(v)) for v in target.params.vector())
+        repr(float(v)) for v in target.params.kernel_vector())
     if target.options:
         key += "|" + ",".join(f"{k}={v!r}" for k, v in sorted(target.options.items()))
     return "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "ema_sim:" + key)) + "}"
@@ -556,7 +556,7 @@ def model_description(target: ExportTarget) -> str:
             variables.append(_real(name, PARAM_VR0 + slot, "parameter", "fixed", desc, unit=unit, start=value,
                                    initial="exact", lo=value, hi=value))
     metas = {} if target.linear else pm.metas(SecondOrderParams)
-    vector = target.params.vector()
+    vector = target.params.kernel_vector()
     for name, m in metas.items():
         if m.kernel is None:
             continue

@@ -227,7 +227,7 @@ def not_expressed(params: SecondOrderParams) -> list[str]:
     list of str
         Parameter names of the stages that are on (:data:`NOT_EXPRESSED`).
     """
-    p = params.vector()
+    p = params.kernel_vector()
     on = {"accel_limit_dps2": bool(drive_on(p)),
           "feedback_filter_in_loop": params.feedback_filter_in_loop > 0.5,
           "feedback_delay_s": params.feedback_delay_s > 0.0, "linkage_freq_hz": params.linkage_freq_hz > 0.0}
@@ -269,7 +269,7 @@ def system_xml(target: ExportTarget) -> str:  # noqa: PLR0912, PLR0915 - figure 
         raise ExportError(f"{target.model}: {LINEAR_NO_JSBSIM}")
     dropped = not_expressed(target.params)
     prm = expressed_params(target.params)
-    p = prm.vector()
+    p = prm.kernel_vector()
     dt = 1.0 / target.rate_hz
     backward = target.backward
     hm = INPUT_HINGE_MOMENT
@@ -440,7 +440,7 @@ def rest_state(params: SecondOrderParams, command_deg: float, hinge_moment_inlb:
     """
     states = np.zeros((1, N_STATE))
     history = np.zeros((1, HISTORY_SIZE if params.feedback_delay_s > 0.0 else 1, 3))
-    trim(params.vector()[None, :], np.array([command_deg]), np.array([hinge_moment_inlb]), states, history)
+    trim(params.kernel_vector()[None, :], np.array([command_deg]), np.array([hinge_moment_inlb]), states, history)
     rest: FloatArray = states[0]
     return rest
 

@@ -14,7 +14,7 @@ record (:func:`not_determinable`), and the declared model itself is run on the r
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,8 +23,14 @@ from ema_sim.errors import UnknownNameError
 from ema_sim.identify.effects import FREE
 from ema_sim.models import create, model_parameters
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.high_order.figure30 import total_deflection
+from ema_sim.models.high_order.linear import linearize
+from ema_sim.models.high_order.params import HighOrderParams, P
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
+
+if TYPE_CHECKING:  # a type only: ema_sim.models.linear imports python-control (1.2 s)
+    from ema_sim.models.linear import LoesParams
 
 SECOND_ORDER = ("second_order", "loac", "loada", "loadf", "sloac")
 """The second-order family, fitted with its accurate simulator."""
@@ -137,11 +143,6 @@ def equivalent(model: str, channel: ChannelConfig, peak_load_inlb: float = 1000.
     dict
         Model parameter → value.
     """
-    from ema_sim.models.high_order.figure30 import total_deflection  # noqa: PLC0415 - only for these models
-    from ema_sim.models.high_order.linear import linearize  # noqa: PLC0415
-    from ema_sim.models.high_order.params import HighOrderParams, K  # noqa: PLC0415
-    from ema_sim.models.linear import LoesParams  # noqa: PLC0415
-
     if model == "loes":
         loes: LoesParams = getattr(create("loes", channel.channel), "params")  # noqa: B009 - Loes has them
         return {"wn_rad_s": loes.wn_rad_s, "zeta": loes.zeta, "delay_s": loes.delay_s, "kb": loes.dc_gain_ratio - 1.0}
@@ -167,7 +168,7 @@ def equivalent(model: str, channel: ChannelConfig, peak_load_inlb: float = 1000.
     if model == "hoad3":
         v = h.kernel_vector(figure33=True, bound=0.0, hysteresis=False, noise=False)
         load = np.linspace(0.0, max(peak_load_inlb, 100.0), 41)
-        deflection = np.array([total_deflection(v, m / v[K.crank_arm_in]) for m in load]) * dpi
+        deflection = np.array([total_deflection(v, m / v[P.crank_arm_in]) for m in load]) * dpi
         return {**out, **_two_slopes(deflection, load)}
     lin = linearize(h, 0.0, figure33=False)
     return {**out, "compliance_deg_per_kinlb": per_kinlb / lin.total_stiffness_lbf_per_in}

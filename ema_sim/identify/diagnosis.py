@@ -57,8 +57,8 @@ from numpy.typing import NDArray
 from scipy.signal import welch
 from scipy.stats import f as fisher
 
-from ema_sim.analysis.noise import autocorrelation, whiteness
-from ema_sim.analysis.series import Hold, holds
+from ema_sim.analysis.estimation.noise import autocorrelation, whiteness
+from ema_sim.analysis.records.series import Hold, holds
 from ema_sim.identify.declared import HIGH_ORDER
 from ema_sim.identify.effects import EFFECTS, FREE, Effect
 from ema_sim.identify.fit import Fit, block_covariance

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from ema_sim.analysis.noise import whiteness
+from ema_sim.analysis.estimation.noise import whiteness
 from ema_sim.identify.effects import FREE
 from ema_sim.identify.fit import TINY, Fit, block_covariance, difference_points, finite, rms
 from ema_sim.identify.library import describe, library

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.signal import fftconvolve
 
-from ema_sim.analysis.noise import autocovariance
+from ema_sim.analysis.estimation.noise import autocovariance
 from ema_sim.identify.effects import FREE, Free
 from ema_sim.identify.problem import Problem
 from ema_sim.models.second_order import SecondOrderParams

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ema_sim.analysis.command_hold import HoldMode
+from ema_sim.analysis.records.command_hold import HoldMode
 from ema_sim.config import ChannelConfig
 from ema_sim.identify import artefacts
 from ema_sim.identify.criteria import MAX_DELTA_BIC, simulator_error
@@ -35,6 +35,7 @@ from ema_sim.identify.discovery import Discovery, discover
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
 from ema_sim.identify.fit import TINY, Fit, evaluate, rms
 from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal
+from ema_sim.identify.parallel import MIN_SAMPLES, SERIAL, Pool
 from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
 from ema_sim.identify.record import Record, prepare
@@ -49,10 +50,12 @@ BALANCE_WEIGHTS = (4.0, 16.0, 64.0)
 class _Chain:
     """The stages' shared state: the result so far, the reference's rms, and the outcome of each stage."""
 
-    def __init__(self, problem: Problem, result: Identification, say: Callable[[str], None]) -> None:
+    def __init__(self, problem: Problem, result: Identification, say: Callable[[str], None], pool: Pool = SERIAL
+                 ) -> None:
         self.problem = problem
         self.result = result
         self.say = say
+        self.pool = pool
         self.reference = rms(problem, reference_fit(problem, result.baseline.params))
 
     @property
@@ -116,6 +119,8 @@ def identify(
     command: HoldMode = "detect",
     escalate: bool = True,
     discover_terms: bool = True,
+    workers: int = 0,
+    scheduler: str | None = None,
 ) -> Identification:
     """Fit ``model`` to ``data``, add the effects it lacks, discover what no effect names (module docstring).
 
@@ -147,6 +152,11 @@ def identify(
     discover_terms : bool
         Whether what is left is regressed on the library and the loop closed with it (never with
         ``max_effects`` 0).
+    workers : int
+        Fit a round's candidates and the physics' extra starts at once on a local Dask cluster of this many
+        processes (0 or 1: one after another here); the same result either way (:mod:`.parallel`).
+    scheduler : str, optional
+        A running Dask scheduler's address to send those fits to instead of a local cluster.
 
     Returns
     -------
@@ -157,6 +167,24 @@ def identify(
     say = log or (lambda _msg: None)
     record = record or prepare(data, channel, command=command)
     problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled)
+    pool = Pool(scheduler, workers) if scheduler or (workers >= 2 and problem.n_fit >= MIN_SAMPLES) else SERIAL
+    pool.start()  # the cluster starts while the baseline is fitted
+    if scheduler:
+        pool.client()  # a scheduler that cannot be reached is the user's error, said before any fit
+    try:
+        result = _identify(problem, record, model, overrides, t0=t0, say=say, pool=pool, max_effects=max_effects,
+                           escalate=escalate, discover_terms=discover_terms)
+        if pool.failed:
+            result.warnings.append(pool.failed)
+        return result
+    finally:
+        pool.close()
+
+
+def _identify(problem: Problem, record: Record, model: str, overrides: dict[str, float] | None, *, t0: float,
+              say: Callable[[str], None], pool: Pool, max_effects: int, escalate: bool, discover_terms: bool
+              ) -> Identification:
+    """:func:`identify` on the problem set up (its fits of a round on ``pool``)."""
     found = artefacts.find(problem)
     artefacts.exclude(problem, found)
     peak = float(np.percentile(np.abs(problem.hinge_moment), 98))
@@ -176,7 +204,7 @@ def identify(
     result.failures += failures
     result.artefacts = [a.as_dict() for a in found]
     result.as_declared = decl
-    chain = _Chain(problem, result, say)
+    chain = _Chain(problem, result, say, pool)
     if failures:
         result.final_model = REFERENCE
         why = f"{failures[0].error} ({failures[0].where})"
@@ -204,7 +232,7 @@ def _stages(chain: _Chain, key: str, base: Any, decl: AsDeclared | None, *, fail
         notes.append(f"{key}'s physical parameters not fitted: the record is in {record.unit}, and the model's "
                      "outputs are surface degrees through its crank arm (give --crank-arm-in to convert)")
     elif key in PHYSICAL_MODELS and not failed:
-        physical = guarded("physics", result.failures, lambda: fit_physical(problem, key, say))
+        physical = guarded("physics", result.failures, lambda: fit_physical(problem, key, say, chain.pool))
     searched = max_effects if not failed else 0
     if physical is not None and within(problem, physical.rms_deg):
         searched = 0
@@ -254,7 +282,7 @@ def _balance(chain: _Chain, free: list[str]) -> None:
 def _effects(chain: _Chain, base: Any, searched: int) -> tuple[str, str]:
     p, r = chain.problem, chain.result
     limit = chain.limit()
-    cur = search(p, r, r.final, base, searched, chain.say, limit)
+    cur = search(p, r, r.final, base, searched, chain.say, limit, chain.pool)
     final = prune(p, r, cur, base, limit)
     trivial = reference_fit(p, final.params)
     if trivial.rss <= final.rss and not worse(chain.reference, limit):
@@ -271,7 +299,7 @@ def _effects(chain: _Chain, base: Any, searched: int) -> tuple[str, str]:
 
 
 def _escalate(chain: _Chain) -> tuple[str, str]:
-    pf = fit_physical(chain.problem, ESCALATE_TO, chain.say)
+    pf = fit_physical(chain.problem, ESCALATE_TO, chain.say, chain.pool)
     return adopt_physical(chain.problem, chain.result, pf, chain.limit())
 
 

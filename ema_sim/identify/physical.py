@@ -39,6 +39,7 @@ from scipy.optimize import least_squares
 
 from ema_sim.identify.declared import run_declared
 from ema_sim.identify.fit import block_covariance, finite
+from ema_sim.identify.parallel import SERIAL, Pool, result
 from ema_sim.identify.problem import Problem
 from ema_sim.models import model_parameters
 from ema_sim.models.arrays import FloatArray
@@ -296,7 +297,38 @@ def _shifted(runs: _Runs, x: FloatArray, free: list[int], sign: float) -> FloatA
     return y
 
 
-def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None) -> PhysicalFit:
+def remote_start(problem: Problem, model: str, names: list[str], declared: dict[str, Any], x: FloatArray,
+                 free: list[int], seed: int) -> tuple[FloatArray, int]:
+    """:func:`_fit_restarted` from ``x`` under the noise ``seed`` on a worker, and the runs it took.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record and its noise floors.
+    model : str
+        One of :data:`PHYSICAL_MODELS`.
+    names : list of str
+        The coordinates' parameters.
+    declared : dict
+        The declared values the log coordinates scale.
+    x : numpy.ndarray
+        The start.
+    free : list of int
+        The coordinates fitted.
+    seed : int
+        The model's noise seed.
+
+    Returns
+    -------
+    tuple
+        Where the fit ended, and the model runs it took.
+    """
+    runs = _Runs(problem, model, names, declared)
+    return _fit_restarted(runs, x, free, seed), runs.count
+
+
+def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL
+                 ) -> PhysicalFit:
     """Fit ``model``'s physical parameters (module docstring) to the problem's record.
 
     Parameters
@@ -307,6 +339,9 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
         One of :data:`PHYSICAL_MODELS`.
     log : callable, optional
         Called with each progress line.
+    pool : Pool
+        Where the two shifted starts' fits run (:mod:`ema_sim.identify.parallel`): at once on its workers,
+        the same ends as one after the other.
 
     Returns
     -------
@@ -335,8 +370,18 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     x = _fit_restarted(runs, x, free)
     say(f"  {model}: delays scanned, {len(free)} parameters fitted: weighted error {runs.cost(x):.6g}")
     ends = [x]
-    for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True):
-        ends.append(_fit_restarted(runs, _shifted(runs, x, free, sign), free, seed))
+    client = pool.client()
+    starts = [(_shifted(runs, x, free, sign), seed) for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True)]
+    if client is None:
+        ends += [_fit_restarted(runs, start, free, seed) for start, seed in starts]
+    else:
+        shared = client.scatter(problem, broadcast=True)
+        futures = [client.submit(remote_start, shared, model, names, declared, start, free, seed, pure=False)
+                   for start, seed in starts]
+        for future in futures:
+            end, count = result(future)
+            ends.append(end)
+            runs.count += count
     mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
     x = ends[int(np.argmin(mean_cost))]
     start_sigma = np.std(np.array(ends)[:, free], axis=0, ddof=1) if free else np.zeros(0)

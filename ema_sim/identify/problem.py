@@ -2,7 +2,7 @@
 
 The model is simulated with the *measured* command and hinge moment and compared with the measured
 LVDT position and/or surface angle; each output's residual is divided by its own noise floor (never
-below the counts' quantization, :func:`ema_sim.analysis.noise.output_noise`) so outputs with
+below the counts' quantization, :func:`ema_sim.analysis.estimation.noise.output_noise`) so outputs with
 different sensors weigh the same and a perfect model leaves unit variance.
 
 A held command (the data contract) is the model's input from one sample to the next. A command
@@ -23,9 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import savgol_filter, welch
 
-from ema_sim.analysis import slew
-from ema_sim.analysis.noise import NoiseFloor, output_noise
-from ema_sim.analysis.slew import Slew
+from ema_sim.analysis.estimation import slew
+from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
+from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.csv import MeasuredData
@@ -198,7 +198,7 @@ class Problem:
 
     @cached_property
     def measured_slew(self) -> Slew:
-        """The slope of the record's rate-limited moves (:mod:`ema_sim.analysis.slew`), on its first output."""
+        """The record's rate-limited moves' slope (:mod:`ema_sim.analysis.estimation.slew`), on its first output."""
         output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
         return slew.measure(self.time_s, self.data.command_deg, self.data.column(output), self.sigma_deg[output])
 

@@ -4,9 +4,9 @@ Before anything is fitted, the facts a careful engineer checks first are read of
 with the sentence the report carries:
 
 * each output's **noise floor**, never below its counts' own quantization (``q/√12``), and its
-  resolution (:func:`ema_sim.analysis.noise.output_noise`); the fit weighs each output by it;
+  resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`); the fit weighs each output by it;
 * whether the command was **held** between samples (the contract) or **sampled** from a running
-  demand (:mod:`ema_sim.analysis.command_hold`); a sampled command is reconstructed between samples
+  demand (:mod:`ema_sim.analysis.records.command_hold`); a sampled command is reconstructed between samples
   by linear interpolation (:class:`~ema_sim.identify.problem.Problem`), which is the expected
   response when a logged change happened anywhere in the sample before it was logged;
 * the record's **own stamps**: the model is run between them and read at them, jittery, rounded or gapped
@@ -25,9 +25,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ema_sim.analysis import series
-from ema_sim.analysis.command_hold import CommandHold, HoldMode
-from ema_sim.analysis.noise import NoiseFloor
+from ema_sim.analysis.estimation.noise import NoiseFloor
+from ema_sim.analysis.pipeline import command_hold, measure_outputs
+from ema_sim.analysis.records import series
+from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
+from ema_sim.analysis.section2.base import Options
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.csv import MeasuredData
@@ -184,9 +186,6 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     Record
         The prepared record, its notes and warnings.
     """
-    from ema_sim.analysis.pipeline import command_hold, measure_outputs  # noqa: PLC0415
-    from ema_sim.analysis.section2 import Options  # noqa: PLC0415
-
     check_identifiable(data)
     noise = measure_outputs(data)
     hold = command_hold(data, noise, Options(command=command))

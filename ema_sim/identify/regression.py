@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import f as fisher
 
-from ema_sim.analysis.noise import autocorrelation
+from ema_sim.analysis.estimation.noise import autocorrelation
 from ema_sim.identify.fit import block_covariance
 
 FloatArray = NDArray[np.float64]

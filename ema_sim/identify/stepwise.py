@@ -26,15 +26,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from ema_sim.analysis import slew
+from ema_sim.analysis.estimation import slew
 from ema_sim.identify.criteria import DONE_EXCESS, MAX_DELTA_BIC, bic, blocks, excess, gain, judge
 from ema_sim.identify.declared import not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Context, Effect, report_values
 from ema_sim.identify.fit import TINY, Fit, evaluate, fit, rms
 from ema_sim.identify.outcome import AsDeclared, Identification, Removal, Step, Verdict
+from ema_sim.identify.parallel import SERIAL, Pool, result
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record
@@ -492,14 +494,63 @@ class _Round:
     tried: dict[str, tuple[Fit, Verdict]]
     accepted: list[tuple[Fit, Candidate]]
 
-    def attempt(self, cand: Candidate) -> None:
-        new = _fit_candidate(self.problem, self.cur, cand, self.ctx)
+    def attempt(self, cand: Candidate, pending: Any = None) -> None:
+        """Fit ``cand`` (or take its fit from ``pending``, a fit already submitted to the pool) and judge it."""
+        if pending is None:
+            new = _fit_candidate(self.problem, self.cur, cand, self.ctx)
+        else:
+            new, simulations = result(pending)
+            self.problem.simulations += simulations
         verdict = judge(self.problem, self.cur, new, cand.effect, self.ctx, self.result.simulator_error_deg, self.limit)
         self.result.verdicts.append(verdict)
         self.tried[cand.effect.key] = (new, verdict)
         self.say(f"  {cand.effect.key}: {verdict.reason}")
         if verdict.accepted:
             self.accepted.append((new, cand))
+
+
+def remote_candidate(problem: Problem, cur: Fit, key: str, value: dict[str, float], flip: bool,
+                     ctx: dict[str, Any]) -> tuple[Fit, int]:
+    """:func:`_fit_candidate` of the effect ``key`` from ``value`` on a worker, and the simulations it ran.
+
+    The effect is named by its key (its probes and checks are functions of the vocabulary, not pickled);
+    the context is given without its problem, which comes on its own (scattered once to the workers).
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    cur : Fit
+        The current model.
+    key : str
+        The effect's key (:data:`ema_sim.identify.effects.BY_KEY`).
+    value : dict
+        Where its fit starts.
+    flip : bool
+        Run with the hinge moment reversed.
+    ctx : dict
+        The :class:`Context`'s fields other than its problem.
+
+    Returns
+    -------
+    tuple
+        The fit, and the simulations it ran.
+    """
+    before = problem.simulations
+    cand = Candidate(BY_KEY[key], value, flip, 0.0, 0.0)
+    new = _fit_candidate(problem, cur, cand, Context(problem, **ctx))
+    return new, problem.simulations - before
+
+
+def _submit(pool: Pool, problem: Problem, cur: Fit, cands: list[Candidate], ctx: Context) -> dict[str, Any]:
+    """The round's candidate fits submitted to the pool's workers at once (empty: they are fitted here in turn)."""
+    client = pool.client() if len(cands) > 1 else None
+    if client is None:
+        return {}
+    shared, model = client.scatter([problem, cur], broadcast=True)
+    fields = {k: v for k, v in vars(ctx).items() if k != "problem"}
+    return {c.effect.key: client.submit(remote_candidate, shared, model, c.effect.key, dict(c.value), c.flip, fields,
+                                        pure=False) for c in cands}
 
 
 def _restart_rate(problem: Problem, cur: Fit, ranked: list[Candidate], tried: dict[str, tuple[Fit, Verdict]],
@@ -531,7 +582,7 @@ def _restart_rate(problem: Problem, cur: Fit, ranked: list[Candidate], tried: di
 
 
 def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrderParams, max_effects: int,
-           say: Callable[[str], None], limit: Mapping[str, float]) -> Fit:
+           say: Callable[[str], None], limit: Mapping[str, float], pool: Pool = SERIAL) -> Fit:
     """Add the vocabulary's effects to ``cur`` one at a time while each pays for itself (module docstring).
 
     Parameters
@@ -550,6 +601,9 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
         Progress lines.
     limit : mapping
         Per output, the rms no accepted model may exceed (the baseline's and the reference's).
+    pool : Pool
+        Where a round's candidate fits run (:mod:`ema_sim.identify.parallel`): all at once on its workers,
+        taken in the search's own order (the same result as fitted one after another).
 
     Returns
     -------
@@ -568,12 +622,15 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
         accepted: list[tuple[Fit, Candidate]] = []
         tried: dict[str, tuple[Fit, Verdict]] = {}
         round_ = _Round(problem, cur, ctx, result, limit, say, tried, accepted)
+        pending = _submit(pool, problem, cur, ranked[:TOP_K], ctx)
         for k, cand in enumerate(ranked[:TOP_K]):
-            round_.attempt(cand)
+            round_.attempt(cand, pending.pop(cand.effect.key, None))
             # Stop fitting when the best so far already removed more than the rest could, even linearly.
             rest = ranked[k + 1].predicted_drop if k + 1 < len(ranked) else 0.0
             if accepted and cur.rss - min(f.rss for f, _ in accepted) > 2.0 * rest:
                 break
+        for future in pending.values():  # fits the search stopped before needing
+            future.cancel()
         restarted = _restart_rate(problem, cur, ranked, tried, ctx, result, limit, say)
         if restarted is not None:
             accepted.append(restarted)

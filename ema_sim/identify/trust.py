@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import welch
 
-from ema_sim.analysis.noise import COMMAND_COUNTS_SPANNED, detect_resolution
-from ema_sim.analysis.series import holds
+from ema_sim.analysis.estimation.noise import COMMAND_COUNTS_SPANNED, detect_resolution
+from ema_sim.analysis.records.series import holds
 from ema_sim.identify.effects import FREE, KEYS, Free
 from ema_sim.identify.fit import Fit, covariance
 from ema_sim.identify.outcome import REFERENCE, Identification

@@ -10,7 +10,7 @@ system and the delays exactly.
 * ``sloac``: LOAC's second order and delay (flight 1's linear model).
 * ``hoalm``: HOAD3 linearized with its nonlinear elements removed (4.2.7).
 * ``loes``: a second order plus delay fitted to HOAD3's sine-dwell frequency response (3.4); the
-  coefficients come from the channel's ``loes`` section, refitted by :mod:`ema_sim.analysis.loes`.
+  coefficients come from the channel's ``loes`` section, refitted by :mod:`ema_sim.analysis.studies.loes`.
 """
 
 from __future__ import annotations
@@ -462,7 +462,7 @@ class Loes(LinearModel):
     """LOES: the low-order equivalent system of HOAD3, a second order plus delay (sections 3.4, 4.2.8).
 
     The coefficients are the channel's ``loes`` section, written by the fit in
-    :mod:`ema_sim.analysis.loes` (``ema loes --write``), so building the model costs nothing. It is the
+    :mod:`ema_sim.analysis.studies.loes` (``ema loes --write``), so building the model costs nothing. It is the
     command-to-position equivalent: the surface output equals the position and the load does not enter.
 
     Parameters

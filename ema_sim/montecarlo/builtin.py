@@ -26,9 +26,15 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.ail.params import WINGS
+from ema_sim.analysis.studies.loes import fit_band, fit_loes
+from ema_sim.calibration import CommandError, four_corner_bounds
+from ema_sim.config import load_channel
 from ema_sim.errors import UnknownNameError
+from ema_sim.models.high_order.params import HighOrderParams
 from ema_sim.montecarlo import output
 from ema_sim.montecarlo.campaign import Campaign
+from ema_sim.montecarlo.summary import merged_envelopes
 
 BANDWIDTH_AT_HZ = (1.0, 2.0, 5.0, 8.0, 10.0)
 FOUR_SURFACES = ("left_wing", "right_wing", "left_rudder", "right_rudder")
@@ -83,8 +89,6 @@ def command_error_corners() -> tuple[float, float]:
     tuple of float
         |Kb|, |offset| (deg).
     """
-    from ema_sim.config import load_channel  # noqa: PLC0415
-
     sections = [load_channel(ch).section("second_order") for ch in FOUR_SURFACES]
     return max(abs(float(s["kb"])) for s in sections), max(abs(float(s["offset_deg"])) for s in sections)
 
@@ -134,9 +138,6 @@ def test_load_inlb(channel: str) -> float:
     float
         in·lb.
     """
-    from ema_sim.config import load_channel  # noqa: PLC0415
-    from ema_sim.models.high_order.params import HighOrderParams  # noqa: PLC0415
-
     return float(HighOrderParams.from_channel(load_channel(channel)).hysteresis_reference_load_inlb)
 
 
@@ -155,8 +156,6 @@ def compliance_bounds(channel: str, analysis: Mapping[str, tuple[float, float]] 
     dict
         The campaign's YAML form.
     """
-    from ema_sim.analysis.loes import fit_band  # noqa: PLC0415
-
     del analysis
     freq, amp = fit_band(channel)
     return {
@@ -334,8 +333,6 @@ def findings_command_error(c: Campaign, out: Path) -> dict[str, Any]:
     dict
         Angles, the campaign's lowest and highest error, the four-corner bounds and the largest difference.
     """
-    from ema_sim.calibration import CommandError, four_corner_bounds  # noqa: PLC0415
-
     box = _box(c)
     cols = [n for n in output.column_names(out) if n.startswith("error_deg@")]
     angles = np.array([float(n.split("@")[1].removesuffix("deg")) for n in cols])
@@ -366,9 +363,6 @@ def findings_compliance(c: Campaign, out: Path) -> dict[str, Any]:
     dict
         The nominal run's LOES, ``ema loes``'s fit of the channel, and their largest difference.
     """
-    from ema_sim.analysis.loes import fit_loes  # noqa: PLC0415
-    from ema_sim.montecarlo.summary import merged_envelopes  # noqa: PLC0415
-
     _, nominal, _, _, _ = merged_envelopes(out)
     ref = fit_loes(c.channel).coefficients
     pairs = {"loes_wn_rad_s": "wn_rad_s", "loes_zeta": "zeta", "loes_delay_s": "delay_s", "loes_gain": "dc_gain_ratio"}
@@ -414,8 +408,6 @@ def findings_ail(c: Campaign, out: Path) -> dict[str, Any]:
         dithering wings, and per parameter each category's probability in the lower and upper third of its
         range.
     """
-    from ema_sim.ail.params import WINGS  # noqa: PLC0415
-
     verdict = np.concatenate([output.read_column(out, f"{w}.dither") for w in WINGS]) > 0.5
     pp = np.concatenate([output.read_column(out, f"{w}.pp_deg") for w in WINGS])
     freq = np.concatenate([output.read_column(out, f"{w}.freq_hz") for w in WINGS])

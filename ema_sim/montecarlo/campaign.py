@@ -26,7 +26,7 @@ parameters; its metric is ``dither``.
 
 Experiments: ``record`` (a maneuver and a load; the outputs sampled at ``sample_hz``), ``multisine`` (a
 ``schroeder`` maneuver whose last period is read at its harmonics: a frequency response) and ``dwell``
-(one sine dwell per frequency, all in one batch run: :func:`ema_sim.analysis.sine_dwell.sine_dwell`).
+(one sine dwell per frequency, all in one batch run: :func:`ema_sim.analysis.section2.sine_dwell.sine_dwell`).
 Dispersible names: the model's parameters, ``bound`` (HOAD3), and per experiment
 ``<experiment>.maneuver.<field>``, ``<experiment>.load.<field>`` and a dwell's ``<experiment>.load_inlb``.
 Anything unknown or malformed is one :class:`~ema_sim.errors.ConfigError` line.
@@ -45,9 +45,16 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ema_sim.ail.params import load_ail_config
+from ema_sim.config import CHANNELS
+from ema_sim.environment import PathSpec, load_profile
 from ema_sim.errors import ConfigError, EmaError, UnknownNameError
+from ema_sim.models import model_class, model_names, model_parameters
 from ema_sim.montecarlo.dispersions import Dispersion, Target, parse_dispersion
 from ema_sim.montecarlo.metrics import MetricSpec, parse_metric
+from ema_sim.parameters import metas
+from ema_sim.signals import parse_load, parse_maneuver
+from ema_sim.signals.maneuvers import Schroeder
 
 KINDS = ("model", "ail")
 EXPERIMENT_KINDS = ("record", "multisine", "dwell")
@@ -236,8 +243,6 @@ def model_targets(model: str, channel: str, fixed: Mapping[str, float]) -> dict[
     dict
         Name → :class:`Target` (numbers only; curves are dispersed through ``bound``).
     """
-    from ema_sim.models import model_class, model_parameters  # noqa: PLC0415
-
     out = {}
     for p in model_parameters(model, channel):
         if p.size != 1 or not isinstance(p.default, int | float):
@@ -268,10 +273,6 @@ def ail_targets(profile: str) -> dict[str, Target]:
         ``command.<field>``, ``feedback.<field>``, ``environment.<field>`` (both paths) and
         ``setup.bungee_inlb``.
     """
-    from ema_sim.ail.params import load_ail_config  # noqa: PLC0415
-    from ema_sim.environment import PathSpec, load_profile  # noqa: PLC0415
-    from ema_sim.parameters import metas  # noqa: PLC0415
-
     prof = load_profile(profile)
     out: dict[str, Target] = {}
     for name, m in metas(PathSpec).items():
@@ -336,9 +337,6 @@ def parse_experiment(name: str, values: Any, where: str) -> Experiment:
     Experiment
         The checked experiment.
     """
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415
-    from ema_sim.signals.maneuvers import Schroeder  # noqa: PLC0415
-
     if not isinstance(values, Mapping):
         raise ConfigError(f"{where}: expected a mapping, got {values!r}")
     keys = set(values)
@@ -384,8 +382,6 @@ def experiment_targets(exp: Experiment) -> dict[str, Target]:
     dict
         Name (``<experiment>.maneuver.<field>``...) → :class:`Target`.
     """
-    from ema_sim.signals import parse_load, parse_maneuver  # noqa: PLC0415
-
     if exp.kind == "dwell":
         return {f"{exp.name}.load_inlb": Target(f"{exp.name}.load_inlb", "in·lb", -1e5, 1e5, exp.load_inlb, None,
                                                 "hinge moment the dwells run under")}
@@ -400,9 +396,6 @@ CAMPAIGN_KEYS = ("campaign", "description", "kind", "model", "channel", "options
 
 def _head(values: Any, origin: str) -> tuple[str, str, str, dict[str, Any], dict[str, float]]:
     """Kind, model, channel, options and fixed values of a campaign mapping, checked."""
-    from ema_sim.config import CHANNELS  # noqa: PLC0415
-    from ema_sim.models import model_names  # noqa: PLC0415
-
     if not isinstance(values, Mapping):
         raise ConfigError(f"{origin}: a campaign is a YAML mapping")
     unknown = sorted(set(values) - set(CAMPAIGN_KEYS))

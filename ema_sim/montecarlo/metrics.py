@@ -16,7 +16,7 @@ metric              experiment   columns
 ``phase_90``        response     ``phase_minus_90_hz``: where the phase first falls through −90°
 ``gain_phase``      response     ``gain_db@F`` and ``phase_deg@F`` at each of ``at_hz``
 ``loes``            response     ``loes_wn_rad_s``, ``loes_zeta``, ``loes_delay_s``, ``loes_gain``,
-                                 ``loes_cost_j``: the LOES fit of section 3.4 (:mod:`ema_sim.analysis.loes`)
+                                 ``loes_cost_j``: the LOES fit of section 3.4 (:mod:`ema_sim.analysis.studies.loes`)
 ``error``           record       ``rms_error_deg``, ``max_error_deg`` against the nominal run
 ``peak_rate``       record       ``peak_rate_dps``: the largest |rate|
 ``step``            record       ``overshoot_pct``, ``rise_time_s`` (10-90 %), ``settling_time_s`` (2 %)
@@ -40,6 +40,7 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
+from ema_sim.analysis.estimation.tf_fit import fit_transfer_function, second_order_coefficients
 from ema_sim.errors import ConfigError, UnknownNameError
 
 FloatArray = NDArray[np.float64]
@@ -270,7 +271,7 @@ def gain_phase(data: ResponseData, at_hz: list[float]) -> dict[str, FloatArray]:
 
 
 def loes(data: ResponseData) -> dict[str, FloatArray]:
-    """The LOES of section 3.4 fitted to every row (second order plus delay, :mod:`ema_sim.analysis.tf_fit`).
+    """The LOES of section 3.4 fitted to every row (second order plus delay, :mod:`ema_sim.analysis.estimation.tf_fit`).
 
     Parameters
     ----------
@@ -283,8 +284,6 @@ def loes(data: ResponseData) -> dict[str, FloatArray]:
         ``loes_wn_rad_s``, ``loes_zeta``, ``loes_delay_s``, ``loes_gain`` (the DC gain ratio K) and
         ``loes_cost_j`` (J over the band).
     """
-    from ema_sim.analysis.tf_fit import fit_transfer_function, second_order_coefficients  # noqa: PLC0415
-
     keys = ("wn_rad_s", "zeta", "delay_s", "dc_gain_ratio")
     names = ("loes_wn_rad_s", "loes_zeta", "loes_delay_s", "loes_gain")
     out = {n: np.empty(data.response.shape[0]) for n in (*names, "loes_cost_j")}

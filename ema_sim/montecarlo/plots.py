@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.analysis import figure
+from ema_sim.analysis.formatting import figure
 from ema_sim.montecarlo import output
 from ema_sim.montecarlo.runs import Envelope
 

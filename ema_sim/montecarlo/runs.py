@@ -295,7 +295,7 @@ def _record(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: 
 def _multisine(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray]
                ) -> ResponseData:
     """A Schroeder multisine of every row, read at its harmonics over its last period (hold divided out)."""
-    from ema_sim.analysis.frf import zoh_factor  # noqa: PLC0415 - scipy.signal only for responses
+    from ema_sim.analysis.estimation.frf import zoh_factor  # noqa: PLC0415 - scipy.signal only for responses
     model = build_model(c, seed, [-1, *runs], rows)
     t, cmd, hm, duration, man = _inputs(exp, rows, model.n)
     model.trim(_first(cmd), _first(hm))
@@ -313,7 +313,7 @@ def _multisine(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], row
 def _dwell(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray],
            with_nominal: bool) -> ResponseData:
     """Sine dwells of every row: one batch run per row, one instance per frequency (NaN: the nominal not run)."""
-    from ema_sim.analysis.sine_dwell import sine_dwell  # noqa: PLC0415 - scipy.signal only for responses
+    from ema_sim.analysis.section2.sine_dwell import sine_dwell  # noqa: PLC0415 - scipy.signal only for responses
     freq = np.asarray(exp.freq_hz)
     loads = rows.get(f"{exp.name}.load_inlb")
     row_runs = [-1, *runs]

@@ -4,7 +4,9 @@ topic_based_ros2_control (``TopicBasedSystem``) publishes every joint's command 
 its ``joint_commands_topic`` and reads the latest JointState on its ``joint_states_topic``, keeping
 only the last message it got in a read cycle, so every state message here carries all joints. Point
 its URDF parameters at ``/ema/joint_commands`` and ``/ema/joint_states``; joints are named after the
-channels (or ``--joint-prefix``), positions are surface angles in radians (REP 103).
+channels (or ``--joint-prefix``), in SI units as REP 103 asks: positions are surface angles in radians,
+velocities rad/s; ``effort`` is left empty (JointState's "not measured"): the FMU reads no hinge moment, and
+the motor current it reads is no joint torque.
 
 The bridge is the FMU's converters: it turns joint commands into command volts through each
 channel's command curve and holds them like a D/A, publishing ``/ema/fmu/command`` every frame (real
@@ -27,6 +29,7 @@ from sensor_msgs.msg import JointState
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos, set_stamp, stamp_ns
+from ema_sim.config import scaling
 from ema_sim.nodes.common import SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list
 from ema_sim.signals.plans import channel_list
@@ -35,10 +38,21 @@ NS = 1_000_000_000
 
 
 class BridgeNode(SuiteNode):
-    """The node (see the module docstring)."""
+    """The node (see the module docstring).
 
-    def __init__(self, args: argparse.Namespace | None = None, name: str = "fmu_bridge") -> None:
-        super().__init__(name, args)
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The command line's flags (parameter overrides).
+    name : str
+        The node's name.
+    **options : Any
+        rclpy node options (``context``...).
+    """
+
+    def __init__(self, args: argparse.Namespace | None = None, name: str = "fmu_bridge", **options: Any) -> None:
+        """The node and its topics (see the class docstring for the arguments)."""
+        super().__init__(name, args, **options)
         own = self.params.declare([
             Spec("channels", ["all"], "channels to bridge", kind=ParameterType.PARAMETER_STRING_ARRAY),
             Spec("joint_prefix", "", "URDF joint name = prefix + channel"),
@@ -47,7 +61,7 @@ class BridgeNode(SuiteNode):
         self.channels = channel_list(own["channels"] or ["all"])
         self.joint = {ch: f"{own['joint_prefix']}{ch}" for ch in self.channels}
         self.channel_of = {j: ch for ch, j in self.joint.items()}
-        self.scaling = {ch: ct.scaling(ch) for ch in self.channels}
+        self.scaling = {ch: scaling(ch) for ch in self.channels}
         self.frame_ns = round(NS / own["frame_hz"])
         self.lockstep = self.sim_time
         self.held_v: dict[str, float] = {}
@@ -154,7 +168,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``fmu_bridge``."""
+    """Console script ``fmu_bridge``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The arguments (None: the process's).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     return run(BridgeNode, parser(), argv)
 
 

@@ -29,7 +29,18 @@ RESEND_S = 0.1
 
 
 class ClockNode(SuiteNode):
-    """The node (see the module docstring)."""
+    """The node (see the module docstring).
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The flags given on the node's command line (parameter overrides, :func:`~ema_sim.nodes.params.cli_overrides`).
+    ports : callable
+        Builds the node's topic ports from the node: :class:`~ema_sim.nodes.ports.Ports` on DDS, or a
+        container's :meth:`~ema_sim.nodes.container.Bus.ports` when composed.
+    name : str
+        The node's name (a ``-r __node:=`` remapping renames it).
+    """
 
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "simclock") -> None:
         super().__init__(name, args)
@@ -47,14 +58,14 @@ class ClockNode(SuiteNode):
             Spec("realtime_factor", 0.0, "pace to this multiple of real time (0: as fast as the suite goes)",
                  low=0.0, high=1e6),
         ], name)
-        frame_hz = own["frame_hz"]
+        frame_hz: float = own["frame_hz"]
         self.frame_ns = round(NS / frame_hz)
         self.last_frame = round(own["duration_s"] * frame_hz) if own["duration_s"] > 0 else None
         self.window = int(own["window"])
         self.expected = list(own["channels"])
         self.wait_for = set(own["wait_for"])
-        self.stall_s = own["stall_timeout_s"]
-        self.rtf = own["realtime_factor"]
+        self.stall_s: float = own["stall_timeout_s"]
+        self.rtf: float = own["realtime_factor"]
         self.params.on_change("stall_timeout_s", self._set_stall)
         self.last_sent = time.monotonic()
         self.ready: set[str] = set()
@@ -65,10 +76,13 @@ class ClockNode(SuiteNode):
         self.stalls = 0
         self.resent = 0
         self.pub = self.ports.clock_publisher()
-        self.create_subscription(String, ct.endpoint(ct.READY), lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
+        self.create_subscription(String, ct.endpoint(ct.READY), self._on_ready, qos(ct.LATCHED_QOS))
         self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback,
                                       lambda text: self.throttled("bad", f"feedback message ignored: {text}"))
         self.get_logger().info(f"lockstep at {frame_hz:g} Hz, waiting for {sorted(self.wait_for) or 'nobody'}")
+
+    def _on_ready(self, msg: String) -> None:
+        self.ready.add(msg.data)
 
     def _set_stall(self, value: Any) -> str:
         old, self.stall_s = self.stall_s, float(value)
@@ -160,7 +174,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``simclock``."""
+    """Console script ``simclock``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The command line, ROS arguments included (None: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The process's exit status.
+    """
     return run(ClockNode, parser(), argv)
 
 

@@ -21,9 +21,11 @@ from typing import Any
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import ParameterType
+from rclpy.impl.rcutils_logger import RcutilsLogger
+from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
+from rclpy.utilities import ok, remove_ros_args
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
@@ -36,6 +38,10 @@ SUMMARY_PREFIX = "EMA_SUMMARY "
 """Each node prints one line with this prefix and a JSON summary when it stops."""
 MAX_SPIN_S = 0.05
 """Longest wait in one spin, so a stop request is seen within it."""
+ROSOUT_LOOK_S = 1.5
+"""A node stopping on a fatal error looks this long for ``/rosout`` listeners (:meth:`SuiteNode.fatal`)."""
+ROSOUT_GRACE_S = 0.5
+"""... and stays up this long once one is there, so the error reaches it."""
 _process_argv: list[str] = []
 """The process's command line, ROS arguments included, as :func:`run_nodes` gave it to ``rclpy.init``."""
 
@@ -58,8 +64,19 @@ def command_line(options: dict[str, Any]) -> list[str]:
 
 
 def make_executor(context: Any = None) -> Any:
-    """The executor every node uses (see the module docstring for the measurement behind it)."""
-    from rclpy.experimental import EventsExecutor  # noqa: PLC0415
+    """The executor every node uses (see the module docstring for the measurement behind it).
+
+    Parameters
+    ----------
+    context : rclpy.context.Context or None
+        Its context (None: the default one).
+
+    Returns
+    -------
+    EventsExecutor
+        rclpy's events executor.
+    """
+    from rclpy.experimental.events_executor import EventsExecutor  # noqa: PLC0415
 
     return EventsExecutor(context=context)
 
@@ -67,13 +84,23 @@ def make_executor(context: Any = None) -> Any:
 class SuiteNode(Node):
     """Base of the suite's nodes: ``poll`` does the deadline work, ``close`` the last words.
 
-    ``args``: the flags given on the node's command line (parameter overrides, :func:`params.cli_overrides`).
     Every node declares its parameters (:mod:`ema_sim.nodes.params`) in its constructor, ``peers`` here.
+
+    Parameters
+    ----------
+    name : str
+        The node's name (a ``-r __node:=`` remapping renames it).
+    args : argparse.Namespace or None
+        The flags given on the node's command line (parameter overrides, :func:`params.cli_overrides`).
+    exclude : tuple of str
+        Flags of ``args`` the node resolves itself (not parameter overrides).
+    **kwargs : Any
+        rclpy node options (``context``, ``cli_args``, ``namespace``...).
     """
 
     def __init__(self, name: str, args: argparse.Namespace | None = None, *, exclude: tuple[str, ...] = (),
                  **kwargs: Any) -> None:
-        """``exclude``: flags of ``args`` the node resolves itself (not parameter overrides)."""
+        """The node, its ``peers`` declared (see the class docstring for the arguments)."""
         overrides = cli_overrides(args, exclude) if args is not None else []
         super().__init__(name, parameter_overrides=overrides, **kwargs)
         self.params = Declared(self)
@@ -93,6 +120,21 @@ class SuiteNode(Node):
         self._matched_since: float | None = None
         self.running_cpu_s: float | None = None
         """Process CPU when this node's first frame came (start-up excluded from the run's CPU)."""
+
+    def get_logger(self) -> RcutilsLogger:
+        """The node's logger (:meth:`rclpy.node.Node.get_logger`, which rclpy leaves unannotated, typed).
+
+        Returns
+        -------
+        rclpy.impl.rcutils_logger.RcutilsLogger
+            The logger rclpy gave the node.
+        """
+        logger: RcutilsLogger = Node.get_logger(self)  # by name, not super(): mypy's untyped_calls_exclude sees it
+        return logger
+
+    def destroy_node(self) -> None:
+        """Destroy the node (:meth:`rclpy.node.Node.destroy_node`, which rclpy leaves unannotated, typed)."""
+        Node.destroy_node(self)  # by name, as get_logger: no class between SuiteNode and Node defines it
 
     def mark_running(self) -> None:
         """The first frame of the test: note the process CPU so far."""
@@ -145,8 +187,42 @@ class SuiteNode(Node):
         if self.auto_ready and not self._ready_sent and self.matched():
             self.announce_ready()
 
+    def fatal(self, message: str) -> None:
+        """A fatal error (the node is about to stop), through the node's logger: console, log file and ``/rosout``.
+
+        ``/rosout`` is reliable and transient-local, so a listener that matches the node's ``/rosout`` writer
+        before the node is destroyed gets the line: in a node's own process, when one is in the graph (a look of
+        at most :data:`ROSOUT_LOOK_S`, discovery under load), the node stays up :data:`ROSOUT_GRACE_S` for it.
+
+        Parameters
+        ----------
+        message : str
+            The error, one line.
+        """
+        self.get_logger().fatal(message)
+        if not _process_argv:  # composed in a caller's process (a test): it goes on, the node with it
+            return
+        end = time.monotonic() + ROSOUT_LOOK_S
+        while time.monotonic() < end:
+            if self.count_subscribers("/rosout") > 0:
+                time.sleep(ROSOUT_GRACE_S)
+                return
+            time.sleep(0.02)
+
     def throttled(self, key: str, message: str, *, period_s: float = 1.0, level: str = "warning") -> None:
-        """Log at most once per ``period_s`` (wall time) per key, at ``level`` (``info``, ``warning`` or ``error``)."""
+        """Log at most once per ``period_s`` (wall time) per key, at ``level``.
+
+        Parameters
+        ----------
+        key : str
+            What is throttled together (one kind of message).
+        message : str
+            The line.
+        period_s : float
+            At most one line per key this often, s.
+        level : str
+            ``info``, ``warning`` or ``error``.
+        """
         now = time.monotonic()
         if now - self._last_log.get(key, -math.inf) >= period_s:
             self._last_log[key] = now
@@ -168,7 +244,18 @@ def _join_lists(args: argparse.Namespace) -> None:
 
 
 def ros_args(argv: Sequence[str] | None) -> list[str]:
-    """The full argv (ROS arguments included) for ``rclpy.init``."""
+    """The full argv (ROS arguments included) for ``rclpy.init``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The arguments after the program's name (None: the process's).
+
+    Returns
+    -------
+    list of str
+        The program's name and the arguments.
+    """
     return list(sys.argv if argv is None else ["node", *argv])
 
 
@@ -178,6 +265,20 @@ def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.Arg
 
     SIGINT and SIGTERM end the loop; the node's ``close`` then runs (a recorder closes its bag, so every
     message it received is readable). A user error is one line on stderr and status 2.
+
+    Parameters
+    ----------
+    factory : callable
+        Makes the node from the parsed flags.
+    parser : argparse.ArgumentParser
+        The node's flags.
+    argv : sequence of str or None
+        The arguments (None: the process's).
+
+    Returns
+    -------
+    int
+        The exit status.
     """
     return run_nodes(lambda args: ([factory(args)], None), parser, argv)
 
@@ -193,6 +294,20 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     ``factory`` returns the nodes and the container's bus (None for a lone node). The nodes are polled
     in order, again while something was handed over in-process, then the executor waits for the next
     message from outside, at most until the earliest deadline a node asked for.
+
+    Parameters
+    ----------
+    factory : callable
+        Makes the nodes and the bus from the parsed flags.
+    parser : argparse.ArgumentParser
+        The process's flags.
+    argv : sequence of str or None
+        The arguments (None: the process's).
+
+    Returns
+    -------
+    int
+        The exit status (0; 2 after a user error; 130 after a keyboard interrupt).
     """
     full = ros_args(argv)
     _process_argv[:] = full
@@ -204,7 +319,7 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     args = parser.parse_args(remove_ros_args(full)[1:])
     _join_lists(args)
     lifetime.follow_parent()  # started by `ema launch`: end with it, however it ends
-    stop = {"signal": None}
+    stop: dict[str, int | None] = {"signal": None}
     rt = realtime.apply(args.__dict__.pop("rt_priority"))  # before rclpy starts its threads: they inherit it
 
     def on_signal(signum: int, frame: Any) -> None:  # noqa: ARG001
@@ -230,6 +345,10 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     except EmaError as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         status = 2
+        if nodes:  # stopped while running: through its first node's logger
+            nodes[0].fatal(str(exc))
+        elif not getattr(exc, "logged", False):  # no node to speak for it: the process's logger (console, log file)
+            get_logger(parser.prog).fatal(str(exc))
     except KeyboardInterrupt:
         status = 130
     finally:
@@ -280,10 +399,12 @@ def _finish(nodes: list[SuiteNode], bus: Any, rt: realtime.Setup) -> None:
                 usage = {"busy_s": round(busy[name], 3)}
             if rt.priority or rt.notes:
                 usage["realtime"] = rt.summary()
-            print(SUMMARY_PREFIX + json.dumps({"node": name, **usage, **node.summary()}), flush=True)
+            text = json.dumps({"node": name, **usage, **node.summary()})
+            print(SUMMARY_PREFIX + text, flush=True)
+            node.get_logger().info(f"run summary: {text}")  # console, log file and /rosout too
         finally:
             node.destroy_node()
-    if rclpy.ok():
+    if ok():
         rclpy.shutdown()
 
 
@@ -292,6 +413,11 @@ class DurationHistogram:
 
     Fixed memory however long a node runs, and nothing allocated per sample: a list growing 200 times a
     second is a leak over hours and stalls a frame whenever it is reallocated.
+
+    Parameters
+    ----------
+    top_s : float
+        The longest duration binned apart, s.
     """
 
     BIN_S = 1e-5
@@ -302,14 +428,31 @@ class DurationHistogram:
         self.max_s = 0.0
 
     def add(self, seconds: float) -> None:
-        """One duration."""
+        """One duration.
+
+        Parameters
+        ----------
+        seconds : float
+            The duration, s.
+        """
         i = min(max(int(seconds / self.BIN_S), 0), len(self.counts) - 1)
         self.counts[i] += 1
         self.n += 1
         self.max_s = max(self.max_s, seconds)
 
     def percentile_ms(self, q: float) -> float:
-        """A percentile, ms, to the upper edge of its bin (the maximum itself for q = 100; NaN when empty)."""
+        """A percentile, ms, to the upper edge of its bin (the maximum itself for q = 100; NaN when empty).
+
+        Parameters
+        ----------
+        q : float
+            The percentile, 0 to 100.
+
+        Returns
+        -------
+        float
+            The duration, ms.
+        """
         if self.n == 0:
             return math.nan
         if q >= 100.0:
@@ -320,7 +463,20 @@ class DurationHistogram:
 
 
 def percentile_ms(values: Sequence[float], q: float) -> float:
-    """A percentile of seconds, in ms (NaN when empty)."""
+    """A percentile of seconds, in ms (NaN when empty).
+
+    Parameters
+    ----------
+    values : sequence of float
+        Durations, s.
+    q : float
+        The percentile, 0 to 100.
+
+    Returns
+    -------
+    float
+        The duration, ms.
+    """
     if not values:
         return math.nan
     ordered = sorted(values)

@@ -57,6 +57,11 @@ class BusyMeter:
     Exclusive of nested calls into other nodes (a callback that publishes runs its subscribers'
     callbacks, which are charged to them). Wall time from ``perf_counter``: a thread-CPU clock costs a
     system call (0.9 µs) here; under SCHED_FIFO, with nothing preempting the thread, the two agree.
+
+    Parameters
+    ----------
+    enabled : bool
+        Account the time (off: :meth:`wrap` gives the callables back as they are, at no cost).
     """
 
     def __init__(self, enabled: bool = True) -> None:
@@ -67,7 +72,20 @@ class BusyMeter:
         self._mark = 0.0
 
     def wrap(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
-        """``fn`` with its own time charged to ``name`` (``fn`` itself when the meter is off)."""
+        """``fn`` with its own time charged to ``name`` (``fn`` itself when the meter is off).
+
+        Parameters
+        ----------
+        name : str
+            The composed node the time is charged to.
+        fn : callable
+            The node's poll or callback.
+
+        Returns
+        -------
+        callable
+            ``fn``, timed.
+        """
         if not self.enabled:
             return fn
         clock = time.perf_counter
@@ -97,6 +115,13 @@ class Outlet:
     is complete when every publisher has given it, and then it and every older stamp go out, oldest
     first (in lockstep every channel gives every stamp, so the grouping is reproducible); a stamp some
     publisher skipped goes out once every publisher has moved past it, or after ``stale_s``.
+
+    Parameters
+    ----------
+    bus : Bus
+        The container's bus.
+    topic : str
+        The topic (its contract name).
     """
 
     def __init__(self, bus: Bus, topic: str) -> None:
@@ -111,7 +136,18 @@ class Outlet:
         self._outside = (0.0, False)
 
     def publisher(self, source: str) -> _OutletPublisher:
-        """A composed node's publisher on this topic."""
+        """A composed node's publisher on this topic.
+
+        Parameters
+        ----------
+        source : str
+            The composed node's name.
+
+        Returns
+        -------
+        _OutletPublisher
+            Its publisher (``publish(frame)``).
+        """
         self.sources.append(source)
         return _OutletPublisher(self, source)
 
@@ -123,7 +159,13 @@ class Outlet:
         return self._outside[1]
 
     def emit(self, frame: JointFrame) -> None:
-        """Deliver one (merged) frame: in-process first (the feedback path to the FMU), then on DDS."""
+        """Deliver one (merged) frame: in-process first (the feedback path to the FMU), then on DDS.
+
+        Parameters
+        ----------
+        frame : JointFrame
+            The frame (all the stamp's channels once merged).
+        """
         bus = self.bus
         bus.progress = True
         for callback in bus.subscribers.get(self.topic, ()):
@@ -132,13 +174,21 @@ class Outlet:
         outside = self.outside()
         if raws or outside:
             raw = encode(frame)
-            for callback in raws or ():
-                callback(raw)
+            for raw_callback in raws or ():
+                raw_callback(raw)
             if outside:
                 self.dds.dds.publish(raw)
 
     def put(self, source: str, frame: JointFrame) -> None:
-        """A composed publisher's frame: out at once, or once its stamp is complete (merged)."""
+        """A composed publisher's frame: out at once, or once its stamp is complete (merged).
+
+        Parameters
+        ----------
+        source : str
+            The composed node that published it.
+        frame : JointFrame
+            Its frame.
+        """
         n = len(self.sources)
         if n == 1:
             self.emit(frame)
@@ -161,7 +211,13 @@ class Outlet:
             self.emit(_merge(stamp, [slot[s] for s in self.sources if s in slot]))
 
     def release(self, now: float) -> None:
-        """Emit the oldest stamps that every publisher moved past, or that waited ``stale_s``."""
+        """Emit the oldest stamps that every publisher moved past, or that waited ``stale_s``.
+
+        Parameters
+        ----------
+        now : float
+            Monotonic time (s).
+        """
         while self.pending:
             stamp = min(self.pending)
             slot = self.pending[stamp]
@@ -213,7 +269,15 @@ class _ClockOutlet:
 
 
 class Bus:
-    """The container's in-process message passing (see the module docstring)."""
+    """The container's in-process message passing (see the module docstring).
+
+    Parameters
+    ----------
+    host : rclpy.node.Node
+        The container's own node (its DDS endpoints carry what goes out and comes in).
+    meter : BusyMeter
+        Accounts the thread's time to each composed node.
+    """
 
     def __init__(self, host: Node, meter: BusyMeter) -> None:
         self.host = host
@@ -231,11 +295,28 @@ class Bus:
         self._host_ports = Ports(host)
 
     def ports(self, node: Node) -> ComposedPorts:
-        """Ports for a node composed in this container."""
+        """Ports for a node composed in this container.
+
+        Parameters
+        ----------
+        node : rclpy.node.Node
+            The composed node.
+
+        Returns
+        -------
+        ComposedPorts
+            Its ports on this bus.
+        """
         return ComposedPorts(self, node)
 
     def wire(self, lockstep: bool) -> None:
-        """After every node is composed: DDS for the outside (publishers, and inputs nobody inside makes)."""
+        """After every node is composed: DDS for the outside (publishers, and inputs nobody inside makes).
+
+        Parameters
+        ----------
+        lockstep : bool
+            The suite runs on ``/clock`` (merged stamps then wait for every channel longer).
+        """
         for topic, outlet in self.outlets.items():
             if outlet.dds is None:  # the merged EMAC topics: the container's node publishes them
                 outlet.dds = FramePublisher(self.host, topic, qos(ct.FRAME_QOS))
@@ -264,8 +345,8 @@ class Bus:
                 for report in bad:
                     report(f"{topic}: {exc}")
                 return
-            for callback in frames:
-                callback(frame)
+            for frame_callback in frames:
+                frame_callback(frame)
 
         return take
 
@@ -283,7 +364,15 @@ class Bus:
 
 
 class ComposedPorts:
-    """A composed node's view of the bus (the interface of :class:`~ema_sim.nodes.ports.Ports`)."""
+    """A composed node's view of the bus (the interface of :class:`~ema_sim.nodes.ports.Ports`).
+
+    Parameters
+    ----------
+    bus : Bus
+        The container's bus.
+    node : rclpy.node.Node
+        The composed node.
+    """
 
     composed = True
 
@@ -293,7 +382,18 @@ class ComposedPorts:
         self.name = node.get_name()
 
     def frame_publisher(self, topic: str) -> Any:
-        """In-process delivery and, for the outside, one DDS publisher per topic."""
+        """In-process delivery and, for the outside, one DDS publisher per topic.
+
+        Parameters
+        ----------
+        topic : str
+            A per-frame topic (contract name).
+
+        Returns
+        -------
+        _OutletPublisher
+            The node's publisher on it (``publish(frame)``).
+        """
         outlet = self.bus.outlets.get(topic)
         if outlet is None:
             outlet = self.bus.outlets[topic] = Outlet(self.bus, topic)
@@ -303,7 +403,17 @@ class ComposedPorts:
 
     def frame_subscription(self, topic: str, callback: Callable[[JointFrame], None],
                            on_bad: Callable[[str], None]) -> None:
-        """Frames of a topic, from a composed publisher or (taken once per process) from outside."""
+        """Frames of a topic, from a composed publisher or (taken once per process) from outside.
+
+        Parameters
+        ----------
+        topic : str
+            A per-frame topic (contract name).
+        callback : callable
+            Called with each :class:`~ema_msgs_py.cdr.JointFrame`.
+        on_bad : callable
+            Called with the error of a message from outside that does not decode.
+        """
         self.bus.subscribers.setdefault(topic, []).append(self.bus.meter.wrap(self.name, callback))
         self.bus.bad.setdefault(topic, []).append(on_bad)
 
@@ -311,6 +421,13 @@ class ComposedPorts:
         """A per-frame topic as CDR bytes (a composed recorder).
 
         Frames from inside are serialized once; messages from outside arrive as they were sent.
+
+        Parameters
+        ----------
+        topic : str
+            A per-frame topic (contract name).
+        callback : callable
+            Called with each message's CDR bytes.
         """
         self.bus.raw_subscribers.setdefault(topic, []).append(self.bus.meter.wrap(self.name, callback))
 
@@ -320,12 +437,29 @@ class ComposedPorts:
         return self.bus.clock_outlet
 
     def clock_subscription(self, callback: Callable[[int], None]) -> None:
-        """Lockstep ``/clock``; it also drives the node's ROS clock."""
+        """Lockstep ``/clock``; it also drives the node's ROS clock.
+
+        Parameters
+        ----------
+        callback : callable
+            Called with each ``/clock`` time (ns).
+        """
         self.bus.time_feed.clocks.append(own_time_source(self.node))
         self.bus.clock_subscribers.append(self.bus.meter.wrap(self.name, callback))
 
     def publishers(self, topic: str) -> int:
-        """Publishers of a topic: the composed ones, and the graph's when it comes from outside."""
+        """Publishers of a topic: the composed ones, and the graph's when it comes from outside.
+
+        Parameters
+        ----------
+        topic : str
+            The topic (contract name).
+
+        Returns
+        -------
+        int
+            How many publish it.
+        """
         outlet = self.bus.outlets.get(topic)
         if outlet is not None:
             return len(outlet.sources)
@@ -337,7 +471,13 @@ class ComposedPorts:
 
 
 class HostNode(SuiteNode):
-    """The container's own node: DDS endpoints shared by the composed nodes, and the process's summary."""
+    """The container's own node: DDS endpoints shared by the composed nodes, and the process's summary.
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The flags given on the container's command line (parameter overrides, and the nodes to compose).
+    """
 
     def __init__(self, args: argparse.Namespace | None = None) -> None:
         super().__init__(NAME, args)
@@ -386,7 +526,20 @@ def _node_class(name: str) -> Callable[..., SuiteNode] | None:
 
 
 def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
-    """The container's node, then the composed ones, each reading its own section of the parameter file."""
+    """The container's node, then the composed ones, each reading its own section of the parameter file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The container's command-line flags (``--peers`` is given to every composed node).
+
+    Returns
+    -------
+    list of SuiteNode
+        The container's node first, then the composed nodes.
+    Bus
+        Their bus, wired.
+    """
     host = HostNode(args)
     meter = BusyMeter(enabled=host.measure_busy)
     bus = Bus(host, meter)
@@ -394,10 +547,11 @@ def compose(args: argparse.Namespace) -> tuple[list[SuiteNode], Bus]:
     given = {"peers": args.peers} if getattr(args, "peers", None) else {}  # --peers: every composed node's
     for name in host.composed:
         cls = _node_class(name)
+        assert cls is not None, name  # HostNode has checked every name it composes
         flags = dict(given)
         if host.from_channels and cls is emac_node.EmacNode:
             flags["channels"] = host.emac_channels if name == "emac" else [name[len("emac_"):]]
-        nodes.append(cls(argparse.Namespace(**flags), ports=bus.ports, name=name))  # type: ignore[call-arg]
+        nodes.append(cls(argparse.Namespace(**flags), ports=bus.ports, name=name))
     lockstep = any(getattr(n, "lockstep", False) for n in nodes)
     for node in nodes:
         if isinstance(node, clock_node.ClockNode) and len(nodes) > 2:
@@ -432,7 +586,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``ema_container``."""
+    """Console script ``ema_container``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The command line, ROS arguments included (None: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The process's exit status.
+    """
     return run_nodes(compose, parser(), argv)
 
 

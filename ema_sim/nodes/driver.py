@@ -33,12 +33,34 @@ START_DELAY_S = 0.05
 
 
 def stamped_bag(stem: str) -> Path:
-    """``bags/<stem>_<UTC time>``."""
+    """``bags/<stem>_<UTC time>``.
+
+    Parameters
+    ----------
+    stem : str
+        The bag's name before its time.
+
+    Returns
+    -------
+    pathlib.Path
+        The bag directory to create (relative to the working directory).
+    """
     return Path("bags") / f"{stem}_{dt.datetime.now(dt.UTC).strftime('%Y%m%d_%H%M%S')}"
 
 
 def calibration_metadata(channels: Iterable[str]) -> dict[str, str]:
-    """Each channel's command and feedback curves, as the bag reader converts volts with them."""
+    """Each channel's command and feedback curves, as the bag reader converts volts with them.
+
+    Parameters
+    ----------
+    channels : iterable of str
+        The channels.
+
+    Returns
+    -------
+    dict of str to str
+        ``calibration.<channel>``: the JSON of its curves' coefficients.
+    """
     out = {}
     for ch in channels:
         cfg = load_channel(ch)
@@ -49,7 +71,26 @@ def calibration_metadata(channels: Iterable[str]) -> dict[str, str]:
 
 def driver_specs(duration_s: float, duration_text: str, *, profile: str = "", frame_hz: float = ct.FRAME_HZ,
                  profile_text: str = "the test environment's profile, for the bag's metadata") -> list[Spec]:
-    """The parameters both drivers have (read-only: a run is set up once)."""
+    """The parameters both drivers have (read-only: a run is set up once).
+
+    Parameters
+    ----------
+    duration_s : float
+        The default run length (s).
+    duration_text : str
+        Its description (what 0 means to this driver).
+    profile : str
+        The default test-environment profile named in the bag's metadata.
+    frame_hz : float
+        The default frame rate (Hz).
+    profile_text : str
+        The profile parameter's description.
+
+    Returns
+    -------
+    list of Spec
+        The shared parameter declarations.
+    """
     return [
         Spec("bag", "", "bag directory to create (empty: bags/<test>_<UTC time>)"),
         Spec("model", "", "the EMACs' model, for the bag's metadata"),
@@ -64,6 +105,9 @@ def driver_specs(duration_s: float, duration_text: str, *, profile: str = "", fr
 class DriverNode(SuiteNode, abc.ABC):
     """A node that drives a run and records its bag (see the module docstring)."""
 
+    lockstep: bool
+    """Frames follow ``/clock`` (``use_sim_time``): set by each driver before :meth:`_open_run`."""
+
     def _open_run(self, bag: Path, metadata: dict[str, str], wait_for: Iterable[str]) -> None:
         """Create the bag, publish the run's parameters on ``/ema/test``, listen on ``/ema/ready``."""
         self.bag_path = bag
@@ -73,13 +117,16 @@ class DriverNode(SuiteNode, abc.ABC):
         self.test_pub = self.create_publisher(String, ct.endpoint(ct.TEST), qos(ct.LATCHED_QOS))
         self.test_pub.publish(String(data=json.dumps(metadata)))
         self.ready: set[str] = set()
-        self.create_subscription(String, ct.endpoint(ct.READY), lambda m: self.ready.add(m.data), qos(ct.LATCHED_QOS))
+        self.create_subscription(String, ct.endpoint(ct.READY), self._on_ready, qos(ct.LATCHED_QOS))
         self.phase = "waiting"
         self.k = 0
         self.start_wall = 0.0
         self.late_publish = 0
         self.finish_deadline = 0.0
         self.drain_until = 0.0
+
+    def _on_ready(self, msg: String) -> None:
+        self.ready.add(msg.data)
 
     def _wait_ready(self) -> float:
         """Waiting: start once every awaited node is ready and the recorder is matched."""

@@ -28,44 +28,52 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from functools import cache
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterType
+from rclpy.impl.implementation_singleton import rclpy_implementation
+from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
-from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters
+from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ros_parameters, scaling
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, Feedback, InputStatus, parse_failure
-from ema_sim.emac.channel import RUN_TIME
 from ema_sim.emac.stamps import CommandClock, FrameGate, Lateness, Verdict
-from ema_sim.errors import ConfigError, EmaError, UnknownNameError
+from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
-from ema_sim.models.registry import model_parameters
-from ema_sim.nodes.common import DurationHistogram, SuiteNode, command_line, run
-from ema_sim.nodes.params import (
-    Spec,
-    config_specs,
-    file_entries,
-    key_matches,
-    names_list,
-    nested,
-    params_files,
-    remapped,
+from ema_sim.nodes.common import MAX_SPIN_S, DurationHistogram, SuiteNode, command_line, run
+from ema_sim.nodes.emac_params import (
+    KNOWN,
+    channel_specs,
+    check_files,
+    default_name,
+    emac_specs,
+    node_specs,
+    resolve_channels,
 )
+from ema_sim.nodes.emac_streams import Outputs, SourceStream, Stream, diagnostics
+from ema_sim.nodes.params import names_list, nested
 from ema_sim.nodes.ports import Ports
-from ema_sim.parameters import ParameterInfo, metas
 from ema_sim.signals.plans import channel_list
 from ema_sim.switches import element_names, model_overrides
 
+__all__ = [
+    "EmacNode",
+    "ManagedEmacNode",
+    "SourceStream",
+    "Stream",
+    "channel_specs",
+    "default_name",
+    "emac_specs",
+    "main",
+    "node",
+    "node_specs",
+    "parser",
+]
+
 NS = 1_000_000_000
-KNOWN = frozenset(CHANNELS)
 DROPS = ("malformed", "unknown_names", "no_names", "lost_commands", "out_of_order", "future_stamp")
 """Why an input was dropped: a message whose arrays do not match its names; names that are no channel; a
 message without names; commands missing from the stream (a gap in the stamps: lost in the middleware or
@@ -81,268 +89,35 @@ CATCH_UP = 20
 """Idle frames a late loop steps to catch up (0.1 s at 200 Hz); beyond that it skips to the present frame."""
 FAULT_HOLD_S = 2.0
 """``/diagnostics`` warns for this long (wall time) after the last dropped input, then is OK again."""
-STRINGS = ParameterType.PARAMETER_STRING_ARRAY
 
-
-@dataclass(frozen=True)
-class Section:
-    """A parameter file section that applies to an EMAC node of a namespace (:func:`emac_sections`)."""
-
-    node: str | None
-    """The one EMAC node name it is keyed for (``emac_<channel>``, ``emac``); None: a wildcard key."""
-    channels: list[str] | None
-    """The channels its ``channels`` or ``channel`` parameter names (None: neither)."""
-    where: str
-    """``<file>: <key>``, for messages."""
-
-
-def emac_sections(argv: Sequence[str], namespace: str) -> list[Section]:
-    """The sections of a command line's parameter files that apply to an EMAC node named as the suite names them.
-
-    Parameters
-    ----------
-    argv : sequence of str
-        The node's command line (ROS arguments included).
-    namespace : str
-        The node's namespace (``/`` or ``/aircraft2``).
-
-    Returns
-    -------
-    list of Section
-        In file order: those keyed for one of ``emac_<channel>`` and ``emac`` there, and wildcard ones.
-    """
-    ns = namespace.rstrip("/")
-    ns = ns if not ns or ns.startswith("/") else f"/{ns}"
-    out = []
-    for path in params_files(argv):
-        for key, params in file_entries(path):
-            nodes = [n for n in (*(f"emac_{ch}" for ch in CHANNELS), "emac") if key_matches(key, f"{ns}/{n}")]
-            if not nodes:
-                continue
-            value = params.get("channels", params.get("channel"))
-            channels = None if value is None else channel_list([value] if isinstance(value, str) else value)
-            out.append(Section(nodes[0] if len(nodes) == 1 else None, channels, f"{path}: {key}"))
-    return out
-
-
-def default_name(flag: list[str] | None, argv: Sequence[str], namespace: str | None = None) -> str:
-    """The EMAC node's name before any remapping: ``emac_<channel>``, or ``emac`` for a box of several.
-
-    Its channels are ``--channel``'s; else the one channel the command line's parameter files give the node:
-    a section keyed for ``emac_<channel>`` in its namespace (a channel file, ``config/<channel>.yaml``), or a
-    ``channel`` or ``channels`` parameter in a section that applies to any EMAC node (``/**``). Without either,
-    the left wing. A ``-r __node:=`` remapping names the node anyway (its name then gives its channel).
-
-    Parameters
-    ----------
-    flag : list of str or None
-        ``--channel``'s channels.
-    argv : sequence of str
-        The node's command line (ROS arguments included).
-    namespace : str or None
-        The node's namespace when not remapped (None: the root).
-
-    Returns
-    -------
-    str
-        The node name.
-
-    Raises
-    ------
-    ConfigError
-        The parameter files give the node different channels and nothing says which.
-    """
-    def named(channels: list[str]) -> str:
-        return f"emac_{channels[0]}" if len(channels) == 1 else "emac"
-
-    if flag:
-        return named(flag)
-    if remapped(argv, "__node") is not None:
-        return "emac"
-    found: dict[tuple[str, ...], str] = {}
-    for sec in emac_sections(argv, remapped(argv, "__ns") or namespace or "/"):
-        if sec.channels is not None:
-            found.setdefault(tuple(sec.channels), sec.where)
-        elif sec.node is not None and sec.node != "emac":
-            found.setdefault((sec.node[len("emac_"):],), sec.where)
-    if len(found) > 1:
-        said = "; ".join(f"{', '.join(chs)} ({where})" for chs, where in found.items())
-        raise ConfigError(f"emac: the parameter files give different channels ({said}): say which with --channel or "
-                          "-r __node:=emac_<channel>")
-    return named(list(next(iter(found)))) if found else "emac_left_wing"
-
-
-def node_specs(channels: list[str]) -> list[Spec]:
-    """The EMAC node's own parameters."""
-    return [
-        Spec("model", "loada", "actuator model of every hosted channel (ema models)"),
-        Spec("channels", channels, "hosted channels: one, or several for an EMAC box", kind=STRINGS),
-        Spec("rate_hz", 0.0, "integration rate of a discrete model (0: the model's default)", "Hz", 0.0, 1e7),
-        Spec("disable", [], "model elements switched off: dead_band, quantization, noise (others are the test "
-             "environment's and ignored here)", kind=STRINGS),
-        Spec("frame_id", channels[0] if len(channels) == 1 else "emac", "header frame_id of the feedback, surface and "
-             "bus messages (default: the channel's name; an EMAC box's: emac)"),
-    ]
-
-
-def emac_specs(base: dict[str, Any]) -> list[Spec]:
-    """``emac.*``: the channel logic's settings (:class:`EmacSettings` metadata; defaults from ``config/emac.yaml``)."""
-    defaults = EmacSettings.from_parameters({k: v for k, v in base.items() if not isinstance(v, dict)}, "emac.yaml")
-    out = []
-    for name, m in metas(EmacSettings).items():
-        low, high = (m.min if math.isfinite(m.min) else None), (m.max if math.isfinite(m.max) else None)
-        out.append(Spec(f"emac.{name}", getattr(defaults, name), m.description, "" if m.unit == "-" else m.unit,
-                        low, high, read_only=name not in RUN_TIME))
-    out.append(Spec("emac.lockstep_wait_s", float(base.get("lockstep_wait_s", 5.0)),
-                    "lockstep: wall time to wait for a frame's inputs while their publishers live", "s", 0.0, 3600.0,
-                    read_only=False))
-    out += [Spec(f"emac.crosstalk.{ch}_pp_v", float(base.get("crosstalk", {}).get(f"{ch}_pp_v", 0.0)),
-                 f"peak-to-peak feedback noise on {ch} while the other channels slew (section 2.2)", "V", 0.0, 20.0)
-            for ch in CHANNELS]
-    return out
-
-
-def channel_specs(channel: str, prefix: str = "") -> list[Spec]:
-    """A channel's physical and model parameters (``config/<channel>.yaml``), read-only: the model is built once.
-
-    A model parameter's description, unit and range come from its one declaration (the parameter sets'
-    metadata, :func:`ema_sim.models.registry.model_parameters`); the channel's other data (calibration
-    curves, names) say what they are and where they come from, the unit from the name.
-    """
-    path = config_dir() / f"{channel}.yaml"
-    known = _model_parameters()
-    out = []
-    for spec in config_specs(ros_parameters(path), path.name):
-        info = known.get(spec.name)
-        where = f"config/{channel}.yaml; the model is built once: read-only"
-        name = f"{prefix}.{spec.name}" if prefix else spec.name
-        if info is None:
-            out.append(Spec(name, spec.default, f"{channel}: {spec.name} ({where})", spec.unit))
-            continue
-        low, high = _range(info)
-        unit = "" if info.unit in ("", "-") else info.unit
-        out.append(Spec(name, spec.default, f"{info.description} ({where})", unit, low, high))
-    return out
-
-
-@cache
-def _model_parameters() -> dict[str, ParameterInfo]:
-    """YAML path → the metadata of every model parameter of every registered model."""
-    out: dict[str, ParameterInfo] = {}
-    for name in model_names():
-        for info in model_parameters(name):
-            out.setdefault(info.path, info)
-    return out
-
-
-def _range(info: ParameterInfo) -> tuple[float | None, float | None]:
-    """A number's declared range as a ROS range (inclusive; widened to take its switch-off value)."""
-    if info.size != 1:
-        return None, None
-    low, high = info.min, info.max
-    if info.off is not None:
-        low, high = min(low, info.off), max(high, info.off)
-    return (low if math.isfinite(low) else None), (high if math.isfinite(high) else None)
-
-
-class Stream:
-    """Stamped messages of one input topic, consumed frame by frame (lockstep) or as they come."""
-
-    def __init__(self) -> None:
-        self.queue: deque[tuple[int, Any]] = deque()
-        self.last_stamp: int | None = None
-        self.waiting_since: float | None = None
-        self.gave_up = False
-
-    def push(self, stamp: int, item: Any) -> None:
-        """A message arrived."""
-        self.queue.append((stamp, item))
-        self.last_stamp = stamp if self.last_stamp is None else max(self.last_stamp, stamp)
-        self.gave_up = False
-
-    def reached(self, t_ns: int) -> bool:
-        """A message for frame ``t_ns`` (or later) has arrived."""
-        return self.last_stamp is not None and self.last_stamp >= t_ns
-
-    def restart(self, t_ns: int) -> None:
-        """Time restarted at ``t_ns``: keep what is stamped at or before it (the new time's), drop the rest.
-
-        Parameters
-        ----------
-        t_ns : int
-            The new time, ns.
-        """
-        kept = [item for item in self.queue if item[0] <= t_ns]
-        self.queue.clear()
-        self.queue.extend(kept)
-        self.last_stamp = max((stamp for stamp, _ in kept), default=None)
-        self.waiting_since = None
-        self.gave_up = False
-
-    def take_until(self, t_ns: int) -> list[tuple[int, Any]]:
-        """(stamp, item) stamped at or before ``t_ns``, in arrival order.
-
-        Every such item, not only those before the first later one: messages of different publishers
-        (the crosstalk sources) may arrive out of stamp order, and a later frame's message from one
-        must not hold back this frame's from another.
-        """
-        queue = self.queue
-        if not queue:
-            return []
-        out = [item for item in queue if item[0] <= t_ns]
-        if len(out) == len(queue):  # the usual case: everything queued is due
-            queue.clear()
-        elif out:
-            kept = [item for item in queue if item[0] > t_ns]
-            queue.clear()
-            queue.extend(kept)
-        return out
-
-
-class SourceStream(Stream):
-    """The other channels' feedback (crosstalk sources): a frame is there when every source has sent it.
-
-    Which sources exist is the node's to say (:attr:`expected`; the EMAC node takes them from the suite's
-    peers, its ``emac_<channel>`` nodes): a frame waits for each of them, so the crosstalk a channel sees
-    does not depend on which source's message came first. Without them (a node run on its own) any
-    source's message counts, as it cannot know better.
-    """
-
-    def __init__(self, expected: frozenset[str] = frozenset()) -> None:
-        super().__init__()
-        self.expected = expected
-        """The sources every frame waits for (empty: any source's message counts); known before the first message."""
-        self._latest: dict[str, int] = {}
-
-    def restart(self, t_ns: int) -> None:  # noqa: D102
-        super().restart(t_ns)
-        self._latest = {}
-        for stamp, item in self.queue:
-            self._note(stamp, item)
-
-    def _note(self, stamp: int, item: list[tuple[str, float]]) -> None:
-        for name, _ in item:
-            if stamp > self._latest.get(name, -1):
-                self._latest[name] = stamp
-        if self.expected:
-            latest = [self._latest.get(name) for name in self.expected]
-            self.last_stamp = None if any(x is None for x in latest) else min(latest)  # type: ignore[type-var]
-        else:
-            self.last_stamp = stamp if self.last_stamp is None else max(self.last_stamp, stamp)
-
-    def push_from(self, stamp: int, item: list[tuple[str, float]]) -> None:
-        """A message arrived carrying these sources' values."""
-        self.queue.append((stamp, item))
-        self.gave_up = False
-        self._note(stamp, item)
 
 
 class EmacNode(SuiteNode):
-    """The node (see the module docstring)."""
+    """The node (see the module docstring).
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The command line's flags (parameter overrides; ``channels`` is resolved here).
+    ports : object
+        How per-frame messages travel (:class:`~ema_sim.nodes.ports.Ports`, or a container's).
+    name : str or None
+        The node's name (None: from the channels, :func:`~ema_sim.nodes.emac_params.default_name`).
+    **options : Any
+        rclpy node options (``context``, ``cli_args``...), as a process's ROS arguments give them.
+
+    Raises
+    ------
+    EmaError
+        A configuration error (logged at FATAL through the node's logger, and the node destroyed, first).
+    """
+
+    managed = False
+    """A managed (lifecycle) node, :class:`ManagedEmacNode`: topics made at ``configure``, frames only when active."""
 
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None,
                  **options: Any) -> None:
-        """``options``: rclpy node options (``context``, ``cli_args``), as a process's ROS arguments give them."""
+        """The node, built from its parameters (see the class docstring for the arguments)."""
         flag = channel_list(getattr(args, "channels", None) or []) or None
         argv = command_line(options)
         if name is None:
@@ -350,15 +125,19 @@ class EmacNode(SuiteNode):
         super().__init__(name, args, exclude=("channels",), **options)
         try:
             self._build(flag, argv, ports)
-        except BaseException:  # a user error (one line, from run) or a bug: the node leaves the graph first
+        except BaseException as exc:  # a user error (one line, from run) or a bug: the node leaves the graph first
+            if isinstance(exc, EmaError):  # through its logger (/rosout) before it goes
+                self.fatal(str(exc))
+                exc.logged = True  # type: ignore[attr-defined]
             self.destroy_node()
             raise
 
     def _build(self, flag: list[str] | None, argv: list[str], ports: Any) -> None:
         """The node's parameters, channels, streams and topics (the constructor's work once the node exists)."""
         name = self.get_name()
-        given = self._resolve_channels(flag)
-        self._check_files(argv)
+        fqn = self.get_fully_qualified_name()
+        given = resolve_channels(flag, name, self._parameter_overrides, fqn)
+        check_files(argv, self.get_namespace(), name, fqn, self.get_logger())
         self.ports = ports(self)
         own = self.params.declare(node_specs(given), name)
         if own["model"] not in model_names():
@@ -381,8 +160,26 @@ class EmacNode(SuiteNode):
         self.meter = ActivityMeter(self.frame_s)
         self.coupled = any(u.crosstalk.active for u in self.units.values())
         self.sources = [c for c in CHANNELS if c not in self.units] if self.coupled else []
-        self.slew_v_per_s = {c: load_channel(c).slew_rate_dps * ct.scaling(c).volts_per_deg for c in CHANNELS}
-        # streams
+        self.slew_v_per_s = {c: load_channel(c).slew_rate_dps * scaling(c).volts_per_deg for c in CHANNELS}
+        self._init_streams()
+        self._init_counters()
+        self.configured = not self.managed
+        """Its topics exist (a managed node's from ``configure`` to ``cleanup``)."""
+        self.active = not self.managed
+        """It steps frames and publishes (a managed node only while ``active``); inactive, its inputs are dropped."""
+        if self.configured:
+            self._make_topics()
+        self._on_changes()
+        self.get_logger().info(
+            f"{self.model_name} on {', '.join(self.channels)}; {'lockstep' if self.lockstep else 'real time'} at "
+            f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
+        if self.lockstep and self.sources and not self.source_fb.expected:
+            self.get_logger().warning(
+                f"lockstep: no emac_<channel> peers name the crosstalk sources ({', '.join(self.sources)}); each "
+                "frame takes whichever source feedback has come, so the crosstalk may differ from run to run")
+
+    def _init_streams(self) -> None:
+        """The input streams and the node's time base."""
         self.commands = Stream()
         self.loads = Stream()
         self.source_fb = SourceStream(frozenset(c for c in self.sources if f"emac_{c}" in self.peers))
@@ -399,71 +196,6 @@ class EmacNode(SuiteNode):
         self.last_step_wall = time.monotonic()
         self.next_idle = self.last_step_wall + IDLE_AFTER_FRAMES * self.frame_s
         """Real time: when the next frame without a command is due (frames keep the frame rate when idle)."""
-        self._init_counters()
-        self._make_topics()
-        self._on_changes()
-        self.get_logger().info(
-            f"{self.model_name} on {', '.join(self.channels)}; {'lockstep' if self.lockstep else 'real time'} at "
-            f"{self.settings.frame_hz:g} Hz; watchdog {self.settings.watchdog_timeout_s * 1e3:g} ms")
-        if self.lockstep and self.sources and not self.source_fb.expected:
-            self.get_logger().warning(
-                f"lockstep: no emac_<channel> peers name the crosstalk sources ({', '.join(self.sources)}); each "
-                "frame takes whichever source feedback has come, so the crosstalk may differ from run to run")
-
-    def _resolve_channels(self, flag: list[str] | None) -> list[str]:
-        """The hosted channels, from every place that names them; one :class:`ConfigError` when two disagree.
-
-        ``--channel`` (a shorthand), the node's name after remapping (``emac_<channel>``), and the ``channels``
-        and ``channel`` parameters of the parameter files and ``-p`` arguments that apply to the node
-        (``channel``: a channel file's, ``config/<channel>.yaml``). None of them: the left wing.
-        """
-        sources: list[tuple[str, list[str]]] = []
-        if flag:
-            sources.append(("--channel", flag))
-        name = self.get_name()
-        if name.startswith("emac_") and name[len("emac_"):] in KNOWN:
-            sources.append((f"the node's name {name}", [name[len("emac_"):]]))
-        over = self._parameter_overrides
-        for key in ("channels", "channel"):
-            p = over.get(key)
-            if p is not None and p.value is not None:
-                value = [p.value] if isinstance(p.value, str) else [str(v) for v in p.value]
-                sources.append((f"parameter {key} (a parameter file or -p)", channel_list(value)))
-        if not sources:
-            return ["left_wing"]
-        first = sources[0][1]
-        if any(channels != first for _, channels in sources[1:]):
-            said = "; ".join(f"{where}: {', '.join(channels)}" for where, channels in sources)
-            raise ConfigError(f"{self.get_fully_qualified_name()}: the channel is given differently ({said}); give it "
-                              "one way (a parameter file's channel, the node name emac_<channel>, or --channel)")
-        return first
-
-    def _check_files(self, argv: list[str]) -> None:
-        """Parameter files keyed for other EMAC nodes and not for this one: one error, or a warning.
-
-        A file keyed for ``emac_right_wing`` given to a node that runs as ``emac_left_wing`` (``--channel``,
-        ``-r __node:=``) would leave every value of it unapplied: an error, as is any disagreement on the
-        channel (:meth:`_resolve_channels`). A section keyed with the node's name alone (no leading ``/``)
-        applies in the root namespace only (rcl's rule): in another namespace it is not applied, with a warning.
-        """
-        ns, name = self.get_namespace(), self.get_name()
-        sections = emac_sections(argv, ns)
-        others = sorted({sec.node for sec in sections if sec.node is not None} - {name})
-        if others and not any(sec.node in (name, None) for sec in sections):
-            where = "; ".join(sorted({sec.where for sec in sections}))
-            raise ConfigError(f"{self.get_fully_qualified_name()}: the parameter files are keyed for "
-                              f"{', '.join(others)} ({where}), not for this node: none of their values would apply; "
-                              "run it as that node (drop --channel, or -r __node:= to that name) or key the file for "
-                              "this node")
-        if ns == "/":
-            return
-        for path in params_files(argv):
-            for key, _ in file_entries(path):
-                if key == name:
-                    self.get_logger().warning(
-                        f"{path}: section {key!r} applies to /{key} only (a key without a namespace is in the root "
-                        f"namespace), not to this node, {self.get_fully_qualified_name()}: its parameters are not "
-                        f"applied; key it '/**/{key}' (any namespace) or '{ns}/{key}'")
 
     def _init_counters(self) -> None:
         """What the node counts: frames late or skipped, waits, messages, inputs dropped."""
@@ -492,6 +224,8 @@ class EmacNode(SuiteNode):
         self.drops = dict.fromkeys(DROPS, 0)
         """Inputs dropped, by reason (:data:`DROPS`): each is counted, logged (throttled) and in ``/diagnostics``."""
         self.last_fault_wall = -math.inf
+        self._inactive_status_due = 0.0
+        """A managed node while inactive: when its ``/diagnostics`` status is next due."""
 
     @property
     def bad_messages(self) -> int:
@@ -555,15 +289,13 @@ class EmacNode(SuiteNode):
 
     def _make_topics(self) -> None:
         ports = self.ports
-        self.fb_pub = ports.frame_publisher(ct.EMAC_FEEDBACK)
-        self.surface_pub = ports.frame_publisher(ct.SURFACE)
-        self.bus_pub = ports.frame_publisher(ct.BUS) if self.has_current else None
-        self.diag_pub = self.create_publisher(DiagnosticArray, ct.endpoint(ct.DIAGNOSTICS), qos(ct.EVENT_QOS))
+        self.outputs = Outputs(self, ports, self.channels, self.frame_id, self.has_current)
+        self.diag_pub = self.outputs.diagnostics
         ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad)
         ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad)
         for ch in self.channels:
-            self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)),
-                                     lambda m, ch=ch: self._on_failure(ch, m.data), qos(ct.FAILURE_QOS))
+            self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)), self._failure_callback(ch),
+                                     qos(ct.FAILURE_QOS))
         if self.sources:
             ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad)
         if self.lockstep:
@@ -571,6 +303,8 @@ class EmacNode(SuiteNode):
 
     # ----------------------------------------------------------------- callbacks (never raise)
     def _on_command(self, msg: JointFrame) -> None:
+        if not self.active:
+            return
         self.arrivals += 1
         try:
             values = self._pick(msg, msg.position, "position", "command")
@@ -622,6 +356,8 @@ class EmacNode(SuiteNode):
         return False
 
     def _on_load(self, msg: JointFrame) -> None:
+        if not self.active:
+            return
         self.arrivals += 1
         try:
             values = self._pick(msg, msg.effort, "effort", "hinge moment")
@@ -633,6 +369,8 @@ class EmacNode(SuiteNode):
             self._bad(f"hinge-moment message dropped: {exc}")
 
     def _on_source(self, msg: JointFrame) -> None:
+        if not self.active:
+            return
         self.arrivals += 1
         try:
             pos = msg.position
@@ -645,6 +383,8 @@ class EmacNode(SuiteNode):
 
     def _on_clock(self, ns: int) -> None:
         """Lockstep time from ``/clock``: forward to any value; a jump backwards restarts the time base there."""
+        if not self.active:
+            return
         last = self.last_clock_topic_ns
         self.last_clock_topic_ns = ns
         if last is not None and ns < last:
@@ -686,6 +426,9 @@ class EmacNode(SuiteNode):
         self.get_logger().warning(
             f"/clock jumped back from {old / NS:.6f} s to {ns / NS:.6f} s (a reset or a replay): the time base "
             f"restarts there, inputs of the time before are dropped ({self.clock_resets} reset(s) so far)")
+
+    def _failure_callback(self, channel: str) -> Callable[[String], None]:
+        return lambda msg: self._on_failure(channel, msg.data)
 
     def _on_failure(self, channel: str, text: str) -> None:
         try:
@@ -756,6 +499,11 @@ class EmacNode(SuiteNode):
 
     # ----------------------------------------------------------------- stepping
     def poll(self) -> float:  # noqa: D102
+        if not self.active:  # a managed node, not active: no frames; configured, its status once a second
+            if self.configured and time.monotonic() >= self._inactive_status_due:
+                self._inactive_status_due = time.monotonic() + 1.0
+                self._publish_diagnostics()
+            return MAX_SPIN_S
         return self._poll_lockstep() if self.lockstep else self._poll_realtime()
 
     def _poll_realtime(self) -> float:
@@ -808,7 +556,7 @@ class EmacNode(SuiteNode):
             self.skipped_frames += behind
             self.model_ns += behind * self.frame_ns
             self.next_idle += behind * self.frame_s
-        if any(self._age_wall(c, now) is not None and self._age_wall(c, now) <= self.settings.watchdog_timeout_s
+        if any((age := self._age_wall(c, now)) is not None and age <= self.settings.watchdog_timeout_s
                for c in self.units):
             self.late_frames += 1
         self._step_all(self.model_ns, {ch: self._age_wall(ch, now) for ch in self.units})
@@ -845,8 +593,8 @@ class EmacNode(SuiteNode):
         self._diagnose_now = True
         self.get_logger().warning(
             f"{self.gate.follow_after} commands in a row came after their frames were stepped without catching up "
-            f"(the last stamped {stamp / NS:.6f} s, {(self.model_ns - stamp) / NS:.3f} s behind the frames; a "
-            "clock that stopped or lags): the frames follow their stamps from here "
+            f"(the last stamped {stamp / NS:.6f} s, {((self.model_ns or stamp) - stamp) / NS:.3f} s behind the "
+            "frames; a clock that stopped or lags): the frames follow their stamps from here "
             f"({self.command_resyncs} resynchronisation(s) so far)")
         self.model_ns = None
 
@@ -887,7 +635,7 @@ class EmacNode(SuiteNode):
             if self.source_fb.queue:
                 self._observe_sources(self.source_fb.take_until(t))
             last_good = self.last_good_ns
-            self._step_all(t, {ch: None if last_good[ch] is None else (t - last_good[ch]) / NS for ch in self.units})
+            self._step_all(t, {ch: None if (good := last_good[ch]) is None else (t - good) / NS for ch in self.units})
         return 0.05
 
     def _observe_sources(self, items: list[tuple[int, list[tuple[str, float]]]]) -> None:
@@ -946,46 +694,20 @@ class EmacNode(SuiteNode):
                 self.meter.observe(ch, fb.position_v, self.slew_v_per_s[ch])
 
     def _publish(self, stamp: int, out: dict[str, Feedback]) -> None:
-        names, fid = self.channels, self.frame_id
-        if len(names) == 1:
-            f = out[names[0]]
-            self.fb_pub.publish(JointFrame(stamp, names, [f.position_v], [], [f.current_a] if self.has_current else [],
-                                           fid))
-            self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg], [f.rate_dps], [f.hinge_moment_inlb],
-                                                fid))
-            if self.bus_pub is not None:
-                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v], frame_id=fid))
-        else:
-            fbs = [out[c] for c in names]
-            self.fb_pub.publish(JointFrame(stamp, names, [f.position_v for f in fbs],
-                                           [], [f.current_a for f in fbs] if self.has_current else [], fid))
-            self.surface_pub.publish(JointFrame(stamp, names, [f.surface_deg for f in fbs],
-                                                [f.rate_dps for f in fbs], [f.hinge_moment_inlb for f in fbs], fid))
-            if self.bus_pub is not None:
-                self.bus_pub.publish(JointFrame(stamp, names, [f.bus_v for f in fbs], frame_id=fid))
+        self.outputs.publish(stamp, out)
         self.published += 1
 
     def _publish_diagnostics(self) -> None:
         """Per channel: ERROR while failing, WARN while braked or within :data:`FAULT_HOLD_S` of a dropped input."""
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        recent = time.monotonic() - self.last_fault_wall < FAULT_HOLD_S
-        for ch, unit in self.units.items():
-            st = unit.status()
-            failing = unit.failure.kind != "none"
-            level = DiagnosticStatus.ERROR if failing else (
-                DiagnosticStatus.WARN if unit.last.braked or recent else DiagnosticStatus.OK)
-            text = (f"failure {unit.failure.spec()}" if failing else "brake engaged" if unit.last.braked else
-                    f"inputs dropped in the last {FAULT_HOLD_S:g} s" if recent else "nominal")
-            st.update({"commands": str(self.commands_taken), "late_frames": str(self.late_frames),
-                       "late_commands": str(self.late_commands), "command_resyncs": str(self.command_resyncs),
-                       "clock_resets": str(self.clock_resets), "skipped_frames": str(self.skipped_frames),
-                       "bad_messages": str(self.bad_messages), "waits_given_up": str(self.waits_given_up),
-                       **{f"dropped_{k}": str(v) for k, v in self.drops.items()}})
-            msg.status.append(DiagnosticStatus(
-                level=level, name=f"{self.fqn}: {ch}", message=text, hardware_id=unit.model.name,
-                values=[KeyValue(key=k, value=v) for k, v in st.items()]))
-        self.diag_pub.publish(msg)
+        counters = {"commands": str(self.commands_taken), "late_frames": str(self.late_frames),
+                    "late_commands": str(self.late_commands), "command_resyncs": str(self.command_resyncs),
+                    "clock_resets": str(self.clock_resets), "skipped_frames": str(self.skipped_frames),
+                    "bad_messages": str(self.bad_messages), "waits_given_up": str(self.waits_given_up),
+                    **{f"dropped_{k}": str(v) for k, v in self.drops.items()}}
+        self.diag_pub.publish(diagnostics(
+            self.get_clock().now().to_msg(), self.fqn, self.units, counters,
+            recent_fault=time.monotonic() - self.last_fault_wall < FAULT_HOLD_S, hold_s=FAULT_HOLD_S,
+            inactive=not self.active))
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
         return {
@@ -1002,7 +724,191 @@ class EmacNode(SuiteNode):
         }
 
     def close(self) -> None:  # noqa: D102
+        if self.configured:
+            self._publish_diagnostics()
+
+
+RCLError = rclpy_implementation.RCLError
+"""What rcl's lifecycle state machine raises on a transition it does not have."""
+
+
+class ManagedEmacNode(LifecycleNodeMixin, EmacNode):
+    """The EMAC node as a managed (lifecycle) node: ``emac --lifecycle``.
+
+    Constructed *unconfigured*: parameters declared and models built (so ``ros2 param`` works and the first
+    frame does not compile), but no topic. ``configure`` makes its publishers and subscriptions (*inactive*):
+    inputs are dropped, no frame is stepped and nothing is published, so the surface stays where it is, the
+    brake held. ``activate`` starts a new time base: the brake stays engaged until a fresh command comes (as at
+    start-up), then frames are stepped and published as by :class:`EmacNode`. ``deactivate`` stops them again;
+    ``cleanup`` removes the topics; ``shutdown`` ends the process. The transitions are served by the standard
+    lifecycle services (``<node>/change_state``, ``<node>/get_state``...), on the node's own executor loop.
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The command line's flags (parameter overrides).
+    ports : object
+        How per-frame messages travel (:class:`~ema_sim.nodes.ports.Ports`).
+    name : str or None
+        The node's name (None: from the channels, :func:`~ema_sim.nodes.emac_params.default_name`).
+    **options : Any
+        rclpy node options (``context``, ``cli_args``).
+    """
+
+    managed = True
+
+    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None,
+                 **options: Any) -> None:
+        EmacNode.__init__(self, args, ports, name, **options)
+        LifecycleNodeMixin.__init__(self)
+        self._lifecycle_entities: list[Any] = []
+        service = self._service_change_state
+        change = service.callback
+
+        def guarded(request: Any, response: Any) -> Any:
+            # rclpy's own callback raises on a transition the present state lacks (activate while unconfigured),
+            # which would end the process: the request is refused instead, as rclcpp refuses it
+            try:
+                return change(request, response)
+            except RCLError as exc:
+                self.get_logger().warning(f"lifecycle transition {request.transition.id} "
+                                          f"{request.transition.label!r} refused: {exc}")
+                response.success = False
+                return response
+
+        service.callback = guarded
+
+    def check_ready(self) -> None:
+        """Announce readiness only once active (a managed node's topics come at ``configure``)."""
+        if self.active:
+            super().check_ready()
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Make the topics (publishers and subscriptions); inactive: nothing stepped or published.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The state before the transition.
+
+        Returns
+        -------
+        TransitionCallbackReturn
+            SUCCESS.
+        """
+        pubs, subs = set(self.publishers), set(self.subscriptions)
+        self._make_topics()
+        self._lifecycle_entities = [*(p for p in self.publishers if p not in pubs),
+                                    *(s for s in self.subscriptions if s not in subs)]
+        self.configured = True
+        self._publish_diagnostics()  # inactive: brake held
+        self.get_logger().info(f"configured from {state.label}: topics up, inactive (brake held, no feedback)")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Step and publish from now on, the brake engaged until a fresh command comes.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The state before the transition.
+
+        Returns
+        -------
+        TransitionCallbackReturn
+            SUCCESS.
+        """
+        self._new_time_base()
+        self.active = True
+        self._diagnose_now = True
+        self.get_logger().info(f"activated from {state.label}: stepping frames, brake engaged until a command comes")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop stepping and publishing; inputs are dropped until activated again.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The state before the transition.
+
+        Returns
+        -------
+        TransitionCallbackReturn
+            SUCCESS.
+        """
+        self.active = False
         self._publish_diagnostics()
+        self.get_logger().info(f"deactivated from {state.label}: no frames, brake held")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Remove the topics made at ``configure`` (unconfigured again; the models keep their state).
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The state before the transition.
+
+        Returns
+        -------
+        TransitionCallbackReturn
+            SUCCESS.
+        """
+        self._drop_topics()
+        self.get_logger().info(f"cleaned up from {state.label}: topics removed")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop: the process ends after this transition's answer (its summary printed and logged).
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The state before the transition.
+
+        Returns
+        -------
+        TransitionCallbackReturn
+            SUCCESS.
+        """
+        self.active = False
+        self.done = True
+        self.get_logger().info(f"shut down from {state.label}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def close(self) -> None:  # noqa: D102
+        super().close()
+        self._drop_topics()
+
+    def _drop_topics(self) -> None:
+        for entity in self._lifecycle_entities:
+            if entity in self.publishers:
+                self.destroy_publisher(entity)
+            else:
+                self.destroy_subscription(entity)
+        self._lifecycle_entities = []
+        self.configured = False
+
+    def _new_time_base(self) -> None:
+        """Forget the frames and inputs of before: the next command starts the frames; brake until it comes."""
+        for s in self._stream_list:
+            s.queue.clear()
+            s.last_stamp = None
+            s.waiting_since = None
+            s.gave_up = False
+        self.model_ns = None
+        self.clock_ns = None
+        self.last_clock_topic_ns = None
+        self.first_command = True
+        self.last_good_ns = dict.fromkeys(self.channels)
+        self.last_good_wall = dict.fromkeys(self.channels)
+        self.command_clock = CommandClock(self.frame_ns, self.settings.stamp_tolerance_s,
+                                          self.settings.resync_commands)
+        late, self.gate = self.gate.late, FrameGate(self.frame_ns, self.settings.resync_commands)
+        self.gate.late = late
+        self.last_step_wall = time.monotonic()
+        self.next_idle = self.last_step_wall + IDLE_AFTER_FRAMES * self.frame_s
 
 
 def parser() -> argparse.ArgumentParser:
@@ -1019,12 +925,41 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--disable", action="append", type=names_list,
                    help="parameter disable: switch the model's own elements off: dead_band (the PWM's), quantization, "
                         "noise (others, the test environment's, are accepted and left to it)")
+    p.add_argument("--lifecycle", action="store_true", help="a managed (lifecycle) node: unconfigured until told "
+                   "(configure, activate, deactivate, cleanup, shutdown through <node>/change_state)")
     return p
 
 
+def node(args: argparse.Namespace) -> EmacNode:
+    """The node a command line asks for: an :class:`EmacNode`, or with ``--lifecycle`` a :class:`ManagedEmacNode`.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed flags (``lifecycle`` is taken out; the others are parameter overrides).
+
+    Returns
+    -------
+    EmacNode
+        The node.
+    """
+    return (ManagedEmacNode if vars(args).pop("lifecycle", False) else EmacNode)(args)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``emac``."""
-    return run(EmacNode, parser(), argv)
+    """Console script ``emac``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The arguments (None: the process's).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
+    return run(node, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import argparse
 import datetime as dt
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,17 @@ from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
 from ema_sim import __version__
 from ema_sim.ail.fmu import EMAC_COMMAND, FEEDBACK, SURFACE, Fmu, FrameInputs
-from ema_sim.ail.params import AilConfig, config_path
+from ema_sim.ail.params import (
+    AilConfig,
+    AutopilotParams,
+    FrameParams,
+    HeldCommand,
+    HingeMomentParams,
+    MeasureParams,
+    Setup,
+    VehicleParams,
+    config_path,
+)
 from ema_sim.ail.vehicle import STATES
 from ema_sim.config import CHANNELS, ros_parameters
 from ema_sim.errors import EmaError, UnknownNameError
@@ -39,6 +49,7 @@ from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_meta
 from ema_sim.nodes.params import Spec, config_specs, names_list, nested
 from ema_sim.nodes.ports import Ports
 from ema_sim.nodes.recorder import Recorder
+from ema_sim.parameters import ParameterInfo, describe
 
 INPUT_TOPICS = {FEEDBACK: ct.FMU_FEEDBACK, SURFACE: ct.SURFACE, EMAC_COMMAND: ct.EMAC_COMMAND}
 MODES = ("closed_loop", "open_loop")
@@ -46,12 +57,49 @@ INPUT_FIELDS = {FEEDBACK: "position", SURFACE: "position", EMAC_COMMAND: "positi
 
 
 def default_bag(profile: str) -> Path:
-    """``bags/ail_<profile>_<UTC time>``."""
+    """``bags/ail_<profile>_<UTC time>``.
+
+    Parameters
+    ----------
+    profile : str
+        The test-environment profile.
+
+    Returns
+    -------
+    pathlib.Path
+        The bag directory to create.
+    """
     return stamped_bag(f"ail_{profile}")
 
 
+def _declared(values: dict[str, Any]) -> dict[str, ParameterInfo]:
+    """YAML path → the declaration (unit, description) of the vehicle file's vehicle, autopilot and hinge moments."""
+    out = {f"vehicle.{p.name}": p for p in describe(VehicleParams)}
+    out.update({f"autopilot.{p.name}": p for p in describe(AutopilotParams)})
+    for kind in values.get("hinge_moment", {}):
+        out.update({f"hinge_moment.{kind}.{p.name}": p for p in describe(HingeMomentParams)})
+    (held,) = describe(HeldCommand)
+    out.update({f"held_deg.{ch}": held for ch in values.get("held_deg", {})})
+    for profile in values.get("setup", {}):
+        out.update({f"setup.{profile}.{p.name}": p for p in describe(Setup)})
+    out.update({f"measure.{p.name}": p for p in describe(MeasureParams)})
+    out.update({p.name: p for p in describe(FrameParams)})
+    return out
+
+
 class FmuNode(DriverNode):
-    """The node (see the module docstring)."""
+    """The node (see the module docstring).
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The flags given on the node's command line (parameter overrides, :func:`~ema_sim.nodes.params.cli_overrides`).
+    ports : callable
+        Builds the node's topic ports from the node: :class:`~ema_sim.nodes.ports.Ports` on DDS, or a
+        container's :meth:`~ema_sim.nodes.container.Bus.ports` when composed.
+    name : str
+        The node's name (a ``-r __node:=`` remapping renames it).
+    """
 
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "fmu") -> None:
         super().__init__(name, args)
@@ -75,7 +123,8 @@ class FmuNode(DriverNode):
             Spec("disable", [], "elements switched off, for the metadata", kind=ParameterType.PARAMETER_STRING_ARRAY),
             Spec("lockstep_wait_s", 5.0, "lockstep: wall seconds to wait for a frame's inputs", "s", 0.0, 3600.0),
         ], name)
-        specs = [spec for spec in config_specs(file_values, path.name) if spec.name != "frame_hz"]
+        specs = [spec for spec in config_specs(file_values, path.name, known=_declared(file_values))
+                 if spec.name != "frame_hz"]
         vehicle = self.params.declare(specs, f"{name}: {path.name}")
         cfg = AilConfig.from_parameters(nested({**vehicle, "frame_hz": own["frame_hz"]}), f"{name} parameters")
         if own["mode"] not in MODES:
@@ -104,8 +153,7 @@ class FmuNode(DriverNode):
         }
         meta.update(calibration_metadata(CHANNELS))
         self._open_run(Path(own["bag"]) if own["bag"] else default_bag(profile), meta, own["wait_for"])
-        hooks = {topic: (lambda raw, _log_time, kind=kind: self._on_input(kind, raw))
-                 for kind, topic in INPUT_TOPICS.items()}
+        hooks = {topic: self._input_hook(kind) for kind, topic in INPUT_TOPICS.items()}
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
                                  own=(ct.FMU_COMMAND, ct.HINGE_MOMENT, ct.VEHICLE), hooks=hooks,
                                  on_clock=self._on_clock)
@@ -124,6 +172,12 @@ class FmuNode(DriverNode):
     # ----------------------------------------------------------------- callbacks (never raise)
     def _on_clock(self, ns: int) -> None:
         self.clock_ns = ns if self.clock_ns is None else max(self.clock_ns, ns)
+
+    def _input_hook(self, kind: str) -> Callable[[bytes, int], None]:
+        """The recorder's hook for input ``kind``: :meth:`_on_input` with the message (its log time unused)."""
+        def hook(raw: bytes, _log_time: int) -> None:
+            self._on_input(kind, raw)
+        return hook
 
     def _on_input(self, kind: str, raw: bytes) -> None:
         try:
@@ -268,7 +322,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``fmu``."""
+    """Console script ``fmu``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The command line, ROS arguments included (None: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The process's exit status.
+    """
     return run(FmuNode, parser(), argv)
 
 

@@ -37,7 +37,19 @@ def thread_marks() -> tuple[float, int, int]:
 
 
 class FrameTimes:
-    """Per-frame command and feedback times of one run (see the module docstring)."""
+    """Per-frame command and feedback times of one run (see the module docstring).
+
+    Parameters
+    ----------
+    frames : int
+        Frames in the run (0: none recorded, as under lockstep).
+    expect : sequence of str
+        The channels whose feedback ends each frame.
+    period_s : float
+        The frame period (s).
+    one_thread : bool
+        The feedback path runs in this thread (composed), so a missed frame's cause can be told.
+    """
 
     def __init__(self, frames: int, expect: Sequence[str], period_s: float, *, one_thread: bool) -> None:
         self.period_s = period_s
@@ -69,12 +81,28 @@ class FrameTimes:
             self.thread_sent[self.count] = thread_marks()
 
     def sent_at(self, wall: float) -> None:
-        """Frame ``count``'s command left at ``wall`` (monotonic s)."""
+        """Frame ``count``'s command left at ``wall`` (monotonic s).
+
+        Parameters
+        ----------
+        wall : float
+            When the publish began (monotonic s).
+        """
         self.sent[self.count] = wall
         self.count += 1
 
     def feedback(self, k: int, names: Iterable[str], wall: float) -> None:
-        """Feedback of frame ``k`` for ``names`` arrived at ``wall``; the first arrival per channel counts."""
+        """Feedback of frame ``k`` for ``names`` arrived at ``wall``; the first arrival per channel counts.
+
+        Parameters
+        ----------
+        k : int
+            The frame.
+        names : iterable of str
+            The channels in the feedback message.
+        wall : float
+            When it arrived (monotonic s).
+        """
         if not 0 <= k < self.count:
             return
         row = self.back[k]

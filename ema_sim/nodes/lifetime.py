@@ -19,7 +19,18 @@ PR_SET_PDEATHSIG = 1
 
 
 def follow_parent(sig: int = signal.SIGTERM) -> bool:
-    """Get ``sig`` when the parent process ends, if ``EMA_PARENT_PID`` names it; True when armed."""
+    """Get ``sig`` when the parent process ends, if ``EMA_PARENT_PID`` names it; True when armed.
+
+    Parameters
+    ----------
+    sig : int
+        The signal to get.
+
+    Returns
+    -------
+    bool
+        The kernel will send it (``PR_SET_PDEATHSIG`` armed).
+    """
     wanted = os.environ.get(PARENT_ENV)
     if not wanted:
         return False

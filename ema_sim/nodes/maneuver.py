@@ -35,12 +35,34 @@ from ema_sim.signals.plans import build_plan, channel_list
 
 
 def default_bag(test: str) -> Path:
-    """``bags/<test>_<UTC time>``."""
+    """``bags/<test>_<UTC time>``.
+
+    Parameters
+    ----------
+    test : str
+        The section-2 test's name.
+
+    Returns
+    -------
+    pathlib.Path
+        The bag directory to create.
+    """
     return stamped_bag(test)
 
 
 class ManeuverNode(DriverNode):
-    """The node (see the module docstring)."""
+    """The node (see the module docstring).
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The flags given on the node's command line (parameter overrides, :func:`~ema_sim.nodes.params.cli_overrides`).
+    ports : callable
+        Builds the node's topic ports from the node: :class:`~ema_sim.nodes.ports.Ports` on DDS, or a
+        container's :meth:`~ema_sim.nodes.container.Bus.ports` when composed.
+    name : str
+        The node's name (a ``-r __node:=`` remapping renames it).
+    """
 
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "maneuver") -> None:
         super().__init__(name, args)
@@ -58,7 +80,7 @@ class ManeuverNode(DriverNode):
             Spec("expect_feedback", [], "channels whose feedback ends each frame (empty: the driven ones)",
                  kind=strings),
         ], name)
-        frame_hz = own["frame_hz"]
+        frame_hz: float = own["frame_hz"]
         self.plan = build_plan(own["test"] or None, maneuver=own["maneuver"] or None, load=own["load"] or None,
                                channels=own["channels"] or ["left_wing"], duration_s=own["duration_s"] or None)
         self.frame_ns = round(NS / frame_hz)
@@ -78,8 +100,8 @@ class ManeuverNode(DriverNode):
         meta.update(calibration_metadata(self.commanded))
         self._open_run(Path(own["bag"]) if own["bag"] else default_bag(self.plan.test), meta, own["wait_for"])
         self.clock_ns: int | None = None
-        own = (ct.FMU_COMMAND, ct.HINGE_MOMENT)
-        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports, own=own,
+        self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
+                                 own=(ct.FMU_COMMAND, ct.HINGE_MOMENT),
                                  hooks={ct.FMU_FEEDBACK: self._on_fmu_feedback}, on_clock=self._on_clock)
         self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
         self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
@@ -219,7 +241,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``maneuver``."""
+    """Console script ``maneuver``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The command line, ROS arguments included (None: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The process's exit status.
+    """
     return run(ManeuverNode, parser(), argv)
 
 

@@ -12,6 +12,7 @@ parameter``); a value outside the declared range is refused the same way.
 from __future__ import annotations
 
 import copy
+import math
 import re
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -26,6 +27,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ema_sim.errors import ConfigError, EmaError
+from ema_sim.parameters import ParameterInfo
 
 ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_INTEGER_ARRAY,
                     ParameterType.PARAMETER_DOUBLE_ARRAY, ParameterType.PARAMETER_STRING_ARRAY,
@@ -33,24 +35,6 @@ ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_
 """The list parameter types."""
 HUGE = sys.float_info.max
 """Open end of a range (a ROS range needs both ends)."""
-
-UNITS: tuple[tuple[str, str], ...] = (
-    ("_lbf_s_per_in", "lbf·s/in"), ("_lbf_per_in", "lbf/in"), ("_inlb_per_deg", "in·lb/deg"),
-    ("_deg_per_kinlb", "deg per 1000 in·lb"), ("_per_kinlb", "1/(1000 in·lb)"), ("_dps_per_lb", "(deg/s)/lbf"),
-    ("_deg_per_deg", "deg/deg"), ("_a_per_in_s", "A/(in/s)"), ("_v_per_a", "V/A"), ("_v_s_per_rad", "V·s/rad"),
-    ("_in_per_rev", "in/rev"), ("_inlbs2", "in·lb·s²"), ("_rad_s", "rad/s"), ("_per_s2", "1/s²"),
-    ("_per_s", "1/s"), ("_in_s", "in/s"), ("_dps", "deg/s"), ("_deg", "deg"), ("_inlb", "in·lb"), ("_lbf", "lbf"),
-    ("_hz", "Hz"), ("_ohm", "Ω"), ("_mh", "mH"), ("_uf", "µF"), ("_ms", "ms"), ("_s", "s"), ("_in", "in"),
-    ("_v", "V"), ("_a", "A"), ("_ratio", "ratio"),
-)
-"""Unit of a parameter from the suffix of its name (every name carries its unit: CONTRIBUTING.md)."""
-
-
-def unit_of(name: str) -> str:
-    """The unit a parameter's name declares (its suffix), or ``""``."""
-    leaf = name.rsplit(".", 1)[-1]
-    return next((unit for suffix, unit in UNITS if leaf.endswith(suffix)), "")
-
 
 @dataclass(frozen=True)
 class Spec:
@@ -94,7 +78,20 @@ def _plain(value: Any) -> Any:
 
 
 def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
-    """``{"a": {"b": 1}}`` → ``("a.b", 1)``: a nested parameter mapping as ROS parameter names."""
+    """``{"a": {"b": 1}}`` → ``("a.b", 1)``: a nested parameter mapping as ROS parameter names.
+
+    Parameters
+    ----------
+    mapping : mapping
+        Nested parameters (a section of a parameter file).
+    prefix : str
+        Put before every name (a section's, dot included: ``"a."``).
+
+    Yields
+    ------
+    tuple of (str, Any)
+        Each leaf's dotted name and value.
+    """
     for key, value in mapping.items():
         name = f"{prefix}{key}"
         if isinstance(value, Mapping):
@@ -104,7 +101,18 @@ def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str,
 
 
 def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
-    """``{"a.b": 1}`` → ``{"a": {"b": 1}}``."""
+    """``{"a.b": 1}`` → ``{"a": {"b": 1}}``.
+
+    Parameters
+    ----------
+    flat : mapping
+        Parameters by dotted name.
+
+    Returns
+    -------
+    dict
+        The same, nested at each dot.
+    """
     out: dict[str, Any] = {}
     for key, value in flat.items():
         parts = key.split(".")
@@ -116,7 +124,20 @@ def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
-    """Deep merge, ``override`` winning."""
+    """Deep merge, ``override`` winning.
+
+    Parameters
+    ----------
+    base : mapping
+        Nested parameters.
+    override : mapping
+        Nested parameters that replace ``base``'s, key by key (a mapping merged into a mapping).
+
+    Returns
+    -------
+    dict
+        A new mapping (neither argument is changed).
+    """
     out = copy.deepcopy(dict(base))
     for key, value in override.items():
         if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
@@ -126,19 +147,80 @@ def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, An
     return out
 
 
+def declared_spec(name: str, default: Any, info: ParameterInfo, where: str, *, read_only: bool = True) -> Spec:
+    """The spec of a declared parameter: description, unit and range from its one declaration.
+
+    Parameters
+    ----------
+    name : str
+        The ROS parameter's name.
+    default : object
+        Its default value.
+    info : ParameterInfo
+        The parameter's metadata (:func:`ema_sim.parameters.describe`).
+    where : str
+        Where the default comes from, appended to the description.
+    read_only : bool
+        Whether a run-time change is refused.
+
+    Returns
+    -------
+    Spec
+        The spec; the range is widened to take the parameter's switch-off value.
+    """
+    low: float | None = None
+    high: float | None = None
+    if info.size == 1:
+        lo, hi = info.min, info.max
+        if info.off is not None:
+            lo, hi = min(lo, info.off), max(hi, info.off)
+        low, high = (lo if math.isfinite(lo) else None), (hi if math.isfinite(hi) else None)
+    unit = "" if info.unit in ("", "-") else info.unit
+    return Spec(name, default, f"{info.description} ({where})", unit, low, high, read_only=read_only)
+
+
 def config_specs(values: Mapping[str, Any], origin: str, prefix: str = "",
-                 describe: Callable[[str], str] | None = None) -> list[Spec]:
-    """Read-only specs of a parameter file's mapping (defaults: its values; units from the names)."""
+                 known: Mapping[str, ParameterInfo] | None = None) -> list[Spec]:
+    """Read-only specs of a parameter file's mapping: defaults its values, the rest from the declarations.
+
+    Parameters
+    ----------
+    values : mapping
+        The file's ``ros__parameters`` (nested).
+    origin : str
+        Where the values come from, for the descriptions.
+    prefix : str
+        Names go under ``prefix.`` (none when empty).
+    known : mapping, optional
+        YAML path → the declared parameter's metadata: its description, unit and range
+        (:func:`declared_spec`). A value not declared there is described by its origin alone.
+
+    Returns
+    -------
+    list of Spec
+        One per value, in file order.
+    """
     out = []
-    for name, value in flatten(values, prefix):
-        text = describe(name) if describe is not None else f"from {origin}"
-        unit = unit_of(name) if isinstance(value, float | int | list) and not isinstance(value, bool) else ""
-        out.append(Spec(name, value, text, unit))
+    for path, value in flatten(values):
+        name = f"{prefix}.{path}" if prefix else path
+        info = (known or {}).get(path)
+        out.append(Spec(name, value, f"from {origin}") if info is None else declared_spec(name, value, info, origin))
     return out
 
 
 def names_list(text: str) -> list[str]:
-    """A comma-separated list flag's items (repeated flags are joined by :func:`ema_sim.nodes.common.run_nodes`)."""
+    """A comma-separated list flag's items (repeated flags are joined by :func:`ema_sim.nodes.common.run_nodes`).
+
+    Parameters
+    ----------
+    text : str
+        The flag's value, e.g. ``left_wing,rudder``.
+
+    Returns
+    -------
+    list of str
+        Its non-empty items, stripped.
+    """
     return [item.strip() for item in text.split(",") if item.strip()]
 
 
@@ -147,13 +229,31 @@ def cli_overrides(args: Any, exclude: Iterable[str] = ()) -> list[Parameter]:
 
     A parser whose options default to ``argparse.SUPPRESS`` and whose ``dest`` is the parameter's name
     gives exactly the flags that were given.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed flags.
+    exclude : iterable of str
+        Flags that are not parameters (the node resolves them itself).
+
+    Returns
+    -------
+    list of rclpy.parameter.Parameter
+        One per flag given.
     """
     skip = set(exclude)
     return [Parameter(k, value=_plain(v)) for k, v in vars(args).items() if k not in skip and v is not None]
 
 
 class Declared:
-    """The parameters a node declared, their values, and who applies a run-time change."""
+    """The parameters a node declared, their values, and who applies a run-time change.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node (its set-parameters callback is registered here).
+    """
 
     def __init__(self, node: Node) -> None:
         self.node = node
@@ -162,10 +262,23 @@ class Declared:
         node.add_on_set_parameters_callback(self._on_set)
 
     def declare(self, specs: Sequence[Spec], origin: str) -> dict[str, Any]:
-        """Declare ``specs`` (overrides applied); their values by name. A bad override is one :class:`ConfigError`."""
+        """Declare ``specs`` (overrides applied); their values by name. A bad override is one :class:`ConfigError`.
+
+        Parameters
+        ----------
+        specs : sequence of Spec
+            The parameters.
+        origin : str
+            What declares them, for the error message.
+
+        Returns
+        -------
+        dict
+            Each parameter's value by name.
+        """
         node = self.node
         overrides = node._parameter_overrides  # a file's 25 for a double parameter becomes 25.0
-        batch: list[tuple[str, Any, ParameterDescriptor]] = []
+        batch: list[tuple[str] | tuple[str, Parameter.Type] | tuple[str, Any, ParameterDescriptor]] = []  # rclpy's type
         empty: list[Parameter] = []  # lists declared empty (by default, or by a file's [], which rcl gives untyped)
         for spec in specs:
             d = spec.descriptor()
@@ -200,7 +313,18 @@ class Declared:
         return {spec.name: self.value(spec.name) for spec in specs}
 
     def value(self, name: str) -> Any:
-        """A declared parameter's value (an empty list when a list parameter was never set)."""
+        """A declared parameter's value (an empty list when a list parameter was never set).
+
+        Parameters
+        ----------
+        name : str
+            The parameter.
+
+        Returns
+        -------
+        Any
+            Its value.
+        """
         p = self.node.get_parameter_or(name, Parameter(name, value=None))
         if p.type_ == Parameter.Type.NOT_SET:
             return []
@@ -208,12 +332,32 @@ class Declared:
         return list(value) if isinstance(value, list | tuple) or hasattr(value, "tolist") else value
 
     def prefixed(self, prefix: str) -> dict[str, Any]:
-        """The declared values under ``prefix.``, nested, prefix stripped."""
+        """The declared values under ``prefix.``, nested, prefix stripped.
+
+        Parameters
+        ----------
+        prefix : str
+            A section, e.g. ``model``.
+
+        Returns
+        -------
+        dict
+            Its values, nested.
+        """
         n = len(prefix) + 1
         return nested({name[n:]: self.value(name) for name in self.specs if name.startswith(prefix + ".")})
 
     def on_change(self, name: str, apply: Callable[[Any], str]) -> None:
-        """``apply(value)`` makes a run-time change take effect and says what changed (for the log)."""
+        """``apply(value)`` makes a run-time change take effect and says what changed (for the log).
+
+        Parameters
+        ----------
+        name : str
+            A parameter declared writable.
+        apply : callable
+            Called with the new value; returns a line for the log, or raises ``EmaError`` or ``ValueError`` to
+        refuse the change (with that reason).
+        """
         self.appliers[name] = apply
 
     def _on_set(self, params: Sequence[Parameter]) -> SetParametersResult:

@@ -35,30 +35,64 @@ GRAPH_CACHE_S = 0.1
 
 
 class FramePublisher:
-    """Publishes JointFrames of one topic as CDR bytes."""
+    """Publishes JointFrames of one topic as CDR bytes.
+
+    Parameters
+    ----------
+    node : Node
+        The node that owns the publisher.
+    topic : str
+        The contract topic.
+    profile : QoSProfile
+        Its QoS.
+    """
 
     def __init__(self, node: Node, topic: str, profile: Any) -> None:
         self.topic = topic
         self.dds = node.create_publisher(JointState, ct.endpoint(topic), profile)
 
     def publish(self, frame: cdr.JointFrame) -> None:
-        """One frame to every subscriber."""
+        """One frame to every subscriber.
+
+        Parameters
+        ----------
+        frame : JointFrame
+            The frame.
+        """
         self.dds.publish(cdr.encode(frame))
 
 
 class ClockPublisher:
-    """Publishes lockstep ``/clock`` frames as CDR bytes."""
+    """Publishes lockstep ``/clock`` frames as CDR bytes.
+
+    Parameters
+    ----------
+    node : Node
+        The node that owns the publisher.
+    """
 
     def __init__(self, node: Node) -> None:
         self.dds = node.create_publisher(Clock, ct.endpoint(ct.CLOCK_TOPIC), qos(ct.CLOCK_QOS))
 
     def publish(self, ns: int) -> None:
-        """The clock at ``ns``."""
+        """The clock at ``ns``.
+
+        Parameters
+        ----------
+        ns : int
+            The time, ns.
+        """
         self.dds.publish(cdr.encode_clock(ns))
 
 
 class Ports:
-    """A node alone in its process: every endpoint is its own DDS endpoint."""
+    """A node alone in its process: every endpoint is its own DDS endpoint.
+
+    Parameters
+    ----------
+    node : Node
+        The node whose endpoints these are.
+    """
 
     composed = False
 
@@ -67,11 +101,32 @@ class Ports:
         self._counts: dict[str, tuple[float, int]] = {}
 
     def frame_publisher(self, topic: str) -> FramePublisher:
-        """A publisher of a per-frame contract topic (its contract QoS)."""
+        """A publisher of a per-frame contract topic (its contract QoS).
+
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+
+        Returns
+        -------
+        FramePublisher
+            The publisher.
+        """
         return FramePublisher(self.node, topic, qos(ct.FRAME_QOS))
 
     def frame_subscription(self, topic: str, callback: FrameCallback, on_bad: Callable[[str], None]) -> None:
-        """Frames of a per-frame topic; a malformed message goes to ``on_bad`` (never raises)."""
+        """Frames of a per-frame topic; a malformed message goes to ``on_bad`` (never raises).
+
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+        callback : callable
+            Takes each decoded frame.
+        on_bad : callable
+            Takes the reason a message could not be decoded.
+        """
 
         def take(raw: bytes) -> None:
             try:
@@ -84,15 +139,35 @@ class Ports:
         self.node.create_subscription(JointState, ct.endpoint(topic), take, qos(ct.FRAME_QOS), raw=True)
 
     def raw_subscription(self, topic: str, callback: Callable[[bytes], None]) -> None:
-        """A per-frame topic's messages as CDR bytes (a recorder's view)."""
+        """A per-frame topic's messages as CDR bytes (a recorder's view).
+
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+        callback : callable
+            Takes each message's bytes.
+        """
         self.node.create_subscription(JointState, ct.endpoint(topic), callback, qos(ct.FRAME_QOS), raw=True)
 
     def clock_publisher(self) -> ClockPublisher:
-        """The lockstep clock's ``/clock`` publisher."""
+        """The lockstep clock's ``/clock`` publisher.
+
+        Returns
+        -------
+        ClockPublisher
+            The publisher.
+        """
         return ClockPublisher(self.node)
 
     def clock_subscription(self, callback: ClockCallback) -> None:
-        """Lockstep ``/clock`` in nanoseconds; it also drives the node's ROS clock (one take, not two)."""
+        """Lockstep ``/clock`` in nanoseconds; it also drives the node's ROS clock (one take, not two).
+
+        Parameters
+        ----------
+        callback : callable
+            Takes each ``/clock`` value, ns.
+        """
         feed = TimeFeed([own_time_source(self.node)])
 
         def take(raw: bytes) -> None:
@@ -105,7 +180,18 @@ class Ports:
         self.node.create_subscription(Clock, ct.endpoint(ct.CLOCK_TOPIC), take, qos(ct.CLOCK_SUB_QOS), raw=True)
 
     def publishers(self, topic: str) -> int:
-        """Publishers of a topic in the graph (a graph query, reused for :data:`GRAPH_CACHE_S`)."""
+        """Publishers of a topic in the graph (a graph query, reused for :data:`GRAPH_CACHE_S`).
+
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+
+        Returns
+        -------
+        int
+            How many.
+        """
         now = time.monotonic()
         cached = self._counts.get(topic)
         if cached is None or now - cached[0] > GRAPH_CACHE_S:
@@ -122,7 +208,17 @@ def own_time_source(node: Node) -> Any:
 
     The suite's nodes already take every ``/clock`` frame (or get it in-process): their ROS clock is
     then set from that frame (:class:`TimeFeed`) instead of by a second subscription that deserializes
-    the same message again. Returns None when the node is not under sim time.
+    the same message again.
+
+    Parameters
+    ----------
+    node : Node
+        The node.
+
+    Returns
+    -------
+    rclpy.clock.Clock or None
+        Its ROS clock, or None when the node is not under sim time.
     """
     from rclpy.time_source import TimeSource  # noqa: PLC0415
 
@@ -136,7 +232,13 @@ def own_time_source(node: Node) -> Any:
 
 
 class TimeFeed:
-    """Sets ROS clocks (of nodes under ``use_sim_time``) to each ``/clock`` frame: one Time for all."""
+    """Sets ROS clocks (of nodes under ``use_sim_time``) to each ``/clock`` frame: one Time for all.
+
+    Parameters
+    ----------
+    clocks : list or None
+        The clocks (None entries, nodes not under sim time, are left out).
+    """
 
     def __init__(self, clocks: list[Any] | None = None) -> None:
         self.clocks = [c for c in clocks or [] if c is not None]

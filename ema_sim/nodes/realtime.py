@@ -56,7 +56,22 @@ _held: list[int] = []
 
 
 def apply(priority: int, *, lock_memory: bool = True, cpu_latency_us: int | None = 0) -> Setup:
-    """Set this process up for real time (see the module docstring); nothing at all when ``priority`` is 0."""
+    """Set this process up for real time (see the module docstring); nothing at all when ``priority`` is 0.
+
+    Parameters
+    ----------
+    priority : int
+        The SCHED_FIFO priority (1–99) of every thread of the process; 0: normal scheduling, nothing done.
+    lock_memory : bool
+        Lock the process's memory (``mlockall``, where the whole address space may be locked).
+    cpu_latency_us : int or None
+        Hold a PM QoS CPU latency request of this many µs on ``/dev/cpu_dma_latency`` (None: none).
+
+    Returns
+    -------
+    Setup
+        What was done, and notes on what could not be.
+    """
     setup = Setup()
     if priority <= 0:
         return setup

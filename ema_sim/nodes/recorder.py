@@ -31,12 +31,41 @@ EXCLUDED = ("/parameter_events",)
 
 
 def leading_stamp_ns(raw: bytes) -> int | None:
-    """The stamp at the start of a CDR message (after the 4-byte encapsulation header)."""
+    """The stamp at the start of a CDR message (after the 4-byte encapsulation header).
+
+    Parameters
+    ----------
+    raw : bytes
+        The message's CDR bytes.
+
+    Returns
+    -------
+    int or None
+        The stamp (ns); None when the message is too short to hold one.
+    """
     return cdr.stamp_ns(raw)
 
 
 class Recorder:
-    """Raw subscriptions of a node feeding a :class:`~ema_sim.io.bag.BagWriter`."""
+    """Raw subscriptions of a node feeding a :class:`~ema_sim.io.bag.BagWriter`.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node whose subscriptions these are.
+    writer : BagWriter
+        The bag.
+    lockstep : bool
+        The suite runs on ``/clock``: a stamped message is logged at its stamp (a reproducible bag).
+    ports : Ports or ComposedPorts
+        The node's per-frame topic ports (raw subscriptions, ``/clock``).
+    own : iterable of str
+        The node's own publications, written by :meth:`record_own` as it publishes them.
+    hooks : dict of str to callable or None
+        Per topic, called with (raw, log time) after its message is written.
+    on_clock : callable or None
+        Called with each new ``/clock`` time (ns) once it is written.
+    """
 
     def __init__(self, node: Node, writer: BagWriter, *, lockstep: bool, ports: Any, own: Iterable[str] = (),
                  hooks: dict[str, Callable[[bytes, int], None]] | None = None,
@@ -53,7 +82,7 @@ class Recorder:
         self._next_discovery = 0.0
         self._last_clock = -1
         self.namespace = node.get_namespace()
-        self._now_ns = (lambda: node.get_clock().now().nanoseconds) if lockstep else time.time_ns
+        self._now_ns: Callable[[], int] = (lambda: node.get_clock().now().nanoseconds) if lockstep else time.time_ns
         for topic in own:  # the node's own publications: written as it publishes them, not taken back
             self._add(topic, ct.TOPICS[topic].msgtype)
         for name, spec in ct.TOPICS.items():
@@ -97,7 +126,17 @@ class Recorder:
                                       self._callback(topic, msgtype, stamped), profile, raw=True)
 
     def record_own(self, topic: str, raw: bytes, stamp_ns: int) -> None:
-        """One of the node's own publications (stamped ``stamp_ns``), with the log time a take would give it."""
+        """One of the node's own publications (stamped ``stamp_ns``), with the log time a take would give it.
+
+        Parameters
+        ----------
+        topic : str
+            One of the ``own`` topics.
+        raw : bytes
+            The message's CDR bytes.
+        stamp_ns : int
+            Its stamp (ns).
+        """
         self.writer.write(topic, self.topics[topic], stamp_ns if self.lockstep else self._now_ns(), raw)
 
     def _callback(self, topic: str, msgtype: str, stamped: bool) -> Callable[[bytes], None]:
@@ -129,7 +168,8 @@ class Recorder:
             if not infos:
                 continue
             offered = infos[0].qos_profile
-            profile = QoSProfile(depth=1000, reliability=offered.reliability, durability=offered.durability)
+            profile = QoSProfile(  # type: ignore[no-untyped-call]  # rclpy's QoSProfile(**kwargs) carries no annotations
+                depth=1000, reliability=offered.reliability, durability=offered.durability)
             if offered.reliability not in (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT):
                 profile.reliability = ReliabilityPolicy.BEST_EFFORT
             self._subscribe(topic, types[0], profile, resolved)

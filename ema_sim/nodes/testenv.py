@@ -31,6 +31,16 @@ def profile_specs(profile: Profile) -> list[Spec]:
     """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them), read-only.
 
     Each path element's description, unit and range come from its declaration (:class:`PathSpec`'s metadata).
+
+    Parameters
+    ----------
+    profile : Profile
+        The defaults (the profile the node starts from).
+
+    Returns
+    -------
+    list of Spec
+        The seed and full scale, then one declaration per element of each path (``command.lag_hz``...).
     """
     out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62),
            Spec("full_scale_v", profile.full_scale_v, "converters' full scale", "V", 0.1, 1000.0)]
@@ -43,7 +53,18 @@ def profile_specs(profile: Profile) -> list[Spec]:
 
 
 class TestEnvNode(SuiteNode):
-    """The node (see the module docstring)."""
+    """The node (see the module docstring).
+
+    Parameters
+    ----------
+    args : argparse.Namespace or None
+        The flags given on the node's command line (parameter overrides, :func:`~ema_sim.nodes.params.cli_overrides`).
+    ports : callable
+        Builds the node's topic ports from the node: :class:`~ema_sim.nodes.ports.Ports` on DDS, or a
+        container's :meth:`~ema_sim.nodes.container.Bus.ports` when composed.
+    name : str
+        The node's name (a ``-r __node:=`` remapping renames it).
+    """
 
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "testenv") -> None:
         super().__init__(name, args)
@@ -139,7 +160,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``testenv``."""
+    """Console script ``testenv``.
+
+    Parameters
+    ----------
+    argv : sequence of str or None
+        The command line, ROS arguments included (None: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The process's exit status.
+    """
     return run(TestEnvNode, parser(), argv)
 
 

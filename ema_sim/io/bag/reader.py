@@ -19,6 +19,7 @@ import numpy as np
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
+from ema_sim.config import scaling
 from ema_sim.errors import DataError
 from ema_sim.io.bag.layout import SIDES, FloatArray
 from ema_sim.io.csv import MIN_ROWS, MeasuredData
@@ -305,7 +306,7 @@ def _joint_series(src: _Source, topic: str, channel: str, field_name: str) -> di
 def _scaling(meta: Mapping[str, str], channel: str) -> ct.Scaling:
     text = meta.get(f"calibration.{channel}")
     if not text:
-        return ct.scaling(channel)
+        return scaling(channel)
     try:
         doc = json.loads(text)
         c0, c1, c2, c3 = (float(x) for x in doc["command_cal_v"])

@@ -11,6 +11,7 @@ import numpy as np
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
+from ema_sim.config import scaling
 from ema_sim.errors import DataError
 from ema_sim.io.bag.storage import fast_storage
 
@@ -165,7 +166,7 @@ def write_bag(path: str | Path, columns: Mapping[str, Any], metadata: Mapping[st
     Path
         The bag directory.
     """
-    sc = ct.scaling(channel)
+    sc = scaling(channel)
     t = np.asarray(columns["time_s"], dtype=float)
     n = t.size
     cmd = np.asarray(columns["command_deg"], dtype=float)

@@ -14,10 +14,10 @@ One file per figure of the report, then one per implementation:
 
 from ema_sim.models.high_order.linear import LinearizedActuator, linearize
 from ema_sim.models.high_order.models import HighOrderModel, Hoac1, Hoad2, Hoad3
-from ema_sim.models.high_order.params import BOUNDS, OPTIONS, VARIANTS, HighOrderParams, K, X
+from ema_sim.models.high_order.params import BOUNDS, OPTIONS, VARIANTS, HighOrderParams, P, X
 from ema_sim.models.high_order.trim import equilibrium
 
 __all__ = [
-    "BOUNDS", "OPTIONS", "VARIANTS", "HighOrderModel", "HighOrderParams", "Hoac1", "Hoad2", "Hoad3", "K",
-    "LinearizedActuator", "X", "equilibrium", "linearize",
+    "BOUNDS", "OPTIONS", "VARIANTS", "HighOrderModel", "HighOrderParams", "Hoac1", "Hoad2", "Hoad3",
+    "LinearizedActuator", "P", "X", "equilibrium", "linearize",
 ]

@@ -43,7 +43,7 @@ import math
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.high_order import gear_train as gt
-from ema_sim.models.high_order.params import K
+from ema_sim.models.high_order.params import P
 from ema_sim.models.stages import FLAG_CURRENT, FLAG_PWM_DEAD_BAND, FLAG_RATE, FLAG_STALL, band_side, jit
 
 INF = math.inf
@@ -631,8 +631,8 @@ def total_force(p: FloatArray, d: float) -> tuple[float, float, int]:
     segment : int
         1, 2 or 3.
     """
-    return gt.three_segment_force(d, p[K.total_f1_lbf], p[K.total_f2_lbf], p[K.total_d1_in], p[K.total_d2_in],
-                                  p[K.total_k1_lbf_per_in], p[K.total_k2_lbf_per_in], p[K.total_k3_lbf_per_in])
+    return gt.three_segment_force(d, p[P.total_f1_lbf], p[P.total_f2_lbf], p[P.total_d1_in], p[P.total_d2_in],
+                                  p[P.total_k1_lbf_per_in], p[P.total_k2_lbf_per_in], p[P.total_k3_lbf_per_in])
 
 
 @jit
@@ -651,9 +651,9 @@ def total_deflection(p: FloatArray, force: float) -> float:
     float
         in.
     """
-    return gt.three_segment_deflection(force, p[K.total_f1_lbf], p[K.total_f2_lbf], p[K.total_d1_in],
-                                       p[K.total_d2_in], 1.0 / p[K.total_k1_lbf_per_in],
-                                       1.0 / p[K.total_k2_lbf_per_in], 1.0 / p[K.total_k3_lbf_per_in])
+    return gt.three_segment_deflection(force, p[P.total_f1_lbf], p[P.total_f2_lbf], p[P.total_d1_in],
+                                       p[P.total_d2_in], 1.0 / p[P.total_k1_lbf_per_in],
+                                       1.0 / p[P.total_k2_lbf_per_in], 1.0 / p[P.total_k3_lbf_per_in])
 
 
 @jit
@@ -672,9 +672,9 @@ def actuator_deflection(p: FloatArray, force: float) -> float:
     float
         in.
     """
-    return gt.three_segment_deflection(force, p[K.actuator_f1_lbf], p[K.actuator_f2_lbf], p[K.actuator_d1_in],
-                                       p[K.actuator_d2_in], p[K.actuator_c1_in_per_lbf],
-                                       p[K.actuator_c2_in_per_lbf], p[K.actuator_c3_in_per_lbf])
+    return gt.three_segment_deflection(force, p[P.actuator_f1_lbf], p[P.actuator_f2_lbf], p[P.actuator_d1_in],
+                                       p[P.actuator_d2_in], p[P.actuator_c1_in_per_lbf],
+                                       p[P.actuator_c2_in_per_lbf], p[P.actuator_c3_in_per_lbf])
 
 
 @jit
@@ -705,15 +705,15 @@ def gear_train(p: FloatArray, xm: float, xs: float) -> tuple[float, float, float
         In the free play (figure 32's dead zone, figure 33's first segment).
     """
     d = xm - xs
-    if p[K.figure33] > 0.5:
+    if p[P.figure33] > 0.5:
         fk, ktan, seg = total_force(p, d)
-        c = p[K.linkage_damping_lbf_s_per_in] + gt.hysteretic_damping(p[K.hysteresis_coefficient_s], ktan)
-        lvdt = gt.lvdt_fig33(xm, fk, p[K.actuator_f1_lbf], p[K.actuator_f2_lbf], p[K.actuator_d1_in],
-                             p[K.actuator_d2_in], p[K.actuator_c1_in_per_lbf], p[K.actuator_c2_in_per_lbf],
-                             p[K.actuator_c3_in_per_lbf])
+        c = p[P.linkage_damping_lbf_s_per_in] + gt.hysteretic_damping(p[P.hysteresis_coefficient_s], ktan)
+        lvdt = gt.lvdt_fig33(xm, fk, p[P.actuator_f1_lbf], p[P.actuator_f2_lbf], p[P.actuator_d1_in],
+                             p[P.actuator_d2_in], p[P.actuator_c1_in_per_lbf], p[P.actuator_c2_in_per_lbf],
+                             p[P.actuator_c3_in_per_lbf])
         return fk, c, lvdt, seg == 1
-    seg = gt.dead_zone_segment(d, p[K.half_backlash_in])
-    fk, _ = gt.gear_train_fig32(d, 0.0, p[K.half_backlash_in], p[K.series_stiffness_lbf_per_in],
-                                p[K.gear_damping_lbf_s_per_in], seg)
-    c = p[K.gear_damping_lbf_s_per_in] if seg != 0 else 0.0
-    return fk, c, gt.lvdt_fig32(xs, fk, p[K.backup_stiffness_lbf_per_in]), seg == 0
+    seg = gt.dead_zone_segment(d, p[P.half_backlash_in])
+    fk, _ = gt.gear_train_fig32(d, 0.0, p[P.half_backlash_in], p[P.series_stiffness_lbf_per_in],
+                                p[P.gear_damping_lbf_s_per_in], seg)
+    c = p[P.gear_damping_lbf_s_per_in] if seg != 0 else 0.0
+    return fk, c, gt.lvdt_fig32(xs, fk, p[P.backup_stiffness_lbf_per_in]), seg == 0

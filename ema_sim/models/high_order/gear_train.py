@@ -18,7 +18,7 @@ deformation and ``F`` the force the train passes to the surface (positive pushes
   the average stiffness because the coupling is nonlinear (section 3.2.2). ``h`` is in lb/in at the
   actuator: rw13's loop is force at the actuator (hinge moment / crank arm, lbf) against deflection at
   the actuator (surface angle × crank arm, in), so its area is lbf·in (the report's "in·lb") and
-  ``A/(π·Pk²)`` is lbf/in, the units of this module (see :mod:`ema_sim.analysis.hysteresis`).
+  ``A/(π·Pk²)`` is lbf/in, the units of this module (see :mod:`ema_sim.analysis.section2.hysteresis`).
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ from ema_sim.models.high_order.figure30 import (
     saturation_segment,
     servo_drive,
 )
-from ema_sim.models.high_order.params import K, X
+from ema_sim.models.high_order.params import P, X
 from ema_sim.models.hybrid import make_hybrid
 from ema_sim.models.stages import FLAG_BRAKE, FLAG_FREE_PLAY, FLAG_POSITION, TIME_EPS_S, jit, zoh_index
 from ema_sim.parameters import slots
@@ -51,9 +51,9 @@ def _servo_drive(p: FloatArray, y: FloatArray, u: FloatArray, classify: bool) ->
                                                                                         int, int]:
     """Figure 30's stages 4–7 on the continuous state, regimes held or classified."""
     return servo_drive(
-        p[K.position_gain_per_s], p[K.rate_limit_in_s], p[K.velocity_gain_a_per_in_s], p[K.current_limit_a],
-        p[K.current_gain_v_per_a], p[K.stator_resistance_ohm], p[K.back_emf_v_per_in_s], p[K.pwm_dead_band_v],
-        p[K.pwm_max_duty_ratio], u[U.command_in], y[X.lvdt_filtered_in], y[X.integral_in_s], y[X.v_motor_in_s],
+        p[P.position_gain_per_s], p[P.rate_limit_in_s], p[P.velocity_gain_a_per_in_s], p[P.current_limit_a],
+        p[P.current_gain_v_per_a], p[P.stator_resistance_ohm], p[P.back_emf_v_per_in_s], p[P.pwm_dead_band_v],
+        p[P.pwm_max_duty_ratio], u[U.command_in], y[X.lvdt_filtered_in], y[X.integral_in_s], y[X.v_motor_in_s],
         y[X.current_a], y[X.bus_v], int(u[U.rate_segment]), int(u[U.current_segment]), int(u[U.pwm_region]),
         classify)
 
@@ -99,9 +99,9 @@ def forces(p: FloatArray, y: FloatArray, u: FloatArray) -> tuple[float, float, f
         Forces (lbf).
     """
     fk, f = gt.gear_train_fig32(y[X.x_motor_in] - y[X.x_surface_in], y[X.v_motor_in_s] - y[X.v_surface_in_s],
-                                p[K.half_backlash_in], p[K.series_stiffness_lbf_per_in],
-                                p[K.gear_damping_lbf_s_per_in], int(u[U.gear_segment]))
-    return fk, f, p[K.force_per_amp_lbf_per_a] * y[X.current_a] - f
+                                p[P.half_backlash_in], p[P.series_stiffness_lbf_per_in],
+                                p[P.gear_damping_lbf_s_per_in], int(u[U.gear_segment]))
+    return fk, f, p[P.force_per_amp_lbf_per_a] * y[X.current_a] - f
 
 
 @nb.njit(cache=True)
@@ -120,8 +120,8 @@ def friction_levels(p: FloatArray, u: FloatArray) -> tuple[float, float]:
     coulomb, stiction : float
         lbf.
     """
-    brake = 0.0 if u[U.power] > 0.5 else p[K.brake_holding_lbf]
-    return p[K.coulomb_friction_lbf] + brake, p[K.stiction_lbf] + brake
+    brake = 0.0 if u[U.power] > 0.5 else p[P.brake_holding_lbf]
+    return p[P.coulomb_friction_lbf] + brake, p[P.stiction_lbf] + brake
 
 
 @nb.njit(cache=True)
@@ -142,15 +142,15 @@ def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray)
         Filled with the derivatives.
     """
     fk, f, fapp = forces(p, y, u)
-    lvdt = gt.lvdt_fig32(y[X.x_surface_in], fk, p[K.backup_stiffness_lbf_per_in])
-    dydt[X.lvdt_filtered_in] = p[K.lvdt_filter_rad_s] * (lvdt - y[X.lvdt_filtered_in])
+    lvdt = gt.lvdt_fig32(y[X.x_surface_in], fk, p[P.backup_stiffness_lbf_per_in])
+    dydt[X.lvdt_filtered_in] = p[P.lvdt_filter_rad_s] * (lvdt - y[X.lvdt_filtered_in])
     dydt[X.integral_in_s] = 0.0
     if u[U.power] > 0.5:
         _, _, _, v = drive(p, y, u)
-        dydt[X.current_a] = motor_current_rate(v, y[X.current_a], y[X.v_motor_in_s], p[K.stator_resistance_ohm],
-                                               p[K.inductance_h], p[K.back_emf_v_per_in_s])
+        dydt[X.current_a] = motor_current_rate(v, y[X.current_a], y[X.v_motor_in_s], p[P.stator_resistance_ohm],
+                                               p[P.inductance_h], p[P.back_emf_v_per_in_s])
         if integrating(int(u[U.rate_segment]), int(u[U.current_segment]), int(u[U.pwm_region])):
-            dydt[X.integral_in_s] = p[K.position_integral_per_s2] * (u[U.command_in] - y[X.lvdt_filtered_in])
+            dydt[X.integral_in_s] = p[P.position_integral_per_s2] * (u[U.command_in] - y[X.lvdt_filtered_in])
     else:
         v = 0.0
         dydt[X.current_a] = 0.0
@@ -158,20 +158,20 @@ def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray)
     if motor in (MOTOR_SLIP_POS, MOTOR_SLIP_NEG):
         fc, _ = friction_levels(p, u)
         dydt[X.x_motor_in] = y[X.v_motor_in_s]
-        dydt[X.v_motor_in_s] = (fapp - motor * fc) / p[K.motor_mass_lbs2_per_in]
+        dydt[X.v_motor_in_s] = (fapp - motor * fc) / p[P.motor_mass_lbs2_per_in]
     else:
         dydt[X.x_motor_in] = 0.0
         dydt[X.v_motor_in_s] = 0.0
     surface = int(u[U.surface_regime])
     if surface != 0:
         dydt[X.x_surface_in] = y[X.v_surface_in_s]
-        net = f + u[U.hinge_moment_inlb] / p[K.crank_arm_in] - surface * p[K.hinge_friction_lbf]
-        dydt[X.v_surface_in_s] = net / p[K.surface_mass_lbs2_per_in]
+        net = f + u[U.hinge_moment_inlb] / p[P.crank_arm_in] - surface * p[P.hinge_friction_lbf]
+        dydt[X.v_surface_in_s] = net / p[P.surface_mass_lbs2_per_in]
     else:
         dydt[X.x_surface_in] = 0.0
         dydt[X.v_surface_in_s] = 0.0
-    dydt[X.bus_v] = bus_voltage_rate(y[X.bus_v], bus_current(v, y[X.current_a], y[X.bus_v]), p[K.bus_supply_v],
-                                     p[K.bus_source_resistance_ohm], p[K.bus_capacitance_f])
+    dydt[X.bus_v] = bus_voltage_rate(y[X.bus_v], bus_current(v, y[X.current_a], y[X.bus_v]), p[P.bus_supply_v],
+                                     p[P.bus_source_resistance_ohm], p[P.bus_capacitance_f])
 
 
 @nb.njit(cache=True)
@@ -195,12 +195,12 @@ def guards(t: float, y: FloatArray, p: FloatArray, u: FloatArray, g: FloatArray)
         g[j] = INF
     if u[U.power] > 0.5:
         vc_raw, ic_raw, vd, _ = drive(p, y, u)
-        g[0], g[1] = saturation_guards(vc_raw, p[K.rate_limit_in_s], int(u[U.rate_segment]))
-        g[2], g[3] = saturation_guards(ic_raw, p[K.current_limit_a], int(u[U.current_segment]))
-        g[4], g[5] = pwm_guards(vd, p[K.pwm_dead_band_v], p[K.pwm_max_duty_ratio] * y[X.bus_v],
+        g[0], g[1] = saturation_guards(vc_raw, p[P.rate_limit_in_s], int(u[U.rate_segment]))
+        g[2], g[3] = saturation_guards(ic_raw, p[P.current_limit_a], int(u[U.current_segment]))
+        g[4], g[5] = pwm_guards(vd, p[P.pwm_dead_band_v], p[P.pwm_max_duty_ratio] * y[X.bus_v],
                                 int(u[U.pwm_region]))
     d = y[X.x_motor_in] - y[X.x_surface_in]
-    g[6], g[7] = saturation_guards(d, p[K.half_backlash_in], int(u[U.gear_segment]))
+    g[6], g[7] = saturation_guards(d, p[P.half_backlash_in], int(u[U.gear_segment]))
     _, _, fapp = forces(p, y, u)
     _, fs = friction_levels(p, u)
     motor = int(u[U.motor_regime])
@@ -208,10 +208,10 @@ def guards(t: float, y: FloatArray, p: FloatArray, u: FloatArray, g: FloatArray)
         g[8] = fs - abs(fapp)
     elif motor == MOTOR_SLIP_POS:
         g[8] = y[X.v_motor_in_s]
-        g[9] = p[K.position_max_in] - y[X.x_motor_in]
+        g[9] = p[P.position_max_in] - y[X.x_motor_in]
     elif motor == MOTOR_SLIP_NEG:
         g[8] = -y[X.v_motor_in_s]
-        g[9] = y[X.x_motor_in] - p[K.position_min_in]
+        g[9] = y[X.x_motor_in] - p[P.position_min_in]
     elif motor == MOTOR_STOP_HIGH:
         g[8] = fapp + fs
     else:
@@ -219,7 +219,7 @@ def guards(t: float, y: FloatArray, p: FloatArray, u: FloatArray, g: FloatArray)
     surface = int(u[U.surface_regime])
     if surface == 0:
         _, f, _ = forces(p, y, u)
-        g[10] = p[K.hinge_friction_lbf] - abs(f + u[U.hinge_moment_inlb] / p[K.crank_arm_in])
+        g[10] = p[P.hinge_friction_lbf] - abs(f + u[U.hinge_moment_inlb] / p[P.crank_arm_in])
     else:
         g[10] = surface * y[X.v_surface_in_s]
 
@@ -239,8 +239,8 @@ def surface_stops_or_reverses(p: FloatArray, y: FloatArray, u: FloatArray) -> No
     """
     y[X.v_surface_in_s] = 0.0
     _, f, _ = forces(p, y, u)
-    net = f + u[U.hinge_moment_inlb] / p[K.crank_arm_in]
-    if abs(net) <= p[K.hinge_friction_lbf]:
+    net = f + u[U.hinge_moment_inlb] / p[P.crank_arm_in]
+    if abs(net) <= p[P.hinge_friction_lbf]:
         u[U.surface_regime] = 0.0
     else:
         u[U.surface_regime] = 1.0 if net > 0.0 else -1.0
@@ -293,17 +293,17 @@ def transition(k: int, t: float, y: FloatArray, p: FloatArray, u: FloatArray) ->
     if k == 10:  # hinge friction
         if int(u[U.surface_regime]) == 0:
             _, f, _ = forces(p, y, u)
-            u[U.surface_regime] = 1.0 if f + u[U.hinge_moment_inlb] / p[K.crank_arm_in] > 0.0 else -1.0
+            u[U.surface_regime] = 1.0 if f + u[U.hinge_moment_inlb] / p[P.crank_arm_in] > 0.0 else -1.0
         else:
             surface_stops_or_reverses(p, y, u)
         return
     motor = int(u[U.motor_regime])
     if k == 9:  # a mechanical stop
         if motor == MOTOR_SLIP_POS:
-            y[X.x_motor_in] = p[K.position_max_in]
+            y[X.x_motor_in] = p[P.position_max_in]
             u[U.motor_regime] = MOTOR_STOP_HIGH
         else:
-            y[X.x_motor_in] = p[K.position_min_in]
+            y[X.x_motor_in] = p[P.position_min_in]
             u[U.motor_regime] = MOTOR_STOP_LOW
         y[X.v_motor_in_s] = 0.0
         return
@@ -338,7 +338,7 @@ def settle(t: float, y: FloatArray, p: FloatArray, u: FloatArray) -> None:  # no
         u[U.rate_segment] = sv
         u[U.current_segment] = si
         u[U.pwm_region] = sp
-    u[U.gear_segment] = gt.dead_zone_segment(y[X.x_motor_in] - y[X.x_surface_in], p[K.half_backlash_in])
+    u[U.gear_segment] = gt.dead_zone_segment(y[X.x_motor_in] - y[X.x_surface_in], p[P.half_backlash_in])
     motor = int(u[U.motor_regime])
     _, _, fapp = forces(p, y, u)
     fc, fs = friction_levels(p, u)
@@ -349,12 +349,12 @@ def settle(t: float, y: FloatArray, p: FloatArray, u: FloatArray) -> None:  # no
     elif motor in (MOTOR_SLIP_POS, MOTOR_SLIP_NEG):
         if motor * v_motor < 0.0 or (v_motor == 0.0 and motor * (fapp - motor * fc) < 0.0):
             motor_stops_or_reverses(p, y, u)
-        elif motor == MOTOR_SLIP_POS and y[X.x_motor_in] >= p[K.position_max_in]:
-            y[X.x_motor_in] = p[K.position_max_in]
+        elif motor == MOTOR_SLIP_POS and y[X.x_motor_in] >= p[P.position_max_in]:
+            y[X.x_motor_in] = p[P.position_max_in]
             y[X.v_motor_in_s] = 0.0
             u[U.motor_regime] = MOTOR_STOP_HIGH
-        elif motor == MOTOR_SLIP_NEG and y[X.x_motor_in] <= p[K.position_min_in]:
-            y[X.x_motor_in] = p[K.position_min_in]
+        elif motor == MOTOR_SLIP_NEG and y[X.x_motor_in] <= p[P.position_min_in]:
+            y[X.x_motor_in] = p[P.position_min_in]
             y[X.v_motor_in_s] = 0.0
             u[U.motor_regime] = MOTOR_STOP_LOW
     elif motor == MOTOR_STOP_HIGH and fapp < -fs:
@@ -363,8 +363,8 @@ def settle(t: float, y: FloatArray, p: FloatArray, u: FloatArray) -> None:  # no
         u[U.motor_regime] = MOTOR_SLIP_POS
     surface = int(u[U.surface_regime])
     _, f, _ = forces(p, y, u)
-    net = f + u[U.hinge_moment_inlb] / p[K.crank_arm_in]
-    fh = p[K.hinge_friction_lbf]
+    net = f + u[U.hinge_moment_inlb] / p[P.crank_arm_in]
+    fh = p[P.hinge_friction_lbf]
     v_surface = y[X.v_surface_in_s]
     if surface == 0:
         if abs(net) > fh:
@@ -398,17 +398,17 @@ def flags_at(p: FloatArray, y: FloatArray, u: FloatArray) -> int:
     flags = 0
     if u[U.power] > 0.5:
         vc_raw, ic_raw, vd, _ = drive(p, y, u)
-        flags |= drive_flags(saturation_segment(vc_raw, p[K.rate_limit_in_s]),
-                             saturation_segment(ic_raw, p[K.current_limit_a]),
-                             pwm_segment(vd, p[K.pwm_dead_band_v], p[K.pwm_max_duty_ratio] * y[X.bus_v]),
+        flags |= drive_flags(saturation_segment(vc_raw, p[P.rate_limit_in_s]),
+                             saturation_segment(ic_raw, p[P.current_limit_a]),
+                             pwm_segment(vd, p[P.pwm_dead_band_v], p[P.pwm_max_duty_ratio] * y[X.bus_v]),
                              y[X.v_motor_in_s])
-        if u[U.command_in] >= p[K.position_max_in] or u[U.command_in] <= p[K.position_min_in]:
+        if u[U.command_in] >= p[P.position_max_in] or u[U.command_in] <= p[P.position_min_in]:
             flags |= FLAG_POSITION
     else:
         flags |= FLAG_BRAKE
     if abs(u[U.motor_regime]) == 2.0:
         flags |= FLAG_POSITION
-    if gt.dead_zone_segment(y[X.x_motor_in] - y[X.x_surface_in], p[K.half_backlash_in]) == 0:
+    if gt.dead_zone_segment(y[X.x_motor_in] - y[X.x_surface_in], p[P.half_backlash_in]) == 0:
         flags |= FLAG_FREE_PLAY
     return flags
 
@@ -463,23 +463,23 @@ def run_continuous(params: FloatArray, states: FloatArray, inputs: FloatArray, s
         y = states[i]
         u = inputs[i]
         u[U.power] = power[i]
-        h_max = 0.05 / p[K.lvdt_filter_rad_s]
+        h_max = 0.05 / p[P.lvdt_filter_rad_s]
         t = t0
         jh = zoh_index(bp_t, t, 0)
         js = 0
         while True:
-            u[U.command_in] = min(max(cmd_in[i, jh], p[K.position_min_in]), p[K.position_max_in])
+            u[U.command_in] = min(max(cmd_in[i, jh], p[P.position_min_in]), p[P.position_max_in])
             u[U.hinge_moment_inlb] = bp_h[i, jh]
             settle(t, y, p, u)
             while js < k_samples and sample_t[js] <= t + TIME_EPS_S:
                 row = out[i, js]
-                row[O_POS] = y[X.lvdt_filtered_in] * p[K.deg_per_in]
-                row[O_SURF] = y[X.x_surface_in] * p[K.deg_per_in]
-                row[O_RATE] = y[X.v_motor_in_s] * p[K.deg_per_in]
+                row[O_POS] = y[X.lvdt_filtered_in] * p[P.deg_per_in]
+                row[O_SURF] = y[X.x_surface_in] * p[P.deg_per_in]
+                row[O_RATE] = y[X.v_motor_in_s] * p[P.deg_per_in]
                 row[O_CUR] = y[X.current_a]
                 row[O_BUS] = y[X.bus_v] if u[U.power] > 0.5 else 0.0
                 flags = flags_at(p, y, u)
-                if cmd_in[i, jh] > p[K.position_max_in] or cmd_in[i, jh] < p[K.position_min_in]:
+                if cmd_in[i, jh] > p[P.position_max_in] or cmd_in[i, jh] < p[P.position_min_in]:
                     flags |= FLAG_POSITION
                 row[O_FLAGS] = flags
                 js += 1

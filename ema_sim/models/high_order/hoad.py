@@ -27,7 +27,7 @@ from ema_sim.models.high_order.figure30 import (
     motor_current_step,
     servo_drive,
 )
-from ema_sim.models.high_order.params import K, X
+from ema_sim.models.high_order.params import P, X
 from ema_sim.models.stages import (
     FLAG_BRAKE,
     FLAG_FREE_PLAY,
@@ -52,7 +52,7 @@ def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, b
     Parameters
     ----------
     params : numpy.ndarray
-        Kernel parameters, one row per instance (:data:`~ema_sim.models.high_order.params.K`).
+        Kernel parameters, one row per instance (:data:`~ema_sim.models.high_order.params.P`).
     c0, c1, c2, c3 : float
         The channel's command calibration (degrees → volts).
     bp_u : numpy.ndarray
@@ -65,11 +65,11 @@ def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, b
     quant_any = False
     noise_any = False
     for i in range(params.shape[0]):
-        quant_any = quant_any or params[i, K.quantization_v] > 0.0
-        noise_any = noise_any or params[i, K.command_noise_v] > 0.0
+        quant_any = quant_any or params[i, P.quantization_v] > 0.0
+        noise_any = noise_any or params[i, P.command_noise_v] > 0.0
     for i in range(params.shape[0]):
-        dpi = params[i, K.deg_per_in]
-        quant = params[i, K.quantization_v]
+        dpi = params[i, P.deg_per_in]
+        quant = params[i, P.quantization_v]
         for j in range(bp_u.shape[1]):
             u = bp_u[i, j]
             if not quant_any and not noise_any:
@@ -112,20 +112,20 @@ def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UI
     float
         The position feedback the FMU reads (deg).
     """
-    deg = float(lvdt_in * p[K.deg_per_in])
-    if p[K.quantization_v] <= 0.0 and p[K.feedback_noise_v] <= 0.0:
+    deg = float(lvdt_in * p[P.deg_per_in])
+    if p[P.quantization_v] <= 0.0 and p[P.feedback_noise_v] <= 0.0:
         return deg
-    c0, c1 = p[K.feedback_cal_c0_deg], p[K.feedback_cal_c1_deg_per_v]
-    c2, c3 = p[K.feedback_cal_c2_deg_per_v2], p[K.feedback_cal_c3_deg_per_v3]
+    c0, c1 = p[P.feedback_cal_c0_deg], p[P.feedback_cal_c1_deg_per_v]
+    c2, c3 = p[P.feedback_cal_c2_deg_per_v2], p[P.feedback_cal_c3_deg_per_v3]
     volts = cubic_inverse(c0, c1, c2, c3, deg, FEEDBACK_TOL)
-    if p[K.feedback_noise_v] > 0.0:
-        bw = p[K.noise_bandwidth_hz]
+    if p[P.feedback_noise_v] > 0.0:
+        bw = p[P.noise_bandwidth_hz]
         decay = math.exp(-TWO_PI * bw * max(s - x[X.feedback_noise_time_s], 0.0)) if bw > 0.0 else 0.0
-        innovation = p[K.feedback_noise_v] * math.sqrt(1.0 - decay * decay)
+        innovation = p[P.feedback_noise_v] * math.sqrt(1.0 - decay * decay)
         x[X.feedback_noise_v] = nz.band_limited_step(x[X.feedback_noise_v], decay, innovation, rng)
         x[X.feedback_noise_time_s] = s
         volts += x[X.feedback_noise_v]
-    return cubic(c0, c1, c2, c3, quantize(volts, p[K.quantization_v]))
+    return cubic(c0, c1, c2, c3, quantize(volts, p[P.quantization_v]))
 
 
 DELAY_STEP_EPS = 1e-9
@@ -206,38 +206,38 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         rng = rngs[i]
         buf = buffers[i]
         nbuf = buf.shape[0]
-        kp, vmax, kv = p[K.position_gain_per_s], p[K.rate_limit_in_s], p[K.velocity_gain_a_per_in_s]
-        imax, kc = p[K.current_limit_a], p[K.current_gain_v_per_a]
-        vdb, duty = p[K.pwm_dead_band_v], p[K.pwm_max_duty_ratio]
-        ki_dt = p[K.position_integral_per_s2] * dt
-        r = p[K.stator_resistance_ohm]
-        ke = p[K.back_emf_v_per_in_s]
-        kf = p[K.force_per_amp_lbf_per_a]
-        arm = p[K.crank_arm_in]
-        vsup = p[K.bus_supply_v]
-        rsrc = p[K.bus_source_resistance_ohm]
-        xmin = p[K.position_min_in]
-        xmax = p[K.position_max_in]
-        delay = p[K.command_delay_s]
-        dt_m = dt / p[K.motor_mass_lbs2_per_in]
-        dt_s = dt / p[K.surface_mass_lbs2_per_in]
+        kp, vmax, kv = p[P.position_gain_per_s], p[P.rate_limit_in_s], p[P.velocity_gain_a_per_in_s]
+        imax, kc = p[P.current_limit_a], p[P.current_gain_v_per_a]
+        vdb, duty = p[P.pwm_dead_band_v], p[P.pwm_max_duty_ratio]
+        ki_dt = p[P.position_integral_per_s2] * dt
+        r = p[P.stator_resistance_ohm]
+        ke = p[P.back_emf_v_per_in_s]
+        kf = p[P.force_per_amp_lbf_per_a]
+        arm = p[P.crank_arm_in]
+        vsup = p[P.bus_supply_v]
+        rsrc = p[P.bus_source_resistance_ohm]
+        xmin = p[P.position_min_in]
+        xmax = p[P.position_max_in]
+        delay = p[P.command_delay_s]
+        dt_m = dt / p[P.motor_mass_lbs2_per_in]
+        dt_s = dt / p[P.surface_mass_lbs2_per_in]
         inv_arm = 1.0 / arm
         inv_r = 1.0 / r
-        decay_i = math.exp(-r * dt / p[K.inductance_h])
-        g_lf = 1.0 - math.exp(-p[K.lvdt_filter_rad_s] * dt)
-        decay_bus = math.exp(-dt / (rsrc * p[K.bus_capacitance_f]))
-        a_cmd = math.exp(-TWO_PI * p[K.noise_bandwidth_hz] * dt) if p[K.noise_bandwidth_hz] > 0.0 else 0.0
-        w_cmd = p[K.command_noise_v] * math.sqrt(1.0 - a_cmd * a_cmd)
-        n_delay, w_fb = split_delay(p[K.feedback_delay_s], dt)
+        decay_i = math.exp(-r * dt / p[P.inductance_h])
+        g_lf = 1.0 - math.exp(-p[P.lvdt_filter_rad_s] * dt)
+        decay_bus = math.exp(-dt / (rsrc * p[P.bus_capacitance_f]))
+        a_cmd = math.exp(-TWO_PI * p[P.noise_bandwidth_hz] * dt) if p[P.noise_bandwidth_hz] > 0.0 else 0.0
+        w_cmd = p[P.command_noise_v] * math.sqrt(1.0 - a_cmd * a_cmd)
+        n_delay, w_fb = split_delay(p[P.feedback_delay_s], dt)
         n_delay = min(n_delay, nbuf - 2)
         _, w_cmd_delay = split_delay(delay, dt)
         delay_lo = delay - w_cmd_delay * dt  # whole steps (the delay itself when it is whole)
         delay_hi = delay_lo + dt
         on = power[i] > 0.5
-        brake = 0.0 if on else p[K.brake_holding_lbf]
-        fc = p[K.coulomb_friction_lbf] + brake
-        fs = p[K.stiction_lbf] + brake
-        fh = p[K.hinge_friction_lbf]
+        brake = 0.0 if on else p[P.brake_holding_lbf]
+        fc = p[P.coulomb_friction_lbf] + brake
+        fs = p[P.stiction_lbf] + brake
+        fh = p[P.hinge_friction_lbf]
         xm = x[X.x_motor_in]
         vm = x[X.v_motor_in_s]
         xs = x[X.x_surface_in]
@@ -262,8 +262,8 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
                     older = buf[head - n_delay - 1 if head > n_delay else head - n_delay - 1 + nbuf]
                     lagged += w_fb * (older - lagged)
                 row[O_POS] = feedback_deg(p, lagged, sample_t[js], x, rng)
-                row[O_SURF] = xs * p[K.deg_per_in]
-                row[O_RATE] = vm * p[K.deg_per_in]
+                row[O_SURF] = xs * p[P.deg_per_in]
+                row[O_RATE] = vm * p[P.deg_per_in]
                 row[O_CUR] = cur
                 row[O_BUS] = vbus if on else 0.0
                 row[O_FLAGS] = flags

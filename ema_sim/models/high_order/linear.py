@@ -14,7 +14,7 @@ import numpy as np
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.high_order.figure30 import total_deflection, total_force
-from ema_sim.models.high_order.params import HighOrderParams, K
+from ema_sim.models.high_order.params import HighOrderParams, P
 from ema_sim.parameters import slots
 
 STATES = ("x_motor_in", "v_motor_in_s", "x_surface_in", "v_surface_in_s", "current_a", "lvdt_filtered_in",
@@ -80,22 +80,22 @@ def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound:
         The matrices and delays.
     """
     v = params.kernel_vector(figure33=figure33, bound=bound, hysteresis=False, noise=False)
-    force = -hinge_moment_inlb / v[K.crank_arm_in]
+    force = -hinge_moment_inlb / v[P.crank_arm_in]
     if figure33:
         _, kt, _ = total_force(v, total_deflection(v, force))
-        seg_c = (v[K.actuator_c1_in_per_lbf], v[K.actuator_c2_in_per_lbf], v[K.actuator_c3_in_per_lbf])
-        f1, f2 = v[K.actuator_f1_lbf], v[K.actuator_f2_lbf]
+        seg_c = (v[P.actuator_c1_in_per_lbf], v[P.actuator_c2_in_per_lbf], v[P.actuator_c3_in_per_lbf])
+        f1, f2 = v[P.actuator_f1_lbf], v[P.actuator_f2_lbf]
         ca = seg_c[0] if abs(force) < f1 else (seg_c[1] if abs(force) < f2 else seg_c[2])
-        damping = v[K.linkage_damping_lbf_s_per_in]
+        damping = v[P.linkage_damping_lbf_s_per_in]
     else:
-        kt = v[K.series_stiffness_lbf_per_in]
+        kt = v[P.series_stiffness_lbf_per_in]
         # figure 32: LVDT = x_surface + F/K_backup, beyond the backlash
-        ca = 1.0 / v[K.series_stiffness_lbf_per_in] - 1.0 / v[K.backup_stiffness_lbf_per_in]
-        damping = v[K.gear_damping_lbf_s_per_in]
-    kp, kv, kc = v[K.position_gain_per_s], v[K.velocity_gain_a_per_in_s], v[K.current_gain_v_per_a]
-    r, ll, kf = v[K.stator_resistance_ohm], v[K.inductance_h], v[K.force_per_amp_lbf_per_a]
-    mm, ms, wf, dpi = v[K.motor_mass_lbs2_per_in], v[K.surface_mass_lbs2_per_in], v[K.lvdt_filter_rad_s], \
-        v[K.deg_per_in]
+        ca = 1.0 / v[P.series_stiffness_lbf_per_in] - 1.0 / v[P.backup_stiffness_lbf_per_in]
+        damping = v[P.gear_damping_lbf_s_per_in]
+    kp, kv, kc = v[P.position_gain_per_s], v[P.velocity_gain_a_per_in_s], v[P.current_gain_v_per_a]
+    r, ll, kf = v[P.stator_resistance_ohm], v[P.inductance_h], v[P.force_per_amp_lbf_per_a]
+    mm, ms, wf, dpi = v[P.motor_mass_lbs2_per_in], v[P.surface_mass_lbs2_per_in], v[P.lvdt_filter_rad_s], \
+        v[P.deg_per_in]
     a = np.zeros((7, 7))
     b = np.zeros((7, 2))
     xm, vm, xs, vs, cur, lf, xi = (L.x_motor_in, L.v_motor_in_s, L.x_surface_in, L.v_surface_in_s, L.current_a,
@@ -107,8 +107,8 @@ def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound:
     a[cur, lf] = -g * kv * kp
     a[cur, xi] = g * kv
     b[cur, 0] = g * kv * kp / dpi
-    a[xi, lf] = -v[K.position_integral_per_s2]
-    b[xi, 0] = v[K.position_integral_per_s2] / dpi
+    a[xi, lf] = -v[P.position_integral_per_s2]
+    b[xi, 0] = v[P.position_integral_per_s2] / dpi
     # motor and surface through the linearized gear train
     a[xm, vm] = 1.0
     a[vm, cur] = kf / mm
@@ -121,7 +121,7 @@ def linearize(params: HighOrderParams, hinge_moment_inlb: float = 0.0, *, bound:
     a[vs, xs] = -kt / ms
     a[vs, vm] = damping / ms
     a[vs, vs] = -damping / ms
-    b[vs, 1] = 1.0 / (v[K.crank_arm_in] * ms)
+    b[vs, 1] = 1.0 / (v[P.crank_arm_in] * ms)
     # LVDT (motor-side position less the in-loop compliance) and its filter
     a[lf, xm] = wf * (1.0 - ca * kt)
     a[lf, xs] = wf * ca * kt

@@ -27,7 +27,7 @@ from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
 from ema_sim.models.high_order.figure30 import MOTOR_STUCK
 from ema_sim.models.high_order.hoac1 import N_U, U, run_continuous
 from ema_sim.models.high_order.hoad import DELAY_STEP_EPS, command_in, run_discrete
-from ema_sim.models.high_order.params import BOUNDS, N_CONTINUOUS, N_STATE, SECTION, HighOrderParams, K, X
+from ema_sim.models.high_order.params import BOUNDS, N_CONTINUOUS, N_STATE, SECTION, HighOrderParams, P, X
 from ema_sim.models.high_order.trim import equilibrium
 from ema_sim.parameters import Slots, metas
 
@@ -88,7 +88,7 @@ class HighOrderModel(ActuatorModel):
     figure33: ClassVar[bool] = False
     params_class: ClassVar[type] = HighOrderParams
     params_section: ClassVar[str] = SECTION
-    params_layout: ClassVar[Slots | None] = K
+    params_layout: ClassVar[Slots | None] = P
 
     def __init__(
         self,
@@ -129,7 +129,7 @@ class HighOrderModel(ActuatorModel):
         ])
         # a delay between two steps blends the inputs of both (:func:`~ema_sim.models.high_order.hoad.split_delay`)
         step = 1.0 / self.rate_hz if not self.continuous and self.rate_hz else 0.0
-        self._max_delay_s = float(self._P[:, K.command_delay_s].max()) + step
+        self._max_delay_s = float(self._P[:, P.command_delay_s].max()) + step
         self._power = np.ones(self.n)
         self.trim()
 
@@ -192,9 +192,9 @@ class HighOrderModel(ActuatorModel):
         out = np.empty(self.n)
         for i in range(self.n):
             p = self._P[i]
-            target = position_deg[i] / p[K.deg_per_in]
+            target = position_deg[i] / p[P.deg_per_in]
             eq = equilibrium(p, target, float(hinge_moment_inlb[i]), self._power[i] > 0.5)
-            out[i] = (2.0 * target - eq["lf"]) * p[K.deg_per_in] if eq["motor"] == MOTOR_STUCK else position_deg[i]
+            out[i] = (2.0 * target - eq["lf"]) * p[P.deg_per_in] if eq["motor"] == MOTOR_STUCK else position_deg[i]
         return out
 
     def stream_seeds(self) -> list[int]:
@@ -276,7 +276,7 @@ class Hoad2(HighOrderModel):
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
         dt = 1.0 / self.rate_hz
-        nbuf = math.floor(float(self._P[:, K.feedback_delay_s].max()) / dt + DELAY_STEP_EPS) + 2
+        nbuf = math.floor(float(self._P[:, P.feedback_delay_s].max()) / dt + DELAY_STEP_EPS) + 2
         self._X = np.zeros((self.n, N_STATE))
         self._buf = np.zeros((self.n, nbuf))
         for i, eq in enumerate(self._equilibria(command_deg, hinge_moment_inlb)):

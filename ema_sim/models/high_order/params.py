@@ -6,7 +6,7 @@ their metadata (:mod:`ema_sim.parameters`) gives unit, range, description, switc
 The kernel works in ball-screw units (in, in/s, lbf) and SI electrical units: each field declares
 its kernel name (unit in the name) and its conversion; slots that no single parameter fills
 (options, figure 33's curves at a compliance bound, the feedback calibration) are listed in
-:data:`KERNEL_EXTRA`. :data:`K` is the generated layout, :data:`X` the state layout.
+:data:`KERNEL_EXTRA`. :data:`P` is the generated layout, :data:`X` the state layout.
 
 Where the report publishes no number the values are illustrative (``config/*.yaml`` says which);
 section 3.2 puts the parametric uncertainty of a model built without the manufacturer's data at 10 to
@@ -125,15 +125,15 @@ class HighOrderParams:
     gear_damping_lbf_s_per_in: float = pm.param("lbf·s/in", "gear-train damping in contact (figure 32)",
                                                 kernel="gear_damping_lbf_s_per_in", **NONNEG)
     # channel geometry (tables 1, A2)
-    crank_arm_in: float = pm.param("in", "servo crank arm: force ↔ hinge moment, travel ↔ angle (stage 13)",
-                                   channel="crank_arm_in", kernel="crank_arm_in", **POS)
-    surface_inertia_inlbs2: float = pm.param(
-        "in·lb·s²", "surface inertia (stage 14, table A2)", channel="surface_inertia_inlbs2",
-        kernel="surface_mass_lbs2_per_in", to_kernel=lambda p: p.surface_mass_lbs2_per_in, **POS)
-    position_min_deg: float = pm.param("deg", "lower mechanical stop", channel="position_min_deg",
-                                       kernel="position_min_in", to_kernel=lambda p: p.position_min_deg / p.deg_per_in)
-    position_max_deg: float = pm.param("deg", "upper mechanical stop", channel="position_max_deg",
-                                       kernel="position_max_in", to_kernel=lambda p: p.position_max_deg / p.deg_per_in)
+    crank_arm_in: float = pm.linked(ChannelConfig, "crank_arm_in", description="servo crank arm: force ↔ hinge "
+                                    "moment, travel ↔ angle (stage 13)", kernel="crank_arm_in")
+    surface_inertia_inlbs2: float = pm.linked(
+        ChannelConfig, "surface_inertia_inlbs2", description="surface inertia (stage 14, table A2)",
+        kernel="surface_mass_lbs2_per_in", to_kernel=lambda p: p.surface_mass_lbs2_per_in)
+    position_min_deg: float = pm.linked(ChannelConfig, "position_min_deg", description="lower mechanical stop",
+                                        kernel="position_min_in", to_kernel=lambda p: p.position_min_deg / p.deg_per_in)
+    position_max_deg: float = pm.linked(ChannelConfig, "position_max_deg", description="upper mechanical stop",
+                                        kernel="position_max_in", to_kernel=lambda p: p.position_max_deg / p.deg_per_in)
     # flight/test environment (zero for HOAC1)
     command_delay_s: float = _environment("s", "command to first motion (stage 1; HOAD3: 4 ms, 2.3)",
                                           kernel="command_delay_s")
@@ -176,10 +176,7 @@ class HighOrderParams:
         "in·lb", "load amplitude of the anticipated motion that sets the average stiffness (figure 36)",
         section="hoad3", **POS)
 
-    RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (
-        ("coulomb_friction_lbf", "<=", "stiction_lbf"),
-        ("position_min_deg", "<", "position_max_deg"),
-    )
+    RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("coulomb_friction_lbf", "<=", "stiction_lbf"),)
 
     @classmethod
     def from_channel(cls, channel: ChannelConfig, variant: str = "hoad3", **overrides: Any) -> HighOrderParams:
@@ -206,9 +203,8 @@ class HighOrderParams:
         section = channel.section(SECTION)
         if not section:
             raise ConfigError(f"{channel.channel}: no {SECTION} section")
-        base = {n: getattr(channel, m.channel) for n, m in pm.metas(cls).items() if m.channel}
         return pm.load(cls, section, origin=channel.channel, family=FAMILY, section=SECTION, overrides=overrides,
-                       options=OPTIONS, variant=variant, base=base)
+                       options=OPTIONS, variant=variant, source=channel)
 
     def validate(self) -> None:
         """Reject values no actuator can have (one message naming the parameter)."""
@@ -315,7 +311,7 @@ class HighOrderParams:
 
     def kernel_vector(self, *, figure33: bool, bound: float = 0.0, hysteresis: bool = False, noise: bool = True,
                       feedback_cal: tuple[float, float, float, float] = (0.0, 1.0, 0.0, 0.0)) -> FloatArray:
-        """The parameters in kernel order (the :data:`K` slots), in kernel units (SI electrical, in, lbf).
+        """The parameters in kernel order (the :data:`P` slots), in kernel units (SI electrical, in, lbf).
 
         Parameters
         ----------
@@ -333,7 +329,7 @@ class HighOrderParams:
         Returns
         -------
         numpy.ndarray
-            One float per slot of :data:`K`.
+            One float per slot of :data:`P`.
         """
         total, actuator = self.curves(bound)
         total_k = gt.three_segment_breakpoints(*total)
@@ -352,7 +348,7 @@ class HighOrderParams:
         if h > 0.0:
             k_avg = gt.hysteresis_average_stiffness(self.hysteresis_reference_load_inlb / self.crank_arm_in, total_k)
             extra["hysteresis_coefficient_s"] = gt.hysteresis_coefficient(h, self.hysteresis_freq_rad_s, k_avg)
-        return pm.kernel_vector(source, K, extra)
+        return pm.kernel_vector(source, P, extra)
 
 
 TOTAL_CURVE = ("total_f1_lbf", "total_f2_lbf", "total_d1_in", "total_d2_in", "total_k1_lbf_per_in",
@@ -368,8 +364,8 @@ KERNEL_EXTRA = ("force_per_amp_lbf_per_a", "deg_per_in", "figure33", *TOTAL_CURV
                 "hysteresis_coefficient_s", *FEEDBACK_CAL)
 """Kernel slots no single parameter fills: derived from several, options, the channel's calibration."""
 
-K = pm.kernel_layout(HighOrderParams, KERNEL_EXTRA)
-"""Kernel slots, generated from the declared kernel names (``p[K.position_gain_per_s]``)."""
+P = pm.kernel_layout(HighOrderParams, KERNEL_EXTRA)
+"""Kernel slots, generated from the declared kernel names (``p[P.position_gain_per_s]``)."""
 
 X = pm.slots("HighOrderState", (
     "x_motor_in", "v_motor_in_s", "x_surface_in", "v_surface_in_s", "current_a", "lvdt_filtered_in", "bus_v",

@@ -19,7 +19,7 @@ from ema_sim.models.high_order.figure30 import (
     steady_bus_voltage,
     total_deflection,
 )
-from ema_sim.models.high_order.params import K
+from ema_sim.models.high_order.params import P
 from ema_sim.models.stages import FLAG_BRAKE, FLAG_FREE_PLAY, FLAG_POSITION, FLAG_PWM_DEAD_BAND
 
 
@@ -36,7 +36,7 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
     Parameters
     ----------
     p : numpy.ndarray
-        Kernel parameters (:data:`~ema_sim.models.high_order.params.K`).
+        Kernel parameters (:data:`~ema_sim.models.high_order.params.P`).
     x_command_in : float
         The held command after stage 2 (in).
     hinge_moment_inlb : float
@@ -50,10 +50,10 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
         ``xm``, ``xs`` (in), ``cur`` (A), ``lf`` (in), ``vbus`` (V), ``xi`` (in/s), ``motor`` (regime)
         and ``flags``.
     """
-    xc = min(max(x_command_in, p[K.position_min_in]), p[K.position_max_in])
-    force = -hinge_moment_inlb / p[K.crank_arm_in]
-    kf, kp, kv = p[K.force_per_amp_lbf_per_a], p[K.position_gain_per_s], p[K.velocity_gain_a_per_in_s]
-    kc, r, vdb = p[K.current_gain_v_per_a], p[K.stator_resistance_ohm], p[K.pwm_dead_band_v]
+    xc = min(max(x_command_in, p[P.position_min_in]), p[P.position_max_in])
+    force = -hinge_moment_inlb / p[P.crank_arm_in]
+    kf, kp, kv = p[P.force_per_amp_lbf_per_a], p[P.position_gain_per_s], p[P.velocity_gain_a_per_in_s]
+    kc, r, vdb = p[P.current_gain_v_per_a], p[P.stator_resistance_ohm], p[P.pwm_dead_band_v]
     i_db = vdb / (kc + r)
     motor = MOTOR_STUCK
     cur = 0.0
@@ -61,33 +61,33 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
     xi = 0.0
     if powered:
         cur = force / kf
-        if abs(cur) > p[K.current_limit_a] - i_db + p[K.stiction_lbf] / kf:
+        if abs(cur) > p[P.current_limit_a] - i_db + p[P.stiction_lbf] / kf:
             motor = MOTOR_STOP_HIGH if hinge_moment_inlb > 0.0 else MOTOR_STOP_LOW
             cur = 0.0
         elif cur != 0.0:
             ic = cur + math.copysign(i_db, cur)
-            if p[K.position_integral_per_s2] > 0.0:
+            if p[P.position_integral_per_s2] > 0.0:
                 xi = ic / kv
             else:
                 lf = xc - ic / (kv * kp)
     if motor == MOTOR_STUCK:
         xm, xs = positions_from_lvdt(p, lf, force)
     else:
-        xm = p[K.position_max_in] if motor == MOTOR_STOP_HIGH else p[K.position_min_in]
+        xm = p[P.position_max_in] if motor == MOTOR_STOP_HIGH else p[P.position_min_in]
         lf, xs, cur = at_stop(p, xm, xc, force)
     volts = r * cur
     power = volts * cur
-    vbus = steady_bus_voltage(p[K.bus_supply_v], p[K.bus_source_resistance_ohm], power) if powered else \
-        p[K.bus_supply_v]
+    vbus = steady_bus_voltage(p[P.bus_supply_v], p[P.bus_source_resistance_ohm], power) if powered else \
+        p[P.bus_supply_v]
     flags = 0 if powered else FLAG_BRAKE
     if powered and cur == 0.0:
         flags |= FLAG_PWM_DEAD_BAND
     if motor != MOTOR_STUCK or x_command_in != xc:
         flags |= FLAG_POSITION
-    if p[K.figure33] > 0.5:
-        free = abs(force) <= p[K.total_f1_lbf]
+    if p[P.figure33] > 0.5:
+        free = abs(force) <= p[P.total_f1_lbf]
     else:
-        free = gt.dead_zone_segment(xm - xs, p[K.half_backlash_in]) == 0
+        free = gt.dead_zone_segment(xm - xs, p[P.half_backlash_in]) == 0
     if free:
         flags |= FLAG_FREE_PLAY
     return {"xm": xm, "xs": xs, "cur": cur, "lf": lf, "vbus": vbus, "xi": xi, "motor": motor, "flags": flags}
@@ -110,12 +110,12 @@ def positions_from_lvdt(p: FloatArray, lvdt: float, force: float) -> tuple[float
     xm, xs : float
         Motor-side and surface positions (in).
     """
-    if p[K.figure33] > 0.5:
+    if p[P.figure33] > 0.5:
         xm = lvdt + actuator_deflection(p, force)
         d = total_deflection(p, force)
         return xm, xm - d
-    xs = lvdt - force / p[K.backup_stiffness_lbf_per_in]
-    d = 0.0 if force == 0.0 else force / p[K.series_stiffness_lbf_per_in] + math.copysign(p[K.half_backlash_in],
+    xs = lvdt - force / p[P.backup_stiffness_lbf_per_in]
+    d = 0.0 if force == 0.0 else force / p[P.series_stiffness_lbf_per_in] + math.copysign(p[P.half_backlash_in],
                                                                                         force)
     return xs + d, xs
 
@@ -141,15 +141,15 @@ def at_stop(p: FloatArray, xm: float, xc: float, force: float) -> tuple[float, f
     current : float
         The limited current pushing towards the command (A).
     """
-    if p[K.figure33] > 0.5:
+    if p[P.figure33] > 0.5:
         lvdt = xm - actuator_deflection(p, force)
         xs = xm - total_deflection(p, force)
     else:
-        d = 0.0 if force == 0.0 else force / p[K.series_stiffness_lbf_per_in] + math.copysign(p[K.half_backlash_in],
+        d = 0.0 if force == 0.0 else force / p[P.series_stiffness_lbf_per_in] + math.copysign(p[P.half_backlash_in],
                                                                                             force)
         xs = xm - d
-        lvdt = xs + force / p[K.backup_stiffness_lbf_per_in]
+        lvdt = xs + force / p[P.backup_stiffness_lbf_per_in]
     toward = math.copysign(1.0, xc - lvdt) if xc != lvdt else 0.0
-    i_db = p[K.pwm_dead_band_v] / (p[K.current_gain_v_per_a] + p[K.stator_resistance_ohm])
-    cur = toward * (p[K.current_limit_a] - i_db)
+    i_db = p[P.pwm_dead_band_v] / (p[P.current_gain_v_per_a] + p[P.stator_resistance_ohm])
+    cur = toward * (p[P.current_limit_a] - i_db)
     return lvdt, xs, cur

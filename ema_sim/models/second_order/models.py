@@ -70,7 +70,7 @@ class SecondOrderModel(ActuatorModel):
         )
         for prm in self.params:
             prm.validate()
-        self._P = np.stack([prm.vector() for prm in self.params])
+        self._P = np.stack([prm.kernel_vector() for prm in self.params])
         self._on = stage_set.kernel_set(int(stages_on_any(self._P)))
         """The stage set the fixed-step kernel is compiled for."""
         self._max_delay_s = float(self._P[:, P.delay_s].max())

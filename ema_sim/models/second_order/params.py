@@ -10,11 +10,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, replace
-from typing import ClassVar
 
 from ema_sim import parameters as pm
 from ema_sim.config import ChannelConfig
-from ema_sim.errors import UnknownNameError
 from ema_sim.models.base import FloatArray
 
 FAMILY = "second-order"
@@ -35,30 +33,29 @@ class SecondOrderParams:
                                uncertainty_source=FIGURE23)
     zeta: float = pm.param("-", "damping ratio ζ (figure 21)", min=0.05, max=3.0, kernel="zeta",
                            uncertainty=(0.5, 0.8), uncertainty_source=FIGURE23)
-    rate_limit_dps: float = pm.param(
-        "deg/s", "unloaded rate limit rl on the velocity command (3.1.2.1)", min=1.0, max=2000.0, off=INF,
-        kernel="rate_limit_dps")
+    rate_limit_dps: float = pm.linked(
+        ChannelConfig, "slew_rate_dps", description="unloaded rate limit rl on the velocity command: the "
+        "channel's unloaded slew (3.1.2.1, table 1)", off=INF, kernel="rate_limit_dps")
     k2_dps_per_lb: float = pm.param("deg/s/lbf", "rate-limit slope K2 with the load hm/marm (3.1.2.1)", min=0.0,
                                     max=1.0, off=0.0, kernel="k2_dps_per_lb")
-    moment_arm_in: float = pm.param("in", "moment arm marm (the servo crank arm) of the rate limit's load term",
-                                    min=0.0, min_exclusive=True, channel="crank_arm_in", kernel="moment_arm_in")
-    position_min_deg: float = pm.param("deg", "lower position limit on the states (3.1.2.1)",
-                                       channel="position_min_deg", kernel="position_min_deg")
-    position_max_deg: float = pm.param("deg", "upper position limit on the states (3.1.2.1)",
-                                       channel="position_max_deg", kernel="position_max_deg")
+    moment_arm_in: float = pm.linked(ChannelConfig, "crank_arm_in", description="moment arm marm (the servo crank "
+                                     "arm) of the rate limit's load term", kernel="moment_arm_in")
+    position_min_deg: float = pm.linked(ChannelConfig, "position_min_deg", description="lower position limit on "
+                                        "the states (3.1.2.1)", kernel="position_min_deg")
+    position_max_deg: float = pm.linked(ChannelConfig, "position_max_deg", description="upper position limit on "
+                                        "the states (3.1.2.1)", kernel="position_max_deg")
     kb: float = pm.param("-", "command error slope: (1 + Kb)·u + offset (3.1.2.2)", min=-0.5, max=0.5, off=0.0,
                          kernel="kb")
     offset_deg: float = pm.param("deg", "command error bias (3.1.2.2)", min=-5.0, max=5.0, off=0.0,
                                  kernel="offset_deg")
     quantization_deg: float = pm.param("deg", "command quantization, the D/A resolution (3.1.2.2)", min=0.0,
                                        off=0.0, element="quantization", kernel="quantization_deg")
-    free_play_deg: float = pm.param(
-        "deg", "free play width, ±half in the limited double integrator (3.1.2.3, figure 29)", min=0.0, max=3.0,
-        off=0.0, channel="free_play_deg", kernel="free_play_deg", uncertainty=(0.171, 0.200),
-        uncertainty_source="section 2.4: 0.171° and 0.179° on vehicle 1, ≈ 0.200° on vehicles 2 and 3")
-    surface_inertia_inlbs2: float = pm.param(
-        "in·lb·s²", "surface inertia Is of the free-play subsystem (table A2)", min=0.0, min_exclusive=True,
-        channel="surface_inertia_inlbs2", kernel="surface_inertia_inlbs2")
+    free_play_deg: float = pm.linked(
+        ChannelConfig, "free_play_deg", description="free play width, ±half in the limited double integrator "
+        "(3.1.2.3, figure 29)", off=0.0, kernel="free_play_deg")
+    surface_inertia_inlbs2: float = pm.linked(
+        ChannelConfig, "surface_inertia_inlbs2", description="surface inertia Is of the free-play subsystem "
+        "(table A2)", kernel="surface_inertia_inlbs2")
     kcp_per_kinlb: float = pm.param("1/(1000 in·lb)", "compliance correction K_CP = 1 + kcp·(aiding load)/1000 "
                                     "(3.1.2.4)", off=0.0, kernel="kcp_per_kinlb")
     delay_s: float = pm.param("s", "time delay, command to first motion (2.3)", min=0.0, max=0.2, off=0.0,
@@ -120,8 +117,6 @@ class SecondOrderParams:
         "deg/(1000 in·lb)", "nonlinear LVDT compliance above the knee", min=0.0, max=10.0, default=0.0,
         kernel="lvdt_compliance_stiff_deg_per_kinlb")
 
-    RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("position_min_deg", "<", "position_max_deg"),)
-
     @classmethod
     def from_channel(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:
         """Defaults of a channel's ``second_order`` section and its physical data, then overrides.
@@ -138,9 +133,8 @@ class SecondOrderParams:
         SecondOrderParams
             The validated parameters.
         """
-        base = {n: getattr(channel, m.channel) for n, m in pm.metas(cls).items() if m.channel}
         return pm.load(cls, channel.section(SECTION), origin=channel.channel, family=FAMILY, section=SECTION,
-                       overrides=overrides, base=base)
+                       overrides=overrides, source=channel)
 
     @classmethod
     def basic(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:
@@ -158,13 +152,7 @@ class SecondOrderParams:
         SecondOrderParams
             The validated parameters.
         """
-        base = cls.from_channel(channel)
-        info = pm.metas(cls)
-        for key in overrides:
-            if key not in info:
-                raise UnknownNameError(f"{FAMILY} parameter", key, info)
-        off = pm.switched_off(cls)
-        return base.replace(**{**off, **{k: float(v) for k, v in overrides.items()}})
+        return cls.from_channel(channel, **{**pm.switched_off(cls), **overrides})
 
     def validate(self) -> None:
         """Reject values no actuator can have (one message naming the parameter)."""
@@ -197,7 +185,7 @@ class SecondOrderParams:
         """
         return asdict(self)
 
-    def vector(self) -> FloatArray:
+    def kernel_vector(self) -> FloatArray:
         """The parameters in kernel order (the :data:`P` slots).
 
         Returns

@@ -1,0 +1,202 @@
+"""Whether a record's command is held between samples (the data contract) or sampled from a running demand.
+
+The contract's command is a digital value held by the D/A from one sample to the next: the actuator
+sees ``u[k]`` from ``t[k]`` on, so nothing it does at ``t[k]`` can answer ``u[k]`` (a physical
+actuator's position is continuous in time). Many bench loggers instead *sample* the drive's running
+demand, which the drive's own profile generator has been following between log samples: the logged
+change at ``t[k]`` happened somewhere in ``(t[k−1], t[k]]``, and the position may already have moved
+at the very sample where the logged demand changes.
+
+:func:`detect_command_hold` tests that causality directly. At every *onset* (the command changes
+after resting for a few samples while the output rests too) it asks whether the output has left its
+resting level, in the direction of the change, at the onset sample itself. Under a held command that
+happens only by chance (noise, a count toggling), at the rate measured on the resting samples just
+before the onsets; the binomial tail of the observed count against that rate decides (1 in 1000).
+
+Only step-like onsets can tell: under a sampled command the output moves past its noise band at
+the onset sample only when the change is large against that band (at least ten times it: the
+output then crosses the band once its response reaches a tenth of the change within the sample).
+A demand that leaves rest gently (a profile's acceleration, a sine) moves the output by nothing
+in one sample either way, and such a record cannot tell: held is assumed, as the contract says.
+
+What a sampled command means for the figures: a response to it is advanced by half a sample on
+average against the held-command model (the change happened uniformly within the sample before it
+was logged). Frequency responses are then not corrected for a hold; delays are measured against the
+sample at which the change was logged and may be negative down to one sample; the actuator's own
+delay is that figure plus half a sample, ± a sample/√12.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ema_sim.analysis.records.series import hold_tolerance
+
+FloatArray = NDArray[np.float64]
+
+REST_S = 0.05
+"""The command and the output rest this long (at least 3 samples) before an onset."""
+MIN_ONSETS = 3
+STEP_LIKE = 10.0
+"""An onset is step-like when its first change is this many times the output's detection band."""
+SIGNIFICANCE = 1e-3
+HoldMode = Literal["detect", "held", "sampled"]
+
+
+@dataclass(frozen=True)
+class CommandHold:
+    """How the command was logged, and the evidence.
+
+    Parameters
+    ----------
+    sampled : bool or None
+        True: sampled from a running demand; False: held (the contract); None: the record cannot tell.
+    onsets : int
+        Step-like command changes from rest examined.
+    same_sample : int
+        Onsets at which the output had already moved at the onset sample.
+    chance_rate : float
+        Share of resting samples that move as far by chance.
+    sample_s : float
+        The record's sample interval, s.
+    evidence : str
+        The finding in words.
+    source : str
+        ``detected`` from the signals, or ``given`` by the user.
+    """
+
+    sampled: bool | None
+    """True: sampled from a running demand; False: held (the contract); None: the record cannot tell."""
+    onsets: int
+    same_sample: int
+    """Onsets at which the output had already moved at the onset sample."""
+    chance_rate: float
+    """Share of resting samples that move as far by chance."""
+    sample_s: float
+    evidence: str
+    source: str = "detected"
+    """``detected`` from the signals, or ``given`` by the user."""
+
+    @property
+    def assumed_sampled(self) -> bool:
+        """What the analyses assume: sampled only when detected or given so (held is the contract's default)."""
+        return bool(self.sampled)
+
+    @property
+    def advance_s(self) -> float:
+        """Mean advance of a response to a sampled command against the held-command model: half a sample."""
+        return 0.5 * self.sample_s if self.assumed_sampled else 0.0
+
+    @property
+    def statement(self) -> str:
+        """One line for the report's header."""
+        if self.sampled is None:
+            return f"held assumed (the data contract); {self.evidence}"
+        word = "sampled (not held)" if self.sampled else "held"
+        return f"{word}: {self.evidence}"
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON.
+
+        Returns
+        -------
+        dict
+            ``sampled`` (true, false or null), the onset counts, the chance rate, the sample interval
+            and the evidence.
+        """
+        return {"sampled": self.sampled, "assumed": "sampled" if self.assumed_sampled else "held",
+                "onsets": self.onsets, "moved_at_onset_sample": self.same_sample, "chance_rate": self.chance_rate,
+                "sample_s": self.sample_s, "evidence": self.evidence, "source": self.source}
+
+
+def given(mode: HoldMode, sample_s: float) -> CommandHold:
+    """The user's statement of how the command was logged (``--command held|sampled``).
+
+    Parameters
+    ----------
+    mode : {"held", "sampled"}
+        What the user says.
+    sample_s : float
+        The record's sample interval, s.
+
+    Returns
+    -------
+    CommandHold
+        With ``source = "given"``.
+    """
+    return CommandHold(mode == "sampled", 0, 0, 0.0, sample_s, f"given (--command {mode})", "given")
+
+
+def _binomial_tail(k: int, n: int, p: float) -> float:
+    """P(X ≥ k) for X ~ Binomial(n, p)."""
+    from scipy.stats import binom  # noqa: PLC0415
+
+    return float(binom.sf(k - 1, n, p))
+
+
+def detect_command_hold(time_s: FloatArray, command: FloatArray, output: FloatArray, noise_sigma: float,
+                        resolution: float | None = None) -> CommandHold:
+    """Test whether the output answers command changes at the very sample they are logged.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times, s (uniform).
+    command : numpy.ndarray
+        The logged command.
+    output : numpy.ndarray
+        The measured output (the LVDT position when there is one).
+    noise_sigma : float
+        The output's noise floor (:func:`ema_sim.analysis.estimation.noise.output_noise`).
+    resolution : float, optional
+        The output's count, when it is logged in counts.
+
+    Returns
+    -------
+    CommandHold
+        ``sampled`` True, False, or None when there are fewer than 3 onsets from rest.
+    """
+    dt = float(np.median(np.diff(time_s)))
+    rest = max(3, round(REST_S / dt))
+    tol_u = hold_tolerance(command)
+    du = np.diff(command)
+    moving = np.abs(du) > tol_u
+    band = max(4.0 * noise_sigma, 1.5 * (resolution or 0.0), 1e-12)
+    onsets = same = 0
+    tries = exceed = 0
+    # Changes after rest: no change in the rest − 1 steps before (a running count of the moving steps).
+    count = np.concatenate([[0], np.cumsum(moving)])
+    k_all = np.flatnonzero(moving) + 1
+    k_all = k_all[k_all >= rest + 1]
+    quiet = count[k_all - 1] - count[k_all - rest] == 0
+    step_like = np.abs(du[k_all - 1]) >= STEP_LIKE * band
+    for k in k_all[quiet & step_like]:
+        pre = output[k - rest:k]
+        y0 = float(np.median(pre))
+        if np.any(np.abs(pre - y0) > band):
+            continue  # the output was not at rest
+        direction = np.sign(du[k - 1])
+        onsets += 1
+        same += int((output[k] - y0) * direction > band)
+        # The chance rate: resting samples that sit as far from the resting level, either way.
+        tries += 2 * (rest - 1)
+        exceed += int(np.sum(np.abs(pre[1:] - y0) > band))
+    if onsets < MIN_ONSETS:
+        return CommandHold(None, onsets, same, 0.0, dt, f"{onsets} step-like command change(s) from rest: too few "
+                           "to test whether the output answers at the sample of the change")
+    p0 = (exceed + 1.0) / (tries + 2.0)
+    tail = _binomial_tail(same, onsets, p0) if same else 1.0
+    sampled = same >= 2 and tail < SIGNIFICANCE
+    ms = 1e3 * dt
+    if sampled:
+        why = (f"the output had already moved at the sample where the command changes at {same} of {onsets} "
+               f"step-like changes from rest (chance {p0:.2g} a sample): the demand changed up to one sample "
+               f"({ms:.3g} ms) before it was logged")
+    else:
+        why = (f"the output stays at rest at the sample where the command changes ({same} of {onsets} step-like "
+               f"changes from rest moved there, chance {p0:.2g} a sample)")
+    return CommandHold(sampled, onsets, same, p0, dt, why)

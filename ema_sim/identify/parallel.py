@@ -1,0 +1,207 @@
+"""Independent fits of one identification on Dask: candidate fits of a round, the physics' shifted starts.
+
+A round of the effects search fits its few most promising candidates against the same current model
+(:func:`ema_sim.identify.stepwise.search`), and HOAD3's physics fits two more starts from the same point
+(:func:`ema_sim.identify.physical.fit_physical`); each fit is deterministic and independent of the others, so
+they run at once on Dask workers and the search takes their results in its own order, the same result as
+one after another. By default the workers are a :class:`distributed.LocalCluster` of
+:data:`DEFAULT_WORKERS` processes (one thread each: a fit's Python and its SVDs hold a thread), started in
+the background when identification begins so its start overlaps the baseline fit; ``scheduler`` sends
+them to a running Dask scheduler instead (``ema identify --scheduler ADDRESS``).
+
+A record under :data:`MIN_SAMPLES` fitted samples is fitted in the calling process: its fits take less
+than the cluster takes to start. The workers load the kernels numba cached on disk (``cache=True``;
+``python -m ema_sim.warmup`` compiles them all) and run one tiny simulation when they join, before the
+first fit reaches them.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from typing import Any
+
+from ema_sim.errors import EmaError
+
+DEFAULT_WORKERS = 2
+"""Worker processes of the local cluster."""
+MIN_SAMPLES = 40_000
+"""Fitted residual entries (samples × outputs) below which the fits stay in the calling process: a 10 s
+record of two outputs at 1 kHz (20,000) is fitted in a few seconds, less than a cluster's start and the
+workers' first loads from numba's cache."""
+ENV_WORKERS = "EMA_IDENTIFY_WORKERS"
+"""Environment override of the local cluster's size (0: no cluster, every fit in the calling process)."""
+
+
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+"""The variables Dask sets to 1 in a worker it spawns (``distributed.nanny.pre-spawn-environ``)."""
+
+
+def blas_environ() -> dict[str, str]:
+    """The calling process's BLAS thread count, for the local workers: the same sums in the same order.
+
+    Dask starts its workers with one BLAS thread; OpenBLAS splits a long dot product or matrix product
+    between its threads, so a fit's linear algebra on a worker would round differently in its last bits from
+    the same fit here. The workers get this process's count instead (its variable, or one thread per
+    core, OpenBLAS's default), and a fit on a worker is the fit made here, to the last bit.
+
+    Returns
+    -------
+    dict
+        Each of :data:`BLAS_THREADS` → the count.
+    """
+    given = next((os.environ[k] for k in BLAS_THREADS if os.environ.get(k)), None)
+    count = given or str(len(os.sched_getaffinity(0)))
+    return dict.fromkeys(BLAS_THREADS, count)
+
+
+def _warm() -> None:
+    """Load the identification simulator's kernels from numba's cache in a worker (one tiny batch)."""
+    import numpy as np  # noqa: PLC0415 - runs in a worker
+
+    from ema_sim.models.second_order import SecondOrder  # noqa: PLC0415 - runs in a worker
+
+    model = SecondOrder("left_wing", n=2)
+    t = np.arange(0.0, 0.1, 0.001)
+    model.run(t, np.where(t < 0.02, 0.0, 1.0), np.zeros_like(t))
+
+
+class Pool:
+    """Where a round's independent fits run: a Dask client (started in the background) or the calling process.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        A running Dask scheduler's address; without it a local cluster of ``workers`` processes.
+    workers : int, optional
+        Processes of the local cluster (default :data:`DEFAULT_WORKERS`, or :data:`ENV_WORKERS`); 0 or 1 fits
+        in the calling process.
+    """
+
+    def __init__(self, scheduler: str | None = None, workers: int | None = None) -> None:
+        if workers is None:
+            workers = int(os.environ.get(ENV_WORKERS, DEFAULT_WORKERS))
+        self.scheduler = scheduler or ""
+        self.workers = workers
+        self._client: Any = None
+        self._cluster: Any = None
+        self._error: BaseException | None = None
+        self._ready = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.failed = ""
+        """Why the local cluster could not be used (empty: it could, or none was asked for)."""
+
+    @property
+    def enabled(self) -> bool:
+        """Whether fits go to Dask (a scheduler given, or a local cluster of at least two workers)."""
+        return bool(self.scheduler) or self.workers >= 2
+
+    def start(self) -> None:
+        """Start the cluster (or connect to the scheduler) in the background; :meth:`client` waits for it."""
+        if not self.enabled or self._thread is not None:
+            return
+        self._thread = threading.Thread(target=self._connect, name="ema-identify-dask", daemon=True)
+        self._thread.start()
+
+    def _connect(self) -> None:
+        try:
+            from distributed import Client, LocalCluster  # noqa: PLC0415 - only when fits go to Dask
+
+            if not logging.getLogger().isEnabledFor(logging.INFO):
+                logging.getLogger("distributed").setLevel(logging.ERROR)
+            if self.scheduler:
+                try:
+                    self._client = Client(self.scheduler, timeout="20s")  # type: ignore[no-untyped-call]
+                except OSError as exc:
+                    raise EmaError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
+            else:
+                import dask  # noqa: PLC0415 - only when fits go to Dask
+
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": {
+                        **dask.config.get("distributed.nanny.pre-spawn-environ"), **blas_environ()}}):
+                    self._cluster = LocalCluster(  # type: ignore[no-untyped-call]
+                        n_workers=self.workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                        silence_logs=logging.ERROR)
+                self._client = Client(self._cluster)  # type: ignore[no-untyped-call]
+            self._client.run(_warm)
+        except Exception as exc:  # reported to the caller that waits for the client
+            self._error = exc
+        finally:
+            self._ready.set()
+
+    def client(self) -> Any:
+        """The Dask client once it is up (None when fits stay in the calling process).
+
+        A local cluster that cannot start leaves every fit in the calling process (:attr:`failed` says why).
+
+        Raises
+        ------
+        EmaError
+            The scheduler given could not be reached.
+        """
+        if not self.enabled:
+            return None
+        self.start()
+        self._ready.wait()
+        if self._error is not None:
+            if self.scheduler:
+                raise self._error if isinstance(self._error, EmaError) else EmaError(
+                    f"cannot use the Dask scheduler at {self.scheduler}: {self._error}")
+            self.failed = f"the local Dask cluster did not start ({self._error}): every fit ran in this process"
+            self.workers = 0  # the same result, one fit after another
+            return None
+        return self._client
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any] | Any:
+        """``fn(*args)`` on a worker (a Dask future), or its result computed here when fits stay here.
+
+        Parameters
+        ----------
+        fn : callable
+            A module-level function (pickled by reference).
+        *args : object
+            Its arguments (pickled).
+
+        Returns
+        -------
+        object
+            A future whose ``result()`` is the value, or the value itself.
+        """
+        client = self.client()
+        if client is None:
+            return fn(*args)
+        return client.submit(fn, *args, pure=False)
+
+    def close(self) -> None:
+        """Close the client and the local cluster (a scheduler given is left running)."""
+        if self._thread is not None:
+            self._ready.wait()
+        if self._client is not None:
+            self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+        self._client = self._cluster = None
+
+
+def result(value: Any) -> Any:
+    """The value of what :meth:`Pool.submit` returned (a future's result, or the value itself).
+
+    Parameters
+    ----------
+    value : object
+        A Dask future or a value.
+
+    Returns
+    -------
+    object
+        The value.
+    """
+    done = getattr(value, "result", None)
+    return done() if callable(done) else value
+
+
+SERIAL = Pool(workers=0)
+"""Every fit in the calling process."""
