@@ -37,7 +37,7 @@ def config_dir() -> Path:
     candidates.append(Path(__file__).resolve().parents[1] / "config")
     candidates.append(Path(sys.prefix) / "share" / "ema_sim" / "config")
     try:  # a colcon/ament install
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415 - only in a ROS install (colcon), absent from a pip venv
 
         candidates.append(Path(get_package_share_directory("ema_sim")) / "config")
     except Exception:

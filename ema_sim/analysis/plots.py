@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ema_sim.analysis.estimation.noise import output_noise
 from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import RecordAnalysis
@@ -35,8 +36,6 @@ def has_load(ra: RecordAnalysis) -> bool:
     bool
         False when there is no hinge-moment column or it reads zero (to ten times its noise).
     """
-    from ema_sim.analysis.estimation.noise import output_noise  # noqa: PLC0415
-
     hm = ra.data.hinge_moment_inlb
     if hm is None or hm.size == 0:
         return False

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from ema_sim import parameters as pm
 from ema_sim.config import config_dir, ros_parameters
 from ema_sim.environment.elements import FirstOrderLag, Noise, Quantizer, SignalPath, TransportDelay
@@ -264,8 +266,6 @@ def profile_names() -> list[str]:
 
 def _is_profile(path: Path) -> bool:
     try:
-        import yaml  # noqa: PLC0415
-
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except Exception:
         return False

@@ -90,7 +90,7 @@ class FmuArtefact(Artefact):
     kind = "fmu"
 
     def run(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> dict[str, FloatArray]:  # noqa: D102
-        from fmpy import simulate_fmu  # type: ignore[import-untyped]  # noqa: PLC0415
+        from fmpy import simulate_fmu  # type: ignore[import-untyped]  # noqa: PLC0415 - FMPy: a test tool, only to verify an FMU
 
         n = command_deg.size
         dt = 1.0 / self.rate_hz

@@ -606,7 +606,7 @@ def fmi_headers() -> Path:
         The directory.
     """
     try:
-        import fmpy  # type: ignore[import-untyped]  # noqa: PLC0415
+        import fmpy  # type: ignore[import-untyped]  # noqa: PLC0415 - FMPy: a test tool, only to verify an FMU
     except ImportError:
         raise ExportError("building an FMU needs fmpy for the FMI 2.0 headers: pip install fmpy==0.3.32") from None
     where = Path(fmpy.__file__).parent / "c-code"
@@ -688,7 +688,7 @@ def validation_problems(path: Path) -> list[str]:
     list of str
         The problems found (empty: clean).
     """
-    from fmpy.validation import validate_fmu  # type: ignore[import-untyped]  # noqa: PLC0415
+    from fmpy.validation import validate_fmu  # type: ignore[import-untyped]  # noqa: PLC0415 - FMPy: a test tool, only to verify an FMU
 
     problems: list[str] = validate_fmu(str(path))
     return problems

@@ -458,7 +458,7 @@ class JsbsimRunner:
 
     def __init__(self, system: Path, rate_hz: float) -> None:
         try:
-            import jsbsim  # noqa: PLC0415
+            import jsbsim  # noqa: PLC0415 - JSBSim: a test tool, only to verify a system file
         except ImportError:
             raise ExportError("running a JSBSim system needs the jsbsim package: pip install jsbsim==1.3.3") from None
         self._jsbsim = jsbsim

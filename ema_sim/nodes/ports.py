@@ -18,6 +18,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from rclpy.time import Time
+from rclpy.time_source import TimeSource
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -220,8 +221,6 @@ def own_time_source(node: Node) -> Any:
     rclpy.clock.Clock or None
         Its ROS clock, or None when the node is not under sim time.
     """
-    from rclpy.time_source import TimeSource  # noqa: PLC0415
-
     found = False
     for sub in list(node.subscriptions):
         owner = getattr(sub.callback, "__self__", None)

@@ -133,7 +133,7 @@ def given(mode: HoldMode, sample_s: float) -> CommandHold:
 
 def _binomial_tail(k: int, n: int, p: float) -> float:
     """P(X ≥ k) for X ~ Binomial(n, p)."""
-    from scipy.stats import binom  # noqa: PLC0415
+    from scipy.stats import binom  # noqa: PLC0415 - scipy.stats loads in ~0.5 s; only this test needs it
 
     return float(binom.sf(k - 1, n, p))
 

@@ -364,7 +364,7 @@ def derivative(y: FloatArray, dt: float, window_s: float = 0.011) -> FloatArray:
     numpy.ndarray
         The derivative.
     """
-    from scipy.signal import savgol_filter  # noqa: PLC0415
+    from scipy.signal import savgol_filter  # noqa: PLC0415 - scipy.signal loads in ~0.5 s; only the smoothed derivative needs it
 
     n = max(3, round(window_s / dt) | 1)
     if y.size < n:

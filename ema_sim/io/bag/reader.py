@@ -16,6 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.rosbag2 import Reader
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
@@ -81,8 +85,6 @@ def _open(path: str | Path) -> _Source:
 
 
 def _open_rosbags(bag: Path) -> _Source:
-    from rosbags.rosbag2 import Reader  # noqa: PLC0415
-
     try:
         reader = Reader(bag)
         reader.open()
@@ -106,10 +108,6 @@ def _open_rosbags(bag: Path) -> _Source:
 
 def _open_stream(bag: Path, mcap_path: Path) -> _Source:
     """An MCAP without (valid) metadata.yaml: read every complete record in order."""
-    from mcap.exceptions import McapError  # noqa: PLC0415
-    from mcap.records import Channel, Message, Metadata, Schema  # noqa: PLC0415
-    from mcap.stream_reader import StreamReader  # noqa: PLC0415
-
     channels: dict[int, tuple[str, str]] = {}
     schemas: dict[int, str] = {}
     rows: list[tuple[str, int, bytes]] = []

@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import json
+import shutil
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from mcap.records import Chunk
+from mcap.stream_reader import get_chunk_data_stream
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.metadata import parse_qos
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
@@ -119,9 +125,6 @@ def _salvage(data: bytes) -> _Salvage:
             (size,) = struct.unpack_from("<Q", rec, at)
             inner = bytes(rec[at + 8:at + 8 + size])
             if compression:  # mcap's own decompression (zstd, lz4)
-                from mcap.records import Chunk  # noqa: PLC0415
-                from mcap.stream_reader import get_chunk_data_stream  # noqa: PLC0415
-
                 stream, n = get_chunk_data_stream(Chunk(compression=compression, data=inner, message_end_time=end,
                                                         message_start_time=start, uncompressed_crc=crc,
                                                         uncompressed_size=usize))
@@ -179,11 +182,6 @@ def reindex_bag(path: str | Path, *, keep_original: bool = True) -> ReindexRepor
     ReindexReport
         Records recovered per topic, bytes dropped, and the paths written.
     """
-    import shutil  # noqa: PLC0415
-
-    from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
-    from rosbags.rosbag2.metadata import parse_qos  # noqa: PLC0415
-
     bag, _, mcap_path = resolve(path)
     if mcap_path is None:
         raise DataError(f"{bag}: no .mcap file to reindex")

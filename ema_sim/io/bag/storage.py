@@ -32,6 +32,7 @@ def fast_storage() -> type:
     The file itself is written by a thread (:class:`_BackgroundFile`): page-cache writes here stall
     up to 4 ms now and then, which must not hold up a node's frame.
     """
+    # rosbags' private MCAP internals, loaded only when a bag is written, and kept to this one file
     from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk, write_record, write_string  # noqa: PLC0415
     from rosbags.rosbag2.storage_mcap import write_uint32 as u32  # noqa: PLC0415
     from rosbags.rosbag2.storage_mcap import write_uint64 as u64  # noqa: PLC0415

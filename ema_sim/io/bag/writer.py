@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
@@ -28,8 +29,6 @@ class BagWriter:
     """
 
     def __init__(self, path: str | Path, metadata: Mapping[str, Any] | None = None) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer, WriterError  # noqa: PLC0415
-
         class _Writer(Writer):
             STORAGE_PLUGINS: Mapping[StoragePlugin, type[Any]] = {
                 **Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: fast_storage()}
