@@ -99,3 +99,23 @@ def test_the_recogniser_asks_only_the_tests_readers(readers):
     assert funcs
     assert len(funcs) == len(set(funcs))
     assert all(inspect.getmodule(f).__name__.startswith("ema_sim.analysis.section2.") for f in funcs)
+
+
+def test_every_analysis_module_is_imported_by_a_test_of_its_own():
+    """Issue 26: each analysis module has a unit test that imports it, not only the end-to-end runs."""
+    import ast  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    root = Path(__file__).resolve().parents[1]
+    modules = {".".join(p.relative_to(root).with_suffix("").parts)
+               for p in (root / "ema_sim" / "analysis").rglob("*.py") if p.name != "__init__.py"}
+    imported = set()
+    for test in (root / "test").glob("test_*.py"):
+        for node in ast.walk(ast.parse(test.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                imported.add(node.module)
+                imported.update(f"{node.module}.{a.name}" for a in node.names)
+            elif isinstance(node, ast.Import):
+                imported.update(a.name for a in node.names)
+    assert len(modules) > 40
+    assert sorted(modules - imported) == []
