@@ -13,6 +13,7 @@ SHARED_FIXTURES = {"test_montecarlo": "scheduler", "test_identify_rig": "rig"}
 tests that use it run in one worker, so it is built once; the module's other tests go to whichever worker is free."""
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups into the test ids
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """A module's tests that start processes run in one pytest-xdist worker, one after another.
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import astuple
 from pathlib import Path
 
+import dask
 import numpy as np
 import pytest
 from identgen import make_record
@@ -46,7 +47,8 @@ def test_unreachable_scheduler_is_one_clear_error(capsys: pytest.CaptureFixture[
     path = tmp_path / "rec.csv"
     write_csv(path, {"time_s": data.time_s, "command_deg": data.command_deg, "position_deg": data.position_deg,
                      "hinge_moment_inlb": data.hinge_moment_inlb}, {"channel": "left_wing"})
-    code = main(["identify", str(path), "--scheduler", "tcp://127.0.0.1:9", "-q"])
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):  # the user's setting, not 30 s
+        code = main(["identify", str(path), "--scheduler", "tcp://127.0.0.1:9", "-q"])
     assert code == 2
     err = capsys.readouterr().err
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err

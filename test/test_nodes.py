@@ -435,3 +435,47 @@ def test_launch_bad_input_is_one_line_and_status_2(tmp_path, capsys, args, messa
     assert message in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "b").exists()
+
+
+def test_a_lone_node_loop_polls_spins_and_stops_as_the_composed_loop_does():
+    """A node alone in its process runs :func:`common._loop_one` (fewer calls a message): it announces readiness
+    until sent, waits in the executor at most until the node's next deadline (never less than 0, never more than
+    ``MAX_SPIN_S``), and stops when the node is done or a signal came, without spinning after the last poll."""
+    from ema_sim.nodes import common  # noqa: PLC0415
+
+    class Node:
+        def __init__(self, timeouts):
+            self.timeouts = list(timeouts)
+            self.done, self.ends_process, self._ready_sent, self.checks = False, True, False, 0
+
+        def check_ready(self):
+            self.checks += 1
+            self._ready_sent = self.checks >= 2
+
+        def poll(self):
+            timeout = self.timeouts.pop(0)
+            self.done = not self.timeouts
+            return timeout
+
+    class Executor:
+        def __init__(self):
+            self.waits = []
+
+        def spin_once(self, timeout_sec):
+            self.waits.append(timeout_sec)
+
+    node, ex = Node([0.002, -0.001, 7.0, 0.0, 0.01]), Executor()
+    common._loop([node], None, ex, {"signal": None})
+    assert ex.waits == [0.002, 0.0, common.MAX_SPIN_S, 0.0]  # the last poll left the node done: no spin after it
+    assert node.checks == 2  # until the announcement was sent
+
+    node, ex = Node([0.01] * 5), Executor()
+    stop = {"signal": None}
+
+    def signalled(timeout_sec):  # a signal during the first wait
+        assert timeout_sec == 0.01
+        stop["signal"] = signal.SIGINT
+
+    ex.spin_once = signalled
+    common._loop([node], None, ex, stop)
+    assert len(node.timeouts) == 4  # polled once, then stopped

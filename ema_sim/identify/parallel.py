@@ -114,7 +114,8 @@ class Pool:
                 logging.getLogger("distributed").setLevel(logging.ERROR)
             if self.scheduler:
                 try:
-                    self._client = Client(self.scheduler, timeout="20s")  # type: ignore[no-untyped-call]
+                    # waits up to Dask's connect timeout (distributed.comm.timeouts.connect, 30 s by default)
+                    self._client = Client(self.scheduler)  # type: ignore[no-untyped-call]
                 except OSError as exc:
                     raise EmaError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
             else:

@@ -50,6 +50,10 @@ def _pre_quantizer(problem: Problem, p: SecondOrderParams) -> FloatArray:
     return (1.0 + p.kb) * u + p.offset_deg
 
 
+FILTER_TAPS = 5
+"""Most coefficients of G's numerator and denominator: a second order and two first-order lags."""
+
+
 @nb.njit(cache=True, parallel=True)
 def _costs(residual: NDArray[np.float64], v: NDArray[np.float64], shift: float, steps: NDArray[np.float64],
            b: NDArray[np.float64], a: NDArray[np.float64], weight: NDArray[np.float64], starts: NDArray[np.int64],
@@ -57,29 +61,38 @@ def _costs(residual: NDArray[np.float64], v: NDArray[np.float64], shift: float, 
     """Σ weight·(residual − G·(q·round((v + shift)/q) − v))² for every step q, over the windows given.
 
     The model the residual was taken against saw ``v`` unquantized; the candidate quantizes it with
-    its offset moved by ``shift``. G is a direct-form IIR filter (a[0] = 1), started ``warm`` samples
-    before each window so its transient has died out where the cost is counted.
+    its offset moved by ``shift``. G is a direct-form IIR filter (a[0] = 1, at most :data:`FILTER_TAPS`
+    coefficients each), started ``warm`` samples before each window so its transient has died out where
+    the cost is counted. Its taps are zero-padded scalars, not arrays shifted each sample: half the time,
+    the same sums term for term.
     """
     out = np.empty(steps.size)
-    nb_, na = b.size, a.size
+    bb = np.zeros(FILTER_TAPS)
+    aa = np.zeros(FILTER_TAPS)
+    bb[:b.size] = b
+    aa[:a.size] = a
+    b0, b1, b2, b3, b4 = bb[0], bb[1], bb[2], bb[3], bb[4]
+    a1, a2, a3, a4 = aa[1], aa[2], aa[3], aa[4]
     for k in nb.prange(steps.size):
         q = steps[k]
         acc = 0.0
         for w in range(starts.size):
-            xs = np.zeros(nb_)
-            ys = np.zeros(na)
+            x0 = x1 = x2 = x3 = x4 = 0.0
+            y0 = y1 = y2 = y3 = 0.0
             for i in range(max(starts[w] - warm, 0), ends[w]):
-                for j in range(nb_ - 1, 0, -1):
-                    xs[j] = xs[j - 1]
-                xs[0] = q * np.floor((v[i] + shift) / q + 0.5) - v[i]
+                x4, x3, x2, x1 = x3, x2, x1, x0
+                x0 = q * np.floor((v[i] + shift) / q + 0.5) - v[i]
                 y = 0.0
-                for j in range(nb_):
-                    y += b[j] * xs[j]
-                for j in range(1, na):
-                    y -= a[j] * ys[j - 1]
-                for j in range(na - 1, 0, -1):
-                    ys[j] = ys[j - 1]
-                ys[0] = y
+                y += b0 * x0
+                y += b1 * x1
+                y += b2 * x2
+                y += b3 * x3
+                y += b4 * x4
+                y -= a1 * y0
+                y -= a2 * y1
+                y -= a3 * y2
+                y -= a4 * y3
+                y3, y2, y1, y0 = y2, y1, y0, y
                 if i >= starts[w]:
                     d = residual[i] - y
                     acc += weight[i] * d * d

@@ -357,6 +357,10 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
 
 
 def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any]) -> None:
+    if bus is None and len(nodes) == 1:
+        _loop_one(nodes[0], executor, stop)
+        return
+
     def finished() -> bool:
         return any(n.done and n.ends_process for n in nodes)
 
@@ -376,6 +380,22 @@ def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any])
         if finished():
             break
         executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
+
+
+def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, Any]) -> None:
+    """:func:`_loop` for a node alone in its process (the ``processes`` layout): the same steps, fewer calls.
+
+    The loop runs once per message taken (a channel node of the ``processes`` layout: 2 to 7 a frame, its
+    driver 21), so its own overhead counts: no closures or generators, the bound methods looked up once.
+    """
+    poll, check_ready, spin_once = node.poll, node.check_ready, executor.spin_once
+    while stop["signal"] is None and not (node.done and node.ends_process):
+        if not node._ready_sent:
+            check_ready()
+        timeout = poll()
+        if node.done and node.ends_process:
+            break
+        spin_once(timeout_sec=MAX_SPIN_S if timeout > MAX_SPIN_S else (timeout if timeout > 0.0 else 0.0))
 
 
 def _finish(nodes: list[SuiteNode], bus: Any, rt: realtime.Setup) -> None:

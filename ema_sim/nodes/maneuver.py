@@ -138,13 +138,14 @@ class ManeuverNode(DriverNode):
         """Frame ``k``'s load, then its command; returns when the command's publish began (monotonic)."""
         load = cdr.JointFrame(stamp, self._names, [], [], [float(self.loads[ch][k]) for ch in self._names])
         cmd = cdr.JointFrame(stamp, self._names, [float(self.volts[ch][k]) for ch in self._names])
-        self.load_pub.publish(load)
+        load_raw = self.load_pub.publish(load)
         if not self.lockstep:
             self.times.mark_sent()
         sent = time.monotonic()
-        self.cmd_pub.publish(cmd)
-        self.recorder.record_own(ct.HINGE_MOMENT, cdr.encode(load), stamp)
-        self.recorder.record_own(ct.FMU_COMMAND, cdr.encode(cmd), stamp)
+        cmd_raw = self.cmd_pub.publish(cmd)
+        # the bytes sent on DDS (a composed publisher hands the frame over in-process and gives none back)
+        self.recorder.record_own(ct.HINGE_MOMENT, load_raw if isinstance(load_raw, bytes) else cdr.encode(load), stamp)
+        self.recorder.record_own(ct.FMU_COMMAND, cmd_raw if isinstance(cmd_raw, bytes) else cdr.encode(cmd), stamp)
         return sent
 
     def poll(self) -> float:  # noqa: D102

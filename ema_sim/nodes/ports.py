@@ -52,15 +52,22 @@ class FramePublisher:
         self.topic = topic
         self.dds = node.create_publisher(JointState, ct.endpoint(topic), profile)
 
-    def publish(self, frame: cdr.JointFrame) -> None:
+    def publish(self, frame: cdr.JointFrame) -> bytes:
         """One frame to every subscriber.
 
         Parameters
         ----------
         frame : JointFrame
             The frame.
+
+        Returns
+        -------
+        bytes
+            The CDR bytes sent (a recorder of the node's own publications writes them as they are).
         """
-        self.dds.publish(cdr.encode(frame))
+        raw = cdr.encode(frame)
+        self.dds.publish(raw)
+        return raw
 
 
 class ClockPublisher:
