@@ -16,9 +16,8 @@ system and the delays exactly.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
-import control as ct
 import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike
@@ -33,6 +32,9 @@ from ema_sim.models.high_order.linear import linearize
 from ema_sim.models.high_order.models import bound_value
 from ema_sim.models.high_order.params import HighOrderParams
 from ema_sim.models.second_order.params import SecondOrderParams
+
+if TYPE_CHECKING:  # the annotations' type; python-control itself is imported where a system is built
+    import control as ct
 
 
 @nb.njit(cache=True)
@@ -183,6 +185,7 @@ class LinearModel(ActuatorModel):
             self._delays = np.array([self.delay_s, 0.0])
         self._A, self._B = A, B
         dt = 1.0 / self.rate_hz
+        import control as ct  # noqa: PLC0415 - python-control: a 1 s import, only where a system is built
         disc = ct.c2d(ct.ss(A, B, C, D), dt, method="zoh")
         self._Ad = np.ascontiguousarray(disc.A, dtype=float)
         self._Bd = np.ascontiguousarray(disc.B, dtype=float)
@@ -218,6 +221,7 @@ class LinearModel(ActuatorModel):
         numpy.ndarray
             The command of each instance (deg).
         """
+        import control as ct  # noqa: PLC0415 - python-control: a 1 s import, only where a system is built
         dc = np.asarray(ct.dcgain(self.system), dtype=float)
         command: FloatArray = (position_deg - dc[0, 1] * hinge_moment_inlb) / dc[0, 0]
         return command
@@ -268,6 +272,7 @@ class LinearModel(ActuatorModel):
         """
         f = np.atleast_1d(np.asarray(freq_hz, dtype=float))
         w = 2.0 * np.pi * f
+        import control as ct  # noqa: PLC0415 - python-control: a 1 s import, only where a system is built
         resp = ct.frequency_response(self.system[output, 0], w)
         delay = self.delay_s + (self.position_delay_s if output == 0 else 0.0)
         response: np.ndarray = np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * delay)
@@ -301,6 +306,7 @@ def second_order_system(wn_rad_s: float, zeta: float) -> ct.StateSpace:
     control.StateSpace
         Two inputs, two outputs.
     """
+    import control as ct  # noqa: PLC0415 - python-control: a 1 s import, only where a system is built
     g = ct.ss(ct.tf([wn_rad_s**2], [1.0, 2.0 * zeta * wn_rad_s, wn_rad_s**2]))
     A = np.asarray(g.A, dtype=float)
     B = np.hstack([np.asarray(g.B, dtype=float), np.zeros((A.shape[0], 1))])
@@ -395,6 +401,7 @@ class Hoalm(LinearModel):
         self.bound = bound_value(bound)
         self.linearized = linearize(self.params, self.load_inlb, bound=self.bound)
         lin = self.linearized
+        import control as ct  # noqa: PLC0415 - python-control: a 1 s import, only where a system is built
         system = ct.ss(lin.a, lin.b, lin.c, np.zeros((2, 2)), inputs=["command_deg", "hinge_moment_inlb"],
                        outputs=["position_deg", "surface_deg"])
         super().__init__(system, lin.command_delay_s, ch, n=n, rate_hz=rate_hz, position_delay_s=lin.feedback_delay_s)
@@ -450,6 +457,7 @@ def loes_system(wn_rad_s: float, zeta: float, dc_gain_ratio: float) -> ct.StateS
     control.StateSpace
         Two inputs, two outputs.
     """
+    import control as ct  # noqa: PLC0415 - python-control: a 1 s import, only where a system is built
     g = ct.ss(ct.tf([dc_gain_ratio * wn_rad_s**2], [1.0, 2.0 * zeta * wn_rad_s, wn_rad_s**2]))
     A = np.asarray(g.A, dtype=float)
     B = np.hstack([np.asarray(g.B, dtype=float), np.zeros((A.shape[0], 1))])
