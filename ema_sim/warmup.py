@@ -73,13 +73,34 @@ def warm_analysis() -> None:
     cubic(x), cubic.slope(x), cubic.inverse(x)
 
 
+TOGETHER = {"loac": ("loac", "second_order")}
+"""Models compiled in one process, one after the other: LOAC and the identification simulator share figure 26's
+functions, which two processes at once would both compile (measured: every group 130 CPU-s apart, 121 s in turn)."""
+
+
+def warm_models(names: tuple[str, ...]) -> None:
+    """:func:`warm_model` on each of ``names``, in turn.
+
+    Parameters
+    ----------
+    names : tuple of str
+        Registry names.
+    """
+    for name in names:
+        warm_model(name)
+
+
+_MERGED = {name for names in TOGETHER.values() for name in names}
 GROUPS: dict[str, Callable[[], None]] = {
-    **{name: partial(warm_model, name) for name in model_names()},
+    **{name: partial(warm_models, names) for name, names in TOGETHER.items()},
+    **{name: partial(warm_model, name) for name in model_names() if name not in _MERGED},
     "analysis": warm_analysis,
 }
-"""What compiles in one process: a model of the registry, or the kernels outside the models."""
-SLOWEST_FIRST = ("loac", "hoac1", "loadf", "loada", "second_order", "hoad3", "hoad2", "analysis")
-"""The groups that compile longest (22.9, 13.7, 10.8, 12.2 s… measured), started first so the processes end together."""
+"""What compiles in one process: a model of the registry (or models of :data:`TOGETHER`), or the kernels outside
+the models."""
+SLOWEST_FIRST = ("loac", "loadf", "loada", "hoac1", "hoad3", "analysis", "sloac", "hoad2")
+"""The groups by compilation time, longest first (47.7, 23.7, 22.8, 13.4, 8.0, 3.7 s… measured in turn), so the
+processes end together."""
 
 
 def warm(group: str) -> tuple[str, float]:
