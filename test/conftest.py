@@ -22,17 +22,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     module never run against each other; the tests that share a module's :data:`SHARED_FIXTURES` (the Monte
     Carlo tests' real Dask cluster, the rig records identified once) run where it was built.
     """
-    grouped = []
     for item in items:
         module = item.module.__name__.rpartition(".")[2]
         shared = SHARED_FIXTURES.get(module)
         if item.get_closest_marker("ros") is not None or (shared is not None and shared in item.fixturenames):
             item.add_marker(pytest.mark.xdist_group(item.module.__name__))
-            grouped.append(item)
-    # The groups first, each a long run on one worker, the single tests after them: the workers then end together
-    # (a group handed out last keeps one worker busy alone while the other idles).
-    first = set(grouped)
-    items[:] = grouped + [item for item in items if item not in first]
 
 
 def frames(duration_s: float) -> np.ndarray:
