@@ -186,6 +186,15 @@ def test_the_channel_files_load_without_ros_or_bag_io():
     assert out.stdout.split() == ["[]"]
 
 
+def test_the_node_processes_import_neither_python_control_nor_plotting():
+    """Every ROS process imports its node module at start: python-control (1.07 s, with scipy.signal and
+    matplotlib) is imported where a linear system is built, not by a module every node imports."""
+    probe = ("import sys\nimport ema_sim.nodes.emac, ema_sim.nodes.testenv, ema_sim.nodes.maneuver\n"
+             "print(sorted({m.split('.')[0] for m in sys.modules} & {'control', 'matplotlib'}))\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["[]"]
+
+
 def test_the_check_sees_lazy_imports_upward_and_circles(tmp_path):
     source = tmp_path / "a.py"
     source.write_text("from ema_sim.models import b\nimport numpy\n\n\ndef f():\n    from ema_sim.io import bag\n",
