@@ -19,7 +19,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,7 +38,15 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 DEFAULT_AT_HZ: tuple[float, ...] = (1.0, 2.0, 5.0, 7.5, 10.0)
 
-R = TypeVar("R")
+class Result(Protocol):
+    """What every test's result offers: its plain values."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """The result as JSON-ready values."""
+        ...
+
+
+R = TypeVar("R", bound=Result)
 __all__ = ["QUALITY_WORDS", "Options", "Quality", "RecordAnalysis", "Section2Test", "worst"]
 
 
@@ -277,9 +285,8 @@ class Section2Test(ABC, Generic[R]):
             The results, in time order.
         """
 
-    @abstractmethod
     def result_json(self, r: R) -> dict[str, Any]:
-        """One result as plain values.
+        """One result as plain values: its own ``as_dict()``.
 
         Parameters
         ----------
@@ -291,6 +298,7 @@ class Section2Test(ABC, Generic[R]):
         dict
             JSON-ready values (numpy scalars and non-finite floats are cleaned later).
         """
+        return r.as_dict()
 
     def as_json(self, results: list[R], ra: RecordAnalysis) -> dict[str, Any]:  # noqa: ARG002 - the default
         """The test's keys in the JSON record.

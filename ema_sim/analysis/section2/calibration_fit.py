@@ -246,9 +246,6 @@ class CommandErrorTest(Section2Test[Calibration]):
     def run(self, ra: RecordAnalysis) -> list[Calibration]:
         return [fit_calibration(ra.data, list(seg.holds)) for seg in ra.segments(*self.kinds)]
 
-    @override
-    def result_json(self, r: Calibration) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[Calibration],

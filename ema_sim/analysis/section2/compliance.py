@@ -432,9 +432,6 @@ class Compliance(Section2Test[ComplianceResult]):
                                           ra.channel.crank_arm_in))
         return out
 
-    @override
-    def result_json(self, r: ComplianceResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[ComplianceResult],

@@ -395,9 +395,6 @@ class Crosstalk(Section2Test[CrosstalkResult]):
             ra.results[self.key] = [replace(c, threshold_deg=value, threshold_source=f"static threshold measured in "
                                             f"{src}") for c in ra.of(self)]
 
-    @override
-    def result_json(self, r: CrosstalkResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[CrosstalkResult],

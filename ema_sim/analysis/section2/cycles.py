@@ -335,9 +335,6 @@ class Cycles(Section2Test[CycleResult]):
                 out.append(analyze_cycles(ra, seg, p))
         return out
 
-    @override
-    def result_json(self, r: CycleResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[CycleResult], images: list[str | None]) -> list[str]:

@@ -251,9 +251,6 @@ class Dither(Section2Test[DitherResult]):
                 out.append(d)
         return out
 
-    @override
-    def result_json(self, r: DitherResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[DitherResult],

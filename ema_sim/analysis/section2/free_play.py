@@ -310,9 +310,6 @@ class FreePlay(Section2Test[FreePlayResult]):
             ra.results[self.key] = [f.with_compliance(value, f"total compliance measured in {src}")
                                     if f.compliance_deg_per_kinlb is None else f for f in ra.of(self)]
 
-    @override
-    def result_json(self, r: FreePlayResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[FreePlayResult],

@@ -606,9 +606,6 @@ class FrequencyTest(Section2Test[FrequencyResult]):
                 bq, bq_note))
         return out
 
-    @override
-    def result_json(self, r: FrequencyResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def fits(self, r: FrequencyResult) -> list[SecondOrderFit]:

@@ -269,9 +269,6 @@ class Hysteresis(Section2Test[HysteresisResult]):
                 out.append(h)
         return out
 
-    @override
-    def result_json(self, r: HysteresisResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[HysteresisResult],

@@ -419,9 +419,6 @@ class Profiles(Section2Test[ProfileResult]):
             out.append(ProfileResult(name, seg.start, seg.stop, rows, fit, notes))
         return out
 
-    @override
-    def result_json(self, r: ProfileResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def fits(self, r: ProfileResult) -> list[SecondOrderFit]:

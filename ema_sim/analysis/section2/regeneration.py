@@ -131,9 +131,6 @@ class Regeneration(Section2Test[RegenerationResult]):
             ra.notes.append("bus voltage assessed on a record that is not the regeneration square sweep")
         return [bus_peak(data.time_s, data.bus_v)]
 
-    @override
-    def result_json(self, r: RegenerationResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def as_json(self, results: list[RegenerationResult], ra: RecordAnalysis) -> dict[str, Any]:

@@ -308,9 +308,6 @@ class SineDwellTest(Section2Test[DwellResult]):
                                        float(np.degrees(np.angle(h))), sy.r2, float(t[0]), float(t[-1]), held))
         return out
 
-    @override
-    def result_json(self, r: DwellResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[DwellResult],

@@ -547,9 +547,6 @@ class Steps(Section2Test[StepResponse]):
         return {self.key: [s.as_dict() for s in results],
                 "slew_rates": slew_rates(results, ra.slew).as_dict() if results else None}
 
-    @override
-    def result_json(self, r: StepResponse) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def fits(self, r: StepResponse) -> list[SecondOrderFit]:

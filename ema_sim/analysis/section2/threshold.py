@@ -337,9 +337,6 @@ class Static(Section2Test[StaticThreshold]):
                 out.append(replace(r, start_s=float(t[seg.start]), end_s=float(t[seg.stop - 1])))
         return out
 
-    @override
-    def result_json(self, r: StaticThreshold) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[StaticThreshold],
@@ -396,9 +393,6 @@ class Dynamic(Section2Test[DynamicThreshold]):
                 out.append(r)
         return out
 
-    @override
-    def result_json(self, r: DynamicThreshold) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def markdown(self, ra: RecordAnalysis, results: list[DynamicThreshold],

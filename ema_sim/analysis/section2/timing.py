@@ -376,9 +376,6 @@ class Timing(Section2Test[TimingResult]):
         return [edge_timing(d.time_s, edges, d.position_deg, d.surface_deg, ra.noise_deg,
                             sampled=ra.command.assumed_sampled, fmu_command=d.extra.get("fmu_command_deg"))]
 
-    @override
-    def result_json(self, r: TimingResult) -> dict[str, Any]:
-        return r.as_dict()
 
     @override
     def as_json(self, results: list[TimingResult], ra: RecordAnalysis) -> dict[str, Any]:
