@@ -15,9 +15,11 @@ constant-speed segments.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +43,8 @@ MIN_NOISE_DEG = 1e-3
 noise-free (simulated) output must not outweigh a measured one a thousandfold."""
 IN_LOOP_SHARE = 0.5
 """Share of the surface's error above its floor the position's error must carry to place it inside the loop."""
+KEPT_RUNS_BYTES = 96 * 2**20
+"""Most memory the simulations kept for reuse may take (about 40 runs of a 30 s record at 1 kHz)."""
 EQUIVALENT_EXCESS = 3.0
 """Final rms over the noise floor beyond which the fitted parameters are said to be equivalents."""
 
@@ -61,6 +65,7 @@ class Problem:
     time_s: FloatArray = field(init=False)
     sigma_deg: dict[str, float] = field(init=False)
     simulations: int = field(init=False, default=0)
+    """Runs asked for, the search's cost (:attr:`reused` of them were not run again)."""
     dense: bool = field(init=False, default=False)
     """A held command has a breakpoint at every sample (so a signal can be added to it sample by sample)."""
     weights: dict[str, float] = field(init=False, default_factory=dict)
@@ -68,6 +73,12 @@ class Problem:
     projections: dict[str, FloatArray] = field(init=False, default_factory=dict)
     """Per output, an orthonormal basis of terms whose combination is solved for at every evaluation and taken
     out of the weighted residual (variable projection: :meth:`set_output_terms`)."""
+    reused: int = field(init=False, default=0)
+    """Of :attr:`simulations`, the runs answered from the ones kept instead of run again."""
+    _kept: OrderedDict[tuple[object, ...], FloatArray] = field(init=False, repr=False, compare=False,
+                                                               default_factory=OrderedDict)
+    """The latest runs, by what determines them: a fit's Jacobian restarts from the point its residual has just
+    run, and each stage restarts from the model the one before ended on."""
 
     def __post_init__(self) -> None:
         d = self.data
@@ -92,6 +103,7 @@ class Problem:
             True: interpolate the command between samples; False: hold it.
         """
         self.command_sampled = sampled
+        self._kept.clear()  # the model's inputs change
         cmd = self.data.command_deg
         hm = self.data.hinge_moment
         if sampled:
@@ -231,16 +243,54 @@ class Problem:
         """
         n = len(params)
         flips = [False] * n if flips is None else list(flips)
+        offsets = None if command_offsets is None else np.asarray(command_offsets, dtype=float).reshape(
+            n, self._bp_u.size)
+        keys = [(self.step_s, repr(p), bool(f), None if offsets is None else offsets[i].tobytes())
+                for i, (p, f) in enumerate(zip(params, flips, strict=True))]
+        first: dict[tuple[object, ...], int] = {}
+        for i, k in enumerate(keys):
+            first.setdefault(k, i)
+        todo = [i for k, i in first.items() if k not in self._kept]
+        out = np.empty((n, self.time_s.size, 3))
+        for i, k in enumerate(keys):
+            if k in self._kept:
+                self._kept.move_to_end(k)
+                out[i] = self._kept[k]
+        if todo:
+            runs = self._run([params[i] for i in todo], [flips[i] for i in todo],
+                             None if offsets is None else offsets[todo])
+            for i, run in zip(todo, runs, strict=True):
+                out[[j for j, k in enumerate(keys) if k == keys[i]]] = run
+                self._keep(keys[i], run)
+        self.simulations += n
+        self.reused += n - len(todo)
+        return out
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (to a Dask worker) without the kept runs: a worker keeps its own."""
+        state = dict(self.__dict__)
+        state["_kept"] = OrderedDict()
+        return state
+
+    def _run(self, params: Sequence[SecondOrderParams], flips: Sequence[bool],
+             offsets: FloatArray | None) -> FloatArray:
+        """Simulate each parameter set: each instance's run is its own, whatever else is in the batch."""
+        n = len(params)
         sign = np.where(np.asarray(flips, dtype=bool), -1.0, 1.0)[:, None]
         model = SecondOrder(self.channel, params=list(params), step_s=self.step_s)
         h = sign * self._bp_h[None, :]
         u = np.broadcast_to(self._bp_u, (n, self._bp_u.size))
-        if command_offsets is not None:
-            u = u + np.asarray(command_offsets, dtype=float).reshape(n, self._bp_u.size)
+        if offsets is not None:
+            u = u + offsets
         model.trim(np.ascontiguousarray(u[:, 0]), h[:, 0])
         out = model.run_outputs(self._bp_t, u, h, sample_times=self.time_s, end_s=float(self.time_s[-1]))
-        self.simulations += n
         return out[:, :, [O_POS, O_SURF, O_RATE]]
+
+    def _keep(self, key: tuple[object, ...], run: FloatArray) -> None:
+        """Keep a run for reuse, dropping the least recently used beyond :data:`KEPT_RUNS_BYTES`."""
+        self._kept[key] = run
+        while len(self._kept) > 1 and sum(r.nbytes for r in self._kept.values()) > KEPT_RUNS_BYTES:
+            self._kept.popitem(last=False)
 
     def weighted_residual(self, sim: FloatArray) -> FloatArray:
         """Stacked ``(measured − model)/σ`` over the fitted samples of every output, for one simulation.

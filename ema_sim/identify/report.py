@@ -305,6 +305,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "sample_hz": _round(p.sample_hz),
         "simulator_error_deg": {o: _round(v, 3) for o, v in result.simulator_error_deg.items()},
         "simulations": p.simulations,
+        "simulations_reused": p.reused,
         "elapsed_s": round(result.elapsed_s, 2),
     }
     impl = guarded("implementation error", failures, lambda: implementation_error(result))

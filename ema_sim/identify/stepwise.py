@@ -499,8 +499,9 @@ class _Round:
         if pending is None:
             new = _fit_candidate(self.problem, self.cur, cand, self.ctx)
         else:
-            new, simulations = result(pending)
+            new, simulations, reused = result(pending)
             self.problem.simulations += simulations
+            self.problem.reused += reused
         verdict = judge(self.problem, self.cur, new, cand.effect, self.ctx, self.result.simulator_error_deg, self.limit)
         self.result.verdicts.append(verdict)
         self.tried[cand.effect.key] = (new, verdict)
@@ -510,8 +511,8 @@ class _Round:
 
 
 def remote_candidate(problem: Problem, cur: Fit, key: str, value: dict[str, float], flip: bool,
-                     ctx: dict[str, Any]) -> tuple[Fit, int]:
-    """:func:`_fit_candidate` of the effect ``key`` from ``value`` on a worker, and the simulations it ran.
+                     ctx: dict[str, Any]) -> tuple[Fit, int, int]:
+    """:func:`_fit_candidate` of the effect ``key`` from ``value`` on a worker, and the simulations it asked for.
 
     The effect is named by its key (its probes and checks are functions of the vocabulary, not pickled);
     the context is given without its problem, which comes on its own (scattered once to the workers).
@@ -534,12 +535,12 @@ def remote_candidate(problem: Problem, cur: Fit, key: str, value: dict[str, floa
     Returns
     -------
     tuple
-        The fit, and the simulations it ran.
+        The fit, the simulations it asked for, and how many of them the worker had kept from before.
     """
-    before = problem.simulations
+    before, reused = problem.simulations, problem.reused
     cand = Candidate(BY_KEY[key], value, flip, 0.0, 0.0)
     new = _fit_candidate(problem, cur, cand, Context(problem, **ctx))
-    return new, problem.simulations - before
+    return new, problem.simulations - before, problem.reused - reused
 
 
 def _submit(pool: Pool, problem: Problem, cur: Fit, cands: list[Candidate], ctx: Context) -> dict[str, Any]:

@@ -167,5 +167,5 @@ def make_hybrid(  # noqa: PLR0915 - one compiled loop
             h = max(min(h_next, h_max), 1e-12)
         return h, events
 
-    compiled: Advance = compile_closure(advance, rhs)
+    compiled: Advance = compile_closure(advance, rhs, forward_copies=True)
     return compiled

@@ -192,7 +192,7 @@ def make_dopri5(rhs: Rhs) -> Stepper:  # noqa: PLR0915
                 h_prop = min(h_max, hh * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2)))
         return h_prop, steps
 
-    masked = compile_closure(_masked, rhs)
-    release = compile_closure(release_stops, rhs)
-    stepper: Stepper = compile_closure(dopri5, rhs)
+    masked = compile_closure(_masked, rhs, borrow=True)
+    release = compile_closure(release_stops, rhs, borrow=True)
+    stepper: Stepper = compile_closure(dopri5, rhs, forward_copies=True)
     return stepper

@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.compiling import ForwardCopiesCompiler
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -38,8 +39,8 @@ FLAG_STALL = 128
 jit = nb.njit(cache=True, inline="always")
 """Compile an element for inlining into the kernels (it takes the caller's floating-point flags)."""
 
-
-def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False) -> Any:
+def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False, forward_copies: bool = False,
+                    borrow: bool = False) -> Any:
     """Compile a kernel a factory made, cached under a name of its own (``qualname_of``).
 
     Numba names a cache file after the function's qualified name, which every closure of one factory
@@ -54,6 +55,12 @@ def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False) 
         What tells it from its siblings: the compiled function it closes over, or a name.
     parallel : bool
         Compile its ``prange`` loops as parallel threads.
+    forward_copies : bool
+        Compile it with :class:`~ema_sim.models.compiling.ForwardCopiesCompiler`: no reference counting of the
+        array arguments it passes to inlined elements (:func:`~ema_sim.models.compiling.forward_array_copies`).
+    borrow : bool
+        Compile it without Numba's runtime (:func:`~ema_sim.models.compiling.borrowing`): a called element that
+        only works in its caller's arrays.
 
     Returns
     -------
@@ -63,6 +70,10 @@ def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False) 
     func = getattr(of, "py_func", of)
     tag = f"{func.__module__.rsplit('.', 1)[-1]}_{func.__name__}" if callable(func) else str(of)
     fn.__qualname__ = f"{fn.__qualname__}_{tag}"
+    if borrow:
+        return nb.njit(cache=True, _nrt=False)(fn)
+    if forward_copies:
+        return nb.njit(cache=True, parallel=parallel, pipeline_class=ForwardCopiesCompiler)(fn)
     return nb.njit(cache=True, parallel=parallel)(fn)
 
 

@@ -15,6 +15,7 @@ import numba as nb
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF
+from ema_sim.models.compiling import borrowing
 from ema_sim.models.high_order import gear_train as gt
 from ema_sim.models.high_order.figure30 import (
     INF,
@@ -58,7 +59,7 @@ def _servo_drive(p: FloatArray, y: FloatArray, u: FloatArray, classify: bool) ->
         classify)
 
 
-@nb.njit(cache=True)
+@borrowing
 def drive(p: FloatArray, y: FloatArray, u: FloatArray) -> tuple[float, float, float, float]:
     """Stages 4–7 with the held regimes.
 
@@ -80,7 +81,7 @@ def drive(p: FloatArray, y: FloatArray, u: FloatArray) -> tuple[float, float, fl
     return vc_raw, ic_raw, vd, v
 
 
-@nb.njit(cache=True)
+@borrowing
 def forces(p: FloatArray, y: FloatArray, u: FloatArray) -> tuple[float, float, float]:
     """Spring force, gear force and the force applied to the motor (all but friction).
 
@@ -104,7 +105,7 @@ def forces(p: FloatArray, y: FloatArray, u: FloatArray) -> tuple[float, float, f
     return fk, f, p[P.force_per_amp_lbf_per_a] * y[X.current_a] - f
 
 
-@nb.njit(cache=True)
+@borrowing
 def friction_levels(p: FloatArray, u: FloatArray) -> tuple[float, float]:
     """Coulomb friction and stiction on the motor, the brake's added while unpowered.
 
@@ -124,7 +125,7 @@ def friction_levels(p: FloatArray, u: FloatArray) -> tuple[float, float]:
     return p[P.coulomb_friction_lbf] + brake, p[P.stiction_lbf] + brake
 
 
-@nb.njit(cache=True)
+@borrowing
 def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray) -> None:  # noqa: ARG001 - the integrator's signature
     """HOAC1 right-hand side with every regime held (see :mod:`ema_sim.models.hybrid`).
 
@@ -174,7 +175,7 @@ def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray)
                                      p[P.bus_source_resistance_ohm], p[P.bus_capacitance_f])
 
 
-@nb.njit(cache=True)
+@borrowing
 def guards(t: float, y: FloatArray, p: FloatArray, u: FloatArray, g: FloatArray) -> None:  # noqa: ARG001
     """Distance of every held regime to its boundary (positive inside), each element's own guards.
 
@@ -224,7 +225,7 @@ def guards(t: float, y: FloatArray, p: FloatArray, u: FloatArray, g: FloatArray)
         g[10] = surface * y[X.v_surface_in_s]
 
 
-@nb.njit(cache=True)
+@borrowing
 def surface_stops_or_reverses(p: FloatArray, y: FloatArray, u: FloatArray) -> None:
     """The surface at zero speed: held by hinge friction or slipping the way the net force pushes.
 
@@ -246,7 +247,7 @@ def surface_stops_or_reverses(p: FloatArray, y: FloatArray, u: FloatArray) -> No
         u[U.surface_regime] = 1.0 if net > 0.0 else -1.0
 
 
-@nb.njit(cache=True)
+@borrowing
 def motor_stops_or_reverses(p: FloatArray, y: FloatArray, u: FloatArray) -> None:
     """The motor at zero speed: stuck when stiction holds, otherwise slipping the way the force pushes.
 
@@ -268,7 +269,7 @@ def motor_stops_or_reverses(p: FloatArray, y: FloatArray, u: FloatArray) -> None
         u[U.motor_regime] = MOTOR_SLIP_POS if fapp > 0.0 else MOTOR_SLIP_NEG
 
 
-@nb.njit(cache=True)
+@borrowing
 def transition(k: int, t: float, y: FloatArray, p: FloatArray, u: FloatArray) -> None:  # noqa: ARG001
     """What crossing guard ``k`` does to the regimes.
 
@@ -318,7 +319,7 @@ def transition(k: int, t: float, y: FloatArray, p: FloatArray, u: FloatArray) ->
         u[U.motor_regime] = MOTOR_SLIP_POS
 
 
-@nb.njit(cache=True)
+@borrowing
 def settle(t: float, y: FloatArray, p: FloatArray, u: FloatArray) -> None:  # noqa: ARG001
     """Classify every regime from the state (after an input change, or several events at once).
 
@@ -377,7 +378,7 @@ advance = make_hybrid(rhs, guards, transition, settle, N_GUARDS)
 """HOAC1's compiled ``advance(p, u, y, t, t_end, h, rtol, atol, h_max) -> (next h, events)``."""
 
 
-@nb.njit(cache=True)
+@borrowing
 def flags_at(p: FloatArray, y: FloatArray, u: FloatArray) -> int:
     """The limit flags at a sample instant: each raw demand against its element's limits, stops, free play.
 

@@ -11,6 +11,7 @@ import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray, IntArray
+from ema_sim.models.compiling import borrowing
 from ema_sim.models.integrate import make_dopri5
 from ema_sim.models.second_order.figure26 import (
     command_path,
@@ -25,7 +26,7 @@ from ema_sim.models.second_order.params import P, X
 from ema_sim.models.stages import TIME_EPS_S, zoh_index
 
 
-@nb.njit(cache=True)
+@borrowing
 def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray) -> None:  # noqa: ARG001 - the integrator's signature
     """Figure 26's right-hand side in the integrators' signature.
 
@@ -48,7 +49,7 @@ def rhs(t: float, y: FloatArray, p: FloatArray, u: FloatArray, dydt: FloatArray)
 _loac_dopri5 = make_dopri5(rhs)
 
 
-@nb.njit(cache=True)
+@borrowing
 def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, jh: int, sample_t: FloatArray,
                js: int, k_samples: int, feedback_delay_s: float, jf: int) -> float:
     """Where an integration step must stop: the next delayed command, hinge moment or sample instant.
@@ -97,7 +98,7 @@ def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, 
     return t_next
 
 
-@nb.njit(cache=True)
+@borrowing
 def record_feedback(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, hinge_moment_inlb: float,
                     sample_t: FloatArray, jf: int) -> int:
     """Stage 14 at a stop of a continuous integrator: record the reading, exactly at a delayed sample's instant.
@@ -136,7 +137,7 @@ def record_feedback(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, hi
 
 
 
-@nb.njit(cache=True)
+@borrowing
 def at_stop(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, t_end: float, bp_t: FloatArray,
             bp_u: FloatArray, bp_h: FloatArray, jd: int, jh: int, js: int, jf: int, sample_t: FloatArray,
             out: FloatArray, u: FloatArray) -> tuple[int, int, float]:

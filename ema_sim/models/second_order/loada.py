@@ -153,7 +153,7 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
                 if damped:  # read only when damped (an undamped compliance is its static deflection)
                     x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm, on), g_c)
 
-    compiled: Kernel = compile_closure(kernel, f"{'backward' if backward else 'forward'}_{on}")
+    compiled: Kernel = compile_closure(kernel, f"{'backward' if backward else 'forward'}_{on}", forward_copies=True)
     return compiled
 
 

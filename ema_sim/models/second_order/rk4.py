@@ -15,6 +15,7 @@ import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.compiling import borrowing
 from ema_sim.models.second_order import stage_set
 from ema_sim.models.second_order.figure26 import (
     derivatives,
@@ -32,7 +33,7 @@ SWITCH_TOL_S = 1e-10
 """How closely a switch of the rate limit or dead zone is located inside an RK4 step."""
 
 
-@nb.njit(cache=True)
+@borrowing
 def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray, on: int = stage_set.ALL) -> int:
     """Which smooth piece of the right-hand side ``y`` is on (rate limit side × dead-zone side).
 
@@ -56,7 +57,7 @@ def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray, on: int = stage_se
     return piece
 
 
-@nb.njit(cache=True)
+@borrowing
 def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArray, k2: FloatArray, k3: FloatArray,
              k4: FloatArray, yt: FloatArray, out: FloatArray, on: int = stage_set.ALL) -> None:
     """One RK4 step of the actuator states from ``y`` into ``out``; free play solved exactly.
@@ -101,9 +102,11 @@ def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArr
 PARALLEL_SPAN_S = 0.05
 """A run takes the parallel kernel only over at least this much simulated time: a thread pool's start and join
 cost more than a trim or a frame (under load, the other thread may not be scheduled for milliseconds). Over a
-longer span it takes it for one instance too: Numba's parallel compilation of the same loop runs 2.2× faster
-even on one thread (measured: one instance, 15 s at 1 kHz, 7.0 ms against 15.3 ms; four, 14 against 62 ms with
-two threads, 28 against 62 ms with one). The outputs are the same bit for bit either way."""
+longer span it takes it for one instance too: Numba's parallel compilation of the same loop runs a little faster
+even on one thread (measured, 15 s at 1 kHz with free play, a delay and compliance: one instance 7.5 against
+7.9 ms; four, 29.4 against 30.8 ms with one thread and 24.4 against 30.9 ms with two). It ran 2.2× faster before
+:func:`~ema_sim.models.compiling.borrowing` and :func:`~ema_sim.models.compiling.forward_array_copies` took away
+the reference counting that made most of the difference. The outputs are the same bit for bit either way."""
 
 
 def make_rk4(parallel: bool) -> Callable[..., None]:
@@ -168,7 +171,8 @@ def make_rk4(parallel: bool) -> Callable[..., None]:
                 jd = zoh_index(bp_t, t - p[P.delay_s], jd)
                 jh = zoh_index(bp_t, t, jh)
 
-    compiled: Callable[..., None] = compile_closure(kernel, "parallel" if parallel else "serial", parallel=parallel)
+    compiled: Callable[..., None] = compile_closure(kernel, "parallel" if parallel else "serial", parallel=parallel,
+                                                    forward_copies=not parallel)
     return compiled
 
 

@@ -1,0 +1,186 @@
+"""How the kernels are compiled where Numba's reference counting would cost more than their arithmetic.
+
+Numba counts a reference to an array each time a variable or a called function takes it: an atomic
+increment and decrement that LLVM cannot always remove, and after which it reloads whatever the kernel
+reads. :func:`borrowing` compiles a called element without the counting; :class:`ForwardCopiesCompiler`
+compiles a kernel with the array copies its inlined elements make forwarded away (:func:`forward_array_copies`).
+Neither changes an operation on a number, so the outputs are the same bit for bit. Both use Numba's compiler
+interfaces (``numba.core``), which requirements.txt pins.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import numba as nb
+from numba.core import ir, ir_utils, types
+from numba.core.analysis import compute_cfg_from_blocks
+from numba.core.compiler import CompilerBase, DefaultPassBuilder
+from numba.core.compiler_machinery import FunctionPass, register_pass
+from numba.core.typed_passes import NopythonRewrites
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def borrowing(fn: _F) -> _F:
+    """Compile a called (not inlined) element that works only in arrays its caller owns, without Numba's runtime.
+
+    Numba counts a reference to each array argument on entry to a compiled function and releases it on
+    exit: two atomic operations per array per call, which LLVM cannot remove when a function takes several
+    arrays. An RK4 step called a few thousand times a simulated second with nine arrays spent most of its
+    time there. Without the runtime the arguments are borrowed, which is safe because the caller holds
+    them for the call; an element that allocates an array does not compile this way (a typing error, not a
+    leak), so it cannot be used by mistake.
+
+    Parameters
+    ----------
+    fn : callable
+        The element.
+
+    Returns
+    -------
+    numba dispatcher
+        ``fn`` compiled and cached, without reference counting.
+    """
+    compiled: _F = nb.njit(cache=True, _nrt=False)(fn)
+    return compiled
+
+
+def forward_array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> int:
+    """Replace every array variable that only copies another by that one, in a typed function's Numba IR.
+
+    An element inlined into a kernel binds its array arguments to variables of its own (``p = params_i``).
+    Numba counts a reference for each such variable, an atomic increment when it is bound and a decrement
+    after its last use, and its reference-count pruning in LLVM removes the pair only in simple shapes: after
+    an element's branches (:func:`~ema_sim.models.second_order.figure26.write_outputs`' ``or``) the decrements
+    sit on several paths and stay. LOADA's sample loop made three ``NRT_incref`` and five ``NRT_decref``
+    calls per sample, and as the calls are opaque to LLVM it reloaded every parameter and state it read
+    after them. Numba's parfor passes propagate these copies away, which is why a ``parallel=True``
+    compilation ran the same serial loop 1.7 to 3.4 times faster; this pass is only that propagation, a few
+    milliseconds of a compilation.
+
+    A copy ``t = v`` is forwarded when both are arrays of one type, each is assigned exactly once in the
+    function, and each one's assignment comes before every use of it on every path (it dominates them): then
+    ``t`` holds ``v``'s value wherever it is read. The arithmetic is untouched, so results are the same bit for
+    bit.
+
+    Parameters
+    ----------
+    blocks : dict
+        The function's IR blocks by label, changed in place.
+    typemap : dict
+        The type of each variable, by name.
+
+    Returns
+    -------
+    int
+        The copies removed.
+    """
+    copies, where = _array_copies(blocks, typemap)
+    if not copies:
+        return 0
+    dominators = compute_cfg_from_blocks(blocks).dominators()  # type: ignore[no-untyped-call]
+
+    def before(at: tuple[int, int], label: int, k: int) -> bool:
+        return at[0] in dominators[label] and (at[0] != label or at[1] < k)
+
+    unsafe: set[str] = set()
+    found: dict[str, Any] = {}
+    for label, block in blocks.items():
+        for k, stmt in enumerate(block.body):
+            defined = stmt.target.name if isinstance(stmt, ir.Assign) else None
+            for var in stmt.list_vars():
+                found.setdefault(var.name, var)
+                name = var.name
+                if name in copies and not before(where[copies[name] if name == defined else name], label, k):
+                    unsafe.add(name)
+    for name in unsafe:
+        del copies[name]
+    root: dict[str, Any] = {}
+    for t, v in copies.items():
+        source = v
+        while source in copies:
+            source = copies[source]
+        root[t] = found[source]
+    for block in blocks.values():
+        block.body = [stmt for stmt in block.body if not (isinstance(stmt, ir.Assign) and stmt.target.name in root)]
+    ir_utils.replace_vars(blocks, root)  # type: ignore[no-untyped-call]
+    return len(root)
+
+
+def _array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> tuple[dict[str, str], dict[str, tuple[int, int]]]:
+    """The candidates of :func:`forward_array_copies`: array copies between variables assigned once.
+
+    Parameters
+    ----------
+    blocks : dict
+        The function's IR blocks by label.
+    typemap : dict
+        The type of each variable, by name.
+
+    Returns
+    -------
+    copies : dict
+        The variable each copy reads, by the copy's name.
+    where : dict
+        Where each variable is assigned (its last assignment): block label, statement index.
+    """
+    defs: dict[str, int] = {}
+    where: dict[str, tuple[int, int]] = {}
+    copies: dict[str, str] = {}
+    for label, block in blocks.items():
+        for k, stmt in enumerate(block.body):
+            if isinstance(stmt, ir.Assign):
+                defs[stmt.target.name] = defs.get(stmt.target.name, 0) + 1
+                where[stmt.target.name] = (label, k)
+                if isinstance(stmt.value, ir.Var):
+                    copies[stmt.target.name] = stmt.value.name
+    copies = {t: v for t, v in copies.items() if isinstance(typemap.get(t), types.Array) and t != v
+              and typemap.get(v) == typemap[t] and defs[t] == 1 and defs.get(v) == 1}
+    return copies, where
+
+
+@register_pass(mutates_CFG=False, analysis_only=False)  # type: ignore[no-untyped-call]
+class ForwardArrayCopies(FunctionPass):
+    """The compiler pass of :func:`forward_array_copies`, run on the typed IR after Numba's rewrites."""
+
+    _name = "ema_forward_array_copies"
+
+    def __init__(self) -> None:
+        FunctionPass.__init__(self)  # type: ignore[no-untyped-call]
+
+    def run_pass(self, state: Any) -> bool:
+        """Forward the function's array copies.
+
+        Parameters
+        ----------
+        state : numba.core.compiler.StateDict
+            The compilation's state: its IR and type map.
+
+        Returns
+        -------
+        bool
+            Whether the IR changed.
+        """
+        if forward_array_copies(state.func_ir.blocks, state.typemap) == 0:
+            return False
+        state.func_ir._definitions = ir_utils.build_definitions(state.func_ir.blocks)  # type: ignore[no-untyped-call]
+        return True
+
+
+class ForwardCopiesCompiler(CompilerBase):
+    """Numba's nopython pipeline with :class:`ForwardArrayCopies` after its rewrites."""
+
+    def define_pipelines(self) -> list[Any]:
+        """The one pipeline.
+
+        Returns
+        -------
+        list
+            Numba's nopython pass manager, the pass added.
+        """
+        pm = DefaultPassBuilder.define_nopython_pipeline(self.state)  # type: ignore[no-untyped-call]
+        pm.add_pass_after(ForwardArrayCopies, NopythonRewrites)
+        pm.finalize()
+        return [pm]
