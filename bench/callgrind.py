@@ -120,6 +120,7 @@ def _identify_iteration() -> Callable[[], None]:
     base = SecondOrderParams.from_channel(channel)
 
     def run() -> None:
+        problem.forget_runs()  # the simulations themselves, each time, not the runs kept from the call before
         evaluate(problem, base, ["wn_rad_s", "zeta", "delay_s", "compliance_deg_per_kinlb"])
 
     return run

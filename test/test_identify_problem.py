@@ -59,6 +59,10 @@ def test_a_run_asked_for_again_is_not_run_again_and_is_the_same_to_the_bit(recor
     assert (problem.simulations, problem.reused) == (6, 3)
     mixed[1][:] = 0.0  # the caller's copy: the kept run is untouched
     assert np.array_equal(problem.simulate([a])[0], alone[0])
+    assert batches == [2, 1]
+    problem.forget_runs()  # a benchmark's: the next call runs again
+    assert np.array_equal(problem.simulate([a])[0], alone[0])
+    assert batches == [2, 1, 1]
 
 
 def test_what_changes_a_run_is_in_its_key(record):

@@ -286,6 +286,10 @@ class Problem:
         out = model.run_outputs(self._bp_t, u, h, sample_times=self.time_s, end_s=float(self.time_s[-1]))
         return out[:, :, [O_POS, O_SURF, O_RATE]]
 
+    def forget_runs(self) -> None:
+        """Drop the runs kept for reuse (a benchmark that counts the simulator's work, not a copy of it)."""
+        self._kept.clear()
+
     def _keep(self, key: tuple[object, ...], run: FloatArray) -> None:
         """Keep a run for reuse, dropping the least recently used beyond :data:`KEPT_RUNS_BYTES`."""
         self._kept[key] = run
