@@ -148,11 +148,15 @@ def make_rk4(parallel: bool) -> Callable[..., None]:
                                          out[i], u)
                 if t >= t_end - TIME_EPS_S:
                     break
+                known = False  # the piece the state is on, known from the step that reached it (inputs held)
+                s1 = 0
                 while t_next - t > TIME_EPS_S:
                     h = min(h_max, max_step_s(p), t_next - t)
-                    s0 = smooth_piece(p, y, u, on)
+                    s0 = s1 if known else smooth_piece(p, y, u, on)
                     rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)
-                    if smooth_piece(p, y1, u, on) != s0 and h > SWITCH_TOL_S:
+                    s1 = smooth_piece(p, y1, u, on)
+                    known = True
+                    if s1 != s0 and h > SWITCH_TOL_S:
                         lo = 0.0  # the step to the switch: last length still on s0's piece
                         hi = h
                         while hi - lo > SWITCH_TOL_S:
@@ -164,6 +168,7 @@ def make_rk4(parallel: bool) -> Callable[..., None]:
                                 hi = mid
                         h = hi
                         rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)
+                        known = False
                     for a in range(n):
                         y[a] = y1[a]
                     t += h
