@@ -99,8 +99,8 @@ GROUPS: dict[str, Callable[[], None]] = {
 """What compiles in one process: a model of the registry (or models of :data:`TOGETHER`), or the kernels outside
 the models."""
 SLOWEST_FIRST = ("loac", "loadf", "loada", "hoac1", "hoad3", "analysis", "sloac", "hoad2")
-"""The groups by compilation time, longest first (47.7, 23.7, 22.8, 13.4, 8.0, 3.7 s… measured in turn), so the
-processes end together."""
+"""The groups by compilation time, longest first (45.4, 21.8, 20.1, 10.0, 6.5, 3.2 s… measured two at a time on the
+idle machine), so the processes end together."""
 
 
 def warm(group: str) -> tuple[str, float]:
