@@ -245,23 +245,27 @@ class Problem:
         flips = [False] * n if flips is None else list(flips)
         offsets = None if command_offsets is None else np.asarray(command_offsets, dtype=float).reshape(
             n, self._bp_u.size)
-        keys = [(self.step_s, repr(p), bool(f), None if offsets is None else offsets[i].tobytes())
-                for i, (p, f) in enumerate(zip(params, flips, strict=True))]
+        keys: list[tuple[object, ...]] = [
+            (self.step_s, repr(p), bool(f), None if offsets is None else offsets[i].tobytes())
+            for i, (p, f) in enumerate(zip(params, flips, strict=True))]
         first: dict[tuple[object, ...], int] = {}
         for i, k in enumerate(keys):
             first.setdefault(k, i)
         todo = [i for k, i in first.items() if k not in self._kept]
-        out = np.empty((n, self.time_s.size, 3))
-        for i, k in enumerate(keys):
-            if k in self._kept:
-                self._kept.move_to_end(k)
-                out[i] = self._kept[k]
+        fresh: dict[tuple[object, ...], FloatArray] = {}
         if todo:
             runs = self._run([params[i] for i in todo], [flips[i] for i in todo],
                              None if offsets is None else offsets[todo])
-            for i, run in zip(todo, runs, strict=True):
-                out[[j for j, k in enumerate(keys) if k == keys[i]]] = run
-                self._keep(keys[i], run)
+            fresh = {keys[i]: run for i, run in zip(todo, runs, strict=True)}
+        out = np.empty((n, self.time_s.size, 3))
+        for i, k in enumerate(keys):
+            if k in fresh:
+                out[i] = fresh[k]
+            else:
+                self._kept.move_to_end(k)
+                out[i] = self._kept[k]
+        for k, run in fresh.items():
+            self._keep(k, run)
         self.simulations += n
         self.reused += n - len(todo)
         return out
@@ -291,9 +295,9 @@ class Problem:
         self._kept.clear()
 
     def _keep(self, key: tuple[object, ...], run: FloatArray) -> None:
-        """Keep a run for reuse, dropping the least recently used beyond :data:`KEPT_RUNS_BYTES`."""
+        """Keep a run for reuse, the least recently used dropped beyond :data:`KEPT_RUNS_BYTES` (runs of one size)."""
         self._kept[key] = run
-        while len(self._kept) > 1 and sum(r.nbytes for r in self._kept.values()) > KEPT_RUNS_BYTES:
+        while len(self._kept) > max(1, KEPT_RUNS_BYTES // run.nbytes):
             self._kept.popitem(last=False)
 
     def weighted_residual(self, sim: FloatArray) -> FloatArray:
