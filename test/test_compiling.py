@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numba.core.errors import TypingError
 
-from ema_sim.models.compiling import ForwardCopiesCompiler, borrowing
+from ema_sim.models.compiling import ForwardCopiesCompiler, borrowing, unlikely
 
 
 @nb.njit(inline="always")
@@ -64,3 +64,25 @@ def test_a_borrowing_element_works_in_its_callers_arrays_and_cannot_allocate():
 
     with pytest.raises((TypingError, NotImplementedError, RuntimeError)):
         allocates(x)
+
+
+def test_unlikely_keeps_the_condition_and_tells_llvm_the_branch_is_rare():
+    @nb.njit
+    def stick(v, dv, f, fs):
+        v_new = v + dv
+        if unlikely(v_new * v <= 0.0 and abs(f) <= fs):
+            return 0.0
+        return v_new
+
+    @nb.njit
+    def plain(v, dv, f, fs):
+        v_new = v + dv
+        if v_new * v <= 0.0 and abs(f) <= fs:
+            return 0.0
+        return v_new
+
+    cases = [(1.0, -2.0, 0.5, 1.0), (1.0, -2.0, 2.0, 1.0), (1.0, 0.5, 0.1, 1.0), (-1.0, 1.0, 0.0, 0.0)]
+    assert [stick(*c) for c in cases] == [plain(*c) for c in cases] == [0.0, -1.0, 1.5, 0.0]
+    # llvm.expect is lowered to branch weights marked "expected" (1 : 2000) on the branch it decides
+    assert '!"expected", i32 1, i32 2000' in "".join(stick.inspect_llvm().values())
+    assert '!"expected"' not in "".join(plain.inspect_llvm().values())

@@ -4,21 +4,24 @@ Numba counts a reference to an array each time a variable or a called function t
 increment and decrement that LLVM cannot always remove, and after which it reloads whatever the kernel
 reads. :func:`borrowing` compiles a called element without the counting; :class:`ForwardCopiesCompiler`
 compiles a kernel with the array copies its inlined elements make forwarded away (:func:`forward_array_copies`).
-Neither changes an operation on a number, so the outputs are the same bit for bit. Both use Numba's compiler
+:data:`unlikely` marks a rare branch, so LLVM keeps it a branch instead of a select on the kernel's critical path.
+None changes an operation on a number, so the outputs are the same bit for bit. They use Numba's compiler
 interfaces (``numba.core``), which requirements.txt pins.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import numba as nb
-from numba.core import ir, ir_utils, types
+from llvmlite import ir as llvm_ir  # type: ignore[import-untyped]
+from numba.core import cgutils, ir, ir_utils, types
 from numba.core.analysis import compute_cfg_from_blocks
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
 from numba.core.compiler_machinery import FunctionPass, register_pass
 from numba.core.typed_passes import NopythonRewrites
+from numba.extending import intrinsic
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -184,3 +187,41 @@ class ForwardCopiesCompiler(CompilerBase):
         pm.add_pass_after(ForwardArrayCopies, NopythonRewrites)
         pm.finalize()
         return [pm]
+
+
+def _expect_false(_typingctx: Any, condition: Any) -> Any:
+    """Typing and code of :data:`unlikely`: the condition unchanged, with LLVM told it is almost always false.
+
+    Parameters
+    ----------
+    _typingctx : numba.core.typing.Context
+        Numba's typing context (unused).
+    condition : numba.core.types.Type
+        The argument's type (a boolean).
+
+    Returns
+    -------
+    tuple or None
+        The signature and its code generator; None for a non-boolean argument.
+    """
+    if not isinstance(condition, types.Boolean):
+        return None
+
+    def codegen(_context: Any, builder: Any, _signature: Any, args: Any) -> Any:
+        i1 = llvm_ir.IntType(1)
+        expect = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
+            builder.module, llvm_ir.FunctionType(i1, [i1, i1]), "llvm.expect.i1")
+        return builder.call(expect, [args[0], llvm_ir.Constant(i1, 0)])
+
+    return types.boolean(types.boolean), codegen
+
+
+unlikely = cast("Callable[[bool], bool]", intrinsic(_expect_false))
+"""``unlikely(condition)`` in a kernel: the condition, with the branch it decides weighted as rarely taken.
+
+``llvm.expect`` becomes branch weights, and LLVM then keeps the branch rather than computing both sides and
+selecting (a select waits for its condition, a predicted branch does not). The stick test after each division
+in :func:`~ema_sim.models.high_order.figure30.friction_step` was such a select: on the serial path of HOAD3's
+step, about 10 % of its time. Only code layout changes, never an operation on a number, so the results are the
+same bit for bit.
+"""

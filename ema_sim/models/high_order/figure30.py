@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.compiling import unlikely
 from ema_sim.models.high_order import gear_train as gt
 from ema_sim.models.high_order.params import P
 from ema_sim.models.stages import FLAG_CURRENT, FLAG_PWM_DEAD_BAND, FLAG_RATE, FLAG_STALL, band_side, jit
@@ -600,12 +601,13 @@ def friction_step(v: float, f_applied: float, coulomb_lbf: float, stiction_lbf: 
     float
         The velocity at the end of the step (in/s).
     """
+    implicit = 1.0 / (1.0 + damping_dt_per_mass)  # known at the step's start: off the velocity's critical path
     if v == 0.0:
         if abs(f_applied) <= stiction_lbf:
             return 0.0
-        return dt_per_mass * (f_applied - math.copysign(coulomb_lbf, f_applied)) / (1.0 + damping_dt_per_mass)
-    v_new = (v + dt_per_mass * (f_applied - math.copysign(coulomb_lbf, v))) / (1.0 + damping_dt_per_mass)
-    if v_new * v <= 0.0 and abs(f_applied) <= stiction_lbf:
+        return dt_per_mass * (f_applied - math.copysign(coulomb_lbf, f_applied)) * implicit
+    v_new = (v + dt_per_mass * (f_applied - math.copysign(coulomb_lbf, v))) * implicit
+    if unlikely(v_new * v <= 0.0 and abs(f_applied) <= stiction_lbf):  # a branch, not a select on the new velocity
         return 0.0
     return v_new
 
