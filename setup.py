@@ -28,6 +28,7 @@ setup(
         "mcap>=1.1",
         "matplotlib>=3.8",
         "PyYAML>=6",
+        "threadpoolctl>=3",
     ],
     zip_safe=True,
     maintainer="ema_sim maintainers",

@@ -72,7 +72,7 @@ def identify_30s_escalated_1_worker() -> Result:
 
 
 def identify_30s_escalated_2_workers() -> Result:
-    """Issue 27's case with a round's candidate fits and the physics' starts on a local 2-process Dask cluster."""
+    """Issue 27's case with a round's candidate fits and the physics' starts on the local Dask cluster's 2 threads."""
     return _escalated_30s(2)
 
 

@@ -8,6 +8,8 @@ gives, to the last bit, whatever else shares its batch.
 from __future__ import annotations
 
 import pickle
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -15,7 +17,7 @@ from identgen import make_record
 
 from ema_sim.config import load_channel
 from ema_sim.identify import problem as problem_module
-from ema_sim.identify.problem import Problem
+from ema_sim.identify.problem import Cancelled, Problem
 from ema_sim.models.second_order import SecondOrderParams
 
 WING = load_channel("left_wing")
@@ -105,3 +107,75 @@ def test_a_problem_goes_to_a_worker_without_its_kept_runs(record):
     assert len(copy._kept) == 0
     assert copy.simulations == problem.simulations
     assert np.array_equal(copy.simulate(_sets()[:1])[0], problem.simulate(_sets()[:1])[0])
+
+
+def test_a_tally_counts_one_threads_simulations_apart_and_a_changed_input_is_never_kept(record):
+    a, b, c = _sets()
+    problem = Problem(record, WING)
+    problem.simulate([a])
+    with problem.tally() as counts:
+        problem.simulate([a, b])  # a kept from before: one of the two reused
+    assert (counts.simulations, counts.reused) == (2, 1)
+    assert (problem.simulations, problem.reused) == (1, 0)  # the caller adds a tally once it takes the fit
+    seen: list[tuple[int, int]] = []
+
+    def other_thread() -> None:
+        problem.simulate([c])  # no tally open in this thread: counted in the problem
+
+    worker = threading.Thread(target=other_thread)
+    with problem.tally() as counts:
+        worker.start()
+        worker.join()
+        seen.append((counts.simulations, counts.reused))
+    assert seen == [(0, 0)]
+    assert problem.simulations == 2
+
+
+def test_a_run_that_began_before_the_inputs_changed_is_not_kept_as_one_of_theirs(record):
+    a = _sets()[0]
+    problem = Problem(record, WING)
+    run = problem._run
+
+    def inputs_change_meanwhile(params, flips, offsets):
+        out = run(params, flips, offsets)
+        problem.set_command_sampled(True)  # as another thread would, while this run was going
+        return out
+
+    problem._run = inputs_change_meanwhile  # type: ignore[method-assign]
+    held = problem.simulate([a])[0]
+    problem._run = run  # type: ignore[method-assign]
+    batches = _counting(problem)
+    sampled = problem.simulate([a])[0]
+    assert batches == [1]  # run again on the new inputs, not answered with the held command's run
+    assert not np.array_equal(held, sampled)
+
+
+def test_threads_sharing_a_problem_get_what_each_would_alone(record):
+    sets = _sets()
+    alone = [Problem(record, WING).simulate([p])[0] for p in sets]
+    problem = Problem(record, WING)
+    batches = _counting(problem)
+    with ThreadPoolExecutor(3) as pool:
+        got = list(pool.map(lambda i: problem.simulate([sets[i % 3], sets[(i + 1) % 3]]), range(12)))
+    for i, pair in enumerate(got):
+        assert np.array_equal(pair[0], alone[i % 3])
+        assert np.array_equal(pair[1], alone[(i + 1) % 3])
+    assert problem.simulations == 24
+    assert problem.reused == 24 - sum(batches)  # what no thread had kept yet ran, the rest was reused
+    assert sum(batches) < 24
+
+
+def test_a_cancelled_fit_stops_at_its_next_simulation_and_others_go_on(record):
+    a, b, _ = _sets()
+    problem = Problem(record, WING)
+    with problem.tally("round 0/delay") as counts:
+        problem.simulate([a])
+        problem.cancel("round 0/delay")
+        with pytest.raises(Cancelled):
+            problem.simulate([b])
+    assert counts.simulations == 1
+    with problem.tally("round 0/lag") as other:
+        problem.simulate([b])  # another fit's token: not cancelled
+    assert other.simulations == 1
+    problem.simulate([b])  # the search itself (no tally) is never cancelled
+    assert problem.simulations == 1

@@ -63,10 +63,11 @@ ROSDEP_KEYS = {
     "builtin_interfaces": "builtin_interfaces", "diagnostic_msgs": "diagnostic_msgs",
     "rcl_interfaces": "rcl_interfaces", "ament_index_python": "ament_index_python", "launch": "launch",
     "launch_ros": "launch_ros", "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
-    "matplotlib": "python3-matplotlib", "numba": "python3-numba-pip", "control": "python3-control-pip",
+    "matplotlib": "python3-matplotlib", "numba": "python3-numba-pip",
+    "llvmlite": "python3-numba-pip", "control": "python3-control-pip",  # llvmlite: numba's own dependency
     "rosbags": "python3-rosbags-pip", "mcap": "python3-mcap-pip", "typing_extensions": "python3-typing-extensions",
     "distributed": "python3-dask-distributed-pip", "dask": "python3-dask-distributed-pip",  # distributed needs dask
-    "pyarrow": "python3-pyarrow-pip",
+    "pyarrow": "python3-pyarrow-pip", "threadpoolctl": "python3-threadpoolctl-pip",
     "fmpy": "python3-fmpy-pip", "jsbsim": "python3-jsbsim-pip",
 }
 """Top-level import → its rosdep key (a new import without one fails the test below)."""

@@ -113,7 +113,7 @@ def register(sub: Subparsers) -> None:
                         "running demand, or detect it (a record that cannot tell is fitted both ways)")
     p.add_argument("--workers", type=int, default=2, metavar="N",
                    help="fit a round's candidate effects and the physics' extra starts at once on a local Dask "
-                        "cluster of N processes (2; 0 or 1: one after another in this process; a record under "
+                        "cluster of N threads in this process (2; 0 or 1: one after another; a record under "
                         "40,000 fitted samples is always fitted here); the same result either way")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="send those fits to a running Dask scheduler (e.g. tcp://host:8786) instead")

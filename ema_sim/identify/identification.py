@@ -35,7 +35,7 @@ from ema_sim.identify.discovery import Discovery, discover
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
 from ema_sim.identify.fit import TINY, Fit, evaluate, rms
 from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal
-from ema_sim.identify.parallel import MIN_SAMPLES, SERIAL, Pool
+from ema_sim.identify.parallel import MIN_SAMPLES, SERIAL, Pool, one_blas_thread
 from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
 from ema_sim.identify.record import Record, prepare
@@ -154,7 +154,7 @@ def identify(
         ``max_effects`` 0).
     workers : int
         Fit a round's candidates and the physics' extra starts at once on a local Dask cluster of this many
-        processes (0 or 1: one after another here); the same result either way (:mod:`.parallel`).
+        threads (0 or 1: one after another here); the same result either way (:mod:`.parallel`).
     scheduler : str, optional
         A running Dask scheduler's address to send those fits to instead of a local cluster.
 
@@ -172,8 +172,9 @@ def identify(
     if scheduler:
         pool.client()  # a scheduler that cannot be reached is the user's error, said before any fit
     try:
-        result = _identify(problem, record, model, overrides, t0=t0, say=say, pool=pool, max_effects=max_effects,
-                           escalate=escalate, discover_terms=discover_terms)
+        with one_blas_thread():
+            result = _identify(problem, record, model, overrides, t0=t0, say=say, pool=pool,
+                               max_effects=max_effects, escalate=escalate, discover_terms=discover_terms)
         if pool.failed:
             result.warnings.append(pool.failed)
         return result

@@ -5,14 +5,18 @@ A round of the effects search fits its few most promising candidates against the
 (:func:`ema_sim.identify.physical.fit_physical`); each fit is deterministic and independent of the others, so
 they run at once on Dask workers and the search takes their results in its own order, the same result as
 one after another. By default the workers are a :class:`distributed.LocalCluster` of
-:data:`DEFAULT_WORKERS` processes (one thread each: a fit's Python and its SVDs hold a thread), started in
-the background when identification begins so its start overlaps the baseline fit; ``scheduler`` sends
-them to a running Dask scheduler instead (``ema identify --scheduler ADDRESS``).
+:data:`DEFAULT_WORKERS` threads in this process, started in the background when identification begins (in
+half a second): the fits share the record, the runs it keeps and this process's BLAS, and their
+simulations release the GIL, so while one fit solves or judges in Python another's kernels fill the
+cores. Worker processes on two cores ran slower than one process (93.6 s against 85.9 s on issue 27's
+record): each held a copy of the record and its own kernel threads, and they contended for the cores.
+``scheduler`` sends the fits to a running Dask scheduler instead (``ema identify --scheduler ADDRESS``),
+whose workers load the kernels numba cached on disk (``cache=True``; ``python -m ema_sim.warmup`` compiles
+them all) and run one tiny simulation when they join, before the first fit reaches them. Every fit runs with
+one BLAS thread (:func:`one_blas_thread`), here and on any worker, so a fit is the same to the last bit
+wherever it ran.
 
-A record under :data:`MIN_SAMPLES` fitted samples is fitted in the calling process: its fits take less
-than the cluster takes to start. The workers load the kernels numba cached on disk (``cache=True``;
-``python -m ema_sim.warmup`` compiles them all) and run one tiny simulation when they join, before the
-first fit reaches them.
+A record under :data:`MIN_SAMPLES` fitted samples is fitted in the calling process: its rounds are short.
 """
 
 from __future__ import annotations
@@ -20,46 +24,45 @@ from __future__ import annotations
 import logging
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
+from contextlib import contextmanager
 from typing import Any
+
+from threadpoolctl import threadpool_limits
 
 from ema_sim.errors import EmaError
 
 DEFAULT_WORKERS = 2
-"""Worker processes of the local cluster."""
+"""Worker threads of the local cluster."""
 MIN_SAMPLES = 40_000
 """Fitted residual entries (samples × outputs) below which the fits stay in the calling process: a 10 s
-record of two outputs at 1 kHz (20,000) is fitted in a few seconds, less than a cluster's start and the
-workers' first loads from numba's cache."""
+record of two outputs at 1 kHz (20,000) is fitted in a few seconds, in short fits the search mostly needs one
+after another (a second worker thread gained nothing measurable even on a 90 s record)."""
 ENV_WORKERS = "EMA_IDENTIFY_WORKERS"
 """Environment override of the local cluster's size (0: no cluster, every fit in the calling process)."""
 
 
-BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-"""The variables Dask sets to 1 in a worker it spawns (``distributed.nanny.pre-spawn-environ``)."""
+BLAS_THREADS = 1
+"""BLAS threads while a fit runs, wherever it runs (:func:`one_blas_thread`)."""
 
 
-def blas_environ() -> dict[str, str]:
-    """The calling process's BLAS thread count, for the local workers: the same sums in the same order.
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Run the block with one BLAS thread: fits whose linear algebra is the same sums on every machine.
 
-    Dask starts its workers with one BLAS thread; OpenBLAS splits a long dot product or matrix product
-    between its threads, so a fit's linear algebra on a worker would round differently in its last bits from
-    the same fit here. The workers get this process's count instead (its variable, or one thread per
-    core, OpenBLAS's default), and a fit on a worker is the fit made here, to the last bit.
-
-    Returns
-    -------
-    dict
-        Each of :data:`BLAS_THREADS` → the count.
+    The fits' matrices are a record long and a dozen parameters wide, too small for OpenBLAS's threads to pay:
+    idle, they spin for the next call and take the cores from the simulator's threads. Issue 27's record (30 s
+    at 1 kHz, ``loada`` declared, escalated) took 80.1 s and 151.7 CPU-s with OpenBLAS's default of one thread
+    per core, and 52.0 s and 86.2 CPU-s with one. One thread also makes the result the same to the last bit
+    whatever the machine's cores and on any Dask worker (which Dask starts with one BLAS thread).
     """
-    given = next((os.environ[k] for k in BLAS_THREADS if os.environ.get(k)), None)
-    count = given or str(len(os.sched_getaffinity(0)))
-    return dict.fromkeys(BLAS_THREADS, count)
+    with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+        yield
 
 
 def _warm() -> None:
-    """Load the identification simulator's kernels from numba's cache in a worker (one tiny batch)."""
+    """Load the identification simulator's kernels from numba's cache in a worker process (one tiny batch)."""
     import numpy as np  # noqa: PLC0415 - runs in a worker
 
     from ema_sim.models.second_order import SecondOrder  # noqa: PLC0415 - runs in a worker
@@ -75,10 +78,10 @@ class Pool:
     Parameters
     ----------
     scheduler : str, optional
-        A running Dask scheduler's address; without it a local cluster of ``workers`` processes.
+        A running Dask scheduler's address; without it a local cluster of ``workers`` threads.
     workers : int, optional
-        Processes of the local cluster (default :data:`DEFAULT_WORKERS`, or :data:`ENV_WORKERS`); 0 or 1 fits
-        in the calling process.
+        Threads of the local cluster (default :data:`DEFAULT_WORKERS`, or :data:`ENV_WORKERS`); 0 or 1 fits
+        in the calling process, one after another.
     """
 
     def __init__(self, scheduler: str | None = None, workers: int | None = None) -> None:
@@ -119,14 +122,11 @@ class Pool:
                 except OSError as exc:
                     raise EmaError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
             else:
-                import dask  # noqa: PLC0415 - only when fits go to Dask
-
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": {
-                        **dask.config.get("distributed.nanny.pre-spawn-environ"), **blas_environ()}}):
-                    self._cluster = LocalCluster(  # type: ignore[no-untyped-call]
-                        n_workers=self.workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                        silence_logs=logging.ERROR)
+                self._cluster = LocalCluster(  # type: ignore[no-untyped-call]
+                    n_workers=1, threads_per_worker=self.workers, processes=False, dashboard_address=":0",
+                    silence_logs=logging.ERROR)
                 self._client = Client(self._cluster)  # type: ignore[no-untyped-call]
+                return
             self._client.run(_warm)
         except Exception as exc:  # reported to the caller that waits for the client
             self._error = exc

@@ -39,7 +39,7 @@ from scipy.optimize import least_squares
 
 from ema_sim.identify.declared import run_declared
 from ema_sim.identify.fit import block_covariance, finite
-from ema_sim.identify.parallel import SERIAL, Pool, result
+from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread, result
 from ema_sim.identify.problem import Problem
 from ema_sim.models import model_parameters
 from ema_sim.models.arrays import FloatArray
@@ -324,7 +324,8 @@ def remote_start(problem: Problem, model: str, names: list[str], declared: dict[
         Where the fit ended, and the model runs it took.
     """
     runs = _Runs(problem, model, names, declared)
-    return _fit_restarted(runs, x, free, seed), runs.count
+    with one_blas_thread():
+        return _fit_restarted(runs, x, free, seed), runs.count
 
 
 def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL

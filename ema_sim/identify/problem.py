@@ -15,8 +15,10 @@ constant-speed segments.
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -49,6 +51,20 @@ EQUIVALENT_EXCESS = 3.0
 """Final rms over the noise floor beyond which the fitted parameters are said to be equivalents."""
 
 
+class Cancelled(Exception):  # noqa: N818 - a fit stopped, not an error
+    """A fit the search no longer needs, stopped at its next simulation (:meth:`Problem.cancel`)."""
+
+
+@dataclass
+class Tally:
+    """Simulations asked for by one thread's work, and how many of them were kept runs (:meth:`Problem.tally`)."""
+
+    simulations: int = 0
+    reused: int = 0
+    token: str = ""
+    """What the work is cancelled by (empty: it is not)."""
+
+
 @dataclass
 class Problem:
     """Everything the fits need from one record, and the batched simulator that compares against it."""
@@ -79,6 +95,15 @@ class Problem:
                                                                default_factory=OrderedDict)
     """The latest runs, by what determines them: a fit's Jacobian restarts from the point its residual has just
     run, and each stage restarts from the model the one before ended on."""
+    _inputs: int = field(init=False, repr=False, compare=False, default=0)
+    """Which inputs the model is driven with (each change of them, one more): part of a kept run's key."""
+    _cancelled: set[str] = field(init=False, repr=False, compare=False, default_factory=set)
+    """Tokens of the fits cancelled (:meth:`cancel`)."""
+    _tally: threading.local = field(init=False, repr=False, compare=False, default_factory=threading.local)
+    """This thread's :class:`Tally`, while one is open (:meth:`tally`)."""
+    _lock: threading.Lock = field(init=False, repr=False, compare=False, default_factory=threading.Lock)
+    """Guards the kept runs and the counts: a round's candidate fits simulate from threads of one process
+    (:mod:`ema_sim.identify.parallel`)."""
 
     def __post_init__(self) -> None:
         d = self.data
@@ -103,7 +128,9 @@ class Problem:
             True: interpolate the command between samples; False: hold it.
         """
         self.command_sampled = sampled
-        self._kept.clear()  # the model's inputs change
+        with self._lock:  # the model's inputs change: a run still going elsewhere is never kept as one of theirs
+            self._kept.clear()
+            self._inputs += 1
         cmd = self.data.command_deg
         hm = self.data.hinge_moment
         if sampled:
@@ -241,40 +268,91 @@ class Problem:
         command_offsets : sequence of numpy.ndarray, optional
             Per instance, a signal added to the command at each breakpoint (a term acting inside the loop).
         """
+        tally: Tally | None = getattr(self._tally, "open", None)
+        if tally is not None and tally.token and tally.token in self._cancelled:
+            raise Cancelled(tally.token)
         n = len(params)
         flips = [False] * n if flips is None else list(flips)
         offsets = None if command_offsets is None else np.asarray(command_offsets, dtype=float).reshape(
             n, self._bp_u.size)
         keys: list[tuple[object, ...]] = [
-            (self.step_s, repr(p), bool(f), None if offsets is None else offsets[i].tobytes())
+            (self._inputs, self.step_s, repr(p), bool(f), None if offsets is None else offsets[i].tobytes())
             for i, (p, f) in enumerate(zip(params, flips, strict=True))]
         first: dict[tuple[object, ...], int] = {}
         for i, k in enumerate(keys):
             first.setdefault(k, i)
-        todo = [i for k, i in first.items() if k not in self._kept]
-        fresh: dict[tuple[object, ...], FloatArray] = {}
-        if todo:
-            runs = self._run([params[i] for i in todo], [flips[i] for i in todo],
-                             None if offsets is None else offsets[todo])
-            fresh = {keys[i]: run for i, run in zip(todo, runs, strict=True)}
         out = np.empty((n, self.time_s.size, 3))
+        with self._lock:
+            todo = []
+            for k, i in first.items():
+                kept = self._kept.get(k)
+                if kept is None:
+                    todo.append(i)
+                else:
+                    self._kept.move_to_end(k)
+                    out[i] = kept
+        runs = self._run([params[i] for i in todo], [flips[i] for i in todo],
+                         None if offsets is None else offsets[todo]) if todo else out[:0]
+        for i, run in zip(todo, runs, strict=True):
+            out[i] = run
         for i, k in enumerate(keys):
-            if k in fresh:
-                out[i] = fresh[k]
-            else:
-                self._kept.move_to_end(k)
-                out[i] = self._kept[k]
-        for k, run in fresh.items():
-            self._keep(k, run)
-        self.simulations += n
-        self.reused += n - len(todo)
+            if first[k] != i:
+                out[i] = out[first[k]]
+        with self._lock:
+            for i, run in zip(todo, runs, strict=True):
+                self._keep(keys[i], run)
+            counts = self if tally is None else tally
+            counts.simulations += n
+            counts.reused += n - len(todo)
         return out
+
+    def cancel(self, token: str) -> None:
+        """Stop the fit opened with ``token`` (:meth:`tally`) at its next simulation, which raises :class:`Cancelled`.
+
+        Parameters
+        ----------
+        token : str
+            The fit's token.
+        """
+        with self._lock:
+            self._cancelled.add(token)
+
+    @contextmanager
+    def tally(self, token: str = "") -> Iterator[Tally]:
+        """Count this thread's simulations apart from :attr:`simulations`, for a caller that adds them itself.
+
+        A worker's candidate fit (:func:`~ema_sim.identify.stepwise.remote_candidate`) counts once the search
+        takes it, so a fit the search stopped before needing is not counted, whichever thread ran it.
+
+        Parameters
+        ----------
+        token : str
+            What :meth:`cancel` stops this work by (empty: nothing does).
+
+        Yields
+        ------
+        Tally
+            The counts so far.
+        """
+        outer = getattr(self._tally, "open", None)
+        self._tally.open = counts = Tally(token=token)
+        try:
+            yield counts
+        finally:
+            self._tally.open = outer
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled (to a Dask worker) without the kept runs: a worker keeps its own."""
         state = dict(self.__dict__)
         state["_kept"] = OrderedDict()
+        del state["_lock"], state["_tally"]
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickled on a worker with a lock of its own."""
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+        self._tally = threading.local()
 
     def _run(self, params: Sequence[SecondOrderParams], flips: Sequence[bool],
              offsets: FloatArray | None) -> FloatArray:
@@ -292,7 +370,8 @@ class Problem:
 
     def forget_runs(self) -> None:
         """Drop the runs kept for reuse (a benchmark that counts the simulator's work, not a copy of it)."""
-        self._kept.clear()
+        with self._lock:
+            self._kept.clear()
 
     def _keep(self, key: tuple[object, ...], run: FloatArray) -> None:
         """Keep a run for reuse, the least recently used dropped beyond :data:`KEPT_RUNS_BYTES` (runs of one size)."""

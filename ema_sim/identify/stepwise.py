@@ -23,6 +23,7 @@ Safeguards (the contract's rules for every report):
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -36,8 +37,8 @@ from ema_sim.identify.declared import not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Context, Effect, report_values
 from ema_sim.identify.fit import TINY, Fit, evaluate, fit, rms
 from ema_sim.identify.outcome import AsDeclared, Identification, Removal, Step, Verdict
-from ema_sim.identify.parallel import SERIAL, Pool, result
-from ema_sim.identify.problem import Problem
+from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread, result
+from ema_sim.identify.problem import Cancelled, Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record
 from ema_sim.identify.screening import Candidate, screen
@@ -46,6 +47,10 @@ from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
 TOP_K = 3
+STOP_FACTOR = 2.0
+"""A round stops once an accepted fit has removed this many times what the next candidate could, linearly."""
+_ROUNDS = itertools.count()
+"""Rounds submitted to workers, for their fits' cancellation tokens."""
 MAX_EFFECTS = 8
 START_WN_RAD_S = (8.0, 15.0, 30.0, 60.0, 120.0, 250.0, 480.0)
 START_ZETA = (0.35, 0.7, 1.2, 2.0)
@@ -511,7 +516,7 @@ class _Round:
 
 
 def remote_candidate(problem: Problem, cur: Fit, key: str, value: dict[str, float], flip: bool,
-                     ctx: dict[str, Any]) -> tuple[Fit, int, int]:
+                     ctx: dict[str, Any], token: str = "") -> tuple[Fit, int, int] | None:
     """:func:`_fit_candidate` of the effect ``key`` from ``value`` on a worker, and the simulations it asked for.
 
     The effect is named by its key (its probes and checks are functions of the vocabulary, not pickled);
@@ -531,27 +536,71 @@ def remote_candidate(problem: Problem, cur: Fit, key: str, value: dict[str, floa
         Run with the hinge moment reversed.
     ctx : dict
         The :class:`Context`'s fields other than its problem.
+    token : str
+        What the search cancels the fit by (:meth:`Problem.cancel`): a fit in a thread of the search's own
+        process stops at its next simulation.
 
     Returns
     -------
-    tuple
-        The fit, the simulations it asked for, and how many of them the worker had kept from before.
+    tuple or None
+        The fit, the simulations it asked for, and how many of them were kept from before; they count once
+        the search takes the fit (a fit it stopped before needing does not count, wherever it ran). None: the
+        search cancelled it.
     """
-    before, reused = problem.simulations, problem.reused
     cand = Candidate(BY_KEY[key], value, flip, 0.0, 0.0)
-    new = _fit_candidate(problem, cur, cand, Context(problem, **ctx))
-    return new, problem.simulations - before, problem.reused - reused
+    try:
+        with one_blas_thread(), problem.tally(token) as counts:
+            new = _fit_candidate(problem, cur, cand, Context(problem, **ctx))
+    except Cancelled:
+        return None
+    return new, counts.simulations, counts.reused
 
 
-def _submit(pool: Pool, problem: Problem, cur: Fit, cands: list[Candidate], ctx: Context) -> dict[str, Any]:
-    """The round's candidate fits submitted to the pool's workers at once (empty: they are fitted here in turn)."""
+def likely_needed(cands: list[Candidate]) -> list[Candidate]:
+    """The round's candidates the search will probably fit: up to the first the early stop would skip, linearly.
+
+    The search stops once an accepted fit has removed more than :data:`STOP_FACTOR` times the next candidate's
+    predicted drop; taking each fit's drop as predicted, a candidate after one whose predicted drop is that much
+    larger is not needed. Fitting it at once on the second core would only slow the fits the search waits for.
+
+    Parameters
+    ----------
+    cands : list of Candidate
+        The round's candidates, in the search's order.
+
+    Returns
+    -------
+    list of Candidate
+        Their first few.
+    """
+    out: list[Candidate] = []
+    for cand in cands:
+        if out and max(c.predicted_drop for c in out) > STOP_FACTOR * cand.predicted_drop:
+            break
+        out.append(cand)
+    return out
+
+
+def _submit(pool: Pool, problem: Problem, cur: Fit, cands: list[Candidate], ctx: Context
+            ) -> dict[str, tuple[Any, str]]:
+    """The round's candidate fits the search will likely need, submitted to the pool's workers at once.
+
+    Returns each one's future and cancellation token by effect (empty: every fit is made here in turn; one not
+    submitted is fitted here when the search reaches it).
+    """
+    cands = likely_needed(cands)
     client = pool.client() if len(cands) > 1 else None
     if client is None:
         return {}
     shared, model = client.scatter([problem, cur], broadcast=True)
     fields = {k: v for k, v in vars(ctx).items() if k != "problem"}
-    return {c.effect.key: client.submit(remote_candidate, shared, model, c.effect.key, dict(c.value), c.flip, fields,
-                                        pure=False) for c in cands}
+    round_id = next(_ROUNDS)
+    out = {}
+    for c in cands:
+        token = f"{round_id}/{c.effect.key}"
+        out[c.effect.key] = (client.submit(remote_candidate, shared, model, c.effect.key, dict(c.value), c.flip,
+                                           fields, token, pure=False), token)
+    return out
 
 
 def _restart_rate(problem: Problem, cur: Fit, ranked: list[Candidate], tried: dict[str, tuple[Fit, Verdict]],
@@ -625,13 +674,14 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
         round_ = _Round(problem, cur, ctx, result, limit, say, tried, accepted)
         pending = _submit(pool, problem, cur, ranked[:TOP_K], ctx)
         for k, cand in enumerate(ranked[:TOP_K]):
-            round_.attempt(cand, pending.pop(cand.effect.key, None))
+            round_.attempt(cand, pending.pop(cand.effect.key, (None, ""))[0])
             # Stop fitting when the best so far already removed more than the rest could, even linearly.
             rest = ranked[k + 1].predicted_drop if k + 1 < len(ranked) else 0.0
-            if accepted and cur.rss - min(f.rss for f, _ in accepted) > 2.0 * rest:
+            if accepted and cur.rss - min(f.rss for f, _ in accepted) > STOP_FACTOR * rest:
                 break
-        for future in pending.values():  # fits the search stopped before needing
+        for future, token in pending.values():  # fits the search stopped before needing
             future.cancel()
+            problem.cancel(token)
         restarted = _restart_rate(problem, cur, ranked, tried, ctx, result, limit, say)
         if restarted is not None:
             accepted.append(restarted)

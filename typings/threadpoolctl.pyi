@@ -1,0 +1,13 @@
+# Typing stubs for the part of threadpoolctl ema_sim uses (threadpoolctl ships none): the BLAS thread limit that
+# identification's fits run under (ema_sim/identify/parallel.py) and the pools' description the tests read.
+from types import TracebackType
+from typing import Any, Literal
+
+class threadpool_limits:  # noqa: N801 - the library's own name
+    def __init__(self, limits: int | dict[str, int] | str | None = None,
+                 user_api: Literal["blas", "openmp"] | None = None) -> None: ...
+    def __enter__(self) -> threadpool_limits: ...
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None: ...
+
+def threadpool_info() -> list[dict[str, Any]]: ...
