@@ -12,7 +12,7 @@ interfaces (``numba.core``), which requirements.txt pins.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any, Literal, TypeVar, cast, overload
 
 import numba as nb
 from llvmlite import ir as llvm_ir  # type: ignore[import-untyped]
@@ -26,7 +26,17 @@ from numba.extending import intrinsic
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
-def borrowing(fn: _F) -> _F:
+@overload
+def borrowing(fn: _F, /) -> _F: ...
+
+
+@overload
+def borrowing(*, nogil: bool = ..., error_model: Literal["python", "numpy"] = ...,
+              fastmath: bool | set[str] = ...) -> Callable[[_F], _F]: ...
+
+
+def borrowing(fn: _F | None = None, /, *, nogil: bool = False, error_model: Literal["python", "numpy"] = "python",
+              fastmath: bool | set[str] = False) -> _F | Callable[[_F], _F]:
     """Compile a called (not inlined) element that works only in arrays its caller owns, without Numba's runtime.
 
     Numba counts a reference to each array argument on entry to a compiled function and releases it on
@@ -34,20 +44,30 @@ def borrowing(fn: _F) -> _F:
     arrays. An RK4 step called a few thousand times a simulated second with nine arrays spent most of its
     time there. Without the runtime the arguments are borrowed, which is safe because the caller holds
     them for the call; an element that allocates an array does not compile this way (a typing error, not a
-    leak), so it cannot be used by mistake.
+    leak), so it cannot be used by mistake. ``@borrowing`` alone, or ``@borrowing(...)`` with Numba's options.
 
     Parameters
     ----------
-    fn : callable
-        The element.
+    fn : callable, optional
+        The element (without it: the decorator with these options).
+    nogil : bool
+        Release the GIL while it runs (an entry point called from Python threads).
+    error_model : str
+        Numba's error model.
+    fastmath : bool or set of str
+        Numba's floating-point flags.
 
     Returns
     -------
-    numba dispatcher
-        ``fn`` compiled and cached, without reference counting.
+    numba dispatcher or callable
+        ``fn`` compiled and cached, without reference counting; or the decorator.
     """
-    compiled: _F = nb.njit(cache=True, _nrt=False)(fn)
-    return compiled
+
+    def compile_(f: _F) -> _F:
+        compiled: _F = nb.njit(cache=True, _nrt=False, nogil=nogil, error_model=error_model, fastmath=fastmath)(f)
+        return compiled
+
+    return compile_ if fn is None else compile_(fn)
 
 
 def forward_array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> int:

@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ema_sim.models.arrays import FloatArray
-from ema_sim.models.compiling import ForwardCopiesCompiler
+from ema_sim.models.compiling import ForwardCopiesCompiler, borrowing
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -71,7 +71,7 @@ def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False, 
     tag = f"{func.__module__.rsplit('.', 1)[-1]}_{func.__name__}" if callable(func) else str(of)
     fn.__qualname__ = f"{fn.__qualname__}_{tag}"
     if borrow:
-        return nb.njit(cache=True, _nrt=False)(fn)
+        return borrowing(fn)
     if forward_copies:
         return nb.njit(cache=True, parallel=parallel, pipeline_class=ForwardCopiesCompiler)(fn)
     return nb.njit(cache=True, parallel=parallel)(fn)

@@ -17,6 +17,7 @@ from ema_sim.calibration import cubic, cubic_inverse, cubic_slope
 from ema_sim.models import noise as nz
 from ema_sim.models.arrays import FloatArray, UIntArray
 from ema_sim.models.base import O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF
+from ema_sim.models.compiling import borrowing
 from ema_sim.models.high_order.figure30 import (
     bus_current,
     bus_voltage_step,
@@ -39,7 +40,7 @@ from ema_sim.models.stages import (
 )
 
 
-@nb.njit(cache=True, nogil=True, _nrt=False)  # its arrays borrowed (ema_sim.models.compiling.borrowing)
+@borrowing(nogil=True)
 def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, bp_u: FloatArray, x_out: FloatArray,
                slope_out: FloatArray) -> None:
     """Stage 2 on every breakpoint of every instance: degrees → volts (command curve) → 5 mV → degrees → in.
@@ -90,7 +91,7 @@ FASTMATH = {"contract", "arcp", "nsz"}
 """The discrete kernel's floating-point flags (its feedback path is compiled with them, explicitly)."""
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=FASTMATH, _nrt=False)  # borrowed, as command_in's
+@borrowing(error_model="numpy", fastmath=FASTMATH)
 def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UIntArray) -> float:
     """Stages 16–17 at a sample instant ``s``: LVDT degrees → volts (+ noise) → 5 mV → degrees.
 
