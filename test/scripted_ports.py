@@ -25,8 +25,12 @@ class ScriptedPorts:
     def frame_publisher(self, topic):
         return SimpleNamespace(publish=self.sent.setdefault(topic, []).append)
 
-    def frame_subscription(self, topic, callback, on_bad):  # noqa: ARG002
+    def frame_subscription(self, topic, callback, on_bad, *, at_frame=False):  # noqa: ARG002
         self.take[topic] = callback
+
+    def take_at_frame(self):
+        """Inputs taken at the frame are handed over by the test as it scripts them: none waits here."""
+        return 0
 
     def clock_subscription(self, callback):
         self.take[ct.CLOCK_TOPIC] = callback

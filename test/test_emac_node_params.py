@@ -46,8 +46,11 @@ class QuietPorts:
     def frame_publisher(self, topic):
         return SimpleNamespace(publish=self.sent.setdefault(topic, []).append)
 
-    def frame_subscription(self, topic, callback, on_bad):
+    def frame_subscription(self, topic, callback, on_bad, *, at_frame=False):
         pass
+
+    def take_at_frame(self):
+        return 0
 
     def clock_subscription(self, callback):
         pass

@@ -15,7 +15,7 @@ import math
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -26,6 +26,7 @@ from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 from rclpy.utilities import ok, remove_ros_args
 from std_msgs.msg import String
 
@@ -102,6 +103,9 @@ class SuiteNode(Node):
                  **kwargs: Any) -> None:
         """The node, its ``peers`` declared (see the class docstring for the arguments)."""
         overrides = cli_overrides(args, exclude) if args is not None else []
+        self.at_frame: set[Subscription] = set()
+        """Subscriptions the node takes at its frame (:meth:`~ema_sim.nodes.ports.Ports.take_at_frame`), not the
+        executor on arrival: inputs a frame reads but need not wake the process for."""
         super().__init__(name, parameter_overrides=overrides, **kwargs)
         self.params = Declared(self)
         self.done = False
@@ -120,6 +124,37 @@ class SuiteNode(Node):
         self._matched_since: float | None = None
         self.running_cpu_s: float | None = None
         """Process CPU when this node's first frame came (start-up excluded from the run's CPU)."""
+
+    @property
+    def subscriptions(self) -> Iterator[Subscription]:
+        """The subscriptions the executor dispatches: every one but those taken at the frame (:attr:`at_frame`)."""
+        return (s for s in self.every_subscription() if s not in self.at_frame)
+
+    def every_subscription(self) -> list[Subscription]:
+        """Every subscription of the node, those taken at the frame included.
+
+        Returns
+        -------
+        list of rclpy.subscription.Subscription
+            The subscriptions.
+        """
+        return list(Node.subscriptions.fget(self))  # type: ignore[attr-defined]  # rclpy's property, by name
+
+    def destroy_subscription(self, subscription: Subscription) -> bool:
+        """Destroy a subscription (:meth:`rclpy.node.Node.destroy_subscription`), taken at the frame or not.
+
+        Parameters
+        ----------
+        subscription : rclpy.subscription.Subscription
+            The subscription.
+
+        Returns
+        -------
+        bool
+            True when it was the node's.
+        """
+        self.at_frame.discard(subscription)
+        return bool(Node.destroy_subscription(self, subscription))
 
     def get_logger(self) -> RcutilsLogger:
         """The node's logger (:meth:`rclpy.node.Node.get_logger`, which rclpy leaves unannotated, typed).
@@ -174,7 +209,7 @@ class SuiteNode(Node):
         for node in ports.endpoint_nodes() if ports is not None else [self]:
             ok = ok and all(p.get_subscription_count() >= self.count_subscribers(p.topic_name)
                             for p in node.publishers) \
-                and all(s.get_publisher_count() >= self.count_publishers(s.topic_name) for s in node.subscriptions)
+                and all(s.get_publisher_count() >= self.count_publishers(s.topic_name) for s in _every(node))
         if not ok:
             self._matched_since = None
             return False
@@ -234,6 +269,11 @@ class SuiteNode(Node):
                 logger.error(message)
             else:
                 logger.warning(message)
+
+
+def _every(node: Node) -> list[Subscription]:
+    """Every subscription of a node (a suite node's taken at the frame included)."""
+    return node.every_subscription() if isinstance(node, SuiteNode) else list(node.subscriptions)
 
 
 def _join_lists(args: argparse.Namespace) -> None:

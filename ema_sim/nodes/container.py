@@ -402,7 +402,7 @@ class ComposedPorts:
         return outlet.publisher(self.name)
 
     def frame_subscription(self, topic: str, callback: Callable[[JointFrame], None],
-                           on_bad: Callable[[str], None]) -> None:
+                           on_bad: Callable[[str], None], *, at_frame: bool = False) -> None:
         """Frames of a topic, from a composed publisher or (taken once per process) from outside.
 
         Parameters
@@ -413,11 +413,14 @@ class ComposedPorts:
             Called with each :class:`~ema_msgs_py.cdr.JointFrame`.
         on_bad : callable
             Called with the error of a message from outside that does not decode.
+        at_frame : bool
+            Unused: a frame handed over in-process costs no wake-up (:meth:`take_at_frame`).
         """
+        del at_frame
         self.bus.subscribers.setdefault(topic, []).append(self.bus.meter.wrap(self.name, callback))
         self.bus.bad.setdefault(topic, []).append(on_bad)
 
-    def raw_subscription(self, topic: str, callback: Callable[[bytes], None]) -> None:
+    def raw_subscription(self, topic: str, callback: Callable[[bytes], None], *, at_frame: bool = False) -> None:
         """A per-frame topic as CDR bytes (a composed recorder).
 
         Frames from inside are serialized once; messages from outside arrive as they were sent.
@@ -428,8 +431,24 @@ class ComposedPorts:
             A per-frame topic (contract name).
         callback : callable
             Called with each message's CDR bytes.
+        at_frame : bool
+            Unused, as for :meth:`frame_subscription`.
         """
+        del at_frame
         self.bus.raw_subscribers.setdefault(topic, []).append(self.bus.meter.wrap(self.name, callback))
+
+    received_ns = None
+    """As :attr:`Ports.received_ns <ema_sim.nodes.ports.Ports.received_ns>`: nothing is taken at the frame here."""
+
+    def take_at_frame(self) -> int:
+        """Nothing waits: the bus hands every frame over as it comes (the process's one wake-up covers it).
+
+        Returns
+        -------
+        int
+            0.
+        """
+        return 0
 
     def clock_publisher(self) -> _ClockOutlet:
         """The composed clock: in-process to the composed nodes, on DDS for the outside."""

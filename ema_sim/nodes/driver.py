@@ -26,6 +26,7 @@ from ema_sim.config import load_channel
 from ema_sim.io.bag import BagWriter
 from ema_sim.nodes.common import SuiteNode
 from ema_sim.nodes.params import Spec
+from ema_sim.nodes.recorder import Recorder
 
 NS = 1_000_000_000
 START_DELAY_S = 0.05
@@ -107,6 +108,8 @@ class DriverNode(SuiteNode, abc.ABC):
 
     lockstep: bool
     """Frames follow ``/clock`` (``use_sim_time``): set by each driver before :meth:`_open_run`."""
+    recorder: Recorder
+    """Its bag's recorder: each driver makes it after :meth:`_open_run`, and calls :meth:`_take_recorded`."""
 
     def _open_run(self, bag: Path, metadata: dict[str, str], wait_for: Iterable[str]) -> None:
         """Create the bag, publish the run's parameters on ``/ema/test``, listen on ``/ema/ready``."""
@@ -164,8 +167,13 @@ class DriverNode(SuiteNode, abc.ABC):
             self.done = True
         return max(self.drain_until - now, 0.0)
 
+    def _take_recorded(self) -> None:
+        """Record what waits on the topics taken at the frame: once a frame while running, each poll otherwise."""
+        self.recorder.take()
+
     def _close_bag(self, frames: int, extra: dict[str, Any] | None = None) -> None:
         """Note how far the run got (and ``extra``) in the bag's metadata, and close it."""
+        self._take_recorded()
         self.writer.set_metadata("frames_commanded", str(self.k))
         self.writer.set_metadata("completed", str(self.k >= frames).lower())
         for key, value in (extra or {}).items():

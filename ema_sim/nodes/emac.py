@@ -291,13 +291,16 @@ class EmacNode(SuiteNode):
         ports = self.ports
         self.outputs = Outputs(self, ports, self.channels, self.frame_id, self.has_current)
         self.diag_pub = self.outputs.diagnostics
+        # Real time: a command is the frame's event; the frame takes the hinge moment and the crosstalk sources
+        # waiting for it (they need not wake the process). Lockstep waits on every input of the frame.
+        at_frame = not self.lockstep
         ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad)
-        ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad)
+        ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad, at_frame=at_frame)
         for ch in self.channels:
             self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)), self._failure_callback(ch),
                                      qos(ct.FAILURE_QOS))
         if self.sources:
-            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad)
+            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad, at_frame=at_frame)
         if self.lockstep:
             ports.clock_subscription(self._on_clock)
 
@@ -523,6 +526,7 @@ class EmacNode(SuiteNode):
         (counted).
         """
         now = time.monotonic()
+        self.ports.take_at_frame()
         if self.loads.queue:
             self._apply_loads(self.loads.take_until(1 << 62))
         if self.source_fb.queue:
@@ -796,10 +800,10 @@ class ManagedEmacNode(LifecycleNodeMixin, EmacNode):
         TransitionCallbackReturn
             SUCCESS.
         """
-        pubs, subs = set(self.publishers), set(self.subscriptions)
+        pubs, subs = set(self.publishers), set(self.every_subscription())
         self._make_topics()
         self._lifecycle_entities = [*(p for p in self.publishers if p not in pubs),
-                                    *(s for s in self.subscriptions if s not in subs)]
+                                    *(s for s in self.every_subscription() if s not in subs)]
         self.configured = True
         self._publish_diagnostics()  # inactive: brake held
         self.get_logger().info(f"configured from {state.label}: topics up, inactive (brake held, no feedback)")

@@ -223,6 +223,7 @@ class FmuNode(DriverNode):
         self.vehicle_pub.publish(vehicle)
         for topic, frame in ((ct.HINGE_MOMENT, load), (ct.FMU_COMMAND, cmd), (ct.VEHICLE, vehicle)):
             self.recorder.record_own(topic, cdr.encode(frame), stamp)
+        self._take_recorded()  # once the frame is out: its path does not wait for the bag
         oldest = (k - 2) * self.frame_ns
         for table in self.inputs.values():
             for s in [s for s in table if s < oldest]:
@@ -232,9 +233,11 @@ class FmuNode(DriverNode):
         now = time.monotonic()
         self.recorder.discover()
         if self.phase == "waiting":
+            self._take_recorded()
             return self._wait_ready()
         if self.phase == "running":
             return self._run_lockstep(now) if self.lockstep else self._run_realtime(now)
+        self._take_recorded()
         return self._finish_up(now)
 
     def _run_lockstep(self, now: float) -> float:

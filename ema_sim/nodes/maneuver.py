@@ -102,7 +102,10 @@ class ManeuverNode(DriverNode):
         self.clock_ns: int | None = None
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
                                  own=(ct.FMU_COMMAND, ct.HINGE_MOMENT),
-                                 hooks={ct.FMU_FEEDBACK: self._on_fmu_feedback}, on_clock=self._on_clock)
+                                 hooks={ct.FMU_FEEDBACK: self._on_fmu_feedback}, on_clock=self._on_clock,
+                                 hooks_at_frame=not self.lockstep)
+        """Real time: the FMU's feedback too is read once a frame (as a flight computer reads its inputs), each
+        message's arrival being the time DDS received it; under lockstep it comes as it arrives (the clock)."""
         self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
         self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
         self._names = list(self.commanded)
@@ -120,18 +123,17 @@ class ManeuverNode(DriverNode):
             self.clock_ns = ns
 
     def _on_fmu_feedback(self, raw: bytes, log_time: int) -> None:
-        del log_time
         msg = cdr.decode(raw)
         stamp = msg.stamp_ns
-        now = time.monotonic()
         for name in msg.name:
             if stamp > self.last_fb_stamp.get(name, -1):
                 self.last_fb_stamp[name] = stamp
         if self.lockstep:  # the feedback ending a frame: the suite's time has reached its stamp
             self._on_clock(stamp)
         elif self.phase != "waiting":
-            # feedback of frame k is stamped at its end
-            self.times.feedback((stamp - self.start_ns) // self.frame_ns - 1, msg.name, now)
+            # feedback of frame k is stamped at its end; it arrived when received (the log time, system clock)
+            arrived = time.monotonic() - max(time.time_ns() - log_time, 0) / NS
+            self.times.feedback((stamp - self.start_ns) // self.frame_ns - 1, msg.name, arrived)
 
     # ----------------------------------------------------------------- the test
     def _publish_frame(self, k: int, stamp: int) -> float:
@@ -153,9 +155,11 @@ class ManeuverNode(DriverNode):
         if self.lockstep or self.phase != "running" or self._slack(now) > 0.003:
             self.recorder.discover()  # a graph query: in real time only where a frame has room for it
         if self.phase == "waiting":
+            self._take_recorded()
             return self._wait_ready()
         if self.phase == "running":
             return self._run_lockstep(now) if self.lockstep else self._run_realtime(now)
+        self._take_recorded()
         return self._finish_up(now)
 
     def _started(self) -> None:
@@ -177,6 +181,7 @@ class ManeuverNode(DriverNode):
         if now - due > self.frame_ns / NS:
             self.late_publish += 1
         self.times.sent_at(self._publish_frame(self.k, self.start_ns + self.k * self.frame_ns))
+        self._take_recorded()  # once the frame is out (and counted: its feedback may be in already)
         self.k += 1
         if self.k >= self.frames:
             self.times.end()
@@ -192,6 +197,7 @@ class ManeuverNode(DriverNode):
         while self.k < self.frames and self.k * self.frame_ns <= self.clock_ns:
             self._publish_frame(self.k, self.k * self.frame_ns)
             self.k += 1
+        self._take_recorded()
         if self.k >= self.frames:
             self._finish(now, 10.0)
         return 0.01
