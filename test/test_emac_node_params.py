@@ -7,7 +7,6 @@ after the node's full name, ``frame_id`` set, ``use_sim_time`` honoured.
 """
 
 import argparse
-import os
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -17,9 +16,9 @@ import rclpy
 import yaml
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from ros_context import ros_context
 
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.errors import ConfigError, EmaError
@@ -28,7 +27,6 @@ from ema_sim.nodes.emac_params import check_files
 from ema_sim.nodes.params import key_matches
 from ema_sim.nodes.ports import Ports
 from ema_sim.run import from_launch_arguments
-from ema_sim.suite import free_domain_id
 
 pytestmark = pytest.mark.ros
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -64,10 +62,8 @@ class QuietPorts:
 
 @pytest.fixture(scope="module")
 def context():
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=free_domain_id(os.getpid() + 89))
-    yield ctx
-    rclpy.shutdown(context=ctx)
+    with ros_context(89) as ctx:
+        yield ctx
 
 
 @pytest.fixture

@@ -1,11 +1,9 @@
 """The EMAC node's input streams in lockstep: what a frame takes, and when it may go ahead."""
 
 import functools
-import os
 
 import pytest
-import rclpy
-from rclpy.context import Context
+from ros_context import ros_context
 from scripted_ports import ScriptedPorts
 
 from ema_msgs_py import contract as ct
@@ -15,7 +13,6 @@ from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings
 from ema_sim.models import create
 from ema_sim.nodes.emac import EmacNode, SourceStream, Stream
 from ema_sim.run import RunDescription
-from ema_sim.suite import free_domain_id
 
 T = 5_000_000
 
@@ -76,19 +73,17 @@ def right_wing_node(tmp_path):
                          emac="channels")
     (proc,) = [p for p in run.processes() if p.nodes == ("emac_right_wing",)]
     params = run.write(tmp_path / "run.yaml")
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=free_domain_id(os.getpid() + 53))
     nodes = []
+    with ros_context(53) as ctx:
 
-    def make():
-        every_channel = functools.partial(ScriptedPorts, alive={ct.EMAC_FEEDBACK: len(CHANNELS)})  # the suite's
-        nodes.append(EmacNode(None, ports=every_channel, context=ctx, cli_args=run.ros_arguments(proc, params)))
-        return nodes[-1]
+        def make():
+            every_channel = functools.partial(ScriptedPorts, alive={ct.EMAC_FEEDBACK: len(CHANNELS)})  # the suite's
+            nodes.append(EmacNode(None, ports=every_channel, context=ctx, cli_args=run.ros_arguments(proc, params)))
+            return nodes[-1]
 
-    yield make
-    for node in nodes:
-        node.destroy_node()
-    rclpy.shutdown(context=ctx)
+        yield make
+        for node in nodes:
+            node.destroy_node()
 
 
 def _drive(node, adversarial):

@@ -7,20 +7,17 @@ stamp an hour ahead or an FMU restart are replayed exactly and in milliseconds.
 
 import argparse
 import itertools
-import os
 import random
 from types import SimpleNamespace
 
 import pytest
-import rclpy
-from rclpy.context import Context
+from ros_context import ros_context
 from scripted_ports import ScriptedPorts
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.emac.stamps import CommandClock, FrameGate, Lateness, Verdict
 from ema_sim.nodes import emac as emac_module
-from ema_sim.suite import free_domain_id
 
 F_NS = 5_000_000
 F_S = 0.005
@@ -85,10 +82,8 @@ class Log:
 
 @pytest.fixture(scope="module")
 def context():
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=free_domain_id(os.getpid() + 71))
-    yield ctx
-    rclpy.shutdown(context=ctx)
+    with ros_context(71) as ctx:
+        yield ctx
 
 
 @pytest.fixture

@@ -1,19 +1,17 @@
 """``/ema/joint_states`` is in SI units (REP 103): radians and rad/s, whatever the FMU side's volts say."""
 
 import math
-import os
 
 import pytest
 import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from ros_context import ros_context
 from sensor_msgs.msg import JointState
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.config import CHANNELS, scaling
 from ema_sim.nodes.bridge import BridgeNode
-from ema_sim.suite import free_domain_id
 
 pytestmark = pytest.mark.ros
 NS = 1_000_000_000
@@ -22,18 +20,16 @@ FRAME_NS = 5_000_000
 
 @pytest.fixture
 def graph():
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=free_domain_id(os.getpid() + 71))
-    bridge = BridgeNode(context=ctx)
-    probe = rclpy.create_node("probe", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(bridge)
-    ex.add_node(probe)
-    yield bridge, probe, ex
-    ex.shutdown()
-    probe.destroy_node()
-    bridge.destroy_node()
-    rclpy.shutdown(context=ctx)
+    with ros_context(71) as ctx:
+        bridge = BridgeNode(context=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(bridge)
+        ex.add_node(probe)
+        yield bridge, probe, ex
+        ex.shutdown()
+        probe.destroy_node()
+        bridge.destroy_node()
 
 
 def _spin(ex, until, seconds=10.0):

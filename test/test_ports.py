@@ -3,12 +3,11 @@
 A lone node's :class:`~ema_sim.nodes.ports.Ports` on real DDS, in process, on a ROS domain of its own.
 """
 
-import os
 import time
 
 import pytest
-import rclpy
 from rclpy.node import Node
+from ros_context import ros_context
 from sensor_msgs.msg import JointState
 
 from ema_msgs_py import cdr
@@ -16,24 +15,21 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.nodes.common import SuiteNode, make_executor
 from ema_sim.nodes.ports import Ports
-from ema_sim.suite import free_domain_id
 
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def graph():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=free_domain_id(os.getpid() + 97))
-    node = SuiteNode("ports_probe", context=ctx)
-    sender = Node("ports_sender", context=ctx)
-    executor = make_executor(ctx)
-    executor.add_node(node)
-    yield node, sender, executor
-    executor.shutdown()
-    node.destroy_node()
-    sender.destroy_node()
-    rclpy.shutdown(context=ctx)
+    with ros_context(97) as ctx:
+        node = SuiteNode("ports_probe", context=ctx)
+        sender = Node("ports_sender", context=ctx)
+        executor = make_executor(ctx)
+        executor.add_node(node)
+        yield node, sender, executor
+        executor.shutdown()
+        node.destroy_node()
+        sender.destroy_node()
 
 
 def _spin(executor, seconds):
