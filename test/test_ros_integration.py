@@ -148,11 +148,14 @@ def command_v(deg):
 
 
 def hold(c, pub, deg, seconds):
-    """Command the left wing to ``deg`` every 5 ms for ``seconds``."""
+    """Command the left wing to ``deg`` every 5 ms for ``seconds``; returns when the last command left (monotonic)."""
     end = time.monotonic() + seconds
+    last = time.monotonic()
     while time.monotonic() < end:
         pub.publish(JointState(name=["left_wing"], position=[command_v(deg)]))
+        last = time.monotonic()
         c.spin(0.005)
+    return last
 
 
 # --------------------------------------------------------------------------- 1. parameter files
@@ -238,9 +241,9 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
 
         def brake_delay():
             """Command for 0.5 s, stop: seconds until the node reports the brake engaged."""
-            hold(client, cmd, 1.0, 0.5)
+            # from the last command sent (a loaded client may be held up between its last publish and the check)
+            last = hold(client, cmd, 1.0, 0.5)
             assert client.spin(2, lambda: diag.get(STATUS, {}).get("brake_engaged") == "false")
-            last = time.monotonic()
             assert client.spin(5, lambda: diag[STATUS]["brake_engaged"] == "true")
             return diag[STATUS]["_t"] - last
 
