@@ -184,6 +184,25 @@ def test_commands_that_came_while_the_node_was_held_up_are_taken_before_an_idle_
     assert feedback_stamps(node) == [BASE_NS + (k + 1) * F_NS for k in range(300)]
 
 
+@pytest.mark.ros
+def test_an_idle_node_held_up_past_its_catch_up_skips_the_frames_on_the_grid_and_says_so(make_node):
+    """No commands, the process held up 200 ms (40 frames, over the 20 it catches up): it jumps to the present
+    frame, counts the frames it skipped, logs it once, and its stamps stay strictly increasing on the grid."""
+    node = make_node()
+    t0 = node.wall["t"]
+    replay(node, [], until_s=t0 + 0.5, held=(t0 + 0.1, t0 + 0.3))
+    stamps = feedback_stamps(node)
+    gaps = [(b - a) // F_NS for a, b in itertools.pairwise(stamps)]
+    assert all((b - a) % F_NS == 0 and b > a for a, b in itertools.pairwise(stamps))
+    (jump,) = [g for g in gaps if g > 1]
+    assert 38 <= jump <= 41
+    assert node.skipped_frames == jump - 1
+    assert (stamps[-1] - stamps[0]) // F_NS + 1 == len(stamps) + node.skipped_frames  # each stepped or skipped
+    assert 96 <= len(stamps) + node.skipped_frames <= 101  # 0.5 s of frames: the loop caught up with the wall
+    assert node.log.count("warning", f"{node.skipped_frames} idle frames skipped") == 1
+    assert diagnostics(node)["skipped_frames"] == str(node.skipped_frames)
+
+
 def _stream(t0, k0, n, volts, stamp=lambda k: BASE_NS + k * F_NS):
     return [(t0 + (k - k0) * F_S, stamp(k), volts) for k in range(k0, k0 + n)]
 

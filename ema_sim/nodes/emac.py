@@ -560,6 +560,8 @@ class EmacNode(SuiteNode):
             self.skipped_frames += behind
             self.model_ns += behind * self.frame_ns
             self.next_idle += behind * self.frame_s
+            self.throttled("skip", f"the process was held up {behind * self.frame_s * 1e3:.0f} ms: {behind} idle "
+                           f"frames skipped, the stamps kept on the frame grid ({self.skipped_frames} so far)")
         if any((age := self._age_wall(c, now)) is not None and age <= self.settings.watchdog_timeout_s
                for c in self.units):
             self.late_frames += 1
