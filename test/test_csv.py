@@ -48,13 +48,30 @@ def good_lines(n=100):
         (lambda ls: [*ls[:10], "0.0001,1,1", *ls[11:]], r"column 'time_s': time does not increase"),
         (lambda ls: ls[:50], "at least 100"),
         (lambda ls: [*ls[:5], "0.1,1", *ls[6:]], r"line 6: 2 cells, header has 3"),
-        (lambda ls: ["# no colon here", *ls[1:]], "line 1: metadata must be"),
         (lambda ls: ["time_s,command_deg,time_s", *ls[2:]], "appears twice"),
     ],
 )
 def test_contract_violations_name_row_and_column(mutate, message):
     with pytest.raises(DataError, match=message):
         parse_csv("\n".join(mutate(good_lines())), "rig.csv")
+
+
+def test_a_spreadsheets_export_and_a_rigs_banner_are_read_as_they_come():
+    """Semicolons with decimal commas (a locale whose decimal mark is the comma), tabs, and ``#`` lines that are
+    not ``# key: value``: read, the banner kept as the comment; a cell that is no number stays an error."""
+    body = [f"{i * 0.001:.3f};{i * 0.5};{i * 0.25}".replace(".", ",") for i in range(100)]
+    text = "\n".join(["# DAU export 12:30, run 7", "# channel: cowl_door", "# operator J. Doe",
+                      "time_s;command_deg;position_deg", *body])
+    data = parse_csv(text, "export.csv")
+    assert data.time_s[3] == pytest.approx(0.003)
+    assert data.command_deg[3] == pytest.approx(1.5)
+    assert data.position_deg[99] == pytest.approx(24.75)
+    assert data.metadata["channel"] == "cowl_door"
+    assert data.metadata["comment"] == "DAU export 12:30, run 7 | operator J. Doe"
+    tabbed = parse_csv("\n".join(line.replace(",", "\t") for line in good_lines()), "tabs.csv")
+    assert tabbed.position_deg[7] == pytest.approx(7.0)
+    with pytest.raises(DataError, match=r"line 6, column 'command_deg': not a number: '1,2,3'"):
+        parse_csv("\n".join([*text.splitlines()[:5], "0,001;1,2,3;0", *text.splitlines()[6:]]), "export.csv")
 
 
 def test_unreadable_files_are_one_clear_error(tmp_path):

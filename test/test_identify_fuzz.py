@@ -1,8 +1,10 @@
 """``ema identify`` on records whose effects no vocabulary names (:mod:`fuzzgen`): it never breaks.
 
 Each record is drawn at random from an independent plant and logger. Whatever it holds, ``ema identify``
-exits 0 with strict JSON, its final model is no worse than its baseline and than the reference
-(output = command) on any output, and each stage kept leaves the record no worse than the one before.
+exits 0 with strict JSON, its final model is no worse than the reference (output = command) on any
+output, and than its baseline and each kept stage than the one before beyond what the stages allow
+(:func:`ema_sim.identify.stages.allow`: a twentieth of the output's noise variance, which a refit sharing its
+parameters between the outputs may cost one of them while it clears the other).
 The default suite runs 30 short records (1.5-2 s, at most one effect added and no escalation to the
 physics, so the suite keeps its time budget); ``make test-slow`` runs 300, short and long (8-40 s), with
 every stage as ``ema identify`` runs it by default.
@@ -19,7 +21,7 @@ import fuzzgen
 import pytest
 
 from ema_sim.cli import main
-from ema_sim.identify.stages import NO_WORSE
+from ema_sim.identify.stages import NO_WORSE, allow
 
 SHORT = range(30)
 QUICK = ["--max-effects", "1", "--no-escalate"]
@@ -45,17 +47,19 @@ def _no_worse(new: float, old: float) -> bool:
 def _check(report: dict[str, Any], fuzz: fuzzgen.Fuzz) -> None:
     where = f"seed {fuzz.seed} ({', '.join(fuzz.effects) or 'no effect'})"
     final = report["final"]["rms_deg"]
+    noise = report["noise_deg"]
+    allowed_base = allow(report["baseline"]["rms_deg"], noise)
     for output, value in final.items():
         assert math.isfinite(value), f"{where}: final {output} rms {value}"
-        base = report["baseline"]["rms_deg"][output]
+        base = allowed_base[output]
         ref = report["reference"]["rms_deg"][output]
-        assert _no_worse(value, base), f"{where}: final {output} {value} worse than the baseline's {base}"
+        assert _no_worse(value, base), f"{where}: final {output} {value} worse than the baseline's {base} allows"
         assert _no_worse(value, ref), f"{where}: final {output} {value} worse than the reference's {ref}"
     for stage in report["stages"]:
         if stage["status"] != "kept":
             continue
         for output, after in stage["rms_deg_after"].items():
-            before = stage["rms_deg_before"][output]
+            before = allow(stage["rms_deg_before"], noise)[output]
             assert _no_worse(after, before), (f"{where}: stage {stage['stage']} kept with {output} {after} "
                                               f"worse than {before} before it")
     for failure in report["failures"]:

@@ -23,7 +23,7 @@ from identgen import command_sequence, make_record, truth_params
 
 from ema_sim.cli import main
 from ema_sim.config import load_channel
-from ema_sim.identify.effects import FREE
+from ema_sim.identify.effects import EFFECTS, FREE, Context
 from ema_sim.identify.fit import evaluate
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import REFERENCE, Step
@@ -228,6 +228,12 @@ def test_a_stop_in_the_record_sets_the_travel_there():
     assert travel.limits[0] == pytest.approx(-70.0, abs=0.01)
     assert travel.limits[1] > 80.0  # no stop seen on the upper side: opened past the data
     assert "a stop at -70" in travel.statement
+    assert "exactly" not in travel.statement  # the stop shows the sensor's noise: a mechanical stop
+    clipped = np.clip(pos, -69.5, 69.5)  # the same record read by a sensor that saturates at ±69.5°
+    noise = {"position_deg": output_noise(clipped)}
+    said = travel_limits(MeasuredData(time_s=t, command_deg=cmd, position_deg=clipped), WING, noise, stand_in=False)
+    assert said.limits[0] == -69.5
+    assert "reads exactly -69.5, no noise on them: a sensor's saturation or a clipped log" in said.statement
 
 
 def test_sampling_jitter_is_named_as_the_logger_s_timing_not_structure():
@@ -266,7 +272,7 @@ def test_an_effect_that_collapsed_to_off_is_taken_out_again():
     assert final.params.delay_s == 0.0
     assert [r.effect for r in result.removed] == ["time_delay"]
     assert not result.steps
-    assert "below one sample" in result.removed[0].reason
+    assert "tells from a sampling shift" in result.removed[0].reason
     report = to_json(result, "x")
     assert report["removed"][0]["effect"] == "time_delay"
     assert any("taken out again" in w for w in report["warnings"])
@@ -370,3 +376,79 @@ def test_a_parameter_the_record_cannot_move_leaves_the_others_determined():
     without = block_covariance(res, [j[:, [0, 2]] for j in jac])
     np.testing.assert_allclose(cov[np.ix_([0, 2], [0, 2])], without, rtol=1e-12)
     assert np.all(np.isinf(block_covariance(res, [np.zeros((400, 2))] * 2)))
+
+
+def _small_steps_record(rate_dps: float, seed: int = 3) -> MeasuredData:
+    """±1° steps every 0.5 s through figure 21 with a rate limit on the velocity command: the limit clips the
+    command at each step while the surface's own rate, lagging it, never reaches the limit."""
+    rng = np.random.default_rng(seed)
+    frames = np.arange(1600) * 0.005
+    cmd = np.where((frames // 0.5) % 2 == 0, 1.0, -1.0)
+    model = Loac("left_wing", params=truth_params({"rate_limit": rate_dps}))
+    model.trim(cmd[0], 0.0)
+    t = np.arange(8000) / 1000.0
+    rec = model.run(frames, cmd, np.zeros_like(frames), sample_times=t, end_s=float(t[-1]))
+    held = np.searchsorted(frames, t + 1e-9, side="right") - 1
+    position = rec.position_deg[0] + rng.normal(0, 0.003, t.size)
+    return MeasuredData(time_s=t, command_deg=cmd[held], position_deg=position, metadata={"channel": "left_wing"})
+
+
+def test_a_rate_limit_binding_on_the_velocity_command_is_kept_though_the_surface_never_reaches_it():
+    """Section 3.1.2.1's limit acts on the velocity command: at 70 °/s it clips every 2° step's command
+    (ωn/2ζ · 2° ≈ 87 °/s) while the unlimited surface peaks at 54 °/s, under it (the check before this one
+    took the peak and threw such a limit away). Judged by whether it moves the outputs, it binds; a limit far
+    above anything the loop asks for does not."""
+    p = Problem(_small_steps_record(70.0), WING)
+    limited = truth_params({"rate_limit": 70.0})
+    unlimited_peak = p.max_rate_dps(p.simulate([limited.replace(rate_limit_dps=math.inf)])[0])
+    assert unlimited_peak < 0.95 * 70.0
+    check = next(e for e in EFFECTS if e.name == "rate_limit").check
+    assert check({"rate_limit_dps": 70.0}, Context(p, limited, unlimited_peak, limited)) is None
+    high = limited.replace(rate_limit_dps=400.0)
+    reason = check({"rate_limit_dps": 400.0}, Context(p, high, unlimited_peak, high))
+    assert reason is not None
+    assert "never binds" in reason
+
+
+def test_a_delay_under_one_sample_is_kept_and_said_to_be_indistinguishable_from_a_logging_skew():
+    """A 3 ms transport delay logged at 200 Hz (5 ms samples): kept (it was thrown away as a sampling shift),
+    with the warning that a skew between the logging of the command and of the output looks the same."""
+    data = make_record({"time_delay": 0.003}, seed=8, duration_s=20.0, sample_hz=200.0, outputs=("position_deg",))
+    result = identify(data, WING)
+    assert "delay_s" in result.final.free
+    assert result.final.params.delay_s == pytest.approx(0.003, abs=0.0006)
+    report = to_json(result, "delay")
+    assert any("under one sample (5.00 ms)" in w for w in report["warnings"])
+    assert not any(r["effect"] == "time_delay" for r in report["removed"])
+
+
+def _step_at(t_step_s: float, duration_s: float, *, moving_start: bool = False, seed: int = 6) -> MeasuredData:
+    """A 2° step at ``t_step_s``, 200 Hz; the output at rest before it, or still settling from an earlier move."""
+    rng = np.random.default_rng(seed)
+    frames = np.arange(round(duration_s / 0.005)) * 0.005
+    cmd = np.where(frames >= t_step_s, 2.0, 0.0)
+    model = Loac("left_wing", params=truth_params({}))
+    model.trim(-3.0 if moving_start else 0.0, 0.0)  # trimmed elsewhere: the record opens mid-move
+    rec = model.run(frames, cmd, np.zeros_like(frames), sample_times=frames, end_s=float(frames[-1]))
+    position = rec.position_deg[0] + rng.normal(0, 0.003, frames.size)
+    return MeasuredData(time_s=frames, command_deg=cmd, position_deg=position, metadata={"channel": "left_wing"})
+
+
+def test_a_short_record_at_rest_is_fitted_from_before_its_first_step_and_a_moving_start_is_left_out():
+    """150 samples with the only step at 0.1 s: fitted from 0.05 s, so the step is in the fit (leaving out the
+    first 0.3 s left nothing but noise to fit); a record that opens mid-move keeps its first 0.3 s out, and the
+    report says how much of the record was not fitted."""
+    short = Problem(_step_at(0.1, 0.75), WING)
+    assert short.settle_s == pytest.approx(0.05)
+    assert short.mask[20:].all()
+    assert short.unfitted_start is None
+    moving = Problem(_step_at(0.1, 0.75, moving_start=True), WING)
+    assert moving.settle_s == pytest.approx(0.3)
+    assert moving.unfitted_start is not None
+    assert moving.unfitted_start.startswith("the first 0.3 s (60 of 150 samples, the command moving in them)")
+    late = Problem(_step_at(0.5, 0.8), WING)  # a first change after 0.3 s: the usual 0.3 s left out, nothing lost
+    assert late.settle_s == pytest.approx(0.3)
+    assert late.unfitted_start is None
+    report = to_json(identify(_step_at(0.1, 0.75), WING), "short")
+    assert report["final"]["rms_deg"]["position_deg"] < 0.0045  # the step fitted to the noise...
+    assert report["reference"]["rms_deg"]["position_deg"] > 0.1  # ...which the command alone does not explain

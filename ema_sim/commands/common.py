@@ -71,7 +71,7 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
                    help="map a rig file's columns onto the contract's, with units: e.g. "
                         "time_ms=t,command_deg=demand,position_deg=pos (position_mm, position_in: linear)")
     p.add_argument("--delimiter", default=None, choices=("tab", "comma", "semicolon"),
-                   help="a rig file's delimiter (default: sniffed from its header)")
+                   help="the file's delimiter (default: sniffed from its header, comma first)")
     p.add_argument("--crank-arm-in", type=float, default=None, metavar="IN",
                    help="turn linear positions (mm, in) into degrees through this crank arm (default: keep them)")
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -39,7 +39,10 @@ from ema_sim.models.second_order import SecondOrder, SecondOrderParams
 FloatArray = NDArray[np.float64]
 OUTPUT_COLUMN = {"position_deg": O_POS, "surface_deg": O_SURF}
 SETTLE_S = 0.3
-"""Samples before this (from the start) are not fitted: the record may not start in equilibrium."""
+"""Samples before this (from the start) are not fitted: the record may not start in equilibrium (less when it
+visibly does: :func:`start_left_out_s`)."""
+AT_REST_SIGMAS = 5.0
+"""Before the first command change, outputs within this many noise sigmas of their median are at rest."""
 MIN_NOISE_DEG = 1e-3
 """Floor on a noise estimate: no sensor of table A3 is better (laser tracker ±0.0014°), and a
 noise-free (simulated) output must not outweigh a measured one a thousandfold."""
@@ -63,6 +66,43 @@ class Tally:
     reused: int = 0
     token: str = ""
     """What the work is cancelled by (empty: it is not)."""
+
+
+def start_left_out_s(time_s: FloatArray, command: FloatArray, outputs: Mapping[str, FloatArray],
+             sigma_deg: Mapping[str, float]) -> float:
+    """How much of a record's start not to fit: :data:`SETTLE_S`, or less for a short record that starts at rest.
+
+    A record :data:`SETTLE_S` is over a tenth of, whose command first changes before it, its outputs at rest
+    until then (within :data:`AT_REST_SIGMAS` noise sigmas), is fitted from halfway to that change: a short
+    record's only step is not left out. A longer record keeps the whole :data:`SETTLE_S` out, which costs it
+    little and spares its fit the start of a simulation that need not match the record's (measured: fitted
+    from its first change, a 15 s record with a command bias took in a spurious compliance).
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times from 0, s.
+    command : numpy.ndarray
+        The command, deg.
+    outputs : mapping of str to numpy.ndarray
+        Each measured output, deg.
+    sigma_deg : mapping of str to float
+        Each output's noise, deg.
+
+    Returns
+    -------
+    float
+        The start left out, s.
+    """
+    changed = np.flatnonzero(np.abs(command - command[0]) > 1e-9 * max(1.0, float(np.max(np.abs(command)))))
+    if time_s[-1] > 10.0 * SETTLE_S or changed.size == 0 or time_s[changed[0]] >= SETTLE_S or changed[0] < 10:
+        return SETTLE_S
+    k = int(changed[0])
+    for o, y in outputs.items():
+        before = y[:k]
+        if np.max(np.abs(before - np.median(before))) > AT_REST_SIGMAS * sigma_deg[o]:
+            return SETTLE_S
+    return float(time_s[k // 2])
 
 
 @dataclass
@@ -111,13 +151,27 @@ class Problem:
         if not self.outputs:
             raise DataError(f"{d.source or 'data'}: needs a position_deg or surface_deg column to identify")
         self.time_s = d.time_s - d.time_s[0]
-        if self.time_s[-1] < 2.0 * self.settle_s:
-            raise DataError(f"{d.source or 'data'}: {self.time_s[-1]:.2f} s of data is too short to identify")
         if self.noise is None:
             self.noise = {o: output_noise(d.column(o)) for o in self.outputs}
         self.sigma_deg = {o: max(self.noise[o].sigma, MIN_NOISE_DEG) for o in self.outputs}
+        if self.settle_s == SETTLE_S:
+            self.settle_s = start_left_out_s(self.time_s, d.command_deg, {o: d.column(o) for o in self.outputs},
+                                              self.sigma_deg)
+        if self.time_s[-1] < 2.0 * self.settle_s:
+            raise DataError(f"{d.source or 'data'}: {self.time_s[-1]:.2f} s of data is too short to identify")
         self.mask = self.time_s >= self.settle_s
         self.set_command_sampled(self.command_sampled)
+
+    @property
+    def unfitted_start(self) -> str | None:
+        """What the start left out of the fit says: over a tenth of the record, the command moving in it (or None)."""
+        left_out = self.time_s < self.settle_s
+        n = int(np.count_nonzero(left_out))
+        cmd = self.data.command_deg[left_out]
+        if n <= 0.1 * self.time_s.size or not np.any(cmd != cmd[0]):
+            return None
+        return (f"the first {self.settle_s:.3g} s ({n} of {self.time_s.size} samples, the command moving in them) "
+                "are not fitted: the record may not start at rest")
 
     def set_command_sampled(self, sampled: bool) -> None:
         """Drive the model with the command held between samples, or interpolated (sampled).

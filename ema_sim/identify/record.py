@@ -98,6 +98,20 @@ def _stop(data: MeasuredData, noise: dict[str, NoiseFloor], side: int) -> float 
     return side * top if pinned.sum() * dt >= STOP_S else None
 
 
+def _clipped(data: MeasuredData, noise: dict[str, NoiseFloor], stop: float) -> str:
+    """What a stop's samples say of it, when most read exactly the stop on an output not counted in steps.
+
+    A sensor's saturation or a clipped log looks so; a mechanical stop read through the sensor shows its noise.
+    """
+    name = data.outputs[0]
+    y = data.column(name)
+    at = int(np.count_nonzero(y == stop))
+    if noise[name].resolution or at < 0.5 * int(np.count_nonzero(np.abs(y - stop) <= 4.0 * noise[name].sigma)):
+        return ""
+    return (f" (every one of its {at} samples reads exactly {stop:.4g}, no noise on them: a sensor's saturation "
+            "or a clipped log more likely than a mechanical stop)")
+
+
 def check_identifiable(data: MeasuredData) -> None:
     """One clear error for a record nothing can be identified from (its columns are legal but say nothing).
 
@@ -152,7 +166,7 @@ def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, N
     span = hi - lo
     stops = (_stop(data, noise, -1), _stop(data, noise, +1))
     limits = (stops[0] if stops[0] is not None else lo - span, stops[1] if stops[1] is not None else hi + span)
-    seen = [f"a stop at {s:.4g}{unit}" for s in stops if s is not None]
+    seen = [f"a stop at {s:.4g}{unit}{_clipped(data, noise, s)}" for s in stops if s is not None]
     how = (f"limits at {', '.join(seen)} where the command stays beyond the output"
            if seen else "no stop seen: limits opened past the data")
     source = "data, stop seen" if seen else "data"

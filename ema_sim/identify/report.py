@@ -214,7 +214,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     warnings, ident, exc = assessed if assessed is not None else ([], None, None)
     diagnosis = guarded("diagnosis", failures, lambda: diagnose(result))
     warnings += diagnosis.warnings if diagnosis is not None else []
-    warnings += result.warnings + result.ambiguities
+    warnings += result.warnings + result.ambiguities + _sub_sample_delays(result)
     slope = guarded("slew", failures, lambda: _slew(result))
     if slope is not None and slope[1]:
         warnings.append(slope[1])
@@ -287,7 +287,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "ambiguities": result.ambiguities,
         "warnings": warnings,
         "diagnosis": diagnosis.as_dict() if diagnosis is not None else None,
-        "notes": (record.notes if record else []) + result.notes,
+        "notes": (record.notes if record else []) + result.notes + ([p.unfitted_start] if p.unfitted_start else []),
         "command": {**(record.hold.as_dict() if record else {}),
                     "fitted_as": "sampled" if p.command_sampled else "held"},
         "travel_deg": ({"declared": list(record.travel.declared), "used": list(record.travel.limits),
@@ -315,6 +315,18 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         if text:
             warnings.append(text)
     out: dict[str, Any] = strict(report)
+    return out
+
+
+def _sub_sample_delays(result: Identification) -> list[str]:
+    """A fitted delay under one sample: what the record cannot tell it from."""
+    sample_s = 1.0 / result.problem.sample_hz
+    out = []
+    for field_name, label in (("delay_s", "time delay"), ("feedback_delay_s", "delay on the feedback")):
+        value = float(getattr(result.final.params, field_name, 0.0))
+        if field_name in result.final.free and 0.0 < value < sample_s:
+            out.append(f"the {label}, {value * 1e3:.2f} ms, is under one sample ({sample_s * 1e3:.2f} ms): a transport "
+                       "delay and a skew between the logging of the command and of the output look the same here")
     return out
 
 

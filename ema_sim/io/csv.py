@@ -3,8 +3,12 @@
 Reading checks every rule of the contract and fails with one :class:`~ema_sim.errors.DataError`
 that names the file line and the column; it never returns partial data.
 
-Rig files as they come (:class:`RigFormat`, :func:`read_rig`): tab or comma separated (sniffed from
-the header), columns under the rig's own names mapped onto the contract's by an option such as
+A contract file saved with tabs or semicolons (a spreadsheet's export; then a decimal comma is read as
+a decimal point) is read as well, the delimiter sniffed from the header; a ``#`` line before the header
+that is not ``# key: value`` (a rig's banner) is kept as the ``comment`` metadata.
+
+Rig files as they come (:class:`RigFormat`, :func:`read_rig`): tab, comma or semicolon separated (sniffed
+from the header), columns under the rig's own names mapped onto the contract's by an option such as
 ``time_ms=t,command_deg=demand,position_deg=pos`` (:func:`parse_columns`), time in seconds or
 milliseconds, positions in degrees or in a linear unit (``_mm``, ``_in``). Linear positions are
 turned into surface degrees through the crank arm when one is given (``deg = x/arm`` in radians, the
@@ -135,14 +139,20 @@ class MeasuredData:
         return int(self.time_s.size)
 
 
-def _parse_metadata(line: str, lineno: int, source: str) -> tuple[str, str] | None:
+def _parse_metadata(line: str) -> tuple[str, str] | None:
+    """``# key: value``; a line without a key (a rig's banner, ``# exported by ...``) is a ``comment``."""
     body = line.lstrip("#").strip()
     if not body:
         return None
     key, sep, value = body.partition(":")
-    if not sep or not key.strip():
-        raise DataError(f"{source}: line {lineno}: metadata must be '# key: value', got {line.strip()!r}")
+    if not sep or not key.strip() or not _is_key(key.strip()):
+        return "comment", body
     return key.strip(), value.strip()
+
+
+def _is_key(text: str) -> bool:
+    """A metadata key: one word of letters, digits, ``_``, ``-`` or ``.`` (``# note: 12:30`` is keyed ``note``)."""
+    return all(c.isalnum() or c in "_-." for c in text)
 
 
 @dataclass(frozen=True)
@@ -279,9 +289,10 @@ def _header(lines: list[str], source: str) -> tuple[dict[str, str], int]:
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
         if lines[first].startswith("#"):
-            kv = _parse_metadata(lines[first], first + 1, source)
+            kv = _parse_metadata(lines[first])
             if kv:
-                metadata[kv[0]] = kv[1]
+                key, value = kv
+                metadata[key] = f"{metadata[key]} | {value}" if key == "comment" and key in metadata else value
         first += 1
     if first >= len(lines):
         raise DataError(f"{source}: no header row")
@@ -289,24 +300,36 @@ def _header(lines: list[str], source: str) -> tuple[dict[str, str], int]:
 
 
 def _delimiter(header_line: str, fmt: RigFormat | None) -> str:
-    if fmt is None:
-        return ","
-    if fmt.delimiter is not None:
+    """The given delimiter, else the header's: comma first, then tab or semicolon.
+
+    A contract file saved by a spreadsheet in a locale whose decimal mark is the comma is semicolon separated.
+    """
+    if fmt is not None and fmt.delimiter is not None:
         if fmt.delimiter not in DELIMITERS:
             raise DataError(f"--delimiter: expected one of {', '.join(DELIMITERS)}, got {fmt.delimiter!r}")
         return DELIMITERS[fmt.delimiter]
-    for sep in ("\t", ",", ";"):
+    for sep in (",", "\t", ";"):
         if sep in header_line:
             return sep
     return ","
 
 
-def _rig_hint(header: list[str], fmt: RigFormat | None) -> str:
-    """A hint when a contract CSV's header is one cell holding tabs or semicolons: a rig's own file."""
-    if fmt is None and len(header) == 1 and any(sep in header[0] for sep in ("\t", ";")):
-        return (" (the header is one cell with tabs or semicolons in it: a rig's own file; map its columns with "
-                "--columns, e.g. time_ms=t,command_deg=demand,position_deg=pos)")
+def _rig_hint(fmt: RigFormat | None) -> str:
+    """A hint when a contract CSV's header lacks the contract's names: a rig's own file."""
+    if fmt is None:
+        return (" (a rig's own file? map its columns with --columns, e.g. "
+                "time_ms=t,command_deg=demand,position_deg=pos)")
     return ""
+
+
+def _number(cell: str, sep: str) -> float:
+    """A cell's value; with a semicolon or tab delimiter, a decimal comma is read as a decimal point."""
+    try:
+        return float(cell)
+    except ValueError:
+        if sep == "," or "," not in cell or "." in cell:
+            raise
+        return float(cell.replace(",", "."))
 
 
 def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
@@ -332,7 +355,7 @@ def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
                 units.add("deg")
     for name in REQUIRED:
         if name not in wanted:
-            raise DataError(f"{source}: line {line}: missing required column {name!r}{_rig_hint(header, fmt)}")
+            raise DataError(f"{source}: line {line}: missing required column {name!r}{_rig_hint(fmt)}")
     if not any(name in wanted for name in OUTPUTS):
         raise DataError(f"{source}: line {line}: needs a 'position_deg' or 'surface_deg' column")
     if len(units) > 1:
@@ -377,7 +400,7 @@ def parse_csv(text: str, source: str = "<csv>", fmt: RigFormat | None = None) ->
             cell = row[idx].strip()
             label = repr(column) if column == name else f"{column!r} ({name})"
             try:
-                value = float(cell)
+                value = _number(cell, sep)
             except ValueError:
                 raise DataError(f"{source}: line {offset}, column {label}: not a number: {cell!r}") from None
             if not math.isfinite(value):
