@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from ema_sim.analysis.estimation.noise import autocorrelation, input_independence, noise_floor, whiteness
+from ema_sim.analysis.estimation.noise import (
+    autocorrelation,
+    input_independence,
+    noise_floor,
+    output_noise,
+    whiteness,
+)
 from ema_sim.analysis.estimation.second_order_fit import fit_step
 from ema_sim.analysis.estimation.uncertainty import coloured_covariance
 from ema_sim.signals import parse_maneuver
@@ -22,6 +28,22 @@ def test_noise_floor_sees_the_white_noise_under_a_moving_signal(sigma):
     t = np.arange(20_000) / 1000.0
     signal = 2.0 * np.sin(2 * np.pi * 1.5 * t) + np.where(t > 7.0, 1.0, 0.0)  # a tone and a step
     assert noise_floor(signal + rng.normal(0, sigma, t.size)) == pytest.approx(sigma, rel=0.05)
+
+
+def test_a_sensor_at_its_saturation_half_the_time_does_not_halve_the_noise_floor():
+    """A 0.7 Hz tone of ±9° read by a sensor that clips at ±6°: over 40 % of the samples read exactly ±6 (no
+    noise on them). The white floor on its own drops towards zero; the output's floor leaves the flat
+    stretches out and sees the sensor's 0.005°. A still, noisy output with no flat run is unchanged."""
+    rng = np.random.default_rng(4)
+    t = np.arange(30_000) / 800.0
+    clipped = np.clip(9.0 * np.sin(2 * np.pi * 0.7 * t) + rng.normal(0, 0.005, t.size), -6.0, 6.0)
+    assert np.mean(np.abs(clipped) == 6.0) > 0.4
+    assert noise_floor(clipped) < 0.7 * 0.005
+    floor = output_noise(clipped)
+    assert floor.resolution is None
+    assert floor.sigma == pytest.approx(0.005, rel=0.1)
+    plain = rng.normal(0, 0.002, t.size)
+    assert output_noise(plain).sigma == noise_floor(plain)
 
 
 def test_autocorrelation_of_an_ar1_sequence_decays_geometrically():

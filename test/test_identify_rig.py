@@ -28,7 +28,7 @@ from ema_sim.identify.fit import evaluate
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import REFERENCE, Step
 from ema_sim.identify.problem import Problem
-from ema_sim.identify.record import prepare, travel_limits
+from ema_sim.identify.record import prepare, sensor_range, travel_limits
 from ema_sim.identify.report import strict, to_json
 from ema_sim.identify.stepwise import no_worse, prune
 from ema_sim.identify.trust import frequency_hz, on_bound
@@ -231,9 +231,34 @@ def test_a_stop_in_the_record_sets_the_travel_there():
     assert "exactly" not in travel.statement  # the stop shows the sensor's noise: a mechanical stop
     clipped = np.clip(pos, -69.5, 69.5)  # the same record read by a sensor that saturates at ±69.5°
     noise = {"position_deg": output_noise(clipped)}
-    said = travel_limits(MeasuredData(time_s=t, command_deg=cmd, position_deg=clipped), WING, noise, stand_in=False)
-    assert said.limits[0] == -69.5
-    assert "reads exactly -69.5, no noise on them: a sensor's saturation or a clipped log" in said.statement
+    read = MeasuredData(time_s=t, command_deg=cmd, position_deg=clipped)
+    assert sensor_range(read, noise) == {"position_deg": (-69.5, math.inf)}
+    assert sensor_range(data, {"position_deg": output_noise(pos)}) == {}
+    said = travel_limits(read, WING, noise, stand_in=False)
+    assert said.limits[0] < -80.0  # a sensor's saturation is no stop: the travel opens past the data
+    assert "no stop seen" in said.statement
+
+
+def test_a_sensor_that_saturates_is_clipped_in_the_model_not_fitted_as_a_stop():
+    """A second order driven to ±22° read by sensors that saturate at ±15°: the model's outputs are clipped as the
+    sensors clip them, so nothing stands in for the time the actuator takes to come back from beyond the
+    sensors' range (a stop at ±15° made a fit add a delay and a lag no actuator had) and the noise floor is
+    the sensors' own, not pulled down by the flat stretches."""
+    rng = np.random.default_rng(12)
+    frames = np.arange(2400) * 0.005
+    cmd = 22.0 * np.sin(2 * np.pi * 0.25 * frames) + np.where((frames // 1.3) % 2 == 0, 3.0, -3.0)
+    model = Loac("left_wing", params=truth_params({}))
+    model.trim(cmd[0], 0.0)
+    t = np.arange(12_000) / 1000.0
+    rec = model.run(frames, cmd, np.zeros_like(frames), sample_times=t, end_s=float(t[-1]))
+    held = np.searchsorted(frames, t + 1e-9, side="right") - 1
+    pos = np.clip(rec.position_deg[0] + rng.normal(0, 0.004, t.size), -15.0, 15.0)
+    data = MeasuredData(time_s=t, command_deg=cmd[held], position_deg=pos, metadata={"channel": "left_wing"})
+    report = to_json(identify(data, WING), "clipped")
+    assert report["noise_deg"]["position_deg"] == pytest.approx(0.004, rel=0.1)
+    assert any("reads exactly -15° " in n and "saturation" in n for n in report["notes"])
+    assert report["added"] == []
+    assert report["final"]["rms_deg"]["position_deg"] < 0.004
 
 
 def test_sampling_jitter_is_named_as_the_logger_s_timing_not_structure():

@@ -567,7 +567,7 @@ EFFECTS: tuple[Effect, ...] = (
            and _loaded(ctx),
            check=_min("hysteresis_h_lb_per_in", 10.0, "h")),
     Effect("linkage_mode", "surface", ("linkage_freq_hz", "linkage_zeta"),
-           "the surface rings after steps where the LVDT does not: its own mode outside the servo loop",
+           "the surface rings after steps (an LVDT, inside the servo loop, would not): its own mode outside the loop",
            probes=_linkage_probe, applies=lambda ctx: _has("surface_deg")(ctx) and _off(ctx, "linkage_freq_hz"),
            check=_linkage_check, contract={"linkage_zeta": "zeta"}),
     Effect("hinge_moment_sign", "load", (), "the load-dependent stages fit the residual only with the hinge moment "

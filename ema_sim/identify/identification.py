@@ -166,7 +166,8 @@ def identify(
     t0 = time.perf_counter()
     say = log or (lambda _msg: None)
     record = record or prepare(data, channel, command=command)
-    problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled)
+    problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled,
+                      output_range=record.sensor_range)
     pool = Pool(scheduler, workers) if scheduler or (workers >= 2 and problem.n_fit >= MIN_SAMPLES) else SERIAL
     pool.start()  # the cluster starts while the baseline is fitted
     if scheduler:

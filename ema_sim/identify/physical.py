@@ -152,8 +152,9 @@ def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -
         The noise seed.
     """
     bp_t, bp_u, bp_h = problem.breakpoints
-    return run_declared(model, problem.channel, bp_t, bp_u, bp_h, sample_times=problem.time_s,
-                        overrides={**values, "noise": True, "seed": seed, "feedback_noise_v": 0.0})[:, :3]
+    return problem.saturate(run_declared(model, problem.channel, bp_t, bp_u, bp_h, sample_times=problem.time_s,
+                                         overrides={**values, "noise": True, "seed": seed,
+                                                    "feedback_noise_v": 0.0})[:, :3].copy())
 
 
 class _Runs:

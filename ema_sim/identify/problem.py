@@ -117,6 +117,9 @@ class Problem:
     """Each output's noise floor (measured on the record when not given)."""
     command_sampled: bool = False
     """The command was sampled from a running demand, not held (see the module docstring)."""
+    output_range: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Output → (lower, upper) saturation of its sensor: every run's output is clipped there as the sensor
+    clips it (:func:`ema_sim.identify.record.sensor_range`)."""
     outputs: list[str] = field(init=False)
     time_s: FloatArray = field(init=False)
     sigma_deg: dict[str, float] = field(init=False)
@@ -345,8 +348,8 @@ class Problem:
                 else:
                     self._kept.move_to_end(k)
                     out[i] = kept
-        runs = self._run([params[i] for i in todo], [flips[i] for i in todo],
-                         None if offsets is None else offsets[todo]) if todo else out[:0]
+        runs = self.saturate(self._run([params[i] for i in todo], [flips[i] for i in todo],
+                                       None if offsets is None else offsets[todo])) if todo else out[:0]
         for i, run in zip(todo, runs, strict=True):
             out[i] = run
         for i, k in enumerate(keys):
@@ -359,6 +362,24 @@ class Problem:
             counts.simulations += n
             counts.reused += n - len(todo)
         return out
+
+    def saturate(self, runs: FloatArray) -> FloatArray:
+        """Runs' outputs as the record's sensors read them: clipped at each one's saturation, in place.
+
+        Parameters
+        ----------
+        runs : numpy.ndarray
+            Outputs ``(..., samples, 3)``: position, surface, rate.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``runs``, clipped.
+        """
+        for o, (lo, hi) in self.output_range.items():
+            col = runs[..., OUTPUT_COLUMN[o]]
+            np.clip(col, lo, hi, out=col)
+        return runs
 
     def cancel(self, token: str) -> None:
         """Stop the fit opened with ``token`` (:meth:`tally`) at its next simulation, which raises :class:`Cancelled`.

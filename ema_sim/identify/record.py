@@ -16,11 +16,16 @@ with the sentence the report carries:
   the command beyond it while the output rests there; opened past the data where it shows none), and
   a warning says so. A record in a linear unit kept as logged, or on a stand-in channel, has no
   declared travel to compare with: its limits always come from the data;
+* a **sensor's range**: an output logged with no counts that reads exactly its extreme value, again and
+  again, is a sensor at its saturation or a clipped log (a continuous reading never repeats by chance; a
+  mechanical stop read through a sensor shows its noise): the model's output is clipped there as the
+  sensor clips it (:attr:`Record.sensor_range`), and that side is no stop of the travel;
 * the **unit**: positions kept in mm or in are named, so no one reads them as degrees.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -68,6 +73,8 @@ class Record:
     warnings: list[str] = field(default_factory=list)
     stamp_scatter_s: float = 0.0
     """Rms of the logged stamps about the least-squares line through them (0 for uniform stamps)."""
+    sensor_range: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Output → (lower, upper) saturation its log shows (:func:`sensor_range`); the model's output is clipped there."""
 
     @property
     def unit(self) -> str:
@@ -98,18 +105,38 @@ def _stop(data: MeasuredData, noise: dict[str, NoiseFloor], side: int) -> float 
     return side * top if pinned.sum() * dt >= STOP_S else None
 
 
-def _clipped(data: MeasuredData, noise: dict[str, NoiseFloor], stop: float) -> str:
-    """What a stop's samples say of it, when most read exactly the stop on an output not counted in steps.
+def sensor_range(data: MeasuredData, noise: dict[str, NoiseFloor]) -> dict[str, tuple[float, float]]:
+    """Each output's saturation, where its log shows one (module docstring); ±inf on a side that shows none.
 
-    A sensor's saturation or a clipped log looks so; a mechanical stop read through the sensor shows its noise.
+    A side saturates when the output reads exactly its extreme for at least :data:`STOP_S` in all, on most of
+    the samples within the noise of it, and the output is not logged in counts.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    noise : dict
+        Each output's noise floor.
+
+    Returns
+    -------
+    dict
+        Output → (lower, upper) saturation; only the outputs that show one.
     """
-    name = data.outputs[0]
-    y = data.column(name)
-    at = int(np.count_nonzero(y == stop))
-    if noise[name].resolution or at < 0.5 * int(np.count_nonzero(np.abs(y - stop) <= 4.0 * noise[name].sigma)):
-        return ""
-    return (f" (every one of its {at} samples reads exactly {stop:.4g}, no noise on them: a sensor's saturation "
-            "or a clipped log more likely than a mechanical stop)")
+    dt = float(np.median(np.diff(data.time_s)))
+    out: dict[str, tuple[float, float]] = {}
+    for name in data.outputs:
+        y, nf = data.column(name), noise[name]
+        if nf.resolution is not None:
+            continue
+        sides = []
+        for extreme in (float(np.min(y)), float(np.max(y))):
+            at = int(np.count_nonzero(y == extreme))
+            near = int(np.count_nonzero(np.abs(y - extreme) <= 4.0 * nf.sigma))
+            sides.append(extreme if at * dt >= STOP_S and at >= 0.5 * near else None)
+        if sides[0] is not None or sides[1] is not None:
+            out[name] = (-np.inf if sides[0] is None else sides[0], np.inf if sides[1] is None else sides[1])
+    return out
 
 
 def check_identifiable(data: MeasuredData) -> None:
@@ -164,9 +191,10 @@ def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, N
         return Travel(declared, declared, "declared", f"within {channel.channel}'s travel "
                       f"{declared[0]:g}…{declared[1]:g}°", False)
     span = hi - lo
-    stops = (_stop(data, noise, -1), _stop(data, noise, +1))
+    clipped = sensor_range(data, noise).get(data.outputs[0], (-np.inf, np.inf))
+    stops = tuple(None if math.isfinite(clipped[side > 0]) else _stop(data, noise, side) for side in (-1, +1))
     limits = (stops[0] if stops[0] is not None else lo - span, stops[1] if stops[1] is not None else hi + span)
-    seen = [f"a stop at {s:.4g}{unit}{_clipped(data, noise, s)}" for s in stops if s is not None]
+    seen = [f"a stop at {s:.4g}{unit}" for s in stops if s is not None]
     how = (f"limits at {', '.join(seen)} where the command stays beyond the output"
            if seen else "no stop seen: limits opened past the data")
     source = "data, stop seen" if seen else "data"
@@ -204,6 +232,7 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     noise = measure_outputs(data)
     hold = command_hold(data, noise, Options(command=command))
     travel = travel_limits(data, channel, noise, stand_in=channel_note is not None)
+    saturation = sensor_range(data, noise)
     if travel.limits != travel.declared:
         channel = replace(channel, position_min_deg=travel.limits[0], position_max_deg=travel.limits[1])
     notes: list[str] = []
@@ -234,4 +263,11 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     notes.append(f"travel: {travel.statement}")
     if travel.outside:
         warnings.append(f"data outside the declared travel: {travel.statement}")
-    return Record(data, channel, noise, hold, travel, notes, warnings, scatter)
+    for name, (lo, hi) in saturation.items():
+        y = data.column(name)
+        sides = [f"{v:.4g}{'°' if data.unit == 'deg' else ' ' + data.unit} ({int(np.count_nonzero(y == v))} samples)"
+                 for v in (lo, hi) if math.isfinite(v)]
+        notes.append(f"{name} reads exactly {' and '.join(sides)} again and again, with no noise on them: a sensor's "
+                     "saturation or a clipped log, not a mechanical stop (which shows the noise); the model's "
+                     f"{name} is clipped there as the sensor clips it")
+    return Record(data, channel, noise, hold, travel, notes, warnings, scatter, saturation)

@@ -445,7 +445,7 @@ def as_declared(problem: Problem, model: str, base: SecondOrderParams, free: lis
         Its own error per output, the parameters fitted and those held.
     """
     d = problem.data
-    sim = run_declared(model, problem.channel, problem.time_s, d.command_deg, d.hinge_moment)
+    sim = problem.saturate(run_declared(model, problem.channel, problem.time_s, d.command_deg, d.hinge_moment))
     own = {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(sim).items()}
     at = evaluate(problem, base, tuple(free), flip=False)
     size = np.linalg.norm(at.jacobian, axis=0)

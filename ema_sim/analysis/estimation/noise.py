@@ -65,6 +65,25 @@ def noise_floor(y: FloatArray) -> float:
     return float(MAD_TO_SIGMA * np.median(np.abs(d4 - np.median(d4))) / np.sqrt(70.0))
 
 
+FLAT_SHARE = 0.2
+"""A continuous signal whose fourth differences are exactly zero this often has flat stretches that are no noise."""
+
+
+def _unclipped_floor(y: FloatArray, white: float) -> float:
+    """:func:`noise_floor` without the stretches where a continuous signal repeats itself exactly.
+
+    A signal logged with no counts never repeats a value by chance: a run of identical samples is a sensor
+    at its saturation, a clipped log or a stuck reading, and its zero differences would pull the noise
+    estimate down by as much as the share of the record they fill. When over :data:`FLAT_SHARE` of the
+    fourth differences are exactly zero, the floor is taken from the others.
+    """
+    d4 = np.diff(np.asarray(y, dtype=float), 4)
+    moving = d4[d4 != 0.0]
+    if d4.size == 0 or moving.size < 6 or moving.size > (1.0 - FLAT_SHARE) * d4.size:
+        return white
+    return float(MAD_TO_SIGMA * np.median(np.abs(moving - np.median(moving))) / np.sqrt(70.0))
+
+
 def detect_resolution(y: FloatArray, min_span: float = 0.0) -> float | None:
     """The count a signal is logged in, when every change of it is a whole number of counts.
 
@@ -234,6 +253,7 @@ def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
             q, source = grid.q, "values"
         elif q is None:
             source = "none"
+            white = _unclipped_floor(y, white)
     floor = max(white, q / np.sqrt(12.0)) if q is not None else white
     return NoiseFloor(float(floor), white, q, source)
 
