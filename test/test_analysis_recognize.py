@@ -4,7 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from analysis_data import measured
+from analysis_data import delayed, measured
 
 from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.analysis.recognize import recognize
@@ -108,3 +108,40 @@ def test_a_slow_sweep_cut_short_by_the_signal_takes_the_spec_window():
     (seg,) = recognize(data).of("sweep")
     assert t[seg.start] == pytest.approx(1.0, abs=0.01)
     assert t[seg.stop - 1] == pytest.approx(59.0, abs=0.01)
+
+
+def test_a_threshold_test_quantised_by_the_command_counts_is_moving_not_a_staircase():
+    """A 0.2 Hz triangle growing to 0.3° logged in 0.01° counts at 250 Hz spans only 60 counts (under
+    the 100 a command's counts usually span) but travels hundreds of them one count at a time: it is a
+    static threshold test, not hundreds of one-count steps."""
+    t = np.arange(0, 40, 0.004)
+    u = 0.3 * t / 40 * (2 / np.pi) * np.arcsin(np.sin(2 * np.pi * 0.2 * t))
+    uq = 0.01 * np.round(u / 0.01)
+    y = np.where(np.abs(u) > 0.03, u - 0.03 * np.sign(u), 0.0) + np.random.default_rng(4).normal(0, 0.001, t.size)
+    rec = recognize(MeasuredData(time_s=t, command_deg=uq, position_deg=y))
+    assert [s.kind for s in rec.segments] == ["static_threshold"]
+    assert rec.segments[0].params["freq_hz"] == pytest.approx(0.2, rel=0.05)
+    assert rec.edge_threshold_deg == pytest.approx(0.03)  # three counts: a one-count change is no edge
+
+
+def test_sine_dwells_one_after_another_are_each_a_dwell_not_a_sweep():
+    """Tones at 0.6, 1.5 and 4 Hz, 6 s each, joined without a pause (a period piecewise constant,
+    shrinking in steps): three sine dwells, each analysed (a 10 ms delay: phase −360·f·τ)."""
+    t = np.arange(0, 18, 0.004)
+    k = np.minimum((t // 6).astype(int), 2)
+    f = np.array([0.6, 1.5, 4.0])[k]
+    u = 0.7 * np.sin(2 * np.pi * f * (t - 6 * k))
+    y = delayed(t, u, 0.01) + np.random.default_rng(5).normal(0, 0.002, t.size)
+    data = MeasuredData(time_s=t, command_deg=u, position_deg=y)
+    rec = recognize(data)
+    assert [s.kind for s in rec.segments] == ["sine"] * 3
+    assert [s.params["freq_hz"] for s in rec.segments] == pytest.approx([0.6, 1.5, 4.0], rel=0.01)
+    assert [round(t[s.start]) for s in rec.segments] == [0, 6, 12]
+    dwells = [r for r in analyze_record(data).results["sine_dwell"] if r.output == "position_deg"]
+    assert [r.freq_hz for r in dwells] == pytest.approx([0.6, 1.5, 4.0], rel=0.01)
+    lag = 0.01 - 0.004 / 2  # the analysis takes a held command's half sample of hold out
+    assert [r.phase_deg for r in dwells] == pytest.approx([-360 * fr * lag for fr in (0.6, 1.5, 4.0)], abs=0.3)
+    # a sweep over the same band (its period shrinks steadily) is still one sweep
+    sweep = np.sin(2 * np.pi * (0.6 * t + (4.0 - 0.6) * t**2 / (2 * 18)))
+    assert [s.kind for s in recognize(MeasuredData(time_s=t, command_deg=sweep, position_deg=sweep)).segments] \
+        == ["sweep"]

@@ -5,15 +5,17 @@ is cut into stretches of four shapes and each test's readers (:mod:`ema_sim.anal
 asked, most specific first, what each stretch is:
 
 * **edges** of the held command: jumps between holds of ≥ 40 ms, a jump counting when it is larger
-  than twice the band a hold may wander in (and three counts of a command logged in counts), the
-  transition taking at most 20 ms; runs of them are a *staircase* (calibration), a *square* wave
-  (timing), a square wave whose holds shrink (*regen*), or *steps*;
+  than twice the band a hold may wander in (and three counts of a command logged in counts:
+  :func:`command_counts`), the transition taking at most 20 ms; runs of them are a *staircase*
+  (calibration), a *square* wave (timing), a square wave whose holds shrink (*regen*), or *steps*;
 * **moves**: holds joined by longer monotone transitions that cruise at a constant speed or dwell
   (a drive's trapezoid demands): a *profile* (or a *staircase* of them);
 * **moving** stretches of the command (neither held nor claimed above), by their turning points: a
   tone of steady period (a *sine* dwell or a *triangle*; growing amplitude: *static_threshold* below
   1 Hz, *dynamic_threshold* above), a period that shrinks steadily (*sweep*), a slow monotone *ramp*,
-  or an irregular broadband signal (*schroeder* when it repeats, else *broadband*);
+  or an irregular broadband signal (*schroeder* when it repeats, else *broadband*). A period that is
+  piecewise constant (tones one after another, :attr:`MovingStretch.dwells`) is no sweep: each of
+  its dwells is read on its own;
 * **held command** for ≥ 5 s: with a varying hinge moment, a load staircase (*load_steps*:
   compliance), two opposite load levels (*load_reversal*: free play) or a sinusoidal load
   (*load_sine*: hysteresis); with a constant load, a *hold* (crosstalk, dither).
@@ -65,6 +67,8 @@ MIN_EDGE_HOLD_S = 0.04
 LONG_HOLD_S = 0.3
 MIN_MOVING_S = 1.0
 HELD_TEST_S = 5.0
+COUNTS_SPANNED_MOVING = 10.0
+"""A command travelling ``COMMAND_COUNTS_SPANNED`` counts over at least this many is logged in counts."""
 MAX_STEP_S = 0.02
 """A step's transition (a recorded command through a lag) takes at most this long; a move takes longer."""
 
@@ -123,9 +127,39 @@ def edge_threshold(u: FloatArray) -> tuple[float, float]:
         The hold tolerance and the edge threshold, deg.
     """
     tol = series.hold_tolerance(u)
-    counts = detect_resolution(u, COMMAND_COUNTS_SPANNED) or 0.0
+    counts = command_counts(u)
     scale = max(1.0, float(np.max(np.abs(u)))) if u.size else 1.0
     return tol, max(2.0 * series.HOLD_BAND * tol, 3.0 * counts, 1e-6 * scale)
+
+
+def command_counts(u: FloatArray) -> float:
+    """The count a command is logged in (0 when it is continuous), judged against the command's motion.
+
+    A command's count is a fine grid, not a designed step: the command spans at least
+    ``COMMAND_COUNTS_SPANNED`` counts, or (a small-amplitude test, a threshold test at the D/A's
+    limit) it travels that many counts in all, one change of a count or a few at a time, over at least
+    ``COUNTS_SPANNED_MOVING`` levels. A waveform between a few levels (a square wave, a regeneration
+    test) spans too few; a step set or staircase changes too seldom (each of its jumps is one test
+    level, and a test has tens of them, not hundreds).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The command.
+
+    Returns
+    -------
+    float
+        The count, deg (0: none).
+    """
+    spanned = detect_resolution(u, COMMAND_COUNTS_SPANNED)
+    if spanned is not None:
+        return spanned
+    q = detect_resolution(u)
+    if q is None or u.size < 2 or float(np.ptp(u)) < COUNTS_SPANNED_MOVING * q:
+        return 0.0
+    travel = float(np.sum(np.abs(np.diff(u)))) / q
+    return q if travel >= COMMAND_COUNTS_SPANNED else 0.0
 
 
 def _maneuver(data: MeasuredData) -> tuple[Maneuver | None, str | None]:
@@ -176,7 +210,7 @@ def _move_segments(t: FloatArray, u: FloatArray, tol: float, min_jump: float, cl
     out = []
     short_holds = series.holds(u, max(2, round(MIN_EDGE_HOLD_S / dt)), tol)
     for run in find_moves(t, u, short_holds, min_jump=min_jump, max_gap=round(MAX_STEP_S / dt) + 1,
-                          counts=detect_resolution(u, COMMAND_COUNTS_SPANNED) or 0.0, tol=tol):
+                          counts=command_counts(u), tol=tol):
         start, stop = run[0].before.start, run[-1].after.stop
         if claimed[start:stop].any():
             continue
@@ -211,8 +245,16 @@ def _moving_segments(t: FloatArray, u: FloatArray, tol: float, held: NDArray[np.
             a, b = before + max(int(left[0]) - 1, 0) + 1, before + int(back[-1]) + 2
         if (b - a) * dt < MIN_MOVING_S:
             continue
-        r = _read(MOVING_READERS, MovingStretch(t[a:b], u[a:b]))
-        out.append(Segment(r.kind, a, b, f"signal: {r.evidence}", r.params))
+        stretch = MovingStretch(t[a:b], u[a:b])
+        dwells = stretch.dwells
+        if not dwells:
+            r = _read(MOVING_READERS, stretch)
+            out.append(Segment(r.kind, a, b, f"signal: {r.evidence}", r.params))
+            continue
+        for k, (i, j) in enumerate(dwells):  # a stepped sine: each dwell is read on its own
+            r = _read(MOVING_READERS, MovingStretch(t[a + i:a + j], u[a + i:a + j]))
+            out.append(Segment(r.kind, a + i, a + j, f"signal: {r.evidence}, dwell {k + 1} of {len(dwells)} of a "
+                               "stepped tone (its period is piecewise constant)", r.params))
     return out
 
 

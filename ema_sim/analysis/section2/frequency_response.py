@@ -446,6 +446,8 @@ def _period_by_autocorrelation(u: FloatArray, dt: float) -> tuple[float, float] 
 def read_sweep(m: MovingStretch) -> Reading | None:
     """At least 12 turning points whose spacing shrinks steadily over more than a 3:1 band: a sine sweep.
 
+    A spacing that shrinks in steps (tones one after another, :attr:`MovingStretch.dwells`) is no sweep.
+
     Parameters
     ----------
     m : MovingStretch
@@ -460,7 +462,7 @@ def read_sweep(m: MovingStretch) -> Reading | None:
         return None
     half = m.half_periods_s
     f0, f1 = 0.5 / float(np.median(half[:3])), 0.5 / float(np.median(half[-3:]))
-    if _spearman(half) >= -0.9 or f1 / f0 <= 3.0:
+    if _spearman(half) >= -0.9 or f1 / f0 <= 3.0 or m.dwells:
         return None
     return Reading("sweep", f"sine sweep {f0:.3g}-{f1:.3g} Hz (period shrinks steadily)", {"f0_hz": f0, "f1_hz": f1})
 

@@ -36,6 +36,8 @@ STEADY_CV = 0.15
 """Half periods within this coefficient of variation make a steady tone."""
 SINE_R2 = 0.99
 """A steady tone a sine explains to this share is a sine (a triangle's fundamental explains 98.6 %)."""
+DWELL_HALVES = 5
+"""Half periods of one steady tone (six turning points, as :attr:`MovingStretch.steady` asks) that make a dwell."""
 
 
 @dataclass(frozen=True)
@@ -338,6 +340,56 @@ class MovingStretch:
         """At least 6 turning points at a steady rhythm: one tone."""
         h = self.half_periods_s
         return self.turns.size >= 6 and float(np.std(h) / np.mean(h)) < STEADY_CV
+
+    @cached_property
+    def dwells(self) -> tuple[tuple[int, int], ...]:
+        """The dwells of a stepped sine: sample ranges ``[start, stop)`` of steady tones (none otherwise).
+
+        A sweep's period shrinks steadily; a stepped sine's is piecewise constant: runs of at least
+        ``DWELL_HALVES`` half periods, each run steady (coefficient of variation under ``STEADY_CV``)
+        and without a trend, one tone jumping to the next by more than ``STEADY_CV``. The half periods
+        are read through a running median of five (a quantised command's turning instants jitter by a
+        sample); at most two half periods between two dwells (the one straddling the change of
+        tone) belong to neither. The first dwell starts, and the last ends, with the stretch.
+        """
+        h = self.half_periods_s
+        if h.size < 2 * DWELL_HALVES:
+            return ()
+        smooth = np.array([np.median(h[max(i - 2, 0):i + 3]) for i in range(h.size)])
+        jump = np.abs(np.diff(np.log(smooth))) > np.log1p(STEADY_CV)
+        bounds = [0, *(np.flatnonzero(jump) + 1).tolist(), h.size]
+        runs = [(a, b) for a, b in pairwise(bounds)]
+        if len(runs) < 2 or runs[0][1] - runs[0][0] < DWELL_HALVES or runs[-1][1] - runs[-1][0] < DWELL_HALVES:
+            return ()
+        kept: list[tuple[int, int]] = []
+        for lo, hi in runs:
+            if hi - lo < DWELL_HALVES:
+                if hi - lo > 2 or not kept or kept[-1][1] != lo:
+                    return ()  # more than a change of tone between two dwells: a sweep's fast start, or no tone
+                kept.append((hi, hi))  # a gap: the next dwell must not join the one before
+                continue
+            a, b = lo, hi
+            ref = float(np.median(h[a:b]))
+            off = np.abs(np.log(h[a:b] / ref)) > np.log1p(STEADY_CV)
+            while a < b and off[0]:  # the half period straddling a change of tone belongs to neither dwell
+                a, off = a + 1, off[1:]
+            while b > a and off[-1]:
+                b, off = b - 1, off[:-1]
+            run = h[a:b]
+            third = max(1, run.size // 3)
+            trend = abs(float(np.log(np.median(run[-third:]) / np.median(run[:third]))))
+            if run.size < DWELL_HALVES or float(np.std(run) / np.mean(run)) >= STEADY_CV \
+                    or trend > np.log1p(STEADY_CV) / 3.0:
+                return ()
+            kept.append((a, b))
+        dwells = [r for r in kept if r[1] > r[0]]
+        if len(dwells) < 2:
+            return ()
+        turns = self.turns
+        out = [(int(turns[a]), int(turns[b]) + 1) for a, b in dwells]
+        out[0] = (0, out[0][1])
+        out[-1] = (out[-1][0], self.u.size)
+        return tuple(out)
 
     @cached_property
     def tone_hz(self) -> float:

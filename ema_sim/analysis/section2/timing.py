@@ -13,7 +13,15 @@ inclinometer on it) and 2 ms more until the LVDT feedback reached the FMU, on a 
   (LOAC, 0.003° noise, 30 seeds: 0.5° steps σ 0.42 ms without it, 0.72 ms with it; 20° steps bias
   −0.3 ms without it, −0.03 ms with it).
 * command → first motion: t₀ of the surface angle (external sensor) minus the edge time; without
-  a surface column, of the LVDT position.
+  a surface column, of the LVDT position. First motion is only defined from rest: an output that
+  is already moving before the edge (its drift over the last 0.1 s exceeds ``STILL_NOISE`` times
+  its noise: a surface deflected by a varying hinge moment through compliance and free play, or still
+  ringing) is not timed when a still one is there: the edge is timed on the LVDT instead (and its
+  motion to feedback is not measured). When no output is still, the edge is timed on the surface all the
+  same and marked: a first motion before such an edge says nothing about the data's stamps. A surface
+  whose start leads the edge by more than one edge's scatter while the LVDT's does not (an aiding load
+  takes it through its free play or compliance ahead of the actuator: no parabola) is not timed either;
+  the LVDT times that edge.
 * motion → feedback: t₀ of the LVDT position minus t₀ of the surface, per edge.
 * FMU command → first motion: when the record also carries the flight computer's side of the test
   environment (a suite bag's ``/ema/fmu/command``), the same first motion against the FMU's edge:
@@ -56,6 +64,16 @@ QUARTIC_SNR = 500.0
 """Steps larger than this many noise standard deviations get the quartic term."""
 FIT_TOP_DEG = 0.5
 """...but no more than this many degrees: a large step soon runs into its rate limit and stops being a parabola."""
+PRE_EDGE_S = 0.1
+"""The output's level before an edge is its mean over this long (within the edge's hold)."""
+FIT_SCATTER_SAMPLES = 0.5
+"""One edge's first motion scatters by up to this share of a sample (LOADA steps of 0.5–15°, 0.003° noise,
+1 kHz, 20 seeds: σ 0.13–0.5 ms): the floor of the standard error of a few edges, whose spread tells little."""
+STILL_NOISE = 5.0
+"""An output whose drift over the pre-edge window exceeds this many noise standard deviations is moving..."""
+DETECT_SHARE = 0.01
+"""...and this share of the edge's jump: the least departure from the level :func:`first_motion` detects (a
+drift under it moves the level the first motion is measured from by less than that)."""
 
 
 def first_motion(t: FloatArray, y: FloatArray, edge: int, y0: float, amplitude: float, noise: float,
@@ -94,7 +112,7 @@ def first_motion(t: FloatArray, y: FloatArray, edge: int, y0: float, amplitude: 
     if top.size == 0:
         return None
     i_hi = int(top[0])
-    detect = max(4.0 * noise / abs(amplitude), 0.01)
+    detect = max(4.0 * noise / abs(amplitude), DETECT_SHARE)
     above = np.flatnonzero(zs[: i_hi + 1] >= detect)
     if above.size == 0 or i_hi < 2:
         return None
@@ -140,6 +158,11 @@ class EdgeTiming:
         First motion to the LVDT's, s.
     fmu_to_motion_s : float or None
         FMU command edge to first motion, s.
+    motion_signal : str
+        The output this edge's first motion is taken from.
+    moving_before : bool
+        That output was already moving before the edge (no output was still): the first motion is
+        measured against motion under way.
     """
 
     time_s: float
@@ -147,6 +170,8 @@ class EdgeTiming:
     command_to_motion_s: float | None
     motion_to_feedback_s: float | None
     fmu_to_motion_s: float | None = None
+    motion_signal: str = ""
+    moving_before: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON.
@@ -157,7 +182,8 @@ class EdgeTiming:
             Edge time, jump, and the three intervals (None where not measured).
         """
         return {"time_s": self.time_s, "jump_deg": self.jump_deg, "command_to_motion_s": self.command_to_motion_s,
-                "motion_to_feedback_s": self.motion_to_feedback_s, "fmu_command_to_motion_s": self.fmu_to_motion_s}
+                "motion_to_feedback_s": self.motion_to_feedback_s, "fmu_command_to_motion_s": self.fmu_to_motion_s,
+                "motion_signal": self.motion_signal, "moving_before": self.moving_before}
 
 
 @dataclass(frozen=True)
@@ -204,20 +230,33 @@ class TimingResult:
         return (max(c, 0.0), c + self.sample_s) if self.sampled else (c, c)
 
     @property
+    def from_rest(self) -> list[float]:
+        """Command to first motion of the edges whose output was still before them, s."""
+        return [e.command_to_motion_s for e in self.edges
+                if e.command_to_motion_s is not None and not e.moving_before]
+
+    @property
     def early(self) -> bool:
-        """First motion clearly before a held command's edge: by more than a quarter sample and two standard errors."""
-        c = self.command_to_motion_s
-        if c is None or self.sampled:
+        """First motion from rest clearly before a held command's edge (more than a quarter sample and two s.e.).
+
+        An output already moving before its edge proves nothing about the stamps. The standard error of
+        the median is taken from the edges' spread, but never below one edge's own scatter
+        (``FIT_SCATTER_SAMPLES`` of a sample) over the root of their number: a single edge has no spread
+        to measure.
+        """
+        spread = self.from_rest
+        if not spread or self.sampled:
             return False
-        spread = [e.command_to_motion_s for e in self.edges if e.command_to_motion_s is not None]
+        c = float(np.median(spread))
         se = 1.2533 * float(np.std(spread)) / np.sqrt(len(spread)) if len(spread) > 1 else 0.0
-        return c < -max(0.25 * self.sample_s, 2.0 * se)
+        se = max(se, FIT_SCATTER_SAMPLES * self.sample_s / np.sqrt(len(spread)))
+        return bool(c < -max(0.25 * self.sample_s, 2.0 * se))
 
     @property
     def quality(self) -> Quality:
-        """``not_determined`` with a sampled command (known to a sample) or a first motion before a held edge."""
+        """``not_determined``: a sampled command, a first motion before a held edge, or no output still before one."""
         c = self.command_to_motion_s
-        if c is None or self.sampled or self.early:
+        if c is None or self.sampled or self.early or not self.from_rest:
             return "not_determined"
         return "ok"
 
@@ -235,6 +274,9 @@ class TimingResult:
         if self.early:
             return ("first motion before the command edge: impossible for a held command; the command is sampled "
                     "rather than held, or the stamps of command and output are misaligned")
+        if not self.from_rest:
+            return ("every output was already moving before the edges (a varying hinge moment?): the first motion "
+                    "is measured against motion under way, not from rest")
         return ""
 
     @property
@@ -264,11 +306,69 @@ class TimingResult:
         }
 
 
+def _pre_edge(t: FloatArray, e: Edge) -> int:
+    """First sample of the window the output's level before the edge is read over."""
+    return max(e.before.start, e.index - max(5, int(PRE_EDGE_S / (t[1] - t[0]))))
+
+
+def moving_before(t: FloatArray, y: FloatArray, e: Edge, noise: float) -> bool:
+    """Whether an output is already moving before a command edge (its fitted drift over the pre-edge window).
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Time, s (uniform).
+    y : numpy.ndarray
+        The output, deg.
+    e : Edge
+        The command edge.
+    noise : float
+        The output's noise floor, deg.
+
+    Returns
+    -------
+    bool
+        True when the output drifts over the window (up to ``PRE_EDGE_S`` before the edge, within its
+        hold) by more than ``STILL_NOISE`` times the noise and ``DETECT_SHARE`` of the edge's jump: twice
+        the difference of the medians of its two halves (a drift's change over the whole window; an
+        isolated spike moves neither median).
+    """
+    pre = _pre_edge(t, e)
+    if e.index - pre < 4:
+        return False
+    yy = y[pre:e.index]
+    half = yy.size // 2
+    drift = 2.0 * abs(float(np.median(yy[-half:])) - float(np.median(yy[:half])))
+    return drift > max(STILL_NOISE * noise, DETECT_SHARE * abs(e.jump))
+
+
 def _edge_motion(t: FloatArray, y: FloatArray, e: Edge, noise: float) -> float | None:
-    pre = max(e.before.start, e.index - max(5, int(0.1 / (t[1] - t[0]))))
+    pre = _pre_edge(t, e)
     y0 = float(np.mean(y[pre:e.index])) if e.index > pre else float(y[e.index])
     y1, _ = settled(y, e.index, e.after.stop, 0.3)
     return first_motion(t, y, e.index, y0, y1 - y0, noise, e.after.stop)
+
+
+def _time_edge(t: FloatArray, e: Edge, motion_name: str, motion: FloatArray, position: FloatArray | None,
+               noise: dict[str, float]) -> tuple[str, float | None, float | None, bool, bool]:
+    """One edge's first motion: the output read, the instant, motion → feedback, moving before, surface led.
+
+    The surface's start leads the edge by more than one edge's scatter (``FIT_SCATTER_SAMPLES`` of a sample)
+    while the LVDT's does not: the surface was taken through its free play or compliance by its load, and
+    the LVDT's first motion is taken.
+    """
+    name, y = motion_name, motion
+    moving = moving_before(t, y, e, noise.get(name, 0.0))
+    if moving and name == "surface_deg" and position is not None \
+            and not moving_before(t, position, e, noise.get("position_deg", 0.0)):
+        name, y, moving = "position_deg", position, False  # the surface moves under its load: time the LVDT
+    tm = _edge_motion(t, y, e, noise.get(name, 0.0))
+    if name != "surface_deg" or position is None or tm is None:
+        return name, tm, None, moving, False
+    tp = _edge_motion(t, position, e, noise.get("position_deg", 0.0))
+    if tp is not None and tm < float(t[e.index]) - FIT_SCATTER_SAMPLES * float(t[1] - t[0]) <= tp:
+        return "position_deg", tp, None, moving, True
+    return name, tm, None if tp is None else tp - tm, moving, False
 
 
 def edge_timing(t: FloatArray, edges: list[Edge], position: FloatArray | None, surface: FloatArray | None,
@@ -309,26 +409,38 @@ def edge_timing(t: FloatArray, edges: list[Edge], position: FloatArray | None, s
     assert motion is not None
     fmu_changes = np.flatnonzero(np.diff(fmu_command) != 0.0) + 1 if fmu_command is not None else None
     rows = []
+    dt = float(np.median(np.diff(t)))
+    leading = 0
     for e in edges:
         t_edge = float(t[e.index])
-        tm = _edge_motion(t, motion, e, noise.get(motion_name, 0.0))
+        name, tm, m2f, moving, led = _time_edge(t, e, motion_name, motion, position, noise)
+        leading += led
         c2m = None if tm is None else tm - t_edge
-        m2f = None
-        if surface is not None and position is not None and tm is not None:
-            tp = _edge_motion(t, position, e, noise.get("position_deg", 0.0))
-            m2f = None if tp is None else tp - tm
         f2m = None
         if fmu_changes is not None and fmu_changes.size and tm is not None:
             before = fmu_changes[fmu_changes <= e.index]
             if before.size:
                 f2m = tm - float(t[before[-1]])
-        rows.append(EdgeTiming(t_edge, e.jump, c2m, m2f, f2m))
+        rows.append(EdgeTiming(t_edge, e.jump, c2m, m2f, f2m, name, moving))
     c2m_all = [r.command_to_motion_s for r in rows if r.command_to_motion_s is not None]
     m2f_all = [r.motion_to_feedback_s for r in rows if r.motion_to_feedback_s is not None]
     f2m_all = [r.fmu_to_motion_s for r in rows if r.fmu_to_motion_s is not None]
     if len(c2m_all) < len(rows):
         notes.append(f"{len(rows) - len(c2m_all)} edge(s) without a clear first motion")
-    dt = float(np.median(np.diff(t)))
+    on_lvdt = sum(1 for r in rows if r.motion_signal != motion_name)
+    if on_lvdt:
+        notes.append(f"{on_lvdt} of {len(rows)} edge(s) timed on the LVDT position: the surface was already moving "
+                     "before them, or started before them, while the LVDT was still; their motion to feedback is not "
+                     "measured")
+        if on_lvdt == len(rows):
+            motion_name = "position_deg"
+    if leading:
+        notes.append(f"of those, {leading} because the surface's start came before the edge while the LVDT's did not: "
+                     "a surface taken through its free play or compliance by its load leads the actuator, and its "
+                     "start is no first motion (the stamps are not to blame)")
+    if any(r.moving_before for r in rows):
+        notes.append(f"{sum(r.moving_before for r in rows)} edge(s) with every output already moving before them: "
+                     "their first motion is measured against motion under way")
     return TimingResult(
         motion_name,
         float(np.median(c2m_all)) if c2m_all else None,
@@ -429,7 +541,7 @@ class Timing(Section2Test[TimingResult]):
         for name in d.outputs:
             ax.plot(tt, getattr(d, name)[sl], ".-", ms=3, lw=0.8, color=figure.COLORS[name], label=name)
         if e.command_to_motion_s is not None:
-            ax.axvline(1e3 * e.command_to_motion_s, color=figure.COLORS[r.motion_signal], ls="--",
+            ax.axvline(1e3 * e.command_to_motion_s, color=figure.COLORS[e.motion_signal or r.motion_signal], ls="--",
                        label=f"first motion {1e3 * e.command_to_motion_s:.2f} ms")
             if r.sampled:
                 ax.axvspan(1e3 * e.command_to_motion_s, 1e3 * (e.command_to_motion_s + r.sample_s), color="0.9",
