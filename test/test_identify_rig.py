@@ -234,6 +234,9 @@ def test_a_stop_in_the_record_sets_the_travel_there():
     read = MeasuredData(time_s=t, command_deg=cmd, position_deg=clipped)
     assert sensor_range(read, noise) == {"position_deg": (-69.5, math.inf)}
     assert sensor_range(data, {"position_deg": output_noise(pos)}) == {}
+    settled = np.clip(cmd, -69.5, 69.5)  # a simulation's output, no sensor: it settles on exactly one value
+    assert sensor_range(MeasuredData(time_s=t, command_deg=cmd, position_deg=settled),
+                        {"position_deg": output_noise(settled)}) == {}
     said = travel_limits(read, WING, noise, stand_in=False)
     assert said.limits[0] < -80.0  # a sensor's saturation is no stop: the travel opens past the data
     assert "no stop seen" in said.statement

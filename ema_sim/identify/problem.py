@@ -69,14 +69,14 @@ class Tally:
 
 
 def start_left_out_s(time_s: FloatArray, command: FloatArray, outputs: Mapping[str, FloatArray],
-             sigma_deg: Mapping[str, float]) -> float:
+                     sigma_deg: Mapping[str, float]) -> float:
     """How much of a record's start not to fit: :data:`SETTLE_S`, or less for a short record that starts at rest.
 
-    A record :data:`SETTLE_S` is over a tenth of, whose command first changes before it, its outputs at rest
-    until then (within :data:`AT_REST_SIGMAS` noise sigmas), is fitted from halfway to that change: a short
-    record's only step is not left out. A longer record keeps the whole :data:`SETTLE_S` out, which costs it
-    little and spares its fit the start of a simulation that need not match the record's (measured: fitted
-    from its first change, a 15 s record with a command bias took in a spurious compliance).
+    A record shorter than ten times :data:`SETTLE_S` whose command first changes before :data:`SETTLE_S`, its
+    outputs at rest until then (within :data:`AT_REST_SIGMAS` noise sigmas), is fitted from halfway to that
+    change: a short record's only step is not left out. A longer record keeps the whole :data:`SETTLE_S` out,
+    which costs it little and spares its fit the start of a simulation that need not match the record's
+    (measured: fitted from its first change, a 15 s record with a command bias took in a spurious compliance).
 
     Parameters
     ----------

@@ -41,6 +41,8 @@ from ema_sim.io.csv import MeasuredData
 
 MAX_ABS = 1e6
 """No command or output in degrees or millimetres is this large: such a column is not what it is named."""
+NOISELESS_DEG = 1e-6
+"""An output whose white noise is under this is a simulation's, read through no sensor."""
 STOP_S = 0.2
 """The command must sit beyond the output's extreme this long, the output resting there, to show a stop."""
 
@@ -109,7 +111,8 @@ def sensor_range(data: MeasuredData, noise: dict[str, NoiseFloor]) -> dict[str, 
     """Each output's saturation, where its log shows one (module docstring); ±inf on a side that shows none.
 
     A side saturates when the output reads exactly its extreme for at least :data:`STOP_S` in all, on most of
-    the samples within the noise of it, and the output is not logged in counts.
+    the samples within the noise of it, and the output is neither logged in counts nor free of noise (a
+    simulated output settles on exactly one value with no sensor in the way).
 
     Parameters
     ----------
@@ -127,7 +130,7 @@ def sensor_range(data: MeasuredData, noise: dict[str, NoiseFloor]) -> dict[str, 
     out: dict[str, tuple[float, float]] = {}
     for name in data.outputs:
         y, nf = data.column(name), noise[name]
-        if nf.resolution is not None:
+        if nf.resolution is not None or nf.white <= NOISELESS_DEG:
             continue
         sides = []
         for extreme in (float(np.min(y)), float(np.max(y))):
