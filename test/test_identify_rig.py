@@ -480,3 +480,27 @@ def test_a_short_record_at_rest_is_fitted_from_before_its_first_step_and_a_movin
     report = to_json(identify(_step_at(0.1, 0.75), WING), "short")
     assert report["final"]["rms_deg"]["position_deg"] < 0.0045  # the step fitted to the noise...
     assert report["reference"]["rms_deg"]["position_deg"] > 0.1  # ...which the command alone does not explain
+
+
+def test_no_step_clears_one_output_by_spoiling_another():
+    """The surface off the LVDT by a cubic the vocabulary lacks (0.3° at 20°): a command gain would trade the
+    LVDT's fit for the surface's. Each step is held to the model it is added to, so none is kept that makes an
+    output worse beyond the noise allowance (before, a gain making the LVDT 13 times worse was kept)."""
+    rng = np.random.default_rng(21)
+    frames = np.arange(3000) * 0.005
+    cmd = command_sequence(frames, 15.0)
+    model = Loac("left_wing", params=truth_params({"rate_limit": 110.0}))
+    model.trim(cmd[0], 0.0)
+    t = np.arange(15_000) / 1000.0
+    rec = model.run(frames, cmd, np.zeros_like(frames), sample_times=t, end_s=float(t[-1]))
+    held = np.searchsorted(frames, t + 1e-9, side="right") - 1
+    pos = rec.position_deg[0]
+    surface = pos - 0.3 * (pos / 20.0) ** 3
+    data = MeasuredData(time_s=t, command_deg=cmd[held], position_deg=pos + rng.normal(0, 0.003, t.size),
+                        surface_deg=surface + rng.normal(0, 0.003, t.size), metadata={"channel": "left_wing"})
+    report = to_json(identify(data, WING), "cubic")
+    for step in report["added"]:
+        for output, after in step["rms_deg_after"].items():
+            before = step["rms_deg_before"][output]
+            assert after**2 <= before**2 + 0.05 * report["noise_deg"][output] ** 2 + 1e-12, (step["effect"], output)
+    assert "command_gain" not in [s["effect"] for s in report["added"]]

@@ -42,7 +42,7 @@ from ema_sim.identify.problem import Cancelled, Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record
 from ema_sim.identify.screening import Candidate, screen
-from ema_sim.identify.stages import worse
+from ema_sim.identify.stages import allow, worse
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
@@ -499,6 +499,17 @@ class _Round:
     tried: dict[str, tuple[Fit, Verdict]]
     accepted: list[tuple[Fit, Candidate]]
 
+    @property
+    def step_limit(self) -> dict[str, float]:
+        """What a candidate must not exceed on each output: the stage's limit and the current model's error.
+
+        The current model's is widened by the noise as the stages widen theirs
+        (:func:`~ema_sim.identify.stages.allow`). An effect that clears one output by spoiling another the
+        model before had right is a trade, never a step.
+        """
+        now = allow(rms(self.problem, self.cur), self.problem.sigma_deg)
+        return {o: min(v, now.get(o, v)) for o, v in self.limit.items()}
+
     def attempt(self, cand: Candidate, pending: Any = None) -> None:
         """Fit ``cand`` (or take its fit from ``pending``, a fit already submitted to the pool) and judge it."""
         if pending is None:
@@ -507,7 +518,8 @@ class _Round:
             new, simulations, reused = result(pending)
             self.problem.simulations += simulations
             self.problem.reused += reused
-        verdict = judge(self.problem, self.cur, new, cand.effect, self.ctx, self.result.simulator_error_deg, self.limit)
+        verdict = judge(self.problem, self.cur, new, cand.effect, self.ctx, self.result.simulator_error_deg,
+                        self.step_limit)
         self.result.verdicts.append(verdict)
         self.tried[cand.effect.key] = (new, verdict)
         self.say(f"  {cand.effect.key}: {verdict.reason}")
