@@ -43,6 +43,8 @@ def good_lines(n=100):
     [
         (lambda ls: [ls[0], "time_s,position_deg", *ls[2:]], "missing required column 'command_deg'"),
         (lambda ls: [ls[0], "time_s,command_deg", *ls[2:]], "needs a 'position_deg' or 'surface_deg'"),
+        (lambda ls: [ls[0], "time_s,command_deg,position_in", *ls[2:]],
+         r"'position_in' in another unit: map it with --columns, e.g. position_in=position_in\)"),
         (lambda ls: [*ls[:10], "0.0081,abc,1", *ls[11:]], r"line 11, column 'command_deg': not a number"),
         (lambda ls: [*ls[:10], "0.0081,nan,1", *ls[11:]], r"line 11, column 'command_deg'.*not a finite"),
         (lambda ls: [*ls[:10], "0.0001,1,1", *ls[11:]], r"column 'time_s': time does not increase"),

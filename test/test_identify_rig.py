@@ -30,7 +30,7 @@ from ema_sim.identify.outcome import REFERENCE, Step
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare, sensor_range, travel_limits
 from ema_sim.identify.report import strict, to_json
-from ema_sim.identify.stepwise import no_worse, prune
+from ema_sim.identify.stepwise import STEP_RISE, no_worse, prune
 from ema_sim.identify.trust import frequency_hz, on_bound
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.second_order import Loac
@@ -485,7 +485,8 @@ def test_a_short_record_at_rest_is_fitted_from_before_its_first_step_and_a_movin
 def test_no_step_clears_one_output_by_spoiling_another():
     """The surface off the LVDT by a cubic the vocabulary lacks (0.3° at 20°): a command gain would trade the
     LVDT's fit for the surface's. Each step is held to the model it is added to, so none is kept that makes an
-    output worse beyond the noise allowance (before, a gain making the LVDT 13 times worse was kept)."""
+    output worse beyond the noise allowance or a tenth of its error (before, a gain making the LVDT 13 times
+    worse was kept)."""
     rng = np.random.default_rng(21)
     frames = np.arange(3000) * 0.005
     cmd = command_sequence(frames, 15.0)
@@ -502,5 +503,6 @@ def test_no_step_clears_one_output_by_spoiling_another():
     for step in report["added"]:
         for output, after in step["rms_deg_after"].items():
             before = step["rms_deg_before"][output]
-            assert after**2 <= before**2 + 0.05 * report["noise_deg"][output] ** 2 + 1e-12, (step["effect"], output)
+            allowed = max((before**2 + 0.05 * report["noise_deg"][output] ** 2) ** 0.5, (1 + STEP_RISE) * before)
+            assert after <= allowed * (1 + 1e-3), (step["effect"], output)
     assert "command_gain" not in [s["effect"] for s in report["added"]]

@@ -486,6 +486,10 @@ def _pick(problem: Problem, cur: Fit, fitted: list[tuple[Fit, Candidate]]
     return best, said
 
 
+STEP_RISE = 0.1
+"""A candidate may raise an output's rms by this share of the current model's (besides the noise allowance)."""
+
+
 @dataclass
 class _Round:
     """One round of the search: candidates fitted against the same current model, and what became of them."""
@@ -504,11 +508,15 @@ class _Round:
         """What a candidate must not exceed on each output: the stage's limit and the current model's error.
 
         The current model's is widened by the noise as the stages widen theirs
-        (:func:`~ema_sim.identify.stages.allow`). An effect that clears one output by spoiling another the
-        model before had right is a trade, never a step.
+        (:func:`~ema_sim.identify.stages.allow`) and by :data:`STEP_RISE` of itself: an effect that clears one
+        output by spoiling another the model before had right is a trade, never a step, but one that moves an
+        output still far above its noise by a few per cent while it clears the other is no trade (a record of
+        the report's compliance staircase: the LVDT's compliance cut its error threefold and moved the
+        surface's, at 12 times its noise, by 0.4 %).
         """
-        now = allow(rms(self.problem, self.cur), self.problem.sigma_deg)
-        return {o: min(v, now.get(o, v)) for o, v in self.limit.items()}
+        cur = rms(self.problem, self.cur)
+        now = allow(cur, self.problem.sigma_deg)
+        return {o: min(v, max(now.get(o, v), (1.0 + STEP_RISE) * cur.get(o, v))) for o, v in self.limit.items()}
 
     def attempt(self, cand: Candidate, pending: Any = None) -> None:
         """Fit ``cand`` (or take its fit from ``pending``, a fit already submitted to the pool) and judge it."""

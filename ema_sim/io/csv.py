@@ -357,7 +357,10 @@ def _mapping(header: list[str], fmt: RigFormat | None, source: str, line: int
         if name not in wanted:
             raise DataError(f"{source}: line {line}: missing required column {name!r}{_rig_hint(fmt)}")
     if not any(name in wanted for name in OUTPUTS):
-        raise DataError(f"{source}: line {line}: needs a 'position_deg' or 'surface_deg' column")
+        named = [h for h in header if h.split("_")[0] in ("position", "surface") and h not in OUTPUTS]
+        hint = (f" ({', '.join(repr(h) for h in named)} in another unit: map it with --columns, e.g. "
+                f"{named[0]}={named[0]})" if named else "")
+        raise DataError(f"{source}: line {line}: needs a 'position_deg' or 'surface_deg' column{hint}")
     if len(units) > 1:
         raise DataError(f"{source}: positions in {' and '.join(sorted(units))} at once: map them to one unit "
                         "(or give --crank-arm-in to turn the linear ones into degrees)")
