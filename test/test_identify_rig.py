@@ -506,3 +506,19 @@ def test_no_step_clears_one_output_by_spoiling_another():
             allowed = max((before**2 + 0.05 * report["noise_deg"][output] ** 2) ** 0.5, (1 + STEP_RISE) * before)
             assert after <= allowed * (1 + 1e-3), (step["effect"], output)
     assert "command_gain" not in [s["effect"] for s in report["added"]]
+
+
+def test_a_position_logged_in_radians_under_a_degree_name_is_called_out():
+    """A second order's position logged in radians in the ``position_deg`` column: the report warns that its span is
+    π/180 of the command's (no actuator's gain is off by that), and a record in degrees gets no such warning."""
+    t = np.arange(0.0, 12.0, 0.005)
+    cmd = np.where((t // 2.0) % 2 == 0, 8.0, -8.0)
+    model = Loac("left_wing", params=truth_params({}))
+    model.trim(cmd[0], 0.0)
+    rec = model.run(t, cmd, np.zeros_like(t), sample_times=t, end_s=float(t[-1]))
+    noise = np.random.default_rng(2).normal(0, 0.003, t.size)
+    degrees = MeasuredData(time_s=t, command_deg=cmd, position_deg=rec.position_deg[0] + noise)
+    radians = MeasuredData(time_s=t, command_deg=cmd, position_deg=np.radians(rec.position_deg[0]) + 1e-4 * noise)
+    said = prepare(radians, WING).warnings
+    assert any(w.startswith("position_deg spans 0.01") and "looks logged in radians" in w for w in said)
+    assert not any("looks logged in" in w for w in prepare(degrees, WING).warnings)

@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation.noise import NoiseFloor
 from ema_sim.analysis.pipeline import command_hold, measure_outputs
@@ -41,6 +42,8 @@ from ema_sim.io.csv import MeasuredData
 
 MAX_ABS = 1e6
 """No command or output in degrees or millimetres is this large: such a column is not what it is named."""
+RADIAN_MATCH = 0.1
+"""How close an output's span must come to π/180 (or 180/π) of the command's to be called a unit slip."""
 NOISELESS_DEG = 1e-6
 """An output whose white noise is under this is a simulation's, read through no sensor."""
 STOP_S = 0.2
@@ -139,6 +142,31 @@ def sensor_range(data: MeasuredData, noise: dict[str, NoiseFloor]) -> dict[str, 
             sides.append(extreme if at * dt >= STOP_S and at >= 0.5 * near else None)
         if sides[0] is not None or sides[1] is not None:
             out[name] = (-np.inf if sides[0] is None else sides[0], np.inf if sides[1] is None else sides[1])
+    return out
+
+
+def _radians(data: MeasuredData) -> list[str]:
+    """A warning for each output whose span is the command's in radians (or the command's in degrees in radians).
+
+    An output whose span (5th to 95th percentile, so an overshoot or a spike does not count) is π/180 (or 180/π)
+    of the command's, within :data:`RADIAN_MATCH`, was logged in the other unit: no actuator's gain is off by
+    that much, and a fit would take it for a gain or a scale error.
+    """
+    if data.unit != "deg":
+        return []
+
+    def span(x: NDArray[np.float64]) -> float:
+        lo, hi = np.percentile(x, [5.0, 95.0])
+        return float(hi - lo)
+
+    span_u = span(data.command_deg)
+    out = []
+    for name in data.outputs:
+        ratio = span(data.column(name)) / span_u if span_u > 0.0 else 0.0
+        for factor, unit in ((math.pi / 180.0, "radians"), (180.0 / math.pi, "degrees, the command in radians")):
+            if abs(ratio / factor - 1.0) <= RADIAN_MATCH:
+                out.append(f"{name} spans {ratio:.4g} of the command's span, {factor:.4g} within {RADIAN_MATCH:.0%}: "
+                           f"it looks logged in {unit}, not as named; fit it in the command's unit")
     return out
 
 
@@ -242,6 +270,7 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     warnings: list[str] = []
     if channel_note:
         notes.append(channel_note)
+    warnings += _radians(data)
     if data.unit != "deg":
         line = (f"positions in {data.unit} as logged (no --crank-arm-in): every *_deg figure of this report is "
                 f"in {data.unit}, every rate in {data.unit}/s")
