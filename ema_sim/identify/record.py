@@ -195,7 +195,7 @@ def check_identifiable(data: MeasuredData) -> None:
 
 
 def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, NoiseFloor], *,
-                  stand_in: bool) -> Travel:
+                  stand_in: bool, saturation: dict[str, tuple[float, float]] | None = None) -> Travel:
     """The model's travel on this record (see the module docstring).
 
     Parameters
@@ -208,6 +208,8 @@ def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, N
         Each output's noise floor (what "resting at the extreme" means).
     stand_in : bool
         The channel is a stand-in (none given or named by the record): its travel says nothing.
+    saturation : dict, optional
+        The outputs' :func:`sensor_range`, when already read (None: read here); a saturated side is no stop.
 
     Returns
     -------
@@ -222,7 +224,8 @@ def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, N
         return Travel(declared, declared, "declared", f"within {channel.channel}'s travel "
                       f"{declared[0]:g}…{declared[1]:g}°", False)
     span = hi - lo
-    clipped = sensor_range(data, noise).get(data.outputs[0], (-np.inf, np.inf))
+    saturation = sensor_range(data, noise) if saturation is None else saturation
+    clipped = saturation.get(data.outputs[0], (-np.inf, np.inf))
     stops = tuple(None if math.isfinite(clipped[side > 0]) else _stop(data, noise, side) for side in (-1, +1))
     limits = (stops[0] if stops[0] is not None else lo - span, stops[1] if stops[1] is not None else hi + span)
     seen = [f"a stop at {s:.4g}{unit}" for s in stops if s is not None]
@@ -262,8 +265,8 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     check_identifiable(data)
     noise = measure_outputs(data)
     hold = command_hold(data, noise, Options(command=command))
-    travel = travel_limits(data, channel, noise, stand_in=channel_note is not None)
     saturation = sensor_range(data, noise)
+    travel = travel_limits(data, channel, noise, stand_in=channel_note is not None, saturation=saturation)
     if travel.limits != travel.declared:
         channel = replace(channel, position_min_deg=travel.limits[0], position_max_deg=travel.limits[1])
     notes: list[str] = []
