@@ -320,6 +320,8 @@ def test_worst_ranks_the_quality_words():
     assert worst("ok", "saturated") == "saturated"
     assert worst("saturated", "on_bound", "ok") == "on_bound"
     assert worst("on_bound", "not_determined") == "not_determined"
-    assert set(QUALITY_WORDS) == {"ok", "on_bound", "not_determined", "saturated"}
+    assert worst("on_bound", "non_causal") == "non_causal"
+    assert worst("non_causal", "not_determined") == "not_determined"
+    assert set(QUALITY_WORDS) == {"ok", "on_bound", "not_determined", "saturated", "non_causal"}
     m = Measurement(1.5, 0.1, "ok", "1.5 ± 0.1")
     assert m.as_dict() == {"value": 1.5, "sigma": 0.1, "quality": "ok", "statement": "1.5 ± 0.1"}

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -26,8 +27,8 @@ from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
 from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
 from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.recognize import recognize
-from ema_sim.analysis.records import series
-from ema_sim.analysis.records.command_hold import CommandHold, detect_command_hold, given
+from ema_sim.analysis.records import causality, series
+from ema_sim.analysis.records.command_hold import CommandHold, detect_command_hold, given, lag_band
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
 from ema_sim.config import CHANNELS, ChannelConfig, load_channel
@@ -37,7 +38,7 @@ RECOGNISED = 0.1
 """Share of a record's analysis reported done once its tests are recognised."""
 
 __all__ = ["Options", "RecordAnalysis", "analyze_record", "analyze_records", "record_slew", "resolve_channel",
-           "spread"]
+           "spread", "timing_alternatives"]
 
 
 def resolve_channel(data: MeasuredData, requested: str | None) -> tuple[ChannelConfig, str | None]:
@@ -102,11 +103,13 @@ def command_hold(data: MeasuredData, noise: dict[str, NoiseFloor], options: Opti
         The finding.
     """
     dt = float(np.median(np.diff(data.time_s)))
-    if options.command != "detect":
-        return given(options.command, dt)
     name = data.outputs[0]
     nf = noise[name]
-    return detect_command_hold(data.time_s, data.command_deg, getattr(data, name), nf.sigma, nf.resolution)
+    y = getattr(data, name)
+    if options.command != "detect":
+        return given(options.command, dt, causality.measure(data.time_s, data.command_deg, y,
+                                                            lag_band(nf.sigma, nf.resolution)))
+    return detect_command_hold(data.time_s, data.command_deg, y, nf.sigma, nf.resolution)
 
 
 def record_slew(data: MeasuredData, noise: dict[str, NoiseFloor]) -> Slew:
@@ -152,6 +155,20 @@ def analyze_record(data: MeasuredData, options: Options | None = None,
     say(0.0)
     noise = measure_outputs(data)
     hold = command_hold(data, noise, options)
+    ra = _analyze(data, options, noise, hold, say)
+    if hold.sampled is None and hold.source == "detected":
+        other = _analyze(data, replace(options, command="sampled"), noise,
+                         replace(hold, sampled=True), lambda _share: None)
+        ra.other_timing = timing_alternatives(ra, other)
+        if ra.other_timing:
+            ra.notes.append("the record cannot tell a held command from a sampled one: its figures assume held (the "
+                            "data contract); what the sampled assumption gives instead is listed beside them")
+    return ra
+
+
+def _analyze(data: MeasuredData, options: Options, noise: dict[str, NoiseFloor], hold: CommandHold,
+             say: Callable[[float], None]) -> RecordAnalysis:
+    """:func:`analyze_record` under one timing assumption (``hold``)."""
     measured_slew = record_slew(data, noise)
     raw_stamps = data.time_s
     data = series.uniform_record(data, command_sampled=hold.assumed_sampled)
@@ -187,6 +204,54 @@ def analyze_record(data: MeasuredData, options: Options | None = None,
             ra.notes.append(f"{seg.kind} at {t[seg.start]:.1f}-{t[seg.stop - 1]:.1f} s ({why}): tracking is in the "
                             "time-history plot; no figure of this tool applies to it")
     return ra
+
+
+def _timing_figures(ra: RecordAnalysis) -> dict[str, tuple[str, float, float | None]]:
+    """Every phase (deg) and delay (s) a record's analysis reports, keyed by where it is (for pairing)."""
+    out: dict[str, tuple[str, float, float | None]] = {}
+    for k, f in enumerate(ra.fits):
+        key = f"fit {k}: {f.test} on {f.output}"
+        out[key] = ("delay_s", f.actuator_delay_s, f.delay_s.sigma)
+
+    def walk(value: Any, path: str) -> None:
+        if isinstance(value, dict):
+            if isinstance(value.get("phase_deg"), int | float) and isinstance(value.get("freq_hz"), int | float):
+                sigma = value.get("phase_sigma_deg")
+                out[f"{path} at {value['freq_hz']:.4g} Hz"] = ("phase_deg", float(value["phase_deg"]),
+                                                              float(sigma) if isinstance(sigma, int | float) else None)
+                return
+            for k, v in value.items():
+                if k not in ("second_order_fit", "moves", "edges"):
+                    walk(v, f"{path}/{k}")
+        elif isinstance(value, list):
+            for i, v in enumerate(value):
+                walk(v, f"{path}[{i}]")
+
+    for key, results in ra.results.items():
+        for i, r in enumerate(results):
+            walk(r.as_dict(), f"{key}[{i}]")
+    return out
+
+
+def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[dict[str, Any]]:
+    """Each phase and delay of a record analysed with its command taken as held and as sampled, side by side.
+
+    Parameters
+    ----------
+    held : RecordAnalysis
+        The analysis with the command held (the data contract).
+    sampled : RecordAnalysis
+        The same record with the command taken as sampled from a running demand.
+
+    Returns
+    -------
+    list of dict
+        ``figure``, ``quantity`` (``phase_deg`` or ``delay_s``), ``held``, ``sampled`` and their ``sigma``;
+        only figures both analyses report.
+    """
+    a, b = _timing_figures(held), _timing_figures(sampled)
+    return [{"figure": k, "quantity": q, "held": v, "sampled": b[k][1], "sigma": s}
+            for k, (q, v, s) in a.items() if k in b and b[k][0] == q]
 
 
 def analyze_records(records: list[MeasuredData], options: Options | None = None,

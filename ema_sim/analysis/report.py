@@ -64,7 +64,8 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
         "data": d.source, "channel": ra.channel.channel, "samples": len(d), "sample_hz": d.sample_hz,
         "duration_s": float(t[-1] - t[0]), "outputs": d.outputs, "unit": d.unit, "metadata": d.metadata,
         "noise_deg": ra.noise_deg, "resolution_deg": ra.resolution_deg,
-        "noise": {k: v.as_dict() for k, v in ra.noise.items()}, "command": ra.command.as_dict(),
+        "noise": {k: v.as_dict() for k, v in ra.noise.items()},
+        "command": {**ra.command.as_dict(), "each_assumption": ra.other_timing or None},
         "tests": [s.as_dict(t) for s in ra.recognition.segments],
         "slew": slope_json(ra),
     }
@@ -180,6 +181,9 @@ def _header(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
         ", ".join(f"{k} {v:.2g}{ra.unit}" for k, v in ra.noise_deg.items()), res,
         "sampled" if ra.command.assumed_sampled else "held"]])
     lines += [f"Command: {ra.command.statement}.", ""]
+    if ra.command.leads:
+        lines += [f"**Causality:** {ra.command.leads}.", ""]
+    lines += _each_assumption(ra)
     lines += [f"Slope of the rate-limited moves: {slope_statement(ra)}; {SLOPE_METHOD}.", ""]
     lines += [f"Noise and resolution: {'; '.join(f'{k}: {v.statement}' for k, v in ra.noise.items())}.", ""]
     if d.unit != "deg":
@@ -195,6 +199,20 @@ def _header(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
                    [[s.kind, f"{t[s.start]:.3f} s", f"{t[s.stop - 1]:.3f} s", s.evidence]
                     for s in ra.recognition.segments]) if ra.recognition.segments else ["None.", ""]
     return lines
+
+
+def _each_assumption(ra: RecordAnalysis) -> list[str]:
+    """What the held and the sampled command give, side by side, for a record that cannot tell them apart."""
+    if not ra.other_timing:
+        return []
+    rows = []
+    for f in ra.other_timing:
+        if f["quantity"] == "delay_s":
+            rows.append([f["figure"], "delay, ms", f"{1e3 * f['held']:+.2f}", f"{1e3 * f['sampled']:+.2f}"])
+        else:
+            rows.append([f["figure"], "phase, °", f"{f['held']:+.2f}", f"{f['sampled']:+.2f}"])
+    return ["The record cannot tell how its command was logged; each timing figure under both assumptions (the "
+            "report's tables assume held):", "", *table(["figure", "quantity", "held", "sampled"], rows)]
 
 
 def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
@@ -246,7 +264,8 @@ def to_markdown(records: Sequence[RecordAnalysis], plots: dict[str, str]) -> str
              f"ema_sim {__version__}; {len(records)} record(s). Methods: composite-window H1 spectra (Hann, 80 % "
              "overlap) or periodic chirp-z DFT; second-order fits by least squares with uncertainty corrected for "
              "coloured residuals (Morelli & Klein); everything cited to NASA/TM-2008-214637. Every result carries a "
-             "quality: ok, on a bound, not determined, or saturated.", ""]
+             "quality: ok, on a bound, not determined, saturated, or leads its command (not causal: a servo never "
+             "does, so the figure says how the record was logged).", ""]
     for i, ra in enumerate(records):
         lines += _record_md(i, ra, plots)
     fits = [f for r in records for f in r.fits]

@@ -40,6 +40,12 @@ def _summary(ra: RecordAnalysis) -> list[str]:
     lines = [f"{d.source}: {len(d)} samples at {d.sample_hz:.6g} Hz, channel {ra.channel.channel}; "
              f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}",
              f"  command: {ra.command.statement}"]
+    if ra.command.leads:
+        lines.append(f"  causality: {ra.command.leads}")
+    for f in ra.other_timing:
+        scale, unit = (1e3, "ms") if f["quantity"] == "delay_s" else (1.0, "°")
+        lines.append(f"  taken as held / as sampled: {f['figure']}: {scale * f['held']:+.2f} / "
+                     f"{scale * f['sampled']:+.2f} {unit}")
     counts = {k: v for k, v in ra.resolution_deg.items() if v}
     if counts:
         lines.append("  resolution: " + ", ".join(f"{k} {v:g}" for k, v in counts.items()))

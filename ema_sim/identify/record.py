@@ -284,9 +284,12 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
             notes.append(f"{name} logged in counts of {nf.resolution:g}: noise floor {nf.sigma:.3g} "
                          f"({'the counts' if nf.limited_by_resolution else 'white noise'} set it)")
     if hold.sampled is None and hold.source == "detected":
-        notes.append(f"command: {hold.evidence}; held and sampled both fitted, the better taken (below)")
+        notes.append(f"command: undecided ({hold.evidence}); ema analyze says the same: held and sampled both "
+                     "fitted, each reported, the better taken (below)")
     else:
         notes.append(f"command {hold.statement}")
+    if hold.leads:
+        warnings.append(hold.leads)
     k = np.arange(data.time_s.size, dtype=float)
     trend = np.polyval(np.polyfit(k, data.time_s, 1), k)
     scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - trend))

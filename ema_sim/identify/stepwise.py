@@ -335,15 +335,24 @@ def choose_hold(problem: Problem, base: SecondOrderParams, free: list[str], reco
     problem.set_command_sampled(True)
     sampled = _baseline(problem, base, free)
     delta_bic = problem.n_fit * math.log(max(sampled[0].rss, TINY) / max(held[0].rss, TINY))
+    each = (f"taken as held: {_hold_summary(problem, held[0])}; taken as sampled: "
+            f"{_hold_summary(problem, sampled[0])}")
     if delta_bic <= MAX_DELTA_BIC:
-        notes.append(f"command taken as sampled from a running demand, not held: the record has no step-like "
-                     f"change from rest to tell, and the declared model fits it clearly better so "
-                     f"(ΔBIC {delta_bic:.0f})")
+        notes.append(f"command taken as sampled from a running demand for the fit: the record's timing is "
+                     f"undecided, and the declared model fits it clearly better so (ΔBIC {delta_bic:.0f}); {each}")
         return sampled
     problem.set_command_sampled(False)
-    notes.append(f"command taken as held (the data contract): the record cannot tell, and a sampled command "
-                 f"fits no better (ΔBIC {delta_bic:+.0f})")
+    notes.append(f"command taken as held (the data contract) for the fit: the record's timing is undecided, and a "
+                 f"sampled command fits no better (ΔBIC {delta_bic:+.0f}); {each}")
     return held
+
+
+def _hold_summary(problem: Problem, fit: Fit) -> str:
+    """A baseline's fitted parameters and error, in a few words (what one timing assumption gives)."""
+    p = fit.params
+    parts = [f"{name} {getattr(p, name):.4g}" for name in fit.free]
+    err = ", ".join(f"{o.removesuffix('_deg')} {v:.3g}" for o, v in rms(problem, fit).items())
+    return f"{', '.join(parts)}; rms {err}"
 
 
 def reference_fit(problem: Problem, params: SecondOrderParams) -> Fit:

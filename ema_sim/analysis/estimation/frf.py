@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis.estimation import spectra
+from ema_sim.analysis.estimation import causal, spectra
 from ema_sim.analysis.estimation.noise import noise_floor
 
 FloatArray = NDArray[np.float64]
@@ -386,6 +386,13 @@ def at_frequencies(fr: FrequencyResponse, freqs_hz: list[float]) -> list[dict[st
         if coh < COHERENCE_GOOD:
             row["note"] = f"coherence {coh:.2f} < {COHERENCE_GOOD}: not measured there"
             row["quality"] = "not_determined"
+        else:
+            # the phase's standard error is the normalised random error of |H| in radians (Bendat & Piersol)
+            sigma = float(np.degrees(interp_log(f, fr.random_error, at)))
+            row["phase_sigma_deg"] = sigma
+            if causal.phase_leads(row["phase_deg"], sigma):
+                row["quality"] = "non_causal"
+                row["note"] = causal.phase_note(row["phase_deg"], sigma, at)
         out.append(row)
     return out
 

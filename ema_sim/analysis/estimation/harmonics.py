@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ema_sim.analysis.estimation import causal
 from ema_sim.analysis.estimation.frf import COHERENCE_GOOD, zoh_factor
 from ema_sim.analysis.estimation.quality import Measurement, Quality
 from ema_sim.analysis.records.periodic import EXCITED, Periodicity
@@ -238,9 +239,19 @@ def harmonic_response(tb: FloatArray, t: FloatArray, u: FloatArray, y: FloatArra
     if out:
         ph = np.degrees(np.unwrap(np.array(phases)))
         ph -= 360.0 * np.round((ph[0] - 1e-9) / 360.0)
-        out = [Harmonic(h.k, h.freq_hz, h.command_amplitude, h.gain_db, h.gain_sigma_db, float(v), h.phase_sigma_deg,
-                        h.coherence, h.quality, h.note) for h, v in zip(out, ph, strict=True)]
+        out = [_causal(Harmonic(h.k, h.freq_hz, h.command_amplitude, h.gain_db, h.gain_sigma_db, float(v),
+                                h.phase_sigma_deg, h.coherence, h.quality, h.note))
+               for h, v in zip(out, ph, strict=True)]
     return out
+
+
+def _causal(h: Harmonic) -> Harmonic:
+    """The harmonic flagged ``non_causal`` when its phase leads beyond its uncertainty (:mod:`.causal`)."""
+    if h.quality == "not_determined" or not causal.phase_leads(h.phase_deg, h.phase_sigma_deg):
+        return h
+    note = causal.phase_note(h.phase_deg, h.phase_sigma_deg, h.freq_hz)
+    return Harmonic(h.k, h.freq_hz, h.command_amplitude, h.gain_db, h.gain_sigma_db, h.phase_deg, h.phase_sigma_deg,
+                    h.coherence, "non_causal", f"{h.note}; {note}" if h.note else note)
 
 
 def bandwidth(harmonics: list[Harmonic], saturated: str = "") -> Measurement:
@@ -313,5 +324,7 @@ def lag_at_fundamental(harmonics: list[Harmonic], stamp_s: float = 0.0) -> Measu
                        f"not measured: coherence {h.coherence:.2f} < {COHERENCE_GOOD} at the fundamental")
     lag = -h.phase_deg / 360.0 / h.freq_hz
     se = float(np.hypot(h.phase_sigma_deg / 360.0 / h.freq_hz, stamp_s / np.sqrt(12.0)))
-    return Measurement(lag, se, h.quality, f"lag {1e3 * lag:.1f} ± {1e3 * se:.2g} ms at {h.freq_hz:.3g} Hz "
-                                       f"(phase {h.phase_deg:.1f}°)")
+    text = f"lag {1e3 * lag:.1f} ± {1e3 * se:.2g} ms at {h.freq_hz:.3g} Hz (phase {h.phase_deg:.1f}°)"
+    if causal.delay_leads(lag, se):
+        return Measurement(lag, se, "non_causal", f"{text}; {causal.delay_note(lag, se)}")
+    return Measurement(lag, se, "ok" if h.quality == "non_causal" else h.quality, text)

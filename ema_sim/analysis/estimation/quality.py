@@ -5,7 +5,9 @@
   not a measurement);
 * ``not_determined``: the record cannot determine it (too little excitation, above the Nyquist
   frequency, below the sensor's resolution, a command sampled rather than held);
-* ``saturated``: a rate or position limit shaped it (not the small-signal figure).
+* ``saturated``: a rate or position limit shaped it (not the small-signal figure);
+* ``non_causal``: the output leads its command beyond the figure's uncertainty, which no servo does: the
+  figure says more of how the record was logged than of the actuator (:mod:`ema_sim.analysis.estimation.causal`).
 
 A :class:`Measurement` is one figure with its uncertainty and quality, or the sentence saying why it
 was not measured.
@@ -16,14 +18,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Literal
 
-Quality = Literal["ok", "on_bound", "not_determined", "saturated"]
+Quality = Literal["ok", "on_bound", "not_determined", "saturated", "non_causal"]
 QUALITY_WORDS: dict[str, str] = {"ok": "ok", "on_bound": "on a bound", "not_determined": "not determined",
-                                 "saturated": "saturated"}
-_RANK = {"ok": 0, "saturated": 1, "on_bound": 2, "not_determined": 3}
+                                 "saturated": "saturated", "non_causal": "leads its command (not causal)"}
+_RANK = {"ok": 0, "saturated": 1, "on_bound": 2, "non_causal": 3, "not_determined": 4}
 
 
 def worst(*qualities: Quality) -> Quality:
-    """The most severe of several qualities (not determined, on a bound, saturated, ok).
+    """The most severe of several qualities (not determined, not causal, on a bound, saturated, ok).
 
     Parameters
     ----------

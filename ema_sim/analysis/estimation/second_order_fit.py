@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq, least_squares
 from scipy.signal import lfilter, lfilter_zi
 
+from ema_sim.analysis.estimation import causal
 from ema_sim.analysis.estimation.frf import COHERENCE_FIT, FrequencyResponse
 from ema_sim.analysis.estimation.noise import WhitenessTest, whiteness
 from ema_sim.analysis.estimation.quality import Quality
@@ -541,6 +542,8 @@ def fit_step(time_s: FloatArray, command_deg: FloatArray, output: FloatArray, *,
         note += (f"; with the command allowed to have changed up to a sample before it was logged (sampled, "
                  f"not held) the fit gives a delay of {1e3 * early.delay_s.value:.2f} ms and RMS {early.rms:.3g} "
                  f"(against {rms:.3g}): rerun with --command sampled if the rig samples its demand")
+    if sampled and quality == "ok" and causal.delay_leads(theta[2] + 0.5 * dt, sig[2]):
+        quality, note = "non_causal", causal.delay_note(theta[2] + 0.5 * dt, sig[2])
     return SecondOrderFit(
         test=test, method="time-domain least squares on the step", output=output_name,
         wn_rad_s=_estimate(values, sig, sig_w, 0), zeta=_estimate(values, sig, sig_w, 1),

@@ -19,6 +19,21 @@ output then crosses the band once its response reaches a tenth of the change wit
 A demand that leaves rest gently (a profile's acceleration, a sine) moves the output by nothing
 in one sample either way, and such a record cannot tell: held is assumed, as the contract says.
 
+A second, independent line of evidence is **causality**
+(:mod:`ema_sim.analysis.records.causality`): the output's lag behind the command over its rest-to-rest
+moves (or, with none, the delay that aligns them), taken both ways. A servo never leads its command, so
+an output that would lead a held command beyond the lag's uncertainty refutes the hold: the command was
+sampled (a demand whose profile leaves rest gently tells this where no onset can). The decision:
+
+* onsets say sampled: sampled;
+* onsets say held, or cannot tell: held stands unless causality refutes it; refuted, sampled when the
+  onsets could not tell, undecided when they said held (the two lines of evidence disagree: a log whose
+  columns are skewed against each other looks like this);
+* the output leads even a sampled command: undecided, flagged (the logged command is not what the
+  actuator followed: a filtered target, a resampled log, a late command column);
+* nothing refutes either: held when the onsets say so, else undecided, and both tools say so and give
+  what each assumption makes of the record.
+
 What a sampled command means for the figures: a response to it is advanced by half a sample on
 average against the held-command model (the change happened uniformly within the sample before it
 was logged). Frequency responses are then not corrected for a hold; delays are measured against the
@@ -34,6 +49,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ema_sim.analysis.records import causality
+from ema_sim.analysis.records.causality import Causality
 from ema_sim.analysis.records.series import hold_tolerance
 
 FloatArray = NDArray[np.float64]
@@ -80,6 +97,25 @@ class CommandHold:
     evidence: str
     source: str = "detected"
     """``detected`` from the signals, or ``given`` by the user."""
+    causality: Causality | None = None
+    """The output's lag behind the command taken each way (None: not measured, or given by the user)."""
+    onset_sampled: bool | None = None
+    """What the onsets alone said (True sampled, False held, None could not tell)."""
+
+    @property
+    def leads(self) -> str:
+        """Why the output leads the command under the assumption taken ("" when it does not)."""
+        c = self.causality
+        if c is None or not c.measured:
+            return ""
+        if c.sampled_leads:
+            return (f"the output leads the logged command even taken as sampled ({c.statement}): a servo never "
+                    "leads its command, so the logged command is not what it followed (a demand that is itself "
+                    "a filtered target, a resampled log, or the command's column stamped late)")
+        if not self.assumed_sampled and c.held_leads:
+            return (f"the output would lead the command taken as held ({c.statement}): a servo never leads its "
+                    "command, so either the command was sampled from a running demand or the log is skewed")
+        return ""
 
     @property
     def assumed_sampled(self) -> bool:
@@ -95,7 +131,7 @@ class CommandHold:
     def statement(self) -> str:
         """One line for the report's header."""
         if self.sampled is None:
-            return f"held assumed (the data contract); {self.evidence}"
+            return f"undecided, held assumed (the data contract) and sampled given beside it; {self.evidence}"
         word = "sampled (not held)" if self.sampled else "held"
         return f"{word}: {self.evidence}"
 
@@ -109,11 +145,14 @@ class CommandHold:
             and the evidence.
         """
         return {"sampled": self.sampled, "assumed": "sampled" if self.assumed_sampled else "held",
-                "onsets": self.onsets, "moved_at_onset_sample": self.same_sample, "chance_rate": self.chance_rate,
-                "sample_s": self.sample_s, "evidence": self.evidence, "source": self.source}
+                "decided": self.sampled is not None, "onsets": self.onsets, "moved_at_onset_sample": self.same_sample,
+                "onsets_say": None if self.onset_sampled is None else ("sampled" if self.onset_sampled else "held"),
+                "chance_rate": self.chance_rate, "sample_s": self.sample_s, "evidence": self.evidence,
+                "source": self.source, "causality": None if self.causality is None else self.causality.as_dict(),
+                "leads": self.leads or None}
 
 
-def given(mode: HoldMode, sample_s: float) -> CommandHold:
+def given(mode: HoldMode, sample_s: float, lag: Causality | None = None) -> CommandHold:
     """The user's statement of how the command was logged (``--command held|sampled``).
 
     Parameters
@@ -122,13 +161,36 @@ def given(mode: HoldMode, sample_s: float) -> CommandHold:
         What the user says.
     sample_s : float
         The record's sample interval, s.
+    lag : Causality, optional
+        The output's lag measured each way, to check the statement against (a lead is flagged, not overruled).
 
     Returns
     -------
     CommandHold
         With ``source = "given"``.
     """
-    return CommandHold(mode == "sampled", 0, 0, 0.0, sample_s, f"given (--command {mode})", "given")
+    why = f"given (--command {mode})"
+    if lag is not None and lag.measured:
+        why += f"; {lag.statement}"
+    return CommandHold(mode == "sampled", 0, 0, 0.0, sample_s, why, "given", causality=lag)
+
+
+def lag_band(noise_sigma: float, resolution: float | None) -> float:
+    """The output's detection band: a change beyond it is motion, not noise or a count toggling.
+
+    Parameters
+    ----------
+    noise_sigma : float
+        The output's noise floor.
+    resolution : float, optional
+        Its count.
+
+    Returns
+    -------
+    float
+        The band.
+    """
+    return max(4.0 * noise_sigma, 1.5 * (resolution or 0.0), 1e-12)
 
 
 def _binomial_tail(k: int, n: int, p: float) -> float:
@@ -140,6 +202,50 @@ def _binomial_tail(k: int, n: int, p: float) -> float:
 
 def detect_command_hold(time_s: FloatArray, command: FloatArray, output: FloatArray, noise_sigma: float,
                         resolution: float | None = None) -> CommandHold:
+    """How the command was logged, from the onsets and from causality (module docstring).
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        The record's own stamps, s.
+    command : numpy.ndarray
+        The logged command.
+    output : numpy.ndarray
+        The measured output (the LVDT position when there is one).
+    noise_sigma : float
+        The output's noise floor (:func:`ema_sim.analysis.estimation.noise.output_noise`).
+    resolution : float, optional
+        The output's count, when it is logged in counts.
+
+    Returns
+    -------
+    CommandHold
+        ``sampled`` True, False, or None when the record cannot tell (or its evidence disagrees).
+    """
+    onset = onset_test(time_s, command, output, noise_sigma, resolution)
+    lag = causality.measure(time_s, command, output, lag_band(noise_sigma, resolution))
+    said = onset.sampled
+    sampled = said
+    why = onset.evidence
+    if lag.measured:
+        why = f"{why}; {lag.statement}"
+        if lag.sampled_leads:
+            sampled = None
+            why += ("; the output leads even a sampled command, so neither assumption is the actuator's: "
+                    "the logged command is not what it followed")
+        elif lag.held_leads and said is None:
+            sampled = True
+            why += "; a servo never leads its command, so it was not held: sampled from a running demand"
+        elif lag.held_leads and said is False:
+            sampled = None
+            why += ("; the onsets look held but the output would lead a held command: the evidence disagrees "
+                    "(a log whose columns are skewed against each other?)")
+    return CommandHold(sampled, onset.onsets, onset.same_sample, onset.chance_rate, onset.sample_s, why,
+                       causality=lag, onset_sampled=said)
+
+
+def onset_test(time_s: FloatArray, command: FloatArray, output: FloatArray, noise_sigma: float,
+               resolution: float | None = None) -> CommandHold:
     """Test whether the output answers command changes at the very sample they are logged.
 
     Parameters
@@ -165,7 +271,7 @@ def detect_command_hold(time_s: FloatArray, command: FloatArray, output: FloatAr
     tol_u = hold_tolerance(command)
     du = np.diff(command)
     moving = np.abs(du) > tol_u
-    band = max(4.0 * noise_sigma, 1.5 * (resolution or 0.0), 1e-12)
+    band = lag_band(noise_sigma, resolution)
     onsets = same = 0
     tries = exceed = 0
     # Changes after rest: no change in the rest − 1 steps before (a running count of the moving steps).

@@ -57,7 +57,11 @@ def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> Meas
     (resampling would delay the held command by up to a sample against the outputs, and blur an
     output logged in counts). Records with gaps or mixed rates are resampled at the median rate:
     held columns (the command) by zero-order hold, as the contract defines the command, measured
-    columns by linear interpolation.
+    columns by linear interpolation. A held column takes, at each grid point, the level the logged
+    staircase has half a grid step later: the new staircase then changes level at the grid point nearest
+    the logged change (within half a step either way, no bias), where taking the level at the grid point
+    itself would make every change up to a whole step late, half a step on average, which a frequency
+    response would read as the output leading its command.
 
     Parameters
     ----------
@@ -89,7 +93,7 @@ def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> Meas
     held = () if command_sampled else (*HELD, "fmu_command_deg")
     n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
     grid = t[0] + dt * np.arange(n)
-    idx = np.clip(np.searchsorted(t, grid + 1e-12, side="right") - 1, 0, t.size - 1)
+    idx = np.clip(np.searchsorted(t, grid + 0.5 * dt + 1e-12, side="right") - 1, 0, t.size - 1)
     changes: dict[str, object] = {"time_s": grid}
     for f in fields(data):
         value = getattr(data, f.name)

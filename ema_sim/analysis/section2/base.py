@@ -138,6 +138,9 @@ class RecordAnalysis:
     """The slope of the record's rate-limited moves, on its own stamps."""
     stand_in: bool = False
     """The channel's configuration is a stand-in: no X-43A table applies to the record."""
+    other_timing: list[dict[str, Any]] = field(default_factory=list)
+    """When the record cannot tell held from sampled: each timing figure under both assumptions
+    (:func:`ema_sim.analysis.pipeline.timing_alternatives`)."""
 
     @property
     def channel_named(self) -> bool:

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from typing_extensions import override
 
+from ema_sim.analysis.estimation import causal
 from ema_sim.analysis.estimation.frf import zoh_factor
 from ema_sim.analysis.estimation.quality import Quality
 from ema_sim.analysis.estimation.sine_fit import sine_at
@@ -218,6 +219,8 @@ class DwellResult:
         End of the dwell, s.
     hold_corrected : bool
         Half a sample of hold divided out (a held command); not for a sampled one.
+    phase_sigma_deg : float
+        The phase's standard error from the two sine fits' residuals, deg.
     """
 
     output: str
@@ -230,11 +233,22 @@ class DwellResult:
     end_s: float
     hold_corrected: bool
     """Half a sample of hold divided out (a held command); not for a sampled one."""
+    phase_sigma_deg: float = 0.0
+    """The phase's standard error from the two sine fits' residuals, deg."""
 
     @property
     def quality(self) -> Quality:
-        """``not_determined`` when the output's tone explains less than half its variance."""
-        return "not_determined" if self.output_r2 < 0.5 else "ok"
+        """``not_determined`` below half the output's variance explained, ``non_causal`` for a leading phase."""
+        if self.output_r2 < 0.5:
+            return "not_determined"
+        return "non_causal" if causal.phase_leads(self.phase_deg, self.phase_sigma_deg) else "ok"
+
+    @property
+    def quality_note(self) -> str:
+        """Why the quality is what it is."""
+        if self.quality == "non_causal":
+            return causal.phase_note(self.phase_deg, self.phase_sigma_deg, self.freq_hz)
+        return f"output R² {self.output_r2:.2f}"
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON.
@@ -247,7 +261,7 @@ class DwellResult:
         return {"output": self.output, "freq_hz": self.freq_hz, "command_amplitude_deg": self.command_amplitude_deg,
                 "gain_db": self.gain_db, "phase_deg": self.phase_deg, "output_r2": self.output_r2,
                 "start_s": self.start_s, "end_s": self.end_s, "hold_corrected": self.hold_corrected,
-                "quality": self.quality}
+                "phase_sigma_deg": self.phase_sigma_deg, "quality": self.quality, "quality_note": self.quality_note}
 
 
 def read_sine(m: MovingStretch) -> Reading | None:
@@ -304,8 +318,11 @@ class SineDwellTest(Section2Test[DwellResult]):
                 h = (sy.amplitude / su.amplitude) * np.exp(1j * (sy.phase_rad - su.phase_rad))
                 if held:
                     h = h / zoh_factor(np.array([f]), data.sample_hz)[0]
+                n = int(keep.sum())
+                sigma = math.degrees(math.sqrt((max(1.0 - su.r2, 0.0) + max(1.0 - sy.r2, 0.0)) / n))
                 out.append(DwellResult(name, f, su.amplitude, float(20 * np.log10(abs(h))),
-                                       float(np.degrees(np.angle(h))), sy.r2, float(t[0]), float(t[-1]), held))
+                                       float(np.degrees(np.angle(h))), sy.r2, float(t[0]), float(t[-1]), held,
+                                       sigma))
         return out
 
 
@@ -314,7 +331,7 @@ class SineDwellTest(Section2Test[DwellResult]):
                  images: list[str | None]) -> list[str]:
         lines = table(["output", "f, Hz", "command amplitude, °", "gain, dB", "phase, °", "quality"],
                       [[s.output, f"{s.freq_hz:g}", f"{s.command_amplitude_deg:.3g}", f"{s.gain_db:+.2f}",
-                        f"{s.phase_deg:.1f}", quality(s.quality, f"output R² {s.output_r2:.2f}")] for s in results])
+                        f"{s.phase_deg:.1f}", quality(s.quality, s.quality_note)] for s in results])
         if results and not results[0].hold_corrected:
             lines += ["The command is sampled, not held: no hold correction.", ""]
         return lines
