@@ -271,6 +271,9 @@ class Effect:
     """The parameters that are this effect's alone (its fields when None): once they are fitted, it is in.
     A nonlinear compliance also fits (and reports) the compliance below its knee, which a linear
     compliance found earlier may already have."""
+    measured: bool = False
+    """Its probes are read off the record (a rate limit at the output's speed plateau): its fit starts from
+    them as they are, not scaled by what the residual would ask of them linearly."""
 
     @property
     def owned(self) -> tuple[str, ...]:
@@ -466,6 +469,20 @@ def _nonlinear_applies(prefix: str, output: str) -> Callable[[Context], bool]:
     return applies
 
 
+def _rate_probes(ctx: Context) -> list[Values]:
+    """A rate limit at the slope the record's rate-limited moves or speed plateau show, and at its peak speed.
+
+    The plateau is the record's own evidence of the limit (:func:`ema_sim.analysis.estimation.slew.measure`); the
+    peak speed is where a limit could start to bind when no move shows one.
+    """
+    slope = ctx.problem.measured_slew.rate
+    peak = ctx.problem.measured_rate_dps
+    rates = [slope] if slope is not None and slope > 5.0 else []
+    if not rates or abs(peak - rates[0]) > 0.1 * rates[0]:
+        rates.append(peak)
+    return [{"rate_limit_dps": r} for r in rates]
+
+
 def _load_rate_probe(ctx: Context) -> list[Values]:
     rate = ctx.params.rate_limit_dps if not _off(ctx, "rate_limit_dps") else ctx.problem.measured_rate_dps
     k2 = 0.1 * rate * ctx.params.moment_arm_in / max(ctx.problem.load_span_inlb / 2.0, 1.0)
@@ -507,10 +524,10 @@ EFFECTS: tuple[Effect, ...] = (
     Effect("quantization", "command", ("quantization_deg",), "a sawtooth locked to the command level",
            probes=lambda ctx: [{"quantization_deg": q} for q, _ in ctx.quantization_steps[:1]],
            applies=lambda ctx: ctx.params.quantization_deg == 0.0, check=_quant_check, discrete=True),
-    Effect("rate_limit", "feedback", ("rate_limit_dps",), "saturated slopes on the large steps",
-           probes=lambda ctx: [{"rate_limit_dps": ctx.problem.measured_rate_dps}],
+    Effect("rate_limit", "feedback", ("rate_limit_dps",), "the output's speed flat at one ceiling on its large moves",
+           probes=_rate_probes,
            applies=lambda ctx: _off(ctx, "rate_limit_dps") and ctx.problem.measured_rate_dps > 5.0,
-           check=_rate_check, restart=True),
+           check=_rate_check, restart=True, measured=True),
     Effect("load_rate_limit", "feedback", ("rate_limit_dps", "k2_dps_per_lb"),
            "saturated slopes steeper with an aiding load, shallower against an opposing one",
            probes=_load_rate_probe,

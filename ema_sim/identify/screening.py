@@ -96,7 +96,7 @@ def screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
             start = {f: getattr(cur.params, f) + beta * (v - getattr(cur.params, f)) for f, v in value.items()}
         elif beta <= 0.0:
             continue
-        elif len(value) == 1:  # a single stage switched on: scale its probe by what the residual asks for
+        elif len(value) == 1 and not effect.measured:  # a single stage switched on: scaled to what the residual asks
             start = {f: v * min(max(beta, 0.3), 3.0) for f, v in value.items()}
         step = beta * s_perp
         shares = [float(2.0 * np.dot(rb, sb) - np.dot(sb, sb)) / e

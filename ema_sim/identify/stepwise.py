@@ -47,6 +47,9 @@ from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
 TOP_K = 3
+NEXT_SCORE = 0.25
+"""When none of a round's first fits is accepted, the next candidates that would remove at least this share of an
+output's error above its noise are fitted too (up to :data:`TOP_K` more)."""
 STOP_FACTOR = 2.0
 """A round stops once an accepted fit has removed this many times what the next candidate could, linearly."""
 _ROUNDS = itertools.count()
@@ -660,6 +663,25 @@ def _restart_rate(problem: Problem, cur: Fit, ranked: list[Candidate], tried: di
     return (again, cand) if v2.accepted else None
 
 
+def _next(round_: _Round, ranked: list[Candidate]) -> None:
+    """The most promising fits failed: the next candidates the residual still points at, until one is accepted."""
+    for cand in [c for c in ranked if c.effect.key not in round_.tried and c.score >= NEXT_SCORE][:TOP_K]:
+        round_.attempt(cand)
+        if round_.accepted:
+            return
+
+
+def _round_candidates(problem: Problem, ranked: list[Candidate]) -> list[Candidate]:
+    """The round's first fits: the best screened, and an effect the record measured wherever screening ranked it.
+
+    The measured effect is a rate limit at the speed plateau the record's moves show.
+    """
+    first = ranked[:TOP_K]
+    if problem.measured_slew.rate is not None:
+        first += [c for c in ranked[TOP_K:] if c.effect.measured]
+    return first
+
+
 def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrderParams, max_effects: int,
            say: Callable[[str], None], limit: Mapping[str, float], pool: Pool = SERIAL) -> Fit:
     """Add the vocabulary's effects to ``cur`` one at a time while each pays for itself (module docstring).
@@ -701,16 +723,19 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
         accepted: list[tuple[Fit, Candidate]] = []
         tried: dict[str, tuple[Fit, Verdict]] = {}
         round_ = _Round(problem, cur, ctx, result, limit, say, tried, accepted)
-        pending = _submit(pool, problem, cur, ranked[:TOP_K], ctx)
-        for k, cand in enumerate(ranked[:TOP_K]):
+        first = _round_candidates(problem, ranked)
+        pending = _submit(pool, problem, cur, first, ctx)
+        for k, cand in enumerate(first):
             round_.attempt(cand, pending.pop(cand.effect.key, (None, ""))[0])
             # Stop fitting when the best so far already removed more than the rest could, even linearly.
-            rest = ranked[k + 1].predicted_drop if k + 1 < len(ranked) else 0.0
+            rest = first[k + 1].predicted_drop if k + 1 < len(first) else 0.0
             if accepted and cur.rss - min(f.rss for f, _ in accepted) > STOP_FACTOR * rest:
                 break
         for future, token in pending.values():  # fits the search stopped before needing
             future.cancel()
             problem.cancel(token)
+        if not accepted:
+            _next(round_, ranked)
         restarted = _restart_rate(problem, cur, ranked, tried, ctx, result, limit, say)
         if restarted is not None:
             accepted.append(restarted)

@@ -11,7 +11,9 @@ Steps of 0.5°, 1° and 20° give the small- and large-amplitude slew rates. For
   60 % of its 10-90 % rise (and at least 3 samples: a linear second order stays there for 0.64/ωn,
   at most 53 % of its rise for any ζ ≥ 0.2, while a step on its rate limit rises at that rate almost
   throughout), when its peak reaches 80 % of the channel's rated slew (table 1), or when its peak
-  falls 15 % short of what a second order fitted to a smaller step predicts. Rate-limited steps give the large-amplitude
+  falls 15 % short of what a second order fitted to a smaller step predicts, or when its peak reaches the record's
+  speed plateau (:func:`ema_sim.analysis.estimation.slew.plateau`: the ceiling the output's runs flatten against
+  wherever the command asks for more, within 10 %). Rate-limited steps give the large-amplitude
   slew rate and no linear fit; the others get :func:`ema_sim.analysis.estimation.second_order_fit.fit_step` and
   the hand calculation from rise and settling time beside it.
 
@@ -263,7 +265,8 @@ def _predicted_peak_rate(amp: float, wn: float, zeta: float) -> float:
 
 def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge], *, output: str,
                   noise_floor: float, rated_slew_dps: float | None = None, fit: bool = True,
-                  sampled: bool = False, counts: float | None = None) -> list[StepResponse]:
+                  sampled: bool = False, counts: float | None = None,
+                  plateau_dps: float | None = None) -> list[StepResponse]:
     """Metrics of every step, then fits in order of increasing amplitude (see the module docstring).
 
     Parameters
@@ -288,6 +291,9 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
         The command was sampled from a running demand, not held.
     counts : float, optional
         The output's count (for the settling band about the command).
+    plateau_dps : float, optional
+        The record's speed plateau (:func:`ema_sim.analysis.estimation.slew.plateau`): a step whose peak rate
+        reaches it is rate-limited.
 
     Returns
     -------
@@ -306,6 +312,8 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
         if m["rise"] and m["plateau"] >= PLATEAU_SHARE * m["rise"] and m["plateau"] >= 3 * dt - 1e-12:
             reasons.append(f"rate within 5 % of its {m['peak']:.1f} °/s peak for {1e3 * m['plateau']:.0f} ms of its "
                            f"{1e3 * m['rise']:.0f} ms rise")
+        if plateau_dps and m["peak"] >= (1.0 - slew.AGREE) * plateau_dps:
+            reasons.append(f"peak rate {m['peak']:.1f}/s reaches the record's speed plateau {plateau_dps:.1f}/s")
         if rated_slew_dps and m["peak"] >= RATED_FRACTION * rated_slew_dps:
             reasons.append(f"peak rate {m['peak']:.1f} °/s ≥ {RATED_FRACTION:.0%} of the rated {rated_slew_dps:g} °/s")
         if reference is not None:
@@ -536,9 +544,10 @@ class Steps(Section2Test[StepResponse]):
             d = ra.data
             rated = ra.channel.slew_rate_dps if d.unit == "deg" and ra.channel.channel == d.metadata.get(
                 "channel") else None
+            flat = ra.slew.plateau if ra.slew is not None else None
             out = analyze_steps(d.time_s, d.command_deg, y, edges, output=name, noise_floor=ra.noise_deg[name],
                                 rated_slew_dps=rated, sampled=ra.command.assumed_sampled,
-                                counts=ra.resolution_deg.get(name))
+                                counts=ra.resolution_deg.get(name), plateau_dps=flat.rate if flat else None)
         _missing_steps(ra, out)
         return out
 
