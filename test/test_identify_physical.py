@@ -61,3 +61,16 @@ def test_hoad3s_physics_fitted_from_its_declared_values_finds_an_actuator_off_th
     assert all(np.isfinite(v) and v > 0 for k, v in pf.sigma.items() if k in pf.fitted)
     assert pf.starts == 3
     json.dumps(pf.scalars())  # plain numbers
+
+
+def test_an_escalation_that_cannot_beat_the_model_before_it_stops_early_and_says_why():
+    """With an error to get under that no HOAD3 reaches (a tenth of the noise floor's), the fit stops after its
+    first fit (or the screen before it): no shifted starts, no uncertainty, fewer runs, and the reason given."""
+    problem = _problem(hoad3_record(seed=5, duration_s=3.0, **OFF_DECLARED))
+    full = fit_physical(problem, "hoad3", beat=1e30)  # within reach: a fit that can pay runs to its end
+    stopped = fit_physical(problem, "hoad3", beat=0.1 * problem.n_fit)
+    assert full.stopped == "" and full.starts == 3
+    assert stopped.stopped
+    assert "must get under" in stopped.stopped
+    assert stopped.starts == 1 and stopped.sigma == {}
+    assert stopped.simulations < 0.6 * full.simulations

@@ -112,6 +112,10 @@ def adopt_physical(problem: Problem, result: Identification, pf: PhysicalFit, li
     text = ", ".join(f"{o} {v:.4g}°" for o, v in pf.rms_deg.items())
     share = f"{100 * min(gain, 1.0):.1f} %" if gain >= 0.0 else "none"
     head = f"{pf.model} with its physical parameters fitted ({pf.simulations} runs, {pf.elapsed_s:.1f} s): rms {text}"
+    if pf.stopped:
+        why = f"{head}; not kept, stopped early: {pf.stopped}"
+        result.notes.append(why)
+        return "not kept", why
     if pf.rss >= cur.rss or (result.escalated and gain < MIN_EXCESS_SHARE):
         why = f"{head}; not kept: it removes {share} of the error above the noise floor that {label(result)} left"
         result.notes.append(why)

@@ -29,7 +29,7 @@ import numpy as np
 from ema_sim.analysis.records.command_hold import HoldMode
 from ema_sim.config import ChannelConfig
 from ema_sim.identify import artefacts
-from ema_sim.identify.criteria import MAX_DELTA_BIC, simulator_error
+from ema_sim.identify.criteria import MAX_DELTA_BIC, MIN_EXCESS_SHARE, simulator_error
 from ema_sim.identify.declared import HIGH_ORDER, declared
 from ema_sim.identify.discovery import Discovery, discover
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
@@ -301,7 +301,9 @@ def _effects(chain: _Chain, base: Any, searched: int) -> tuple[str, str]:
 
 
 def _escalate(chain: _Chain) -> tuple[str, str]:
-    pf = fit_physical(chain.problem, ESCALATE_TO, chain.say, chain.pool)
+    cur = chain.result.final
+    excess = max(cur.rss - chain.problem.n_fit, TINY)
+    pf = fit_physical(chain.problem, ESCALATE_TO, chain.say, chain.pool, beat=cur.rss - MIN_EXCESS_SHARE * excess)
     return adopt_physical(chain.problem, chain.result, pf, chain.limit())
 
 

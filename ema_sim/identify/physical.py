@@ -15,6 +15,15 @@ fits those elements of HOAD2/HOAD3 (figure 30's drive with figure 32's or 33's g
   kept and their spread joins each uncertainty (with the coloured-residual and the batch-means sigma).
 * **What the record cannot move** (a column of the Jacobian below :data:`MOVE_SHARE` of the largest,
   or a relative uncertainty above one) is held at its declared value and named.
+* **An escalation that cannot pay stops early.** When the physics must beat a model already fitted (a
+  declared model escalated to HOAD3's physics, :mod:`ema_sim.identify.escalation`), it is screened twice
+  against the error it must get under: after the delay scan, by the Gauss-Newton prediction of what the
+  fit can remove from there (the Jacobian the held elements are read from, no run more), taken
+  :data:`SCREEN_OPTIMISM` times over (a rough objective may do better than its linearisation); and after
+  the first fit, by where it ended (the shifted starts only move the end by the optimizer's own spread).
+  The first fit itself runs in short rounds and stops once even that many times its last round's progress,
+  in every round left, could not get it there. Either way the fit stops, says why and how long it ran, and the
+  shifted starts and the uncertainty are not run.
 
 The declared model's noise levels and quantization are not fitted; its command noise is run (4.3: noise
 inside the loop dithers the drive's dead band and friction, which a noise-free model would absorb into
@@ -93,6 +102,11 @@ LOG_LIMIT = math.log(100.0)
 """No element moves beyond a hundredfold of its declared value either way (past that the model is not HOAD3's
 actuator any more, and exp() would overflow or an inertia collapse to zero)."""
 MAX_DELAY_S = 0.05
+SCREEN_NFEV = 10
+"""An escalation's first fit runs in rounds of this many evaluations, its progress judged after each."""
+SCREEN_OPTIMISM = 3.0
+"""The screen after the delay scan stops the fit when even this many times the Gauss-Newton prediction of what
+the fit can remove leaves it above the error it must beat."""
 SEEDS = (7, 8, 9)
 """The model's own noise is run with these seeds: the first for the fit, the others for the two fits from
 shifted starts, so their spread carries the noise inside the loop as well."""
@@ -122,6 +136,8 @@ class PhysicalFit:
     correlation: dict[str, dict[str, float]] = field(default_factory=dict)
     starts: int = 1
     """Fits from different starts whose ends the uncertainty includes."""
+    stopped: str = ""
+    """Why the fit stopped before its end (empty: it ran to the end): it could not beat the model it must."""
 
     @property
     def rss(self) -> float:
@@ -271,17 +287,27 @@ def _scan(runs: _Runs, x: FloatArray, i: int, grid: FloatArray) -> FloatArray:
     return points[int(np.argmin(costs))]
 
 
-def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0]) -> FloatArray:
-    """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`)."""
+def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None
+                   ) -> FloatArray:
+    """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`).
+
+    With ``beat`` (an escalation's error to get under), the fit runs in rounds of :data:`SCREEN_NFEV`
+    evaluations and stops once even :data:`SCREEN_OPTIMISM` times the last round's drop, in every round
+    left, could not bring it under ``beat``.
+    """
     cost = runs.cost(x, seed)
-    for _ in range(POLISH_ROUNDS):
-        y = _fit(runs, x, free, MAX_NFEV, seed)
+    nfev, rounds = (MAX_NFEV, POLISH_ROUNDS) if beat is None else (SCREEN_NFEV, POLISH_ROUNDS * MAX_NFEV // SCREEN_NFEV)
+    for k in range(rounds):
+        y = _fit(runs, x, free, nfev, seed)
         c = runs.cost(y, seed)
         if c >= cost:
             break
         gain = (cost - c) / max(cost - runs.problem.n_fit, TINY)
+        drop = cost - c
         x, cost = y, c
         if gain < POLISH_SHARE:
+            break
+        if beat is not None and cost - SCREEN_OPTIMISM * drop * (rounds - k - 1) >= beat:
             break
     return x
 
@@ -329,8 +355,8 @@ def remote_start(problem: Problem, model: str, names: list[str], declared: dict[
         return _fit_restarted(runs, x, free, seed), runs.count
 
 
-def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL
-                 ) -> PhysicalFit:
+def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL,
+                 beat: float | None = None) -> PhysicalFit:
     """Fit ``model``'s physical parameters (module docstring) to the problem's record.
 
     Parameters
@@ -344,6 +370,9 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     pool : Pool
         Where the two shifted starts' fits run (:mod:`ema_sim.identify.parallel`): at once on its workers,
         the same ends as one after the other.
+    beat : float, optional
+        The weighted error the physics must get under to be kept (an escalation's): the fit stops as soon as
+        it cannot (module docstring). None: fitted to its end (a declared HOAD2/HOAD3).
 
     Returns
     -------
@@ -365,25 +394,23 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     for i in delays:
         x = _scan(runs, x, i, wide)
     # what the record cannot move, from the Jacobian at the scanned start
-    size = np.linalg.norm(runs.jacobian(x, rest, runs.residual(x)), axis=0)
+    r_start = runs.residual(x)
+    jac = runs.jacobian(x, rest, r_start)
+    size = np.linalg.norm(jac, axis=0)
     top = float(np.max(size, initial=0.0))
     held = [names[i] for i, s in zip(rest, size, strict=True) if s <= MOVE_SHARE * top]
     free = delays + [i for i in rest if names[i] not in held]
-    x = _fit_restarted(runs, x, free)
+    if beat is not None:
+        why = _screen(r_start, jac[:, [k for k, i in enumerate(rest) if names[i] not in held]], beat)
+        if why:
+            return _stopped(runs, x, names, declared, held, why, t0, say)
+    x = _fit_restarted(runs, x, free, beat=beat)
     say(f"  {model}: delays scanned, {len(free)} parameters fitted: weighted error {runs.cost(x):.6g}")
-    ends = [x]
-    client = pool.client()
-    starts = [(_shifted(runs, x, free, sign), seed) for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True)]
-    if client is None:
-        ends += [_fit_restarted(runs, start, free, seed) for start, seed in starts]
-    else:
-        shared = client.scatter(problem, broadcast=True)
-        futures = [client.submit(remote_start, shared, model, names, declared, start, free, seed, pure=False)
-                   for start, seed in starts]
-        for future in futures:
-            end, count = result(future)
-            ends.append(end)
-            runs.count += count
+    if beat is not None and runs.cost(x) >= beat:
+        why = (f"the first fit ended at weighted error {runs.cost(x):.6g}, above the {beat:.6g} it must get under "
+               "to pay: the shifted starts and the uncertainty were not run")
+        return _stopped(runs, x, names, declared, held, why, t0, say)
+    ends = [x, *_other_starts(runs, x, free, pool)]
     mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
     x = ends[int(np.argmin(mean_cost))]
     start_sigma = np.std(np.array(ends)[:, free], axis=0, ddof=1) if free else np.zeros(0)
@@ -407,6 +434,49 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     return PhysicalFit(model, values, {n: declared[n] for n in names}, out_sigma, fitted, tuple(held), sim,
                        residual, rms, runs.count, time.perf_counter() - t0,
                        {names[a]: {names[b]: v for b, v in row.items()} for a, row in corr.items()}, len(ends))
+
+
+def _other_starts(runs: _Runs, x: FloatArray, free: list[int], pool: Pool) -> list[FloatArray]:
+    """The fits from the two shifted starts under the other noise seeds (on the pool's workers when it has some)."""
+    client = pool.client()
+    starts = [(_shifted(runs, x, free, sign), seed) for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True)]
+    if client is None:
+        return [_fit_restarted(runs, start, free, seed) for start, seed in starts]
+    shared = client.scatter(runs.problem, broadcast=True)
+    futures = [client.submit(remote_start, shared, runs.model, runs.names, runs.declared, start, free, seed,
+                             pure=False) for start, seed in starts]
+    ends = []
+    for future in futures:
+        end, count = result(future)
+        ends.append(end)
+        runs.count += count
+    return ends
+
+
+def _screen(r: FloatArray, jac: FloatArray, beat: float) -> str:
+    """Why the fit cannot pay, from its Gauss-Newton prediction at the start (empty: it may)."""
+    cost = float(np.dot(r, r))
+    if cost < beat or jac.shape[1] == 0:
+        return ""
+    good = np.all(np.isfinite(jac), axis=0)
+    q = np.linalg.qr(jac[:, good], mode="reduced")[0] if good.any() else np.zeros((r.size, 0))
+    drop = float(np.sum((q.T @ r) ** 2))
+    if cost - SCREEN_OPTIMISM * drop < beat:
+        return ""
+    return (f"screened after the delay scan: weighted error {cost:.6g}, of which a linearised fit removes {drop:.6g}; "
+            f"{SCREEN_OPTIMISM:g} times that still leaves it above the {beat:.6g} it must get under to pay")
+
+
+def _stopped(runs: _Runs, x: FloatArray, names: list[str], declared: dict[str, Any], held: list[str], why: str,
+             t0: float, say: Callable[[str], None]) -> PhysicalFit:
+    """The physics where it stopped, with why (no uncertainty: it was not worth computing)."""
+    say(f"{runs.model} physical fit stopped after {runs.count} runs: {why}")
+    sim = runs.sim(x)
+    residual = runs.residual(x)
+    rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in runs.problem.errors_deg(sim).items()}
+    return PhysicalFit(runs.model, runs.values(x), {n: declared[n] for n in names}, {},
+                       tuple(n for n in names if n not in held), tuple(held), sim, residual, rms, runs.count,
+                       time.perf_counter() - t0, stopped=why)
 
 
 def _positive(v: Any) -> bool:
