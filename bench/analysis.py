@@ -1,4 +1,8 @@
-"""Speed of the offline analysis (issue 5): a 60 s sweep sampled at 1 kHz is analysed in ≤ 0.3 s."""
+"""Speed of the offline analysis: a 60 s sweep sampled at 1 kHz, against JSBSim simulating it.
+
+The time is in JSBSim runs (:func:`ema_sim.benchmark.jsbsim_seconds`): the analysis's wall time over what JSBSim's
+actuator chain takes to simulate the same 60 s at 800 Hz in the same run: at most four.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 
 from ema_sim.analysis.pipeline import analyze_record
-from ema_sim.benchmark import Benchmark, Result, timed
+from ema_sim.benchmark import Benchmark, Result, jsbsim_seconds, timed
 from ema_sim.io.csv import MeasuredData
 from ema_sim.signals import parse_maneuver
 from ema_sim.simulation import csv_columns, simulate
@@ -32,11 +36,12 @@ def sweep_analysis() -> Result:
     once = time.perf_counter() - t0
     responses = ra.results["frequency_response"]
     fit = responses[0].fit
+    runs = wall / jsbsim_seconds(60.0, 800.0)
     detail = (f"{len(data):,} samples, {len(responses)} responses; best {wall * 1e3:.0f} ms, last "
               f"{once * 1e3:.0f} ms; fit ωn {fit.wn_rad_s.value:.2f} rad/s, ζ {fit.zeta.value:.3f}")
-    return Result(wall, "s", wall <= 0.3, detail)
+    return Result(runs, "JSBSim 60 s runs", runs <= 4.0, detail)
 
 
 BENCHMARKS = [
-    Benchmark("analyze_60s_sweep_1khz", "≤ 0.3 s", sweep_analysis),
+    Benchmark("analyze_60s_sweep_1khz", "≤ 4 JSBSim runs of the record at 800 Hz", sweep_analysis),
 ]

@@ -2,12 +2,22 @@
 
 Benchmarks live in the scripts under ``bench/``; each script defines ``BENCHMARKS``, a list of
 :class:`Benchmark`. A benchmark measures one number and compares it with its target.
+
+Every speed target is a **ratio against a yardstick measured in the same run**, never an absolute time: a
+wall-clock figure on a shared two-core machine says more of what else it runs than of the code. The
+yardstick is JSBSim's actuator chain (:func:`jsbsim_realtime`: figure 21's servo written as JSBSim
+flight-control components under ``bench/jsbsim``, stepped from Python one frame at a time as a host does),
+measured once per process at each rate and shared by every benchmark of the run. A time is stated in
+**JSBSim runs** (:func:`jsbsim_seconds`: how long JSBSim takes to simulate the same span at the model's
+rate), a speed in **× JSBSim**.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import json
+import math
 import os
 import time
 from collections.abc import Callable
@@ -91,3 +101,72 @@ def timed(fn: Callable[[], Any], repeat: int = 3) -> float:
         fn()
         best = min(best, time.perf_counter() - t0)
     return best
+
+
+YARDSTICK_S = 10.0
+"""Simulated seconds of each yardstick measurement (best of three)."""
+
+
+@functools.cache
+def jsbsim_realtime(rate_hz: float) -> float:
+    """JSBSim's real-time ratio on the X-43A servo at ``rate_hz``: the yardstick (module docstring), once a process.
+
+    The command changes every 5 ms frame (a sine), the model is stepped one JSBSim frame at a time from Python,
+    as a host simulation drives an actuator; the best of three runs of :data:`YARDSTICK_S`.
+
+    Parameters
+    ----------
+    rate_hz : float
+        JSBSim's frame rate (the rate of the model it is compared with).
+
+    Returns
+    -------
+    float
+        Simulated seconds per wall second.
+    """
+    import jsbsim  # noqa: PLC0415 - a benchmark tool's dependency, loaded only when a benchmark runs
+
+    root = bench_dir() / "jsbsim"
+    jsbsim.FGJSBBase().debug_lvl = 0  # no start-up banner
+    fdm = jsbsim.FGFDMExec(str(root), None)
+    fdm.set_debug_level(0)
+    if not fdm.load_model("ema_actuator"):
+        raise EmaError(f"JSBSim could not load {root}/aircraft/ema_actuator")
+    fdm.set_dt(1.0 / rate_hz)
+    fdm.run_ic()
+    steps = round(YARDSTICK_S * rate_hz)
+    per_frame = max(round(rate_hz * 0.005), 1)
+    best = math.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for k in range(steps):
+            if k % per_frame == 0:
+                fdm["fcs/ema-cmd-deg"] = math.sin(2.0 * math.pi * k / rate_hz)
+            fdm.run()
+        best = min(best, time.perf_counter() - t0)
+    return YARDSTICK_S / best
+
+
+def jsbsim_seconds(simulated_s: float, rate_hz: float) -> float:
+    """How long JSBSim's actuator chain takes to simulate ``simulated_s`` at ``rate_hz`` in this run.
+
+    Parameters
+    ----------
+    simulated_s : float
+        Simulated span, s.
+    rate_hz : float
+        JSBSim's frame rate.
+
+    Returns
+    -------
+    float
+        Wall seconds (a benchmark's time divided by this is its time in JSBSim runs).
+    """
+    return simulated_s / jsbsim_realtime(rate_hz)
+
+
+def jsbsim_version() -> str:
+    """JSBSim's version, for the benchmarks' details."""
+    import jsbsim  # noqa: PLC0415 - a benchmark tool's dependency, loaded only when a benchmark runs
+
+    return str(jsbsim.__version__)
