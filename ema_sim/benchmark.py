@@ -63,20 +63,67 @@ def baseline_path(path: Path | None = None) -> Path:
 
 def recorded(path: Path | None = None) -> dict[str, float]:
     """Each benchmark's recorded figure (empty when none is recorded)."""
+    return {k: float(v["value"]) for k, v in recorded_entries(path).items()}
+
+
+def recorded_entries(path: Path | None = None) -> dict[str, dict[str, Any]]:
+    """Each benchmark's recorded entry: ``value``, ``unit``, ``target``, ``passed``, ``detail`` and ``date``."""
     file = baseline_path(path)
     if not file.exists():
         return {}
     figures = json.loads(file.read_text(encoding="utf-8")).get("bench", {})
-    return {str(k): float(v) for k, v in figures.items()}
+    return {str(k): dict(v) if isinstance(v, dict) else {"value": float(v)} for k, v in figures.items()}
 
 
-def record(figures: dict[str, float], path: Path | None = None) -> Path:
-    """Write ``figures`` as the recorded ones (other benchmarks' figures and the counts are kept)."""
+def record(entries: dict[str, dict[str, Any]], path: Path | None = None) -> Path:
+    """Write ``entries`` as the recorded ones (other benchmarks' entries and the counts are kept).
+
+    Each entry is what ``ema bench`` printed (``value``, ``unit``, ``target``, ``passed``, ``detail``) and the
+    ``date`` it ran; :func:`figures_page` renders them all as the documentation's one source of figures.
+    """
     file = baseline_path(path)
     data = json.loads(file.read_text(encoding="utf-8")) if file.exists() else {}
-    data["bench"] = {**data.get("bench", {}), **figures}
-    file.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    data["bench"] = {**data.get("bench", {}), **entries}
+    file.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
     return file
+
+
+FIGURES_HEAD = """# Figures as measured
+
+Every speed, memory and running-time figure of this project, as `ema bench` last printed it and the date it
+ran (`bench/baseline.json`; `ema bench --record` rewrites this page, so the figures here and there are one).
+Speeds are ratios against JSBSim's actuator chain measured in the same run (× JSBSim), times are in JSBSim
+runs of the same span, so a figure holds whatever else the machine ran; the absolute time is in the detail.
+"""
+
+
+def figures_page(entries: dict[str, dict[str, Any]]) -> str:
+    """The documentation's page of figures (``docs/figures.md``) from the recorded entries.
+
+    Parameters
+    ----------
+    entries : dict
+        :func:`recorded_entries`.
+
+    Returns
+    -------
+    str
+        The Markdown page.
+    """
+    rows = ["| benchmark | measured | target | verdict | date | detail |", "| --- | --- | --- | --- | --- | --- |"]
+    for name in sorted(entries):
+        e = entries[name]
+        passed = e.get("passed")
+        verdict = "" if passed is None else ("pass" if passed else "**miss**")
+        detail = str(e.get("detail", "")).replace("|", "/")
+        rows.append(f"| `{name}` | {float(e['value']):.4g} {e.get('unit', '')} | {e.get('target', '')} | {verdict} "
+                    f"| {e.get('date', '')} | {detail} |")
+    return FIGURES_HEAD + "\n" + "\n".join(rows) + "\n"
+
+
+def figures_path(path: Path | None = None) -> Path:
+    """Where :func:`figures_page` is written: ``docs/figures.md`` beside the ``bench/`` scripts."""
+    return (path or bench_dir()).parent / "docs" / "figures.md"
 
 
 def discover(path: Path | None = None) -> list[Benchmark]:

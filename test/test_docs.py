@@ -106,9 +106,18 @@ def test_the_readme_is_a_front_door():
     wide = [n for n, line in enumerate(lines, 1) if len(line) > MAX_README_WIDTH]
     assert wide == [], f"README.md lines over {MAX_README_WIDTH} characters: {wide}"
     text = "\n".join(lines)
-    for needed in ("make demo", "make test", "docs/index.md", "CONTRIBUTING.md"):
+    for needed in ("make demo", "make test", "docs/index.md", "docs/contributing.md"):
         assert needed in text, needed
     assert any(info == "python" for info, _, _ in fenced_blocks(text)), "the tour's code example"
+
+
+def test_the_figures_page_is_what_bench_recorded():
+    """docs/figures.md is bench/baseline.json's entries rendered: one source for every measured figure."""
+    from ema_sim.benchmark import figures_page, recorded_entries  # noqa: PLC0415
+
+    page = ROOT / "docs" / "figures.md"
+    assert page.read_text(encoding="utf-8") == figures_page(recorded_entries(ROOT / "bench")), (
+        "docs/figures.md differs from bench/baseline.json: run `ema bench --only NAME --record`")
 
 
 def test_every_docs_page_is_in_the_site_nav():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 from pathlib import Path
 
@@ -22,11 +23,19 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0, or 1 when a benchmark misses its target.
     """
-    from ema_sim.benchmark import discover, record, recorded  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+    from ema_sim.benchmark import (  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+        discover,
+        figures_page,
+        figures_path,
+        record,
+        recorded,
+        recorded_entries,
+    )
 
     before = recorded()
     results: list[dict[str, object]] = []
-    figures: dict[str, float] = {}
+    figures: dict[str, dict[str, object]] = {}
+    today = datetime.date.today().isoformat()
     failed = 0
     for bench in discover():
         if args.only and not any(key in bench.name for key in args.only):
@@ -40,9 +49,14 @@ def run(args: argparse.Namespace) -> int:
               f"{res.detail}", flush=True)
         results.append({"name": bench.name, "target": bench.target, "value": res.value, "unit": res.unit,
                         "passed": res.passed, "detail": res.detail})
-        figures[bench.name] = res.value
+        figures[bench.name] = {"value": res.value, "unit": res.unit, "target": bench.target, "passed": res.passed,
+                               "detail": res.detail, "date": today}
     if args.record:
         print(f"recorded in {record(figures)}")
+        page = figures_path()
+        if page.parent.is_dir():
+            page.write_text(figures_page(recorded_entries()), encoding="utf-8")
+            print(f"wrote {page}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
     return 1 if failed else 0
@@ -60,5 +74,6 @@ def register(sub: Subparsers) -> None:
     p.add_argument("--only", action="append", help="run benchmarks whose name contains this (repeatable)")
     p.add_argument("--json", default=None, help="write the results as JSON")
     p.add_argument("--record", action="store_true",
-                   help="record these figures in bench/baseline.json (each run prints its ratio to them)")
+                   help="record these figures, with today's date, in bench/baseline.json and docs/figures.md "
+                        "(each run prints its ratio to them)")
     p.set_defaults(func=run)
