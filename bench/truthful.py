@@ -6,14 +6,18 @@ integer-ms stamps). Each record is run through both tools; every figure is then 
 of the fine-step simulation and against what a few lines of numpy on the raw record show (issue 37):
 
 - ``exit``       exit status 0 and strict JSON (no NaN/Infinity);
-- ``causal``     no phase lead / negative delay beyond its stated uncertainty without a flag beside it;
+- ``causal``     no phase lead / negative delay beyond its stated uncertainty without a flag beside it that
+                 gives a cause (logging, sampling, stamps, resampling) or disowns the figure ("not determined");
+                 a fit's "on_bound" alone is not such a flag;
 - ``cmd``        the command's timing (held / sampled) is not decided wrongly;
 - ``phase``      harmonic phases of a profiled square within max(0.5°, 3σ) of the truth;
-- ``rate``       where the speed plateaus, a rate limit within 10 % of the plateau;
+- ``rate``       where the speed plateaus, a rate limit within 10 % of the plateau; where the plant has no speed
+                 limit and no current saturation, no rate limit that would bind on the record;
 - ``settle``     no threshold / dead band / free play (half width) larger than the median settled error
                  measured on the raw record (plus half a count);
 - ``model``      report.md and the JSON (and the console) name the same final model, term by term;
 - ``halves``     no discovered term said to hold whose two halves disagree beyond their uncertainty;
+- ``undecid``    no effect kept that the tool's own warning says the record cannot decide against another;
 - ``resol``      position resolution within 15 % of the count grid;
 - ``lcycle``     a limit cycle at rest named, with its frequency (±15 %) and amplitude (±50 %);
 - ``floor``      the noise floor taken where the output cannot move (≤ 2× the truth's rest floor or one
@@ -54,8 +58,8 @@ import heldout_rigs as rigs  # noqa: E402
 
 EMA = ROOT / ".venv" / "bin" / "ema"
 X43A_CHANNELS = ("left_wing", "right_wing", "left_rudder", "right_rudder", "cowl_door")
-CHECKS = ("exit", "causal", "cmd", "phase", "rate", "settle", "model", "halves", "resol", "lcycle", "floor", "drift",
-          "jitter", "corr", "sigma0", "units", "channel")
+CHECKS = ("exit", "causal", "cmd", "phase", "rate", "settle", "model", "halves", "undecid", "resol", "lcycle",
+          "floor", "drift", "jitter", "corr", "sigma0", "units", "channel")
 PASS, FAIL, NA = "PASS", "FAIL", "n.a."
 
 
@@ -220,6 +224,8 @@ def res(status: str, why: str = "") -> dict[str, str]:
 
 
 LEAD_WORDS = re.compile(r"\blead|caus|negative delay|ahead of|before its command|cannot lead|never lead", re.I)
+CAUSE_WORDS = re.compile(r"sampl|\bheld\b|logg|resampl|filtered|stamp|timing|skew", re.I)
+"""A flag on a lead must give its likely cause (issue 37): the logging, a resampling, a filtered demand."""
 
 
 # --------------------------------------------------------------------------------------- the checks
@@ -231,7 +237,8 @@ def check_causal(tool: str, doc: dict[str, Any]) -> dict[str, str]:  # noqa: PLR
                 if not isinstance(d, dict) or any(p in ("command", "causality") for p in path):
                     continue
                 local = " ".join(str(d.get(k, "")) for k in ("note", "quality_note", "statement", "notes"))
-                ok_flag = (d.get("quality") not in (None, "ok")) or bool(LEAD_WORDS.search(local))
+                disowned = d.get("quality") in ("not_determined", "unreliable", "bad", "rejected")
+                ok_flag = disowned or bool(LEAD_WORDS.search(local) or CAUSE_WORDS.search(local))
                 ph, sg = d.get("phase_deg"), d.get("phase_sigma_deg")
                 if sg is None and isinstance(d.get("random_error"), list):  # normalised random error, rad
                     sg = [math.degrees(e) if num(e) is not None else None for e in d["random_error"]]
@@ -250,19 +257,20 @@ def check_causal(tool: str, doc: dict[str, Any]) -> dict[str, str]:  # noqa: PLR
                         continue
                     if isinstance(v, dict) and "value" in v:
                         val, s = num(v.get("value")), num(v.get("sigma")) or 0.0
-                        fl = (ok_flag or v.get("quality") not in (None, "ok")
-                              or bool(LEAD_WORDS.search(str(v.get("statement", "")))))
+                        own = f"{v.get('statement', '')} {v.get('note', '')}"
+                        fl = (ok_flag or v.get("quality") in ("not_determined", "unreliable", "bad", "rejected")
+                              or bool(LEAD_WORDS.search(own) or CAUSE_WORDS.search(own)))
                     else:
                         val, s, fl = num(v), 0.0, ok_flag
                     if val is None:
                         continue
                     scale = 1e-3 if k.endswith("_ms") else 1.0
                     if val * scale < -max(2 * s * scale, 1e-4):
-                        item = f"{'/'.join(path)}/{k} = {val:.4g} ± {s:.2g}"
+                        item = f"{'/'.join(path)}/{k} = {val:.4g} ± {s:.2g} (quality {d.get('quality')})"
                         (flagged if fl else bad).append(item)
     else:
-        warn = " ".join(doc.get("warnings", []) or [])
-        fl = bool(LEAD_WORDS.search(warn))
+        warn = [w for w in doc.get("warnings", []) or [] if "delay" in w or LEAD_WORDS.search(w)]
+        fl = any(LEAD_WORDS.search(w) or CAUSE_WORDS.search(w) for w in warn)
         fin = doc.get("final", {}) or {}
         unc = fin.get("uncertainty", {}) or {}
         cands = [("final", k, num(v), num(unc.get(k)) or 0.0)
@@ -330,17 +338,25 @@ def _identify_rate(doc: dict[str, Any]) -> float | None:
 
 def check_rate(tool: str, doc: dict[str, Any], truth: dict[str, Any], raw: dict[str, Any]) -> dict[str, str]:
     tr = truth.get("speed_limit")
-    if tr is None:
-        return res(NA)
     pl = raw["plateau"]
-    if not pl.get("exists"):
-        return res(NA, f"numpy sees no plateau on the logged record ({pl})")
     if tool == "analyze":
         s = (doc.get("records") or [{}])[0].get("slew") or {}
         got = num(s.get("rate")) or num((s.get("plateau") or {}).get("rate"))
-        where = f"slew: {s.get('statement', '')}"
     else:
         got = _identify_rate(doc)
+    if tr is None:
+        # no speed limit and no current saturation in the plant: a rate limit that would bind here is invented
+        clean = not (truth.get("current_limit_effect") or {}).get("rms")
+        peak = pl.get("peak") or 0.0
+        if clean and got is not None and got < 0.95 * peak:
+            return res(FAIL, f"rate limit {got:.4g} reported on a record whose speed never plateaus (no limit in the "
+                             f"plant; numpy peak speed {peak:.4g})")
+        return res(NA, f"no speed limit in the record (reported {got})")
+    if not pl.get("exists"):
+        return res(NA, f"numpy sees no plateau on the logged record ({pl})")
+    if tool == "analyze":
+        where = f"slew: {s.get('statement', '')}"
+    else:
         rej = [f"{r.get('effect')} {r.get('value')}: {r.get('reason')}" for r in doc.get("rejected") or []
                if "rate" in str(r.get("effect"))]
         where = f"final params {(doc.get('final') or {}).get('params')}; rejected: {'; '.join(rej)[:200]}"
@@ -463,6 +479,27 @@ def check_halves(tool: str, doc: dict[str, Any]) -> dict[str, str]:
     return res(FAIL if bad else PASS, "; ".join(bad[:3]))
 
 
+EFFECTS = ("command_bias", "command_gain", "compliance", "current_limit", "feedback_filter", "free_play",
+           "hinge_moment_sign", "hysteretic_damping", "lag_filter", "linkage_mode", "load_rate_limit",
+           "nonlinear_compliance", "quantization", "rate_limit", "servo_compliance", "servo_integral",
+           "static_threshold", "time_delay")
+
+
+def check_undecided(tool: str, doc: dict[str, Any]) -> dict[str, str]:
+    """No effect kept that the tool's own warning says the record cannot decide (against another effect)."""
+    if tool != "identify":
+        return res(NA)
+    kept = {a.get("effect") for a in doc.get("added") or []}
+    bad = []
+    for w in doc.get("warnings") or []:
+        if not re.search(r"cannot (decide|tell|determine)|undecid|told apart", w):
+            continue
+        named = {e for e in EFFECTS if re.search(rf"\b{e}\b", w)}
+        if named & kept and (len(named) > 1 or re.search(r"cannot decide (whether|if)", w)):
+            bad.append(w[:300])
+    return res(FAIL if bad else PASS, "; ".join(bad[:2]))
+
+
 def _resolution(tool: str, doc: dict[str, Any]) -> float | None:
     if tool == "analyze":
         r = (doc.get("records") or [{}])[0].get("resolution_deg") or {}
@@ -537,7 +574,9 @@ def check_drift(tool: str, doc: dict[str, Any], truth: dict[str, Any], texts: li
         pat_t = re.compile(r"\bfall|falls|falling|drops?|decreas|declin|lower in the (second|later)|slows", re.I)
     else:
         pat_p = re.compile(r"delay", re.I)
-        pat_t = re.compile(r"wander|vari(es|ing|able)|chang(es|ing)|drift|differ|not constant|grows|trend", re.I)
+        pat_t = re.compile(r"wander|vari(es|ing|able)|chang(es|ing) (over|across|along|through|during)|drift|"
+                           r"not constant|trend|between the halves|(first|second|later) half|over the record|"
+                           r"from [\d.]+ ?(ms )?(to|→) [\d.]+ ?ms", re.I)
     hits = [s for s in texts if pat_p.search(s) and pat_t.search(s)]
     proxies = ([a.get("effect") for a in (doc.get("added") or []) if a.get("effect") in PROXY]
                if tool == "identify" else [])
@@ -573,12 +612,16 @@ def check_jitter(tool: str, doc: dict[str, Any], truth: dict[str, Any], texts: l
 
 
 def check_corr(doc: dict[str, Any]) -> dict[str, str]:
-    bad = []
+    bad, n = [], 0
     for path, v in walk(doc):
         if (any(re.search(r"correlation|^rho$|^r$", p) for p in path[-3:]) and num(v) is not None
-                and not any(p in ("independence", "whiteness") for p in path) and abs(num(v)) > 1.0 + 1e-9):
+                and not any(p in ("independence", "whiteness") for p in path)):
+            n += 1
+            if abs(num(v)) > 1.0 + 1e-9:
                 bad.append(f"{'/'.join(path)} = {v}")
-    return res(FAIL if bad else PASS, "; ".join(bad[:4]))
+    if not n:
+        return res(NA, "no correlation reported")
+    return res(FAIL if bad else PASS, "; ".join(bad[:4]) or f"{n} correlations within ±1")
 
 
 ZERO_PM = re.compile(r"±\s*0(?:\.0*)?(?![\d.eE])(?!\s*%?\s*(?:of|\)))")
@@ -667,7 +710,16 @@ def run_tool(tool: str, csv: Path, truth: dict[str, Any], out: Path, timeout: fl
     dt = time.monotonic() - t0
     (out / f"{tool}.stdout").write_text(so, encoding="utf-8")
     (out / f"{tool}.stderr").write_text(se, encoding="utf-8")
-    return {"cmd": " ".join(cmd), "rc": rc, "seconds": round(dt, 2), "stdout": so, "stderr": se}
+    meta = {"cmd": " ".join(cmd), "rc": rc, "seconds": round(dt, 2)}
+    (out / f"{tool}.run.json").write_text(json.dumps(meta) + "\n", encoding="utf-8")
+    return {**meta, "stdout": so, "stderr": se}
+
+
+def load_run(tool: str, out: Path) -> dict[str, Any]:
+    """A run already made (``--rejudge``): its status, time and console."""
+    meta = json.loads((out / f"{tool}.run.json").read_text(encoding="utf-8"))
+    return {**meta, "stdout": (out / f"{tool}.stdout").read_text(encoding="utf-8"),
+            "stderr": (out / f"{tool}.stderr").read_text(encoding="utf-8")}
 
 
 def judge(tool: str, run: dict[str, Any], truth: dict[str, Any], raw: dict[str, Any], out: Path) -> dict[str, Any]:
@@ -703,6 +755,7 @@ def judge(tool: str, run: dict[str, Any], truth: dict[str, Any], raw: dict[str, 
         checks["settle"] = check_settle(tool, doc, truth, raw)
         checks["model"] = check_model(tool, doc, md, console)
         checks["halves"] = check_halves(tool, doc)
+        checks["undecid"] = check_undecided(tool, doc)
         checks["resol"] = check_resol(tool, doc, truth, raw)
         checks["lcycle"] = check_lcycle(truth, texts)
         checks["floor"] = check_floor(tool, doc, truth, texts)
@@ -732,7 +785,7 @@ def git_state() -> dict[str, str]:
     return {"commit": g("rev-parse", "HEAD"), "status": "\n".join(g("status", "--short").splitlines()[:20])}
 
 
-def main() -> int:
+def main() -> int:  # noqa: PLR0915 - the script, top to bottom
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--set", choices=("heldout", "dev"), default="heldout")
     ap.add_argument("--out", default="/tmp/truthful")
@@ -741,6 +794,7 @@ def main() -> int:
     ap.add_argument("--tools", default="analyze,identify")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per tool run")
+    ap.add_argument("--rejudge", action="store_true", help="judge the runs already in --out again, run nothing")
     args = ap.parse_args()
     out = Path(args.out)
     (out / "records").mkdir(parents=True, exist_ok=True)
@@ -751,6 +805,10 @@ def main() -> int:
     names = args.cases.split(",") if args.cases else list(rigs.CASES)
     tools = args.tools.split(",")
     state = git_state()
+    ran_s = None
+    if args.rejudge and (out / "summary.json").is_file():
+        before = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+        state, ran_s = before["git"], before.get("elapsed_s")
     print(f"commit {state['commit']}\n{state['status']}\n", flush=True)
     t_start = time.monotonic()
     items = []
@@ -767,7 +825,7 @@ def main() -> int:
     def work(job: tuple[Any, str]) -> dict[str, Any]:
         (name, seed, csv, truth, raw), tool = job
         d = out / "runs" / f"{name}_s{seed}"
-        run = run_tool(tool, csv, truth, d, args.timeout)
+        run = load_run(tool, d) if args.rejudge else run_tool(tool, csv, truth, d, args.timeout)
         verdict = judge(tool, run, truth, raw, d)
         row = {"case": name, "seed": seed, "tool": tool, "seconds": run["seconds"], "rc": run["rc"], "cmd": run["cmd"],
                **verdict}
@@ -786,7 +844,8 @@ def main() -> int:
     for r in rows:
         for c in CHECKS:
             tally[r["tool"]][c][r["checks"].get(c, {"status": NA})["status"]] += 1
-    summary = {"set": args.set, "seeds": seeds, "git": state, "elapsed_s": round(time.monotonic() - t_start, 1),
+    elapsed = ran_s if args.rejudge and ran_s is not None else round(time.monotonic() - t_start, 1)
+    summary = {"set": args.set, "seeds": seeds, "git": state, "elapsed_s": elapsed, "rejudged": bool(args.rejudge),
                "tally": tally, "rows": rows, "records": truths}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     table = render(rows, tally, summary)

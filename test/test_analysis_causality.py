@@ -15,7 +15,7 @@ from ema_sim.io.csv import MeasuredData
 FINE_S = 1e-4
 
 
-def _servo(t_fine: np.ndarray, demand: np.ndarray, tau_s: float) -> np.ndarray:
+def _servo(demand: np.ndarray, tau_s: float) -> np.ndarray:
     """A first-order servo (equivalent delay ``tau_s``) following ``demand`` on a fine grid."""
     a = np.exp(-FINE_S / tau_s)
     return lfilter([1.0 - a], [1.0, -a], demand, zi=[a * demand[0]])[0]
@@ -54,7 +54,7 @@ def test_a_first_order_servo_lags_a_held_command_by_its_time_constant_and_half_a
     t = np.arange(0.0, 11.9, 1.0 / rate)
     steps = np.where(np.mod(t, 2.0) < 1.0, 1.0, 0.0)
     held = steps[np.clip(np.searchsorted(t, fine, side="right") - 1, 0, t.size - 1)]
-    y = _servo(fine, held, tau)[np.round(t / FINE_S).astype(int)]
+    y = _servo(held, tau)[np.round(t / FINE_S).astype(int)]
     lags_held, lags_sampled = causality.move_lags(t, steps, y, 1e-3)
     assert lags_held.size >= 10
     # the trapezoid over a sampled exponential overestimates its area by about T²/(12·tau): 0.4 ms here
@@ -71,11 +71,12 @@ def test_a_fast_servo_on_a_sampled_profile_refutes_the_hold_and_the_decision_say
     rate, tau = 100.0, 0.002
     fine = np.arange(0.0, 20.0, FINE_S)
     demand = _profile(fine, 2.0, 5.0, 0.3)
-    y = _servo(fine, demand, tau)
+    y = _servo(demand, tau)
     t, u, yl = _log(fine, demand, y, rate, sampled=True)
     hold = detect_command_hold(t, u, yl, 1e-4)
     assert hold.onset_sampled is None  # the onsets alone cannot tell
-    assert hold.causality is not None and hold.causality.held_leads
+    assert hold.causality is not None
+    assert hold.causality.held_leads
     assert hold.causality.lag_sampled_s == pytest.approx(tau, abs=1e-3)
     assert hold.sampled is True
     assert hold.leads == ""
@@ -86,7 +87,7 @@ def test_a_slow_servo_on_a_profile_leaves_the_timing_undecided_and_analyze_gives
     rate, tau = 100.0, 0.03
     fine = np.arange(0.0, 20.0, FINE_S)
     demand = _profile(fine, 2.0, 5.0, 0.3)
-    y = _servo(fine, demand, tau)
+    y = _servo(demand, tau)
     t, u, yl = _log(fine, demand, y, rate, sampled=True)
     hold = detect_command_hold(t, u, yl, 1e-4)
     assert hold.sampled is None
@@ -110,7 +111,8 @@ def test_a_lead_beyond_its_uncertainty_is_flagged_never_ok():
     h = Harmonic(1, 0.5, 5.0, 0.0, 0.01, 1.8, 0.08, 1.0, "non_causal", "")
     lag = lag_at_fundamental([h])
     assert lag.quality == "non_causal"
-    assert lag.value is not None and lag.value < 0
+    assert lag.value is not None
+    assert lag.value < 0
 
 
 def test_a_sampled_profile_forced_held_gets_its_harmonic_phases_flagged():
@@ -119,7 +121,7 @@ def test_a_sampled_profile_forced_held_gets_its_harmonic_phases_flagged():
     rate, tau = 100.0, 0.002
     fine = np.arange(0.0, 20.0, FINE_S)
     demand = _profile(fine, 2.0, 5.0, 0.3)
-    y = _servo(fine, demand, tau)
+    y = _servo(demand, tau)
     t, u, yl = _log(fine, demand, y, rate, sampled=True)
     data = MeasuredData(time_s=t, command_deg=u, position_deg=yl, source="forced")
     ra = analyze_record(data, Options(command="held"))
@@ -144,7 +146,8 @@ def test_resampling_a_held_command_does_not_delay_it():
     u = np.where(np.mod(t, 1.0) < 0.5, 1.0, 0.0)
     data = MeasuredData(time_s=t, command_deg=u, position_deg=u.copy())
     out = uniform_record(data)
-    assert "resampled" in out.metadata and "not resampled" not in out.metadata["resampled"]
+    assert "resampled" in out.metadata
+    assert "not resampled" not in out.metadata["resampled"]
     logged = t[np.flatnonzero(np.diff(u)) + 1]
     logged = logged[logged < out.time_s[-1] - 0.02]
     grid = out.time_s[np.flatnonzero(np.diff(out.command_deg)) + 1]

@@ -47,7 +47,8 @@ def test_rate_limited_squares_and_a_sweep_past_the_limit_show_the_plateau():
     swept = slew.measure(ts, u, yl, 3e-4)
     assert swept.source == "plateau"  # no rest between the swings: the straight-move test finds nothing
     assert swept.rate == pytest.approx(90.0, rel=0.02)
-    assert swept.plateau is not None and swept.plateau.below > 0  # the slow swings stay under it
+    assert swept.plateau is not None
+    assert swept.plateau.below > 0
 
 
 @pytest.mark.parametrize("zeta", [0.3, 0.7, 1.0, 2.0])
@@ -80,8 +81,10 @@ def test_both_tools_find_the_rate_limit_at_the_plateau():
     data = MeasuredData(time_s=ts, command_deg=u, position_deg=yl, source="limited", unit="mm")
     ra = analyze_record(data, Options())
     steps = ra.results["steps"]
-    assert steps and all(s.rate_limited for s in steps if abs(s.command_to_deg - s.command_from_deg) > 4.0)
-    assert ra.slew is not None and ra.slew.rate == pytest.approx(75.0, rel=0.05)
+    assert steps
+    assert all(s.rate_limited for s in steps if abs(s.command_to_deg - s.command_from_deg) > 4.0)
+    assert ra.slew is not None
+    assert ra.slew.rate == pytest.approx(75.0, rel=0.05)
     result = identify(data, load_channel("left_wing"), "second_order", escalate=False, discover_terms=False)
     added = {s.effect: s.params for s in result.steps}
     assert "rate_limit" in added

@@ -69,8 +69,10 @@ def test_an_escalation_that_cannot_beat_the_model_before_it_stops_early_and_says
     problem = _problem(hoad3_record(seed=5, duration_s=3.0, **OFF_DECLARED))
     full = fit_physical(problem, "hoad3", beat=1e30)  # within reach: a fit that can pay runs to its end
     stopped = fit_physical(problem, "hoad3", beat=0.1 * problem.n_fit)
-    assert full.stopped == "" and full.starts == 3
+    assert full.stopped == ""
+    assert full.starts == 3
     assert stopped.stopped
     assert "must get under" in stopped.stopped
-    assert stopped.starts == 1 and stopped.sigma == {}
+    assert stopped.starts == 1
+    assert stopped.sigma == {}
     assert stopped.simulations < 0.6 * full.simulations
