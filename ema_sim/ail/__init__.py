@@ -1,4 +1,4 @@
-"""Aircraft-in-the-loop (AIL) harness (issue 7; sections 2.10, 4.1, 4.3): vehicle, flight computer, loop.
+"""Aircraft-in-the-loop (AIL) harness (sections 2.10, 4.1, 4.3): vehicle, flight computer, loop.
 
 A minimal rigid-body vehicle (:mod:`.vehicle`) flown by an attitude-hold autopilot (:mod:`.autopilot`),
 both illustrative (``config/ail_vehicle.yaml``), close the loop through the actuator models and the

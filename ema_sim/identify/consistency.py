@@ -1,6 +1,6 @@
 """Consistency of one actuator identified from several maneuvers: whether its parameters agree.
 
-Issue 13's "consistency": the same actuator identified from different records must give parameters
+"Consistency": the same actuator identified from different records must give parameters
 that agree within their stated uncertainties, or the report must say the record cannot determine
 them. :func:`compare` reads two or more ``ema identify`` reports (:func:`parse_report`) and, for every
 model parameter fitted in at least two of them, gives the inverse-variance weighted mean and its

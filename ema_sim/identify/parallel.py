@@ -8,7 +8,7 @@ one after another. By default the workers are a :class:`distributed.LocalCluster
 :data:`DEFAULT_WORKERS` threads in this process, started in the background when identification begins (in
 half a second): the fits share the record, the runs it keeps and this process's BLAS, and their
 simulations release the GIL, so while one fit solves or judges in Python another's kernels fill the
-cores. Worker processes on two cores ran slower than one process (93.6 s against 85.9 s on issue 27's
+cores. Worker processes on two cores ran slower than one process (93.6 s against 85.9 s on the 30 s HOAD3
 record): each held a copy of the record and its own kernel threads, and they contended for the cores.
 ``scheduler`` sends the fits to a running Dask scheduler instead (``ema identify --scheduler ADDRESS``),
 whose workers load the kernels numba cached on disk (``cache=True``; ``python -m ema_sim.warmup`` compiles
@@ -52,7 +52,7 @@ def one_blas_thread() -> Iterator[None]:
     """Run the block with one BLAS thread: fits whose linear algebra is the same sums on every machine.
 
     The fits' matrices are a record long and a dozen parameters wide, too small for OpenBLAS's threads to pay:
-    idle, they spin for the next call and take the cores from the simulator's threads. Issue 27's record (30 s
+    idle, they spin for the next call and take the cores from the simulator's threads. The escalated HOAD3 record (30 s
     at 1 kHz, ``loada`` declared, escalated) took 80.1 s and 151.7 CPU-s with OpenBLAS's default of one thread
     per core, and 52.0 s and 86.2 CPU-s with one. One thread also makes the result the same to the last bit
     whatever the machine's cores and on any Dask worker (which Dask starts with one BLAS thread).
