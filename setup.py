@@ -29,6 +29,7 @@ setup(
         "matplotlib>=3.8",
         "PyYAML>=6",
         "threadpoolctl>=3",
+        "jsonschema>=4.18",
     ],
     zip_safe=True,
     maintainer="ema_sim maintainers",

@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
+from ema_sim.io.contract import STRICT_ENV
+
 FRAME_S = 0.005
+
+os.environ[STRICT_ENV] = "1"
+"""Every report a test builds (in this process or in a command it starts) is checked against its published
+schema, and a mismatch fails the test (``ema_sim.io.contract.check``)."""
 
 
 SHARED_FIXTURES = {"test_montecarlo": "scheduler", "test_identify_rig": "rig"}

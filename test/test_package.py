@@ -68,7 +68,7 @@ ROSDEP_KEYS = {
     "rosbags": "python3-rosbags-pip", "mcap": "python3-mcap-pip", "typing_extensions": "python3-typing-extensions",
     "distributed": "python3-dask-distributed-pip", "dask": "python3-dask-distributed-pip",  # distributed needs dask
     "pyarrow": "python3-pyarrow-pip", "threadpoolctl": "python3-threadpoolctl-pip",
-    "fmpy": "python3-fmpy-pip", "jsbsim": "python3-jsbsim-pip",
+    "fmpy": "python3-fmpy-pip", "jsbsim": "python3-jsbsim-pip", "jsonschema": "python3-jsonschema",
 }
 """Top-level import → its rosdep key (a new import without one fails the test below)."""
 

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ema_sim import __version__
+from ema_sim.analysis.contract import analyze_schema
 from ema_sim.analysis.estimation.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
 from ema_sim.analysis.formatting.markdown import bullets, image, quality, table
 from ema_sim.analysis.pipeline import spread
@@ -23,6 +24,7 @@ from ema_sim.analysis.section2.base import RecordAnalysis
 from ema_sim.analysis.section2.calibration_fit import TEST as CALIBRATION
 from ema_sim.analysis.section2.calibration_fit import pooled_bounds
 from ema_sim.analysis.section2.hysteresis import RW13_AREA_INLB, RW13_PEAK_IN, hysteretic_damping_constant
+from ema_sim.io.contract import check
 
 __all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "slope_json", "slope_statement", "to_json", "to_markdown"]
 
@@ -143,7 +145,7 @@ def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
         lo = min(min(c.nominal_levels) for c in cals)
         hi = max(max(c.nominal_levels) for c in cals)
         bounds = pooled_bounds([c.error for c in cals], lo, hi)
-    return dict(_clean({
+    doc = dict(_clean({
         "tool": "ema analyze", "version": __version__,
         "records": [record_json(r) for r in records],
         "second_order_spread": spread(fits) if fits else None,
@@ -152,6 +154,8 @@ def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
         "rw13_check": {"area_inlb": RW13_AREA_INLB, "peak_in": RW13_PEAK_IN,
                        "h_lb_per_in": hysteretic_damping_constant(RW13_AREA_INLB, RW13_PEAK_IN)},
     }))
+    check(doc, analyze_schema(), "ema analyze")
+    return doc
 
 
 # ---------------------------------------------------------------------------------------------- Markdown

@@ -17,5 +17,6 @@ COMMANDS: tuple[str, ...] = (
     "ail",
     "montecarlo",
     "export",
+    "schema",
     "listing",
 )

@@ -20,6 +20,7 @@ import numpy as np
 
 from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.estimation.noise import input_independence, whiteness
+from ema_sim.identify.contract import identify_schema
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
@@ -27,6 +28,7 @@ from ema_sim.identify.outcome import AS_DECLARED, Identification, model_name
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stages import guarded
 from ema_sim.identify.trust import assess, reference
+from ema_sim.io.contract import check
 from ema_sim.io.csv import write_csv
 from ema_sim.models import create
 
@@ -315,6 +317,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         if text:
             warnings.append(text)
     out: dict[str, Any] = strict(report)
+    check(out, identify_schema(), "ema identify")
     return out
 
 

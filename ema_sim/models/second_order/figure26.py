@@ -31,7 +31,9 @@ surface (outside the servo loop)
 The integrators (:mod:`.loada`, :mod:`.loac`, :mod:`.rk4`) call these functions: :func:`command_path`
 for stages 2–3, :func:`servo` for stages 5–10, :func:`derivatives` for the whole chain in continuous
 time, :func:`sample` and :func:`write_outputs` for what the outside sees, :func:`history_write` and
-:func:`history_read` for stage 14.
+:func:`history_read` for stage 14 (:mod:`.feedback_delay`); stages 15–17, the surface outside the loop, are in
+:mod:`.surface`. One concept, the servo loop and its whole chain in continuous time, kept in one module of about
+700 lines: its stages are read in the diagram's order, and each is short.
 """
 
 from __future__ import annotations
@@ -44,29 +46,51 @@ import numpy as np
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF
 from ema_sim.models.second_order import stage_set
+from ema_sim.models.second_order.feedback_delay import (
+    HISTORY_SIZE,
+    NEVER_S,
+    history_read,
+    history_spacing_s,
+    history_write,
+)
 from ema_sim.models.second_order.figure21 import load_rate_limits, rate_loop, velocity_command
 from ema_sim.models.second_order.figure29 import free_play_accel
 from ema_sim.models.second_order.params import P, X
+from ema_sim.models.second_order.surface import (
+    compliance_deflection,
+    compliance_time_constant_s,
+    free_play_subsystem,
+    linkage_accel,
+    linkage_damping,
+    linkage_rest,
+    linkage_slope,
+    linkage_spring,
+    linkage_step,
+    linkage_steps,
+    surface_compliance,
+)
 from ema_sim.models.stages import (
-    DEG2RAD,
     FLAG_CURRENT,
     FLAG_FREE_PLAY,
     FLAG_POSITION,
     FLAG_RATE,
     FLAG_THRESHOLD,
-    TIME_EPS_S,
     TWO_PI,
     dead_zone,
     jit,
-    oscillator_step,
     quantize,
 )
 
-HISTORY_SIZE = 1024
-"""Entries of stage 14's history ring: the delay spans at most half of them (:func:`history_spacing_s`)."""
-NEVER_S = -1e30
-"""The time of the history entries trim writes: the held state, forever before the record."""
-
+# The diagram's stages are all named here, those of stages 14-17 from their own modules, so a reader (and the
+# integrators, the C export) finds every stage of figure 26 in one namespace.
+__all__ = [
+    "HISTORY_SIZE", "NEVER_S", "actuator_position", "command_error", "command_path", "compliance_correction",
+    "compliance_deflection", "compliance_gain", "compliance_time_constant_s", "current_limited_drive",
+    "derivatives", "drive_on", "drive_step", "feedback_value", "free_play_subsystem", "history_read",
+    "history_spacing_s", "history_write", "linkage_accel", "linkage_damping", "linkage_rest", "linkage_slope",
+    "linkage_spring", "linkage_step", "linkage_steps", "lvdt", "max_step_s", "sample", "servo", "servo_input",
+    "stages_on", "stages_on_any", "surface_compliance", "trim", "velocity_demand", "write_outputs",
+]
 
 @jit
 def command_error(u: float, kb: float, offset_deg: float) -> float:
@@ -133,59 +157,6 @@ def compliance_correction(u: float, hinge_moment_inlb: float, kcp_per_kinlb: flo
         return u
     aiding = hinge_moment_inlb if u > 0.0 else -hinge_moment_inlb
     return u * (1.0 + kcp_per_kinlb * aiding * 1e-3)
-
-
-@jit
-def compliance_deflection(hinge_moment_inlb: float, deg_per_kinlb: float, knee_inlb: float = math.inf,
-                          stiff_deg_per_kinlb: float = 0.0) -> float:
-    """Stages 12 and 16: deflection with hinge moment (deg), linear up to the knee, stiffer beyond it.
-
-    ``c·|hm|`` up to the knee, then ``c·knee + c_stiff·(|hm| − knee)``, with the sign of hm (the data
-    contract's ``nonlinear_compliance``); an infinite knee is the linear compliance.
-
-    Parameters
-    ----------
-    hinge_moment_inlb : float
-        Hinge moment (in·lb).
-    deg_per_kinlb : float
-        Compliance below the knee (deg per 1000 in·lb).
-    knee_inlb : float
-        Hinge moment where it stiffens (in·lb; inf: linear).
-    stiff_deg_per_kinlb : float
-        Compliance above the knee (deg per 1000 in·lb).
-
-    Returns
-    -------
-    float
-        The deflection (deg).
-    """
-    a = abs(hinge_moment_inlb)
-    d = deg_per_kinlb * a if a <= knee_inlb else deg_per_kinlb * knee_inlb + stiff_deg_per_kinlb * (a - knee_inlb)
-    return math.copysign(d * 1e-3, hinge_moment_inlb) if d != 0.0 else 0.0
-
-
-@jit
-def surface_compliance(p: FloatArray, hinge_moment_inlb: float, on: int = stage_set.ALL) -> float:
-    """Stage 16's static deflection (deg).
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    hinge_moment_inlb : float
-        Hinge moment (in·lb).
-    on : int
-        The stages that may be on (:mod:`.stage_set`).
-
-    Returns
-    -------
-    float
-        The deflection outside the servo loop (deg).
-    """
-    if not on & stage_set.COMPLIANCE:
-        return 0.0
-    return compliance_deflection(hinge_moment_inlb, p[P.compliance_deg_per_kinlb], p[P.compliance_knee_inlb],
-                                 p[P.compliance_stiff_deg_per_kinlb])
 
 
 @jit
@@ -520,220 +491,6 @@ def actuator_position(p: FloatArray, x: float, v: float, on: int = stage_set.ALL
 
 
 @jit
-def compliance_time_constant_s(p: FloatArray) -> float:
-    """Stage 16: linkage stiffness k and hysteretic damping h/ω make the compliance a first-order lag.
-
-    The linkage deflects x = δ·marm (in) under F = hm/marm (lb), so k = F/x = 1000/(C·marm²) lb/in
-    with C in rad per 1000 in·lb; the damper c = h/ω gives τ = c/k. Zero when either is off.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-
-    Returns
-    -------
-    float
-        τ (s); 0 for a compliance without damping.
-    """
-    c = p[P.compliance_deg_per_kinlb]
-    if c <= 0.0 or p[P.hysteresis_h_lb_per_in] <= 0.0:
-        return 0.0
-    k_lb_per_in = 1000.0 / (c * DEG2RAD * p[P.moment_arm_in] * p[P.moment_arm_in])
-    return float(p[P.hysteresis_h_lb_per_in] / (TWO_PI * p[P.hysteresis_freq_hz]) / k_lb_per_in)
-
-
-@jit
-def free_play_subsystem(p: FloatArray) -> bool:
-    """Stage 15 runs as figure 29's own subsystem (not as the dead zone of a linkage mode's spring).
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-
-    Returns
-    -------
-    bool
-        True with free play and no linkage mode.
-    """
-    return bool(p[P.free_play_deg] > 0.0 and p[P.linkage_freq_hz] <= 0.0)
-
-
-@jit
-def linkage_spring(p: FloatArray, e: float) -> tuple[float, int]:
-    """Stage 17's spring, as the static deflection its force balances: stage 16's curve inverted.
-
-    Inside the free play (stage 15) it carries nothing; beyond it, the deflection up to the knee's,
-    then the stiffer segment scaled back to the compliance below the knee (so the linkage frequency
-    is the one below the knee and rises by √(c/c_stiff) above it).
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    e : float
-        The surface's deflection from the actuator (deg).
-
-    Returns
-    -------
-    deflection : float
-        The static deflection the spring's force would hold (deg).
-    piece : int
-        The curve's segment: 0 in the free play, 1 below the knee, 2 above it (:func:`linkage_slope`).
-    """
-    e_dz, side = dead_zone(e, 0.5 * p[P.free_play_deg])
-    if side == 0 and p[P.free_play_deg] > 0.0:
-        return e_dz, 0
-    c = p[P.compliance_deg_per_kinlb]
-    knee = p[P.compliance_knee_inlb]
-    if c <= 0.0 or knee == math.inf:
-        return e_dz, 1
-    a = abs(e_dz)
-    ck = c * knee * 1e-3
-    if a <= ck:
-        return e_dz, 1
-    return math.copysign(ck + c * (a - ck) / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6), e_dz), 2
-
-
-@jit
-def linkage_slope(p: FloatArray, piece: int) -> float:
-    """The slope of :func:`linkage_spring` on one of its segments.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    piece : int
-        0 (free play), 1 (below the knee) or 2 (above it).
-
-    Returns
-    -------
-    float
-        d(deflection)/de.
-    """
-    if piece == 0:
-        return 0.0
-    if piece == 1:
-        return 1.0
-    return float(p[P.compliance_deg_per_kinlb] / max(p[P.compliance_stiff_deg_per_kinlb], 1e-6))
-
-
-@jit
-def linkage_damping(p: FloatArray) -> float:
-    """Stage 17's damping ``2ζω + ω²τh`` (1/s): the damper and any hysteretic damping's viscous equivalent.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-
-    Returns
-    -------
-    float
-        1/s.
-    """
-    w0 = TWO_PI * p[P.linkage_freq_hz]
-    return float(2.0 * p[P.linkage_zeta] * w0 + w0 * w0 * compliance_time_constant_s(p))
-
-
-@jit
-def linkage_accel(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuator_accel: float) -> float:
-    """Stage 17: the surface's acceleration relative to the actuator (°/s²).
-
-    ``ë = ω²·(curve(hm) − spring(e)) − (2ζω + ω²τh)·ė − a_actuator``: the hinge moment loads the
-    spring, the actuator's acceleration shakes the surface, the damper (and any hysteretic damping's
-    viscous equivalent) damps the relative motion.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    y : numpy.ndarray
-        State.
-    hinge_moment_inlb : float
-        Hinge moment (in·lb).
-    actuator_accel : float
-        The actuator's acceleration (°/s²).
-
-    Returns
-    -------
-    float
-        d/dt of the linkage rate (°/s²).
-    """
-    w0 = TWO_PI * p[P.linkage_freq_hz]
-    target = surface_compliance(p, hinge_moment_inlb)
-    spring, _ = linkage_spring(p, y[X.linkage_deg])
-    return float(w0 * w0 * (target - spring) - linkage_damping(p) * y[X.linkage_rate_dps] - actuator_accel)
-
-
-@jit
-def linkage_steps(p: FloatArray, dt: float) -> FloatArray:
-    """Stage 17's exact steps over ``dt``, one row per spring segment: ``(φ00, φ01, φ10, φ11, γ0, k)``.
-
-    On each segment of :func:`linkage_spring` the mode is linear, ``ë = −k·e − c·ė + f`` with
-    ``k = ω²·slope``, so its zero-order-hold step (:func:`~ema_sim.models.stages.oscillator_step`) is
-    exact for the inputs held over the step and stable at any rate; computed once per run.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    dt : float
-        The fixed step (s).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(3, 6)``.
-    """
-    w0 = TWO_PI * p[P.linkage_freq_hz]
-    damping = linkage_damping(p)
-    steps = np.empty((3, 6))
-    for piece in range(3):
-        k = w0 * w0 * linkage_slope(p, piece)
-        steps[piece, 0], steps[piece, 1], steps[piece, 2], steps[piece, 3], steps[piece, 4] = oscillator_step(
-            k, damping, dt)
-        steps[piece, 5] = k
-    return steps
-
-
-@jit
-def linkage_step(p: FloatArray, y: FloatArray, hinge_moment_inlb: float, actuator_accel: float,
-                 steps: FloatArray) -> tuple[float, float]:
-    """Stage 17 over one fixed step: the deflection and its rate after it (deg, °/s).
-
-    The segment the deflection starts on holds for the step, the hinge moment and the actuator's
-    acceleration are held: its affine forcing ``f = ë + k·e + c·ė`` goes through the exact step.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    y : numpy.ndarray
-        State.
-    hinge_moment_inlb : float
-        Hinge moment (in·lb).
-    actuator_accel : float
-        The actuator's acceleration over the step (°/s²).
-    steps : numpy.ndarray
-        :func:`linkage_steps`.
-
-    Returns
-    -------
-    deflection : float
-        deg.
-    rate : float
-        °/s.
-    """
-    e, v = y[X.linkage_deg], y[X.linkage_rate_dps]
-    _, piece = linkage_spring(p, e)
-    s = steps[piece]
-    f = linkage_accel(p, y, hinge_moment_inlb, actuator_accel) + s[5] * e + linkage_damping(p) * v
-    return s[0] * e + s[1] * v + s[4] * f, s[2] * e + s[3] * v + s[1] * f
-
-
-@jit
 def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, dydt: FloatArray,
                 on: int = stage_set.ALL) -> None:
     """Stages 4–17 in continuous time: the state's derivatives into ``dydt`` (position limits are the integrator's).
@@ -810,101 +567,6 @@ def feedback_value(p: FloatArray, y: FloatArray, hinge_moment_inlb: float) -> tu
     if p[P.feedback_lag_hz] > 0.0:
         return y[X.feedback_lag_deg], TWO_PI * p[P.feedback_lag_hz] * (reading - y[X.feedback_lag_deg])
     return reading, y[X.rate_dps]
-
-
-@jit
-def history_spacing_s(p: FloatArray) -> float:
-    """Closest spacing of stage 14's history entries: the delay then spans at most half the ring.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-
-    Returns
-    -------
-    float
-        Seconds.
-    """
-    return float(2.0 * p[P.feedback_delay_s] / HISTORY_SIZE)
-
-
-@jit
-def history_write(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, value: float, rate: float,
-                  force: bool) -> None:
-    """Stage 14: record the reading at ``t`` (at most every :func:`history_spacing_s`, unless ``force``).
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    y : numpy.ndarray
-        State (its history head and last time advance).
-    hist : numpy.ndarray
-        The instance's ring ``(entries, 3)``: time, reading, rate.
-    t : float
-        Now (s).
-    value : float
-        The reading (deg).
-    rate : float
-        Its rate (°/s).
-    force : bool
-        Record even closer than the spacing (an instant a delayed sample will ask for).
-    """
-    if p[P.feedback_delay_s] <= 0.0:
-        return
-    if t <= y[X.history_last_s] + TIME_EPS_S:
-        j = int(y[X.history_head])
-    elif force or t >= y[X.history_last_s] + history_spacing_s(p):
-        j = int(y[X.history_head]) + 1
-        if j >= hist.shape[0]:
-            j = 0
-    else:
-        return
-    hist[j, 0] = t
-    hist[j, 1] = value
-    hist[j, 2] = rate
-    y[X.history_head] = j
-    y[X.history_last_s] = t
-
-
-@jit
-def history_read(y: FloatArray, hist: FloatArray, t: float) -> float:
-    """Stage 14: the reading at ``t`` (in the past), cubic Hermite between the recorded entries.
-
-    Parameters
-    ----------
-    y : numpy.ndarray
-        State (its history head).
-    hist : numpy.ndarray
-        The instance's ring.
-    t : float
-        The instant asked for (s).
-
-    Returns
-    -------
-    float
-        The reading then (deg); the oldest entry's before the ring's start.
-    """
-    size = hist.shape[0]
-    j = int(y[X.history_head])
-    newer = -1
-    for _ in range(size):
-        if hist[j, 0] <= t + TIME_EPS_S:
-            break
-        newer = j
-        j = j - 1 if j > 0 else size - 1
-    else:
-        return float(hist[newer, 1])
-    t0, t1 = hist[j, 0], hist[newer, 0] if newer >= 0 else hist[j, 0]
-    if newer < 0 or abs(t - t0) <= TIME_EPS_S or t1 - t0 <= TIME_EPS_S:
-        return float(hist[j, 1])
-    h = t1 - t0
-    s = (t - t0) / h
-    s2 = s * s
-    s3 = s2 * s
-    return float((2.0 * s3 - 3.0 * s2 + 1.0) * hist[j, 1] + (s3 - 2.0 * s2 + s) * h * hist[j, 2]
-                 + (-2.0 * s3 + 3.0 * s2) * hist[newer, 1] + (s3 - s2) * h * hist[newer, 2])
 
 
 @jit
@@ -1019,25 +681,6 @@ def max_step_s(p: FloatArray) -> float:
     if drive_on(p):  # a first-order loop: RK4 at h·λ = 1 is accurate to 2 % of its (fast) transient
         fastest = max(fastest, 0.25 * TWO_PI * p[P.velocity_loop_hz])
     return float(1.0 / (4.0 * fastest))
-
-
-@jit
-def linkage_rest(p: FloatArray, hinge_moment_inlb: float) -> float:
-    """Stage 17 at rest under a held load: the deflection whose spring balances the compliance's.
-
-    Parameters
-    ----------
-    p : numpy.ndarray
-        Kernel parameters.
-    hinge_moment_inlb : float
-        Hinge moment (in·lb).
-
-    Returns
-    -------
-    float
-        The deflection (deg), pushed across the free play by the load.
-    """
-    return float(surface_compliance(p, hinge_moment_inlb) + 0.5 * p[P.free_play_deg] * np.sign(hinge_moment_inlb))
 
 
 @nb.njit(cache=True)
