@@ -19,7 +19,8 @@ A set may carry data that are not parameters (a channel's model-family sections)
 declared with :func:`carried`, loaded as given and listed nowhere.
 
 Numba's on-disk cache does not follow changes in other modules: after changing a layout, remove the
-``__pycache__`` directories so every kernel recompiles against it.
+``__pycache__`` directories so every kernel recompiles against it. One concept, the declaration and what is read
+from it, in one module of about 720 lines: the readers above must agree with each other, so they sit together.
 """
 
 from __future__ import annotations

@@ -19,6 +19,9 @@ Safeguards (the contract's rules for every report):
   fails the acceptance criteria, or whose final value fails its physical check, has collapsed to
   "off" and is taken out again (the model refitted without it), with the reason;
 * no accepted effect and no refit leaves an output worse than the baseline or the reference leave it.
+
+One concept, the loop and its safeguards, in one module of about 750 lines: each safeguard is a step of the loop
+and reads the loop's state.
 """
 
 from __future__ import annotations

@@ -31,7 +31,8 @@ output would need 90 % of that slew or more is rate saturation, not the small-si
 (quality ``saturated``), and the second-order fit stops below the first saturated cycle.
 
 :class:`FrequencyTest` runs on sweeps, Schroeder sweeps and broadband commands, recognised by
-:func:`read_sweep`, :func:`read_schroeder` and :func:`read_broadband`.
+:func:`read_sweep`, :func:`read_schroeder` and :func:`read_broadband`. One test of section 2 in one module
+of about 720 lines, as its siblings are: its readers, its slew check and its report section belong together.
 """
 
 from __future__ import annotations

@@ -34,7 +34,8 @@ into a numbered segment, the element evaluated on a given segment, and the dista
 segment's boundaries (the continuous model's event guards). :func:`servo_drive` chains stages 4–7
 once: a fixed-step kernel lets it classify every segment, the continuous model (:mod:`.hoac1`) holds
 them between located events (every branch is a smooth function extended past its boundary), so
-Dormand–Prince never steps across a corner.
+Dormand–Prince never steps across a corner. One diagram in one module of about 720 lines: its stages
+are read in the figure's order, each with its segments and guards beside it.
 """
 
 from __future__ import annotations
