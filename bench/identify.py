@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from ema_sim.benchmark import Benchmark, Result, jsbsim_seconds
 from ema_sim.config import load_channel
 from ema_sim.identify.identification import identify
@@ -58,7 +60,7 @@ def identify_90s_hoad3_declared() -> Result:
 
 
 def _escalated_30s(workers: int) -> Result:
-    """HOAD3 data, 30 s at 1 kHz (seed 9), ``loada`` declared, escalated to HOAD3's physics (issue 27's case)."""
+    """HOAD3 data, 30 s at 1 kHz (seed 9), ``loada`` declared, escalated to HOAD3's physics."""
     data = hoad3_record(seed=9, duration_s=30.0)
     identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"), "loada")  # compile outside the clock
     t0 = time.perf_counter()
@@ -75,16 +77,43 @@ def _escalated_30s(workers: int) -> Result:
 
 
 def identify_30s_escalated_1_worker() -> Result:
-    """Issue 27's case with every fit in this process (numba's threads for a batch's instances)."""
+    """The escalated 30 s record with every fit in this process (numba's threads for a batch's instances)."""
     return _escalated_30s(1)
 
 
 def identify_30s_escalated_2_workers() -> Result:
-    """Issue 27's case with a round's candidate fits and the physics' starts on the local Dask cluster's 2 threads."""
+    """The escalated 30 s record, a round's candidate fits and the physics' starts on the local cluster's 2 threads."""
     return _escalated_30s(2)
 
 
-BENCHMARKS = [Benchmark("identify_90s_record_1khz", "≤ 8.7 JSBSim runs", identify_90s),
+GROWTH_SPANS_S = (15.0, 30.0, 92.0, 180.0)
+"""The record lengths the cost's growth is measured over."""
+
+
+def identify_cost_growth() -> Result:
+    """The same actuator and hidden effects identified from records of 15, 30, 92 and 180 s at 1 kHz.
+
+    The figure is the exponent of the time's growth with the record's length (a log-log fit over the four):
+    1 is a cost in proportion to the record, under 1 a cost that grows slower than it.
+    """
+    effects = {"time_delay": 0.008, "compliance": 0.3, "free_play": 0.2}
+    identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"))  # compile outside the clock
+    walls, notes = [], []
+    for span in GROWTH_SPANS_S:
+        data = make_record(effects, seed=7, duration_s=span)
+        t0 = time.perf_counter()
+        result = identify(data, load_channel("left_wing"))
+        wall = time.perf_counter() - t0
+        walls.append(wall)
+        found = ",".join(sorted(s.effect for s in result.steps)) or "nothing"
+        notes.append(f"{span:g} s: {wall:.1f} s = {wall / jsbsim_seconds(span, 10_000.0):.2f} JSBSim runs, "
+                     f"{result.problem.simulations} sims, {found}")
+    slope = float(np.polyfit(np.log(GROWTH_SPANS_S), np.log(walls), 1)[0])
+    return Result(slope, "exponent", slope <= 1.0, "; ".join(notes))
+
+
+BENCHMARKS = [Benchmark("identify_cost_growth", "exponent ≤ 1 over 15-180 s", identify_cost_growth),
+              Benchmark("identify_90s_record_1khz", "≤ 8.7 JSBSim runs", identify_90s),
               Benchmark("identify_90s_hoad3_declared", "≤ 43 JSBSim runs", identify_90s_hoad3_declared),
               Benchmark("identify_30s_escalated_1_worker", "≤ 26 JSBSim runs", identify_30s_escalated_1_worker),
               Benchmark("identify_30s_escalated_2_workers", "≤ 26 JSBSim runs", identify_30s_escalated_2_workers)]

@@ -1,4 +1,4 @@
-"""The machine's real-time floor, beside which the node suite's real-time figures are read (issue 4).
+"""The machine's real-time floor, beside which the node suite's real-time figures are read.
 
 ``rtfloor.c`` (compiled here with the system's C compiler) keeps the suite's frame timing: 200 Hz
 frames, 0.5 ms of CPU work each (the suite's median command-to-feedback window), SCHED_FIFO 20, memory

@@ -1,4 +1,4 @@
-"""The middleware's floor under the ``processes`` layout (issue 25): its message pattern, and nothing else.
+"""The middleware's floor under the ``processes`` layout: its message pattern, and nothing else.
 
 Seven bare rclpy processes (EventsExecutor, raw CDR, the contract's QoS) exchange exactly the messages of
 the ``processes`` layout at 200 Hz, five channels: the FMU publishes the hinge moment and the command and

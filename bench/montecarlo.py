@@ -1,4 +1,4 @@
-"""Speed and memory of Monte Carlo campaigns (issue 16): LOADA by the ten thousand, HOAD3 batches, scaling, memory.
+"""Speed and memory of Monte Carlo campaigns: LOADA by the ten thousand, HOAD3 batches, scaling, memory.
 
 Every campaign here is a real ``ema montecarlo`` run on a local Dask cluster (cluster start included in
 the wall time); the HOAD3 batch figure is one compiled call in this process. ``EMA_BENCH_MC_RUNS``

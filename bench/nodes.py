@@ -1,13 +1,13 @@
-"""Speed of the ROS 2 node suite (issue 4): lockstep real-time factor, real-time latency, the executor.
+"""Speed of the ROS 2 node suite: lockstep real-time factor, real-time latency, the executor.
 
-Parametrised by model: ``EMA_BENCH_MODEL`` (default ``hoad3``, the issue's) and by duration:
-``EMA_BENCH_REALTIME_S`` (default 600 s, the issue's ten minutes) and ``EMA_BENCH_LOCKSTEP_S`` (default
+Parametrised by model: ``EMA_BENCH_MODEL`` (default ``hoad3``) and by duration:
+``EMA_BENCH_REALTIME_S`` (default 600 s, ten minutes) and ``EMA_BENCH_LOCKSTEP_S`` (default
 30 s of simulated time); ``EMA_BENCH_SHORT=1`` makes them 45 s and 10 s (each run then takes about a
 minute). Each run is the whole suite on a ROS domain of its own: five EMAC channels, the AIL test
 environment, the maneuver node recording the bag, and under lockstep the clock, hosted as ``ema launch``
 hosts them by default (``single``: one process, the EMAC box), the EMACs, the test environment and the
 clock composed with the maneuver node in a process of its own (``container``), and one process per node
-with one EMAC node per channel (``processes``, issue 25's target: < 0.1 % of frames missed and at most
+with one EMAC node per channel (``processes``, its target: < 0.1 % of frames missed and at most
 60 % CPU, the processes' CPU time over the run's wall time, of one core, at 200 Hz on two cores). The
 ``_fifo`` runs use the real-time set-up of :mod:`ema_sim.nodes.realtime` (``--rt-priority 20``): SCHED_FIFO,
 memory locked, and idle CPUs that poll instead of halting (their time is the idle task's, not counted in

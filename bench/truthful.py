@@ -3,7 +3,7 @@
 The records come from ``test/heldout_rigs.py`` (a plant of its own: FOC current loop, speed and position
 loops with limits, ball screw or gearbox, Coulomb/Stribeck friction, backlash, a logger at 70-250 Hz with
 integer-ms stamps). Each record is run through both tools; every figure is then checked against the truth
-of the fine-step simulation and against what a few lines of numpy on the raw record show (issue 37):
+of the fine-step simulation and against what a few lines of numpy on the raw record show:
 
 - ``exit``       exit status 0 and strict JSON (no NaN/Infinity);
 - ``causal``     no phase lead / negative delay beyond its stated uncertainty without a flag beside it that
@@ -225,7 +225,7 @@ def res(status: str, why: str = "") -> dict[str, str]:
 
 LEAD_WORDS = re.compile(r"\blead|caus|negative delay|ahead of|before its command|cannot lead|never lead", re.I)
 CAUSE_WORDS = re.compile(r"sampl|\bheld\b|logg|resampl|filtered|stamp|timing|skew", re.I)
-"""A flag on a lead must give its likely cause (issue 37): the logging, a resampling, a filtered demand."""
+"""A flag on a lead must give its likely cause: the logging, a resampling, a filtered demand."""
 
 
 # --------------------------------------------------------------------------------------- the checks

@@ -13,7 +13,7 @@ from importlib import import_module
 from typing import NoReturn
 
 from ema_sim import __version__
-from ema_sim.commands import COMMANDS
+from ema_sim.commands import COMMANDS, SUBCOMMANDS
 from ema_sim.errors import EmaError
 
 
@@ -25,15 +25,28 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``ema`` parser with every subcommand."""
+def _chosen(argv: Sequence[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word that is not an option), None when it names none we know."""
+    word = next((a for a in argv if not a.startswith("-")), None)
+    return word if word in SUBCOMMANDS else None
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``ema`` parser: with ``argv`` naming a subcommand, that command's module only, else every one.
+
+    Parameters
+    ----------
+    argv : Sequence[str], optional
+        The arguments after ``ema``; None for the parser of every subcommand (``ema --help``).
+    """
     parser = _Parser(
         prog="ema", description="X-43A electromechanical actuator emulation (NASA/TM-2008-214637)."
     )
     parser.add_argument("--version", action="version", version=f"ema_sim {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
+    chosen = _chosen(argv) if argv is not None else None
+    for name in COMMANDS if chosen is None else (SUBCOMMANDS[chosen],):
         import_module(f"ema_sim.commands.{name}").register(sub)
     return parser
 
@@ -51,7 +64,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     int
         The exit status: 0 on success, 2 for a user error (one line on stderr), 130 when interrupted.
     """
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")

@@ -1,11 +1,14 @@
+import argparse
 import json
 import subprocess
 import sys
+from importlib import import_module
 
 import numpy as np
 import pytest
 
 from ema_sim.cli import main
+from ema_sim.commands import COMMANDS, SUBCOMMANDS
 from ema_sim.io.csv import read_csv
 
 
@@ -69,3 +72,27 @@ def test_compare_prints_table6_and_writes_json(tmp_path, capsys):
 def test_console_script_is_installed():
     res = subprocess.run([sys.executable, "-m", "ema_sim.cli", "models"], capture_output=True, text=True, check=True)
     assert "loada" in res.stdout
+
+
+def test_every_subcommand_is_mapped_to_the_module_that_registers_it():
+    registered = {}
+    for name in COMMANDS:
+        sub = argparse.ArgumentParser().add_subparsers()
+        import_module(f"ema_sim.commands.{name}").register(sub)
+        registered.update(dict.fromkeys(sub.choices, name))
+    assert registered == SUBCOMMANDS
+
+
+def test_a_command_imports_its_own_module_and_no_other_command():
+    code = ("import sys; from ema_sim.cli import main; main(['schema', 'analyze']); "
+            "print(sorted(m for m in sys.modules if m.startswith('ema_sim.commands.')), file=sys.stderr)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == "['ema_sim.commands.common', 'ema_sim.commands.schema']"
+
+
+def test_ema_help_lists_every_subcommand():
+    done = subprocess.run([sys.executable, "-m", "ema_sim.cli", "--help"], capture_output=True, text=True,
+                          check=False)
+    assert done.returncode == 0, done.stderr
+    assert all(name in done.stdout for name in SUBCOMMANDS)
