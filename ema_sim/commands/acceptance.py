@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from ema_sim.analysis.studies.acceptance import acceptance, format_acceptance
 from ema_sim.commands.common import Subparsers
 
 
@@ -22,8 +23,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 when every figure meets its requirement, 1 otherwise.
     """
-    from ema_sim.analysis.studies.acceptance import acceptance, format_acceptance  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     figures = acceptance(args.model, args.channel)
     print(f"{args.model}, {args.channel}: table 1 and table A2")
     print(format_acceptance(figures))

@@ -6,9 +6,14 @@ import argparse
 import json
 from pathlib import Path
 
+from ema_sim.ail import study
+from ema_sim.ail.loop import AilOptions, run_ail
+from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure, vehicle_cycle
 from ema_sim.ail.params import load_ail_config
+from ema_sim.analysis.section2.dither import DETECT_DB
 from ema_sim.commands.common import Subparsers
 from ema_sim.errors import EmaError
+from ema_sim.io.csv import write_csv
 from ema_sim.progress import ProgressBar
 
 MEASURED_STATES = (("q_dps", "pitch rate"), ("p_dps", "roll rate"), ("alpha_deg", "angle of attack"))
@@ -33,10 +38,6 @@ def run(args: argparse.Namespace) -> int:
     """
     if args.study:
         return _study(args)
-    from ema_sim.ail.loop import AilOptions, run_ail  # noqa: PLC0415 - keep `ema --help` fast
-    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure, vehicle_cycle  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.analysis.section2.dither import DETECT_DB  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.io.csv import write_csv  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     cfg = load_ail_config(args.vehicle_config)
     setup = cfg.setup(args.profile, aero_input=args.aero_input, surface_load=args.surface_load,
@@ -92,8 +93,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _study(args: argparse.Namespace) -> int:
     """Section 4.3's table: every case over several seeds (``ema_sim.ail.study``)."""
-    from ema_sim.ail import study  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     try:
         seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     except ValueError:

@@ -5,12 +5,11 @@ from __future__ import annotations
 import argparse
 
 from ema_sim.commands.common import Subparsers
+from ema_sim.io.bag import reindex_bag
 
 
 def _reindex(args: argparse.Namespace) -> int:
     """Rebuild the index, summary, footer and ``metadata.yaml`` of each bag; print what was recovered."""
-    from ema_sim.io.bag import reindex_bag  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     for path in args.bags:
         report = reindex_bag(path, keep_original=not args.no_backup)
         cut = (f"; {report.partial_chunk_messages} message(s) from the chunk cut short, "

@@ -7,6 +7,7 @@ import datetime
 import json
 from pathlib import Path
 
+from ema_sim.benchmark import discover, figures_page, figures_path, record, recorded, recorded_entries
 from ema_sim.commands.common import Subparsers
 
 
@@ -23,15 +24,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0, or 1 when a benchmark misses its target.
     """
-    from ema_sim.benchmark import (  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-        discover,
-        figures_page,
-        figures_path,
-        record,
-        recorded,
-        recorded_entries,
-    )
-
     before = recorded()
     results: list[dict[str, object]] = []
     figures: dict[str, dict[str, object]] = {}

@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from ema_sim.analysis.studies import model_error
+from ema_sim.analysis.studies.model_error import TABLE6_CANDIDATES, TABLE6_MANEUVER
 from ema_sim.commands.common import Subparsers, add_model_args, parse_overrides
 from ema_sim.errors import SpecError
 from ema_sim.signals import parse_load, parse_maneuver
@@ -24,10 +26,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
-    from ema_sim.analysis.studies import (  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-        model_error,
-    )
-
     candidates: list[tuple[str, float | None]] = []
     for item in args.models.split(","):
         name, at, rate = item.strip().partition("@")
@@ -55,8 +53,6 @@ def register(sub: Subparsers) -> None:
     sub : Subparsers
         ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
     """
-    from ema_sim.analysis.studies.model_error import TABLE6_CANDIDATES, TABLE6_MANEUVER  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     p = sub.add_parser("compare", help="error of discrete models against a reference (table 6)",
                        description="Mean, spread and maximum |error| of each model against the reference.")
     p.add_argument("--reference", default="loac")

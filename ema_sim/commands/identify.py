@@ -7,8 +7,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ema_sim import io as ema_io
+from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.commands.common import Subparsers, add_data_args, check_channel, parse_overrides, rig_format
 from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.identify.declared import DECLARED
+from ema_sim.identify.identification import identify
+from ema_sim.identify.record import prepare
+from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals
 
 if TYPE_CHECKING:
     from ema_sim.io.csv import MeasuredData, RigFormat
@@ -31,8 +37,6 @@ def load_measured(path: Path, channel: str | None, rig: RigFormat | None = None)
     MeasuredData
         The record.
     """
-    from ema_sim import io as ema_io  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     return ema_io.load_data(path, channel=channel, rig=rig)
 
 
@@ -49,12 +53,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
-    from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.identify.identification import identify  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.identify.record import prepare  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     check_channel(args.channel)
     if args.workers < 0:
         raise EmaError(f"--workers must be 0 or more, got {args.workers}")
@@ -87,8 +85,6 @@ def register(sub: Subparsers) -> None:
     sub : Subparsers
         ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
     """
-    from ema_sim.identify.declared import DECLARED  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     p = sub.add_parser(
         "identify", help="fit a model to measured data and add the effects it lacks",
         description="Output-error fit of a declared model, then stepwise addition of the vocabulary effects "

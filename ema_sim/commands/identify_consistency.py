@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 
 from ema_sim.commands.common import Subparsers
+from ema_sim.identify.consistency import compare, format_table, read_reports
+from ema_sim.identify.report import write_json
 
 
 def run(args: argparse.Namespace) -> int:
@@ -21,9 +23,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0, even when parameters disagree (the table says so).
     """
-    from ema_sim.identify.consistency import compare, format_table, read_reports  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.identify.report import write_json  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     result = compare(read_reports(args.reports), sigma=args.sigma)
     print(format_table(result))
     if args.json:

@@ -10,14 +10,18 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
+from ema_sim.ail.bag import run_from_bag
+from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure
 from ema_sim.ail.params import load_ail_config
 from ema_sim.commands.common import Subparsers
+from ema_sim.emac.failures import failure_help
+from ema_sim.io.bag import bag_info
 from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS, RunDescription
 from ema_sim.signals.plans import test_help
+from ema_sim.suite import Suite
 
 if TYPE_CHECKING:
     from ema_sim.io.bag.reader import BagInfo
-    from ema_sim.suite import Suite
 
 
 def _config(args: argparse.Namespace) -> tuple[RunDescription, str, str, float]:
@@ -47,9 +51,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0, or 130 when interrupted (the bag is closed either way).
     """
-    from ema_sim.io.bag import bag_info  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.suite import Suite  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     cfg, test, what, duration = _config(args)
     bag = cfg.bag_dir
     suite = Suite(cfg)
@@ -94,9 +95,6 @@ def _report(suite: Suite, bag: Path, bag_info: Callable[[Path], BagInfo]) -> Non
 
 def _report_dither(bag: Path) -> None:
     """Each surface's limit cycle in the recorded run, as ``ema ail`` prints it."""
-    from ema_sim.ail.bag import run_from_bag  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-    from ema_sim.ail.measure import DITHER_MIN_PP_DEG, measure  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     run = run_from_bag(bag)
     settle = load_ail_config().settle_s
     if run.time_s[-1] < settle + 4.0:
@@ -162,8 +160,6 @@ def register(sub: Subparsers) -> None:
 
 
 def _tests(args: argparse.Namespace) -> int:  # noqa: ARG001
-    from ema_sim.emac.failures import failure_help  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     print("tests (--test name[:field=value,...]):")
     print(test_help())
     print("\nfailures (std_msgs/String on /ema/emac/<channel>/failure, or the emac.failure parameter):")

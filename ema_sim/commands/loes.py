@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from ema_sim.analysis.studies.loes import fit_loes, write_loes
 from ema_sim.commands.common import Subparsers, add_model_args, parse_overrides
 
 
@@ -22,8 +23,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
-    from ema_sim.analysis.studies.loes import fit_loes, write_loes  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     fit = fit_loes(args.channel, None, None, load_inlb=args.load_inlb, **parse_overrides(args.overrides))
     c = fit.coefficients
     print(f"LOES of HOAD3, {args.channel}: wn {c['wn_rad_s']:.4g} rad/s, zeta {c['zeta']:.4g}, "

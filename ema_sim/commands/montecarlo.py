@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from ema_sim.commands.common import Subparsers, check_channel
+from ema_sim.montecarlo import load_campaign, run_campaign
+from ema_sim.montecarlo.builtin import BUILTIN
 from ema_sim.progress import ProgressBar
 
 
@@ -21,8 +23,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
-    from ema_sim.montecarlo import load_campaign, run_campaign  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     check_channel(args.channel)
     campaign = load_campaign(args.campaign, channel=args.channel, analysis=args.analysis or ())
     bar = ProgressBar(f"{campaign.name} {args.runs} runs", delay_s=0.0 if args.progress else 2.0)
@@ -47,8 +47,6 @@ def register(sub: Subparsers) -> None:
     sub : Subparsers
         ``ema``'s subcommands (:func:`ema_sim.cli.build_parser`).
     """
-    from ema_sim.montecarlo.builtin import BUILTIN  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
-
     p = sub.add_parser("montecarlo", help="a Monte Carlo campaign on Dask (local cluster, or --scheduler)",
                        description="Run a campaign: a built-in one (" + ", ".join(BUILTIN) + ") or a YAML file.")
     p.add_argument("campaign", help="built-in campaign name or campaign YAML file")
