@@ -24,7 +24,7 @@ quiet:
   floor times the output's gain over the command there), against the excitation's frequency there
   (``rms(rate) / (2π·rms)`` of the command: a sine's frequency). A floor that rises with the frequency
   (rank correlation :data:`GROWTH_RANK` or more, the top third of the windows :data:`GROWTH_FACTOR` times
-  the bottom third and over the rests' floor) is motion's (a screw's rolling, friction, a rough track),
+  the bottom third and :data:`GROWTH_OVER_REST` times the rests' floor) is motion's (a screw's rolling, friction, a rough track),
   not the sensor's noise.
 
 :func:`ema_sim.analysis.estimation.noise.with_rests` turns this into the output's noise floor: the rests'
@@ -74,8 +74,10 @@ GROWTH_SPAN = 3.0
 """The windows' excitation frequencies must span this factor for a trend with frequency to be seen."""
 GROWTH_RANK = 0.8
 """Spearman rank correlation of the windows' floor with their frequency that makes a trend."""
-GROWTH_FACTOR = 2.0
-"""The top third of the windows (by frequency) over the bottom third, and over the rests' floor."""
+GROWTH_FACTOR = 1.5
+"""The top third of the windows (by frequency) over the bottom third."""
+GROWTH_OVER_REST = 2.0
+"""The top third of the windows over the rests' floor."""
 
 
 def white_floor(d4: FloatArray) -> float:
@@ -448,7 +450,7 @@ def floor_growth(time_s: FloatArray, command: FloatArray, y: FloatArray, runs: l
     low, high = order[:third], order[-third:]
     lo, hi = float(np.median(fl[low])), float(np.median(fl[high]))
     rank = _rank(fa, fl)
-    if rank < GROWTH_RANK or hi < GROWTH_FACTOR * lo or (rest_floor is not None and hi < GROWTH_FACTOR * rest_floor):
+    if rank < GROWTH_RANK or hi < GROWTH_FACTOR * lo or (rest_floor is not None and hi < GROWTH_OVER_REST * rest_floor):
         return None
     return Growth(tuple(freqs), tuple(floors), rank, lo, hi, float(np.median(fa[low])), float(np.median(fa[high])))
 
