@@ -24,8 +24,8 @@ quiet:
   floor times the output's gain over the command there), against the excitation's frequency there
   (``rms(rate) / (2π·rms)`` of the command: a sine's frequency). A floor that rises with the frequency
   (rank correlation :data:`GROWTH_RANK` or more, the top third of the windows :data:`GROWTH_FACTOR` times
-  the bottom third and :data:`GROWTH_OVER_REST` times the rests' floor) is motion's (a screw's rolling, friction, a rough track),
-  not the sensor's noise.
+  the bottom third and :data:`GROWTH_OVER_REST` times the rests' floor) is motion's (a screw's rolling,
+  friction, a rough track), not the sensor's noise.
 
 :func:`ema_sim.analysis.estimation.noise.with_rests` turns this into the output's noise floor: the rests'
 floor where the record's own estimate is above it by :data:`REST_EXCESS` (the rest of it is motion's), the
@@ -81,7 +81,18 @@ GROWTH_OVER_REST = 2.0
 
 
 def white_floor(d4: FloatArray) -> float:
-    """White-noise standard deviation from fourth differences (MAD, ``Var Δ⁴ = 70σ²``); 0 for too few."""
+    """White-noise standard deviation from fourth differences (MAD, ``Var Δ⁴ = 70σ²``); 0 for too few.
+
+    Parameters
+    ----------
+    d4 : numpy.ndarray
+        The fourth differences (of one stretch, or several pooled).
+
+    Returns
+    -------
+    float
+        The standard deviation.
+    """
     if d4.size < 6:
         return 0.0
     return float(MAD_TO_SIGMA * np.median(np.abs(d4 - np.median(d4))) / math.sqrt(70.0))
@@ -155,7 +166,20 @@ class LimitCycle:
         return self.current != "quiet"
 
     def statement(self, output: str, unit: str) -> str:
-        """The finding in one sentence."""
+        """The finding in one sentence.
+
+        Parameters
+        ----------
+        output : str
+            The output's name as the report shows it.
+        unit : str
+            The record's unit (deg, mm, in).
+
+        Returns
+        -------
+        str
+            The sentence.
+        """
         u = "°" if unit == "deg" else f" {unit}"
         fig = (f"{self.freq_hz:.3g} Hz, ±{self.amplitude:.2g}{u} (rms {self.rms:.2g}{u}) in {self.rests} of "
                f"{self.of} rests")
@@ -201,7 +225,22 @@ class Growth:
     high_hz: float
 
     def statement(self, output: str, unit: str, rest_floor: float | None) -> str:
-        """The finding in one sentence."""
+        """The finding in one sentence.
+
+        Parameters
+        ----------
+        output : str
+            The output's name as the report shows it.
+        unit : str
+            The record's unit (deg, mm, in).
+        rest_floor : float or None
+            The quiet rests' floor, said beside the growth.
+
+        Returns
+        -------
+        str
+            The sentence.
+        """
         u = "°" if unit == "deg" else f" {unit}"
         rest = f"; at rest it is {rest_floor:.2g}{u}" if rest_floor is not None else ""
         return (f"{output}'s floor grows with the excitation's frequency, from {self.low:.2g}{u} at "
@@ -370,7 +409,20 @@ def settled_rests(time_s: FloatArray, command: FloatArray, y: FloatArray, curren
 
 
 def shared_line(rests: list[Rest], current_logged: bool) -> LimitCycle | None:
-    """The line at least half the rests agree on (module docstring), or None."""
+    """The line at least half the rests agree on (module docstring), or None.
+
+    Parameters
+    ----------
+    rests : list of Rest
+        The settled rests (:func:`settled_rests`).
+    current_logged : bool
+        Whether the record has the drive's current.
+
+    Returns
+    -------
+    LimitCycle or None
+        The shared line, hunting or not.
+    """
     lined = [r for r in rests if r.line_hz is not None]
     if not lined or 2 * len(lined) < len(rests):
         return None
