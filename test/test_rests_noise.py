@@ -8,6 +8,8 @@ does: jittered instants, integer-millisecond stamps, counts printed to the logge
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,7 +18,7 @@ from ema_sim.analysis.estimation import grid, rests
 from ema_sim.analysis.estimation.noise import output_noise, with_rests
 from ema_sim.analysis.pipeline import analyze_record, measure_outputs
 from ema_sim.config import load_channel
-from ema_sim.identify.diagnosis import OutputDiagnosis, _floor_caveat
+from ema_sim.identify.diagnosis import OutputDiagnosis, _floor_caveat, _hunting_rings
 from ema_sim.identify.record import prepare
 from ema_sim.io.csv import MeasuredData
 
@@ -153,6 +155,10 @@ def test_when_every_rest_hunts_the_floor_is_an_upper_bound_and_identify_never_sa
     assert "limit cycle" in sentence
     plain = OutputDiagnosis("position_deg", 0.98 * nf.sigma, nf.sigma, True)
     assert "nothing left to explain" in plain.sentence("mm", 50.0, 5.0)  # the caveat is what changes it
+    ringing = OutputDiagnosis("position_deg", 20 * nf.sigma, nf.sigma, False, line_hz=37.5)
+    (said_ring,) = _hunting_rings(SimpleNamespace(noise={"position_deg": nf}), [ringing])
+    assert "the limit cycle, not a mode" in said_ring
+    assert _hunting_rings(SimpleNamespace(noise={"position_deg": nf}), [replace(ringing, line_hz=12.0)]) == []
 
 
 def test_identify_warns_of_the_limit_cycle_before_it_fits():

@@ -610,6 +610,18 @@ def _floor_caveat(nf: NoiseFloor | None, output: str, unit: str) -> str:
     return "; ".join(bits)
 
 
+def _hunting_rings(p: Problem, left: list[OutputDiagnosis]) -> list[str]:
+    """A ring left at the frequency an output hunts at at rest: the limit cycle, not a mode (one line each)."""
+    out = []
+    for o, ring in [(d.output, d.line_hz) for d in left if d.line_hz is not None]:
+        lc = r.limit_cycle if (r := p.noise[o].rests if p.noise else None) is not None else None
+        if lc is not None and abs(lc.freq_hz - ring) <= MODE_MATCH * ring:
+            out.append(f"{o.removesuffix('_deg')} rings at {ring:.3g} Hz, the frequency it hunts at at rest "
+                       f"({lc.freq_hz:.3g} Hz, ±{lc.amplitude:.2g}): the limit cycle, not a mode; no effect of the "
+                       "vocabulary models it")
+    return out
+
+
 def diagnose(result: Identification) -> Diagnosis:
     """The residual diagnosis of an identification (module docstring).
 
@@ -662,7 +674,7 @@ def diagnose(result: Identification) -> Diagnosis:
     left = [d for d in outputs.values() if d.structured]
     if left:
         text.append(_what_is_left(result))
-    for line in _what_the_structure_means(result, left):
+    for line in [*_what_the_structure_means(result, left), *_hunting_rings(p, left)]:
         text.append(line)
         warnings.append(line)
     rings = [(d.output, d.line_hz) for d in left if d.line_hz is not None]
