@@ -7,6 +7,7 @@ does: jittered instants, integer-millisecond stamps, counts printed to the logge
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 from types import SimpleNamespace
@@ -16,7 +17,8 @@ import pytest
 
 from ema_sim.analysis.estimation import grid, rests
 from ema_sim.analysis.estimation.noise import output_noise, with_rests
-from ema_sim.analysis.pipeline import analyze_record, measure_outputs
+from ema_sim.analysis.pipeline import measure_outputs
+from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import OutputDiagnosis, _floor_caveat, _hunting_rings
 from ema_sim.identify.record import prepare
@@ -169,14 +171,24 @@ def test_identify_warns_of_the_limit_cycle_before_it_fits():
     assert "Hz" in hunting[0]
 
 
-def test_analyze_names_the_limit_cycle_and_reads_its_floor_at_rest():
+def test_analyze_names_the_limit_cycle_and_reads_its_floor_at_rest(tmp_path, capsys):
     d = hunting_record(8, quiet_start=True)
-    ra = analyze_record(d)
-    named = [n for n in ra.notes if "limit cycle" in n]
-    assert len(named) == 1
-    assert "37" in named[0]
-    assert ra.noise["position_deg"].basis == "rests"
-    assert ra.noise_deg["position_deg"] < 0.001
+    csv = tmp_path / "hunting.csv"
+    rows = zip(d.time_s, d.command_deg, d.position_deg, d.current_a, strict=True)
+    csv.write_text("time_s,command_mm,position_mm,current_a\n" + "".join(
+        f"{t:.3f},{u:.3f},{y:.3f},{i:.2f}\n" for t, u, y, i in rows), encoding="utf-8")
+    out = tmp_path / "analyze.json"
+    assert main(["analyze", str(csv), "--columns", "command_mm=command_mm,position_mm=position_mm",
+                 "--json", str(out)]) == 0
+    console = [line for line in capsys.readouterr().out.splitlines() if "limit cycle" in line]
+    assert len(console) == 1
+    assert "37 Hz" in console[0]
+    (rec,) = json.loads(out.read_text(encoding="utf-8"))["records"]
+    assert any("limit cycle" in n for n in rec["notes"])
+    noise = rec["noise"]["position_deg"]
+    assert noise["basis"] == "rests"
+    assert noise["rests"]["line_at_rest"]["current"] == "swings"
+    assert noise["sigma"] < 0.001
 
 
 def test_a_floor_that_grows_with_the_sweep_is_said_not_noise_and_the_floor_is_the_rests():
