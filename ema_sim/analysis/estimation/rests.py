@@ -322,12 +322,13 @@ def still_runs(time_s: FloatArray, command: FloatArray, min_s: float = REST_MIN_
         return []
     scale = max(1.0, float(np.max(np.abs(u))))
     tol = max(1e-9 * scale, 4.0 * white_floor(np.diff(u, 4)))
+    values, stamps = u.tolist(), np.asarray(time_s, dtype=float).tolist()  # plain floats: a loop over samples
     out, i, n = [], 0, u.size
     while i < n:
         j = i + 1
-        while j < n and abs(u[j] - u[i]) <= tol:
+        while j < n and abs(values[j] - values[i]) <= tol:
             j += 1
-        if time_s[j - 1] - time_s[i] >= min_s:
+        if stamps[j - 1] - stamps[i] >= min_s:
             out.append((i, j))
         i = j
     return out
@@ -370,7 +371,7 @@ def _shares_line(c: FloatArray, dt: float, hz: float) -> bool:
 
 
 def settled_rests(time_s: FloatArray, command: FloatArray, y: FloatArray, current: FloatArray | None = None,
-                  count: float = 0.0) -> list[Rest]:
+                  count: float = 0.0, runs: list[tuple[int, int]] | None = None) -> list[Rest]:
     """Each rest's settled part, its noise, spread and line (module docstring).
 
     Parameters
@@ -385,6 +386,8 @@ def settled_rests(time_s: FloatArray, command: FloatArray, y: FloatArray, curren
         The drive's current, A.
     count : float
         The output's count (0: continuous): a line must swing at least one.
+    runs : list of tuple, optional
+        The command's still runs (:func:`still_runs`), when already found.
 
     Returns
     -------
@@ -392,7 +395,7 @@ def settled_rests(time_s: FloatArray, command: FloatArray, y: FloatArray, curren
         The rests whose settled part has at least :data:`MIN_REST_SAMPLES` samples.
     """
     out = []
-    for a, b in still_runs(time_s, command):
+    for a, b in still_runs(time_s, command) if runs is None else runs:
         skip = max(SETTLE_MIN_S, SETTLE_SHARE * float(time_s[b - 1] - time_s[a]))
         s = int(np.searchsorted(time_s, time_s[a] + skip))
         if b - s < MIN_REST_SAMPLES:
@@ -532,11 +535,12 @@ def read_rests(time_s: FloatArray, command: FloatArray, y: FloatArray, current: 
     t = np.asarray(time_s, dtype=float)
     u = np.asarray(command, dtype=float)
     x = np.asarray(y, dtype=float)
-    rests = settled_rests(t, u, x, current, count)
+    runs = still_runs(t, u)
+    rests = settled_rests(t, u, x, current, count, runs)
     line = shared_line(rests, current is not None)
     quiet = [r for r in rests if r.line_hz is None]
     d4 = [np.diff(x[r.start:r.stop], 4) for r in quiet]
     pooled = np.concatenate(d4) if d4 else np.zeros(0)
     quiet_floor = white_floor(pooled) if pooled.size >= MIN_QUIET_DIFFS else None
-    growth = floor_growth(t, u, x, still_runs(t, u), quiet_floor)
+    growth = floor_growth(t, u, x, runs, quiet_floor)
     return Rests(tuple(rests), quiet_floor, line, growth, current is not None)
