@@ -2,9 +2,10 @@
 
 :func:`analyze_record` takes one :class:`~ema_sim.io.csv.MeasuredData` (a rig's CSV or a bag), and
 
-1. measures each output's noise floor and resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`)
-   and whether the command is held or sampled (:mod:`ema_sim.analysis.records.command_hold`), on the samples
-   as logged;
+1. measures each output's noise floor and resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`),
+   read where the output cannot move (:func:`ema_sim.analysis.estimation.noise.with_rests`: a limit cycle at
+   rest and a floor that grows with the excitation are said, not taken for noise), and whether the command
+   is held or sampled (:mod:`ema_sim.analysis.records.command_hold`), on the samples as logged;
 2. puts the record on a uniform grid (:func:`ema_sim.analysis.records.series.uniform_record`);
 3. recognises its segments (:mod:`ema_sim.analysis.recognize`);
 4. runs every test of :data:`ema_sim.analysis.registry.TESTS` in order; a test that finds nothing to
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ema_sim.analysis.estimation import slew
-from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
+from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise, with_rests
 from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
 from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.recognize import recognize
@@ -68,7 +69,7 @@ def resolve_channel(data: MeasuredData, requested: str | None) -> tuple[ChannelC
 
 
 def measure_outputs(data: MeasuredData) -> dict[str, NoiseFloor]:
-    """Each output's noise floor and resolution, on the samples as logged.
+    """Each output's noise floor and resolution, on the samples as logged, read at the record's rests.
 
     Parameters
     ----------
@@ -82,7 +83,8 @@ def measure_outputs(data: MeasuredData) -> dict[str, NoiseFloor]:
     """
     given_counts = data.metadata.get("resolution_deg")
     counts = float(given_counts) if given_counts else None
-    return {name: output_noise(getattr(data, name), counts) for name in data.outputs}
+    return {name: with_rests(output_noise(getattr(data, name), counts), data.time_s, data.command_deg,
+                             getattr(data, name), data.current_a) for name in data.outputs}
 
 
 def command_hold(data: MeasuredData, noise: dict[str, NoiseFloor], options: Options) -> CommandHold:
@@ -156,6 +158,7 @@ def analyze_record(data: MeasuredData, options: Options | None = None,
     noise = measure_outputs(data)
     hold = command_hold(data, noise, options)
     ra = _analyze(data, options, noise, hold, say)
+    ra.notes += [line for name, nf in noise.items() for line in nf.findings(name, data.unit)]
     if hold.sampled is None and hold.source == "detected":
         other = _analyze(data, replace(options, command="sampled"), noise,
                          replace(hold, sampled=True), lambda _share: None)

@@ -49,6 +49,7 @@ def _summary(ra: RecordAnalysis) -> list[str]:
     counts = {k: v for k, v in ra.resolution_deg.items() if v}
     if counts:
         lines.append("  resolution: " + ", ".join(f"{k} {v:g}" for k, v in counts.items()))
+    lines += [f"  at rest: {line}" for k, nf in ra.noise.items() for line in nf.findings(k, d.unit)]
     lines.append(f"  slope of the rate-limited moves: {slope_statement(ra)}")
     for test in TESTS:
         for r in ra.of(test):

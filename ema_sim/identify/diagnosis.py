@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 from scipy.signal import welch
 from scipy.stats import f as fisher
 
-from ema_sim.analysis.estimation.noise import autocorrelation, whiteness
+from ema_sim.analysis.estimation.noise import NoiseFloor, autocorrelation, whiteness
 from ema_sim.analysis.records.series import Hold, holds
 from ema_sim.identify.declared import HIGH_ORDER
 from ema_sim.identify.effects import EFFECTS, FREE, Effect
@@ -155,6 +155,8 @@ class OutputDiagnosis:
     jitter_s: float | None = None
     """Sampling-time jitter (rms, s) that, with the noise floor, explains the residual (None: it does not)."""
     stamp_scatter_s: float = 0.0
+    floor_caveat: str = ""
+    """Why the noise floor is not known to be noise (an upper bound, a limit cycle at rest; empty: it is)."""
 
     @property
     def in_loop(self) -> bool:
@@ -224,6 +226,8 @@ class OutputDiagnosis:
                 f"{self.noise:.3g}{u}")
         if self.jitter_s is not None:
             return head + ": " + self.jitter_statement()
+        if self.white and self.floor_caveat:  # a floor that is no noise cannot say nothing is left
+            return head + f", white, but the floor is not shown to be noise: {self.floor_caveat}"
         if self.white:
             return head + ", white: nothing left to explain"
         if not self.structured:  # small, but a whiteness test that fails is never "nothing left"
@@ -590,6 +594,34 @@ def _halves(problem: Problem, fit: Fit) -> list[Proxy]:
     return out
 
 
+def _floor_caveat(nf: NoiseFloor | None, output: str, unit: str) -> str:
+    """Why an output's floor is not known to be noise: a line at rest, an upper bound (empty: it is noise)."""
+    if nf is None or nf.rests is None:
+        return ""
+    label = output.removesuffix("_deg")
+    bits = []
+    if nf.rests.line is not None and nf.upper_bound:
+        bits.append(nf.rests.line.statement(label, unit) + "; the floor holds it, so what the model leaves at that "
+                    "floor is this behaviour, unexplained, not nothing")
+    elif nf.upper_bound:
+        bits.append(f"it is an upper bound ({nf.rests.why_no_quiet_rest}): at most that much of the residual is noise")
+    if nf.rests.growth is not None and nf.basis != "rests":
+        bits.append(nf.rests.growth.statement(label, unit, nf.rests.quiet_floor))
+    return "; ".join(bits)
+
+
+def _hunting_rings(p: Problem, left: list[OutputDiagnosis]) -> list[str]:
+    """A ring left at the frequency an output hunts at at rest: the limit cycle, not a mode (one line each)."""
+    out = []
+    for o, ring in [(d.output, d.line_hz) for d in left if d.line_hz is not None]:
+        lc = r.limit_cycle if (r := p.noise[o].rests if p.noise else None) is not None else None
+        if lc is not None and abs(lc.freq_hz - ring) <= MODE_MATCH * ring:
+            out.append(f"{o.removesuffix('_deg')} rings at {ring:.3g} Hz, the frequency it hunts at at rest "
+                       f"({lc.freq_hz:.3g} Hz, ±{lc.amplitude:.2g}): the limit cycle, not a mode; no effect of the "
+                       "vocabulary models it")
+    return out
+
+
 def diagnose(result: Identification) -> Diagnosis:
     """The residual diagnosis of an identification (module docstring).
 
@@ -615,7 +647,8 @@ def diagnose(result: Identification) -> Diagnosis:
         sigma = p.sigma_deg[o]
         rms = float(np.sqrt(np.mean(e**2)))
         white = whiteness(e / sigma, lags=50, fitted_params=len(fit.free)).white
-        d = OutputDiagnosis(o, rms, sigma, white, stamp_scatter_s=scatter)
+        d = OutputDiagnosis(o, rms, sigma, white, stamp_scatter_s=scatter,
+                            floor_caveat=_floor_caveat(p.noise[o] if p.noise else None, o, unit))
         if not white and rms > STRUCTURED * sigma:
             d.jitter_s = _jitter(e, sigma, fit.sim[p.mask, O_RATE], len(fit.free))
         if not white and not d.structured and d.jitter_s is None:
@@ -641,7 +674,7 @@ def diagnose(result: Identification) -> Diagnosis:
     left = [d for d in outputs.values() if d.structured]
     if left:
         text.append(_what_is_left(result))
-    for line in _what_the_structure_means(result, left):
+    for line in [*_what_the_structure_means(result, left), *_hunting_rings(p, left)]:
         text.append(line)
         warnings.append(line)
     rings = [(d.output, d.line_hz) for d in left if d.line_hz is not None]

@@ -5,6 +5,9 @@ with the sentence the report carries:
 
 * each output's **noise floor**, never below its counts' own quantization (``q/√12``), and its
   resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`); the fit weighs each output by it;
+  read where the output cannot move (:func:`ema_sim.analysis.estimation.noise.with_rests`), or said to be an
+  upper bound; a limit cycle at rest and a floor that grows with the excitation are warned of, not taken
+  for noise;
 * whether the command was **held** between samples (the contract) or **sampled** from a running
   demand (:mod:`ema_sim.analysis.records.command_hold`); a sampled command is reconstructed between samples
   by linear interpolation (:class:`~ema_sim.identify.problem.Problem`), which is the expected
@@ -242,6 +245,31 @@ def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, N
     return Travel(declared, limits, source, text, outside)
 
 
+def rest_warnings(name: str, nf: NoiseFloor, unit: str) -> list[str]:
+    """What the rests show that is behaviour, not noise: a line at rest, a floor that grows with the excitation.
+
+    Parameters
+    ----------
+    name : str
+        The output.
+    nf : NoiseFloor
+        Its floor, read at the rests (:func:`ema_sim.analysis.estimation.noise.with_rests`).
+    unit : str
+        The record's unit.
+
+    Returns
+    -------
+    list of str
+        One warning each.
+    """
+    r = nf.rests
+    if r is None:
+        return []
+    label = name.removesuffix("_deg")
+    out = [r.line.statement(label, unit)] if r.line is not None else []
+    return out + ([r.growth.statement(label, unit, r.quiet_floor)] if r.growth is not None else [])
+
+
 def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | None = None,
             command: HoldMode = "detect") -> Record:
     """Noise floors, command hold, uniform stamps, travel and unit of one record (module docstring).
@@ -283,6 +311,9 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         if nf.resolution is not None:
             notes.append(f"{name} logged in counts of {nf.resolution:g}: noise floor {nf.sigma:.3g} "
                          f"({'the counts' if nf.limited_by_resolution else 'white noise'} set it)")
+    for name, nf in noise.items():
+        notes += nf.findings(name, data.unit)
+        warnings += rest_warnings(name, nf, data.unit)
     if hold.sampled is None and hold.source == "detected":
         notes.append(f"command: undecided ({hold.evidence}); ema analyze says the same: held and sampled both "
                      "fitted, each reported, the better taken (below)")

@@ -15,6 +15,14 @@ the grid from the *values* themselves, as a person would who sees ``3.00, 3.01, 
   enough of it that landing on its multiples by chance is unlikely (``k^(levels − 1)`` ≥
   :data:`CHANCE` for a spacing of ``k`` decimal steps: three levels four hundredths apart say the
   count is a hundredth used sparsely, not 0.04); else the decimal grid is;
+* the **coarse grid** (:func:`coarse_grid`): a count coarser than the printing and no multiple of its
+  last digit, such as an encoder of 6600 counts a turn (0.0545°) logged to 0.01°, whose values step
+  0.05 or 0.06 apart. No value is a whole number of counts once printed, but every one lies within
+  half a digit of ``offset + k·q``: ``q`` is fitted to the distinct values by least squares on their
+  count numbers ``k``, and is the count when every value lies within :data:`COARSE_SLACK` of a digit of
+  it and the values populate it beyond chance (a value lands that close to a grid of ``q`` with odds
+  ``2·COARSE_SLACK·digit/q``; ``(levels − 2)`` of them, the fit's two parameters aside, must reach
+  :data:`CHANCE`);
 * at least :data:`MIN_LEVELS` distinct values (an output toggling between two says nothing of its
   count), a count no finer than :data:`MIN_RELATIVE` of the values' scale (finer is the printing's),
   and a grid only matters when the signal sits on it: at least :data:`MIN_REPEATS` of the
@@ -48,6 +56,11 @@ CHANCE = 1000.0
 """A spacing of k decimal steps is the count when k^(levels − 1) reaches this (the odds against chance)."""
 MIN_RELATIVE = 1e-6
 """A grid finer than this share of the signal's scale is the printing's, no sensor's count."""
+COARSE_MIN_STEPS = 1.5
+"""A coarse grid's smallest gap between values spans at least this many digits (one digit apart: the printing's)."""
+COARSE_SLACK = 0.6
+"""A value within this share of a digit of a coarse grid's count lies on it (the printing rounds by half a digit;
+the fitted offset and count add a little)."""
 
 
 @dataclass(frozen=True)
@@ -111,6 +124,43 @@ def decimal_grid(values: FloatArray) -> float | None:
     return None
 
 
+def coarse_grid(levels: FloatArray, digit: float) -> tuple[float, float] | None:
+    """A count coarser than the printing's last digit and no multiple of it (module docstring), or None.
+
+    Parameters
+    ----------
+    levels : numpy.ndarray
+        The distinct values, sorted.
+    digit : float
+        The printing's last digit (:func:`decimal_grid`).
+
+    Returns
+    -------
+    tuple or None
+        The count ``q`` and the offset (within ``[0, q)``) of the grid every value lies on within
+        :data:`COARSE_SLACK` of a digit, or None.
+    """
+    gaps = np.diff(levels)
+    if levels.size < MIN_LEVELS or float(np.min(gaps)) < COARSE_MIN_STEPS * digit:
+        return None
+    smallest = gaps[gaps <= float(np.min(gaps)) + digit * (1.0 + FLOAT_TOLERANCE)]
+    q = float(np.mean(smallest))  # one count, printed as the digits either side of it
+    x = levels - levels[0]
+    k = np.round(x / q)
+    for _ in range(4):  # refit: the count numbers from the count, the count from the count numbers
+        a, q = np.linalg.lstsq(np.column_stack([np.ones_like(k), k]), x, rcond=None)[0]
+        k_new = np.round((x - a) / q)
+        if np.array_equal(k_new, k):
+            break
+        k = k_new
+    resid = x - (a + q * k)
+    if (q < COARSE_MIN_STEPS * digit or np.any(np.diff(k) < 1) or float(np.max(np.abs(resid))) > COARSE_SLACK * digit
+            or (levels.size - 2) * float(np.log(q / (2.0 * COARSE_SLACK * digit))) < float(np.log(CHANCE))):
+        return None
+    offset = float(np.mod(levels[0] + a, q))
+    return float(q), (0.0 if min(offset, q - offset) <= COARSE_SLACK * digit else offset)
+
+
 def value_grid(y: FloatArray) -> Grid | None:
     """The count grid the values of ``y`` sit on (module docstring), or None.
 
@@ -137,7 +187,7 @@ def value_grid(y: FloatArray) -> Grid | None:
     base = decimal_grid(levels)
     gaps = np.diff(levels)
     spacing = float(np.min(gaps[gaps > (base or 0.0) * FLOAT_TOLERANCE])) if np.any(gaps > 0) else None
-    q, offset, how = None, 0.0, ""
+    q, offset, how, within = None, 0.0, "", "within float tolerance"
     if spacing is not None:
         ok, off = _on_grid(levels, spacing)
         k = spacing / base if base else float("inf")
@@ -145,7 +195,13 @@ def value_grid(y: FloatArray) -> Grid | None:
         if ok and (not whole or round(k) == 1 or (levels.size - 1) * float(np.log(round(k))) >= np.log(CHANCE)):
             q, offset, how = spacing, off, "on multiples of the smallest gap between values"
     if q is None and base is not None:
-        q, how = base, "written with the same last decimal"
+        coarse = coarse_grid(levels, base)
+        if coarse is not None:
+            q, offset = coarse
+            how = f"a count coarser than the printing's {base:g}, fitted to the values"
+            within = f"within {COARSE_SLACK:g} of a printed digit"
+        else:
+            q, how = base, "written with the same last decimal"
     scale = max(float(np.max(np.abs(levels))), float(np.ptp(levels)))
     if q is None or q < MIN_RELATIVE * scale:
         return None
@@ -153,5 +209,5 @@ def value_grid(y: FloatArray) -> Grid | None:
     offset = float(f"{offset:.10g}")
     where = f" + {offset:g}" if offset else ""
     return Grid(q, offset, int(levels.size), repeats,
-                f"every value lies on multiples of {q:g}{where} ({how}, within float tolerance); {levels.size} "
+                f"every value lies on multiples of {q:g}{where} ({how}, {within}); {levels.size} "
                 f"distinct values, {100 * repeats:.0f} % of the samples repeat the one before")

@@ -15,6 +15,11 @@ Used by the offline analysis (`ema analyze`) to set detection thresholds and by 
   that reads the same count for seconds has a fourth-difference MAD of zero, not a zero floor). When
   the changes tell nothing (a drive that moves two counts at a time), the values themselves are
   read for a count grid (:func:`ema_sim.analysis.estimation.grid.value_grid`).
+* :func:`with_rests` takes the floor where the output cannot move: the record's rests
+  (:mod:`ema_sim.analysis.estimation.rests`), quiet ones only. Where the record's own estimate stands over
+  theirs, the difference is motion's (not noise) and the rests' floor is taken; where no rest is quiet
+  (every rest hunts, or the output never rests) the record's estimate is kept as an upper bound. What the
+  rests show (a limit cycle, a floor that grows with the excitation) is said beside it (:meth:`NoiseFloor.findings`).
 * :func:`whiteness` is the Ljung-Box portmanteau test on the residual's autocorrelation.
 * :func:`input_independence` tests the residual's cross-correlation with the input (a model that
   explains everything leaves a residual uncorrelated with the input at every lag); the band holds
@@ -23,12 +28,13 @@ Used by the offline analysis (`ema analyze`) to set detection thresholds and by 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation.grid import CHANCE, Grid, value_grid
+from ema_sim.analysis.estimation.rests import REST_EXCESS, Rests, read_rests
 
 FloatArray = NDArray[np.float64]
 
@@ -156,6 +162,15 @@ class NoiseFloor:
     resolution_source : str
         How the count was found: ``given``, ``changes`` (every change a whole number of counts), ``values``
         (every value on the grid), or ``none``.
+    basis : str
+        Where the floor was read: ``record`` (the whole record's fourth differences), ``rests`` (the quiet
+        rests, the record's own estimate being motion's too).
+    upper_bound : bool
+        No stretch where the output cannot move confirms the floor: it may hold more than noise.
+    rests : Rests or None
+        What the record's rests show (None: not examined, no command given).
+    record_white : float or None
+        The whole record's white noise when the rests' floor replaced it.
     """
 
     sigma: float
@@ -166,6 +181,14 @@ class NoiseFloor:
     """The count the output is logged in (None: continuous)."""
     resolution_source: str = "changes"
     """How the count was found: ``given``, ``changes``, ``values`` or ``none``."""
+    basis: str = "record"
+    """Where the floor was read: ``record`` or ``rests``."""
+    upper_bound: bool = False
+    """No stretch where the output cannot move confirms the floor."""
+    rests: Rests | None = None
+    """What the record's rests show (None: not examined)."""
+    record_white: float | None = None
+    """The whole record's white noise when the rests' floor replaced it."""
 
     @property
     def quantization(self) -> float:
@@ -177,26 +200,70 @@ class NoiseFloor:
         """True when the counts, not the noise, set the floor."""
         return self.resolution is not None and self.quantization >= self.white
 
-    def as_dict(self) -> dict[str, float | bool | str | None]:
+    def as_dict(self) -> dict[str, object]:
         """Plain values for JSON.
 
         Returns
         -------
         dict
-            ``sigma``, ``white``, ``resolution``, ``resolution_source`` and ``limited_by_resolution``.
+            ``sigma``, ``white``, ``resolution``, ``resolution_source``, ``limited_by_resolution``, where the floor
+            was read (``basis``, ``upper_bound``, ``record_white``) and what the ``rests`` show.
         """
         return {"sigma": self.sigma, "white": self.white, "resolution": self.resolution,
-                "resolution_source": self.resolution_source, "limited_by_resolution": self.limited_by_resolution}
+                "resolution_source": self.resolution_source, "limited_by_resolution": self.limited_by_resolution,
+                "basis": self.basis, "upper_bound": self.upper_bound, "record_white": self.record_white,
+                "rests": self.rests.as_dict() if self.rests is not None else None}
 
     @property
     def statement(self) -> str:
         """The floor and the count in one sentence."""
+        where = ("" if self.basis == "record" else
+                 f", read at rest (the whole record's {self.record_white:.3g} holds motion's too)")
+        bound = ", an upper bound (no stretch where the output cannot move confirms it)" if self.upper_bound else ""
         if self.resolution is None:
-            return f"continuous (no count grid in the values or their changes), white noise {self.white:.3g}"
+            return (f"continuous (no count grid in the values or their changes), white noise {self.white:.3g}"
+                    f"{where}{bound}")
         how = {"given": "given by the metadata", "changes": "every change a whole number of counts",
                "values": "every value on the grid"}.get(self.resolution_source, self.resolution_source)
         return (f"counts of {self.resolution:g} ({how}): floor {self.sigma:.3g} = max(white {self.white:.3g}, "
-                f"q/√12 {self.quantization:.3g})")
+                f"q/√12 {self.quantization:.3g}){where}{bound}")
+
+    def findings(self, output: str, unit: str) -> list[str]:
+        """What the rests say of this floor, one sentence each: where it was read, a line at rest, a growth.
+
+        Parameters
+        ----------
+        output : str
+            The output's name.
+        unit : str
+            The record's unit (deg, mm, in).
+
+        Returns
+        -------
+        list of str
+            Empty when the rests were not examined or show nothing to say.
+        """
+        r = self.rests
+        if r is None:
+            return []
+        u = "°" if unit == "deg" else f" {unit}"
+        label = output.removesuffix("_deg")  # the channel, not a unit: an mm record's position is no degree
+        out = []
+        if self.basis == "rests":
+            quiet = sum(x.line_hz is None for x in r.rests)
+            what = "the hunting's and motion's" if r.line is not None else "motion's"
+            out.append(f"{label}'s noise floor {self.sigma:.3g}{u} is read where the output cannot move ({quiet} quiet "
+                       f"rest{'s' if quiet != 1 else ''}); the whole record's fourth differences give "
+                       f"{self.record_white or 0.0:.3g}{u}, the difference is {what}, not noise")
+        if self.upper_bound:
+            out.append(f"{label}'s noise floor {self.sigma:.3g}{u} is an upper bound, not a measured noise: "
+                       f"{r.why_no_quiet_rest}, so no stretch where the output cannot move shows the floor; at most "
+                       "this much of a residual is noise")
+        if r.line is not None:
+            out.append(r.line.statement(label, unit))
+        if r.growth is not None:
+            out.append(r.growth.statement(label, unit, r.quiet_floor))
+        return out
 
 
 def sparse_multiple(q: float, grid: Grid) -> bool:
@@ -224,6 +291,27 @@ def sparse_multiple(q: float, grid: Grid) -> bool:
     return whole and (grid.levels - 1) * float(np.log(round(k))) < float(np.log(CHANCE))
 
 
+def refines(q: float, grid: Grid) -> bool:
+    """Whether the values' grid is the same count as the changes' ``q``, fitted on every value (more exact).
+
+    A coarse count printed to a finer digit (0.0547 logged to 0.01) changes by 0.05 or 0.06: the changes, when
+    they pass for whole counts at all, give one of the two; the grid fitted to the values gives the count.
+
+    Parameters
+    ----------
+    q : float
+        The count from the changes.
+    grid : Grid
+        The values' grid.
+
+    Returns
+    -------
+    bool
+        True when ``grid.q`` differs from ``q`` by less than a fifth of it.
+    """
+    return q != grid.q and abs(q - grid.q) < 0.2 * grid.q
+
+
 def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
     """The noise floor of a measured output, aware of the counts it is logged in.
 
@@ -249,13 +337,47 @@ def output_noise(y: FloatArray, resolution: float | None = None) -> NoiseFloor:
     if q is None:
         q, source = detect_resolution(y), "changes"
         grid = value_grid(y)
-        if grid is not None and (q is None or sparse_multiple(q, grid)):
+        if grid is not None and (q is None or sparse_multiple(q, grid) or refines(q, grid)):
             q, source = grid.q, "values"
         elif q is None:
             source = "none"
             white = _unclipped_floor(y, white)
     floor = max(white, q / np.sqrt(12.0)) if q is not None else white
     return NoiseFloor(float(floor), white, q, source)
+
+
+def with_rests(nf: NoiseFloor, time_s: FloatArray, command: FloatArray, y: FloatArray,
+               current: FloatArray | None = None) -> NoiseFloor:
+    """The floor of :func:`output_noise` read where the output cannot move (module docstring).
+
+    Parameters
+    ----------
+    nf : NoiseFloor
+        The floor from the whole record (:func:`output_noise`).
+    time_s : numpy.ndarray
+        Stamps, s.
+    command : numpy.ndarray
+        The command.
+    y : numpy.ndarray
+        The output.
+    current : numpy.ndarray, optional
+        The drive's current, A (None: not logged).
+
+    Returns
+    -------
+    NoiseFloor
+        The rests' floor (never below the counts' quantization) when the record's estimate is
+        :data:`ema_sim.analysis.estimation.rests.REST_EXCESS` times over it; the record's, marked as an upper
+        bound, when no rest is quiet; the record's otherwise. With what the rests show.
+    """
+    rests = read_rests(time_s, command, y, current, nf.resolution or 0.0)
+    if rests.quiet_floor is None:
+        return replace(nf, upper_bound=True, rests=rests)
+    at_rest = max(rests.quiet_floor, nf.quantization)
+    if nf.white > REST_EXCESS * at_rest:
+        return replace(nf, sigma=float(at_rest), white=rests.quiet_floor, basis="rests", rests=rests,
+                       record_white=nf.white)
+    return replace(nf, rests=rests)
 
 
 def autocovariance(x: FloatArray, max_lag: int) -> FloatArray:
