@@ -9,6 +9,7 @@ COMMANDS: tuple[str, ...] = (
     "analyze",
     "identify",
     "identify_consistency",
+    "monitor",
     "loes",
     "acceptance",
     "bench",
