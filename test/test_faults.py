@@ -75,3 +75,23 @@ def test_a_fault_on_a_stage_the_model_lacks_is_one_clear_error():
 def test_a_bad_spec_names_the_field():
     with pytest.raises(SpecError, match="size"):
         parse_fault("delay:size=-1")
+
+
+def test_an_emac_channel_injects_its_faults_frame_by_frame():
+    from ema_sim.emac import EmacChannel, EmacSettings  # noqa: PLC0415 - the channel layer, beside the models
+    from ema_sim.models import create  # noqa: PLC0415
+
+    def drive(faults: str) -> tuple[list[float], EmacChannel]:
+        unit = EmacChannel(create("loada", "left_wing"), EmacSettings(faults=faults))
+        out = []
+        for k in range(400):  # 2 s at 200 Hz, a 1 Hz sine of 2 deg
+            unit.set_command(unit.scaling.command_deg_to_v(2.0 * np.sin(2 * np.pi * k / 200.0)))
+            out.append(unit.step(0.0).position_deg)
+        return out, unit
+
+    clean, _ = drive("none")
+    biased, unit = drive("lvdt_bias:at_s=1,size=0.1")
+    diff = np.array(biased) - np.array(clean)
+    assert np.allclose(diff[:190], 0.0)
+    assert np.allclose(diff[205:], 0.1)
+    assert unit.fault_truth() == {"fault_lvdt_bias": 0.1}

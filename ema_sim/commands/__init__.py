@@ -10,6 +10,7 @@ COMMANDS: tuple[str, ...] = (
     "identify",
     "identify_consistency",
     "monitor",
+    "fault_campaign",
     "loes",
     "acceptance",
     "bench",

@@ -264,6 +264,23 @@ def parse_fault(text: str) -> Fault:
     return fault
 
 
+def parse_faults(text: str) -> list[Fault]:
+    """Faults from ``;``-separated specs (an EMAC node parameter); an empty string or ``none`` is no fault.
+
+    Parameters
+    ----------
+    text : str
+        The specs.
+
+    Returns
+    -------
+    list of Fault
+        The faults.
+    """
+    parts = [p.strip() for p in text.split(";") if p.strip()]
+    return [] if parts in ([], ["none"]) else [parse_fault(p) for p in parts]
+
+
 def fault_help() -> str:
     """Every fault kind with its fields and defaults."""
     return "\n".join(describe(FAULTS))  # type: ignore[arg-type]

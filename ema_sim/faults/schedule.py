@@ -192,3 +192,56 @@ def _run_blocks(model: ActuatorModel, time_s: FloatArray, command_deg: FloatArra
            for name in ("command_deg", "hinge_moment_inlb", "position_deg", "surface_deg", "rate_dps", "current_a",
                         "bus_v", "flags")}
     return Record(model=first.model, channel=first.channel, time_s=np.concatenate([p.time_s for p in parts]), **cat)
+
+
+class FaultSchedule:
+    """Faults applied frame by frame to a model stepped one frame at a time (an EMAC channel's).
+
+    The same schedule as :func:`run_faulted`: at each frame the scheduled parameters are retuned when they
+    changed, the load the host applies is reversed by a sign fault, and the reported LVDT reading carries the
+    sensor faults.
+
+    Parameters
+    ----------
+    model : ActuatorModel
+        The stepped model (one instance).
+    faults : sequence of Fault
+        The faults, their times from the channel's start.
+    """
+
+    def __init__(self, model: ActuatorModel, faults: Sequence[Fault]) -> None:
+        check_faults(model, faults)
+        self.model = model
+        self.faults = tuple(faults)
+        self._params = [f for f in self.faults if f.stage == "parameter"]
+        self._family = model_family(model) if self._params else ""
+        self._base = model.params[0] if self._params else None  # type: ignore[attr-defined]
+        self._nominal: dict[str, float] = {}
+        self._last: dict[str, float] = {}
+        self._held_deg: float | None = None
+
+    def frame(self, time_s: float, position_deg: float) -> None:
+        """Retune the model for the frame starting at ``time_s`` (``position_deg``: where the actuator is)."""
+        if not self._params:
+            return
+        t = np.array([time_s])
+        if self._held_deg is None and any(float(f.ramp(t)[0]) > 0.0 for f in self._params
+                                          for c in f.changes[self._family] if c.how == "hold"):
+            self._held_deg = position_deg
+        values = parameter_values(self._base, self._params, self._family, time_s, self._nominal,
+                                  position_deg if self._held_deg is None else self._held_deg)
+        if values != self._last:
+            self.model.retune(**values)
+            self._last = values
+
+    def load(self, time_s: float, hinge_moment_inlb: float) -> float:
+        """The load the host applies at ``time_s``."""
+        return float(applied_load(self.faults, np.array([time_s]), np.array([hinge_moment_inlb]))[0])
+
+    def reading(self, time_s: float, position_deg: float) -> float:
+        """The LVDT reading reported at ``time_s``."""
+        return float(reported_position(self.faults, np.array([time_s]), np.array([position_deg]))[0])
+
+    def truth(self, time_s: float) -> dict[str, float]:
+        """Each fault's size in at ``time_s`` (``fault_<kind>`` keys, as the CSV columns)."""
+        return {k: float(v[0]) for k, v in truth_columns(self.faults, np.array([time_s])).items()}
