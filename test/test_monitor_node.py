@@ -30,10 +30,10 @@ class TakePorts:
         self.node = node
         self.callbacks = {}
 
-    def frame_publisher(self, topic):
-        return SimpleNamespace(publish=lambda msg: None)
+    def frame_publisher(self, topic):  # noqa: ARG002 - the ports' signature
+        return SimpleNamespace(publish=lambda _msg: None)
 
-    def frame_subscription(self, topic, callback, on_bad, *, at_frame=False):
+    def frame_subscription(self, topic, callback, on_bad, *, at_frame=False):  # noqa: ARG002
         self.callbacks[topic] = callback
 
 
@@ -54,7 +54,8 @@ def test_the_node_detects_and_reports_on_diagnostics():
             levels = []
             for k in range(1, rec.time_s.size):
                 stamp = int(k * 5e6)
-                take[ct.EMAC_COMMAND](JointFrame(stamp, ["left_wing"], [sc.command_deg_to_v(rec.command_deg[0, k - 1])]))
+                volts = sc.command_deg_to_v(rec.command_deg[0, k - 1])
+                take[ct.EMAC_COMMAND](JointFrame(stamp, ["left_wing"], [volts]))
                 take[ct.HINGE_MOMENT](JointFrame(stamp, ["left_wing"], [], [], [rec.hinge_moment_inlb[0, k - 1]]))
                 pos = rec.position_deg[0, k] + rng.normal(0.0, 0.005)
                 take[ct.EMAC_FEEDBACK](JointFrame(stamp, ["left_wing"], [sc.feedback_deg_to_v(pos)]))
