@@ -1,8 +1,7 @@
 """Sequential detection on normalized residuals: a two-sided CUSUM whose threshold meets a false-alarm rate.
 
-Residuals are averaged over short blocks (20 ms by default: ten 1 kHz samples, four 200 Hz frames) so that
-successive block means are nearly independent, normalized by the spread the healthy window showed, and fed to
-Page's CUSUM with drift ``k`` (half the smallest shift, in spreads, it is tuned for). The threshold ``h`` comes
+Residuals are averaged over short blocks (20 ms by default: ten 1 kHz samples, four 200 Hz frames), normalized
+by the long-run spread the healthy window showed (their autocorrelation accounted for), and fed to Page's CUSUM with drift ``k`` (half the smallest shift, in spreads, it is tuned for). The threshold ``h`` comes
 from Siegmund's approximation of the in-control run length, ARL₀ ≈ (e^{2k(h+1.166)} − 2k(h+1.166) − 1)/(2k²),
 set to the number of blocks in an hour over the user's false alarms per hour (halved for two sides).
 """
@@ -102,9 +101,23 @@ def block_means(time_s: FloatArray, residual: FloatArray, block_s: float) -> tup
     return ends[ok], sums[ok] / counts[ok]
 
 
-def spread(means: FloatArray, floor: float) -> tuple[float, float]:
-    """Centre and spread of healthy block means: median and 1.4826·MAD, the spread at least ``floor``."""
+def spread(means: FloatArray, floor: float, lags: int = 50) -> tuple[float, float]:
+    """Centre and long-run spread of healthy block means.
+
+    The centre is the median; the spread 1.4826·MAD (at least half the standard deviation and ``floor``),
+    times the square root of the long-run variance factor 1 + 2·Σ w_k·ρ_k (Bartlett weights over ``lags``
+    blocks): successive block means of a model's residual are not independent, and a CUSUM fed correlated
+    increments alarms far more often than its run-length formula says unless they are scaled this way.
+    """
     centre = float(np.median(means))
     mad = float(np.median(np.abs(means - centre))) * 1.4826
     std = float(np.std(means))
-    return centre, max(mad, 0.5 * std, floor)
+    sigma = max(mad, 0.5 * std, floor)
+    x = means - float(np.mean(means))
+    denom = float(x @ x)
+    factor = 1.0
+    if denom > 0.0 and x.size > 4 * lags:
+        rho = np.array([float(x[:-k] @ x[k:]) / denom for k in range(1, lags + 1)])
+        weights = 1.0 - np.arange(1, lags + 1) / (lags + 1.0)
+        factor = max(1.0, 1.0 + 2.0 * float(weights @ rho))
+    return centre, sigma * math.sqrt(factor)

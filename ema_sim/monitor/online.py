@@ -94,7 +94,7 @@ class OnlineMonitor:
         if not self.started:
             self.model.trim(command_deg, hinge_moment_inlb)
             self.started = True
-        if self._n == 0 and len(self.snapshots) < (self.snapshots.maxlen or 0) and self.detection is None:
+        if self._n == 0 and self.detection is None:
             self.snapshots.append((self.t, snapshot(self.model)))
         v = self.model.step_values(command_deg, hinge_moment_inlb, self.frame_s)
         self.t += self.frame_s
