@@ -1,9 +1,10 @@
 """Sequential detection on normalized residuals: a two-sided CUSUM whose threshold meets a false-alarm rate.
 
-Residuals are averaged over short blocks (20 ms by default: ten 1 kHz samples, four 200 Hz frames), normalized
-by the long-run spread the healthy window showed (their autocorrelation accounted for), and fed to Page's CUSUM
-with drift ``k`` (half the smallest shift, in spreads, it is tuned for). The threshold ``h`` comes from Siegmund's approximation of the in-control run length, ARL₀ ≈ (e^{2k(h+1.166)} − 2k(h+1.166) − 1)/(2k²),
-set to the number of blocks in an hour over the user's false alarms per hour (halved for two sides).
+Residuals are averaged over short blocks (20 ms by default: ten 1 kHz samples, four 200 Hz frames), normalized by
+the long-run spread the healthy window showed (their autocorrelation accounted for), and fed to Page's CUSUM with
+drift ``k`` (half the smallest shift, in spreads, it is tuned for). The threshold ``h`` comes from Siegmund's
+approximation of the in-control run length, ARL₀ ≈ (e^{2k(h+1.166)} − 2k(h+1.166) − 1)/(2k²), set to the number of
+blocks in an hour over the user's false alarms per hour (halved for two sides).
 """
 
 from __future__ import annotations
