@@ -26,23 +26,26 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.montecarlo.faults import (  # noqa: PLC0415 - loaded when this subcommand runs
         DEFAULT_MANEUVERS,
         DEFAULT_SIZES,
+        HIGH_ORDER_SIZES,
         cases,
+        model_has_current,
         plot_campaign,
         run_campaign,
         summarize,
     )
 
-    kinds = DEFAULT_SIZES
+    table = HIGH_ORDER_SIZES if model_has_current(args.model) else DEFAULT_SIZES
+    kinds = table
     if args.kinds:
-        unknown = sorted(set(args.kinds) - set(DEFAULT_SIZES))
+        unknown = sorted(set(args.kinds) - set(table))
         if unknown:
-            raise EmaError(f"fault kinds without a second-order stage or unknown: {', '.join(unknown)} "
-                           f"(kinds: {', '.join(DEFAULT_SIZES)})")
-        kinds = {k: DEFAULT_SIZES[k] for k in args.kinds}
+            raise EmaError(f"fault kinds {args.model} has no stage for, or unknown: {', '.join(unknown)} "
+                           f"(kinds: {', '.join(table)})")
+        kinds = {k: table[k] for k in args.kinds}
     if args.seeds < 1:
         raise EmaError(f"--seeds must be at least 1, got {args.seeds}")
     all_cases = cases(kinds, args.maneuver or DEFAULT_MANEUVERS, seeds=args.seeds, clean=args.clean,
-                      reference=args.reference, model=args.model)
+                      reference=args.reference, model=args.model, load=args.load)
     print(f"{len(all_cases)} cases")
     table = run_campaign(all_cases, args.out, workers=args.workers, scheduler=args.scheduler)
     summary = summarize(table)
@@ -69,9 +72,10 @@ def register(sub: Subparsers) -> None:
     p.add_argument("out", type=Path, help="output directory (cases.parquet, summary.json, plots)")
     p.add_argument("--kinds", nargs="*", default=None, help="fault kinds (default: every second-order one)")
     p.add_argument("--maneuver", action="append", default=None, help="maneuver spec (repeatable)")
+    p.add_argument("--load", default="const:inlb=800", help="hinge moment of every case (const:inlb=800)")
     p.add_argument("--seeds", type=int, default=2, help="noise seeds per kind, size and maneuver (2)")
     p.add_argument("--clean", type=int, default=2, help="clean cases per seed and maneuver (2)")
-    p.add_argument("--model", default="loada", help="truth model (a second-order one: loada, loac)")
+    p.add_argument("--model", default="loada", help="truth model: loada, loac (second order) or hoad2, hoad3")
     p.add_argument("--reference", choices=("nominal", "learned"), default="nominal",
                    help="the monitor's reference: the truth model's nominal parameters, or learned (healthy window)")
     p.add_argument("--workers", type=int, default=None, help="local Dask workers (0: run in this process)")

@@ -83,10 +83,10 @@ class Window:
     start_s: float
     end_s: float
     nominal: FloatArray
-    """The nominal prediction at the samples in ``[onset_s, end_s)``, ``(samples, 2)``."""
-    sigma: tuple[float, float]
-    """Per-sample residual spread of position and surface on the healthy window."""
-    outputs: tuple[bool, bool] = (True, True)
+    """The nominal prediction at the samples in ``[onset_s, end_s)``, ``(samples, 3)``."""
+    sigma: tuple[float, ...]
+    """Per-sample residual spread of position, surface and current on the healthy window."""
+    outputs: tuple[bool, ...] = (True, True, False)
     times: FloatArray = field(init=False)
     measured: FloatArray = field(init=False)
     pick: NDArray[np.int64] = field(init=False)
@@ -95,7 +95,7 @@ class Window:
         t = self.data.time_s - self.data.time_s[0]
         sel = (t >= self.onset_s) & (t < self.end_s)
         self.times = t[sel]
-        cols = [self.data.position_deg, self.data.surface_deg]
+        cols = [self.data.position_deg, self.data.surface_deg, self.data.current_a]
         self.measured = np.column_stack([c[sel] if c is not None else np.zeros(int(sel.sum())) for c in cols])
         idx = np.flatnonzero(self.times >= self.start_s)
         step = max(1, math.ceil(idx.size / MAX_SAMPLES))
@@ -104,7 +104,7 @@ class Window:
     def residual(self, predicted: FloatArray) -> FloatArray:
         """Measured minus predicted over the fitted samples, normalized, outputs stacked."""
         parts = [(self.measured[self.pick, j] - predicted[self.pick, j]) / self.sigma[j]
-                 for j in range(2) if self.outputs[j]]
+                 for j in range(3) if self.outputs[j]]
         return np.concatenate(parts)
 
 
@@ -274,7 +274,8 @@ def signature(win: Window, hinge_moment_inlb: FloatArray | None) -> dict[str, ob
         predicted rate exceeds 1 deg/s), ``direction_correlation`` and ``load_correlation``.
     """
     r = (win.measured - win.nominal) / np.array(win.sigma)
-    rms = {name: float(np.sqrt(np.mean(r[:, j] ** 2))) for j, name in enumerate(("position_deg", "surface_deg"))
+    names = ("position_deg", "surface_deg", "current_a")
+    rms = {name: float(np.sqrt(np.mean(r[:, j] ** 2))) for j, name in enumerate(names)
            if win.outputs[j] and r.shape[0]}
     j = 0 if win.outputs[0] else 1
     rate = np.gradient(win.nominal[:, j], win.times) if win.times.size > 2 else np.zeros(win.times.size)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models import ActuatorModel
+from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.monitor.detect import Cusum, spread, threshold
 from ema_sim.monitor.isolate import Window, candidates, isolate, signature
 from ema_sim.monitor.reference import Reference, snapshot
@@ -31,7 +32,8 @@ class _Frame:
     hinge_moment_inlb: float
     position_deg: float
     surface_deg: float
-    predicted: tuple[float, float]
+    current_a: float
+    predicted: tuple[float, float, float]
 
 
 class OnlineMonitor:
@@ -58,15 +60,16 @@ class OnlineMonitor:
         self.frames: deque[_Frame] = deque(maxlen=keep)
         self.snapshots: deque[tuple[float, ActuatorModel]] = deque(maxlen=int(3.0 * opt.window_s / opt.block_s) + 2)
         self.t = 0.0
-        self._sum = np.zeros(2)
-        self._seen = np.zeros(2, dtype=bool)
+        n = len(OUTPUTS)
+        self._sum = np.zeros(n)
+        self._seen = np.zeros(n, dtype=bool)
         self._n = 0
-        self._healthy: list[list[float]] = [[], []]
-        self._sq: list[list[float]] = [[], []]
-        self.centre = np.zeros(2)
-        self.spread = np.ones(2)
-        self.sample_sigma = [MIN_SAMPLE_SPREAD_DEG, MIN_SAMPLE_SPREAD_DEG]
-        self.cusums = [Cusum(self.h, opt.k), Cusum(self.h, opt.k)]
+        self._healthy: list[list[float]] = [[] for _ in OUTPUTS]
+        self._sq: list[list[float]] = [[] for _ in OUTPUTS]
+        self.centre = np.zeros(n)
+        self.spread = np.ones(n)
+        self.sample_sigma = [MIN_SAMPLE_SPREAD_DEG] * n
+        self.cusums = [Cusum(self.h, opt.k) for _ in OUTPUTS]
         self.alarm: tuple[float, str, float, float] | None = None
         """(time, output, statistic, onset) of the first alarm."""
         self.detection: Detection | None = None
@@ -83,8 +86,8 @@ class OnlineMonitor:
         return max(c.statistic for c in self.cusums)
 
     def step(self, command_deg: float, hinge_moment_inlb: float, position_deg: float,
-             surface_deg: float = math.nan) -> Detection | None:
-        """One frame: the frame's held command and load, the outputs read at its end.
+             surface_deg: float = math.nan, current_a: float = math.nan) -> Detection | None:
+        """One frame: the frame's held command and load, the outputs read at its end (NaN: not measured).
 
         Returns
         -------
@@ -98,10 +101,12 @@ class OnlineMonitor:
             self.snapshots.append((self.t, snapshot(self.model)))
         v = self.model.step_values(command_deg, hinge_moment_inlb, self.frame_s)
         self.t += self.frame_s
-        pred = (v[0], v[1])
-        self.frames.append(_Frame(self.t, command_deg, hinge_moment_inlb, position_deg, surface_deg, pred))
-        meas = (position_deg, surface_deg)
-        for j in range(2):
+        pred = (v[O_POS], v[O_SURF], v[O_CUR])
+        if not self.model.has_current:
+            current_a = math.nan
+        self.frames.append(_Frame(self.t, command_deg, hinge_moment_inlb, position_deg, surface_deg, current_a, pred))
+        meas = (position_deg, surface_deg, current_a)
+        for j in range(len(OUTPUTS)):
             if math.isfinite(meas[j]):
                 self._sum[j] += meas[j] - pred[j]
                 self._seen[j] = True
@@ -120,19 +125,19 @@ class OnlineMonitor:
         self._sum[:] = 0.0
         self._n = 0
         if not self.calibrated:
-            for j in range(2):
+            for j in range(len(OUTPUTS)):
                 if self._seen[j]:
                     self._healthy[j].append(float(means[j]))
             return
-        if not self._healthy[0] and not self._healthy[1]:
+        if not any(self._healthy):
             return
-        if self.cusums[0].history == [] and self.cusums[1].history == []:
-            for j in range(2):
+        if all(c.history == [] for c in self.cusums):
+            for j in range(len(OUTPUTS)):
                 if self._healthy[j]:
                     self.centre[j], self.spread[j] = spread(np.array(self._healthy[j]), MIN_SPREAD_DEG)
                     self.sample_sigma[j] = max(float(np.std(self._sq[j])), MIN_SAMPLE_SPREAD_DEG)
                 self.cusums[j].history.append(0.0)
-        for j in range(2):
+        for j in range(len(OUTPUTS)):
             if not self._seen[j] or not self._healthy[j]:
                 continue
             cs = self.cusums[j]
@@ -156,12 +161,14 @@ class OnlineMonitor:
         hm = np.array([ahead[0].hinge_moment_inlb] + [f.hinge_moment_inlb for f in ahead])
         pos = np.array([now[0].position_deg] + [f.position_deg for f in now])
         surf = np.array([now[0].surface_deg] + [f.surface_deg for f in now])
+        cur = np.array([now[0].current_a] + [f.current_a for f in now])
         data = MeasuredData(times, cmd, pos if np.all(np.isfinite(pos)) else None,
-                            surf if np.all(np.isfinite(surf)) else None, hm, source="online")
+                            surf if np.all(np.isfinite(surf)) else None, hm,
+                            current_a=cur if np.all(np.isfinite(cur)) else None, source="online")
         nominal = np.array([f.predicted for f in now])
         win = Window(data, snapshot(snap), snap_t, max(snap_t, onset), now[-1].t + 0.5 * self.frame_s, nominal,
-                     (self.sample_sigma[0], self.sample_sigma[1]),
-                     (data.position_deg is not None, data.surface_deg is not None))
+                     tuple(self.sample_sigma),
+                     (data.position_deg is not None, data.surface_deg is not None, data.current_a is not None))
         ranking = isolate(win, candidates(win.model, data))
         best = ranking[0]
         sig = signature(win, hm[1:])

@@ -23,8 +23,11 @@ from ema_sim.identify.fit import fit
 from ema_sim.identify.problem import Problem
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models import ActuatorModel, create, model_names
+from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.models.second_order import SecondOrderParams
 
+COLUMNS = [O_POS, O_SURF, O_CUR]
+"""The model outputs a monitor watches: position, surface, current (:data:`ema_sim.monitor.watch.OUTPUTS`)."""
 LEARNED_FIELDS = ("wn_rad_s", "zeta", "delay_s", "offset_deg")
 """What a learned nominal model fits on the healthy window (the rest stays at the channel's values)."""
 
@@ -68,7 +71,9 @@ def held_inputs(data: MeasuredData) -> tuple[FloatArray, FloatArray, FloatArray]
 
 
 def predict(model: ActuatorModel, data: MeasuredData, *, until_s: float | None = None) -> FloatArray:
-    """Trim ``model`` at the record's first input and run it on the record; ``(samples, 2)`` position, surface.
+    """Trim ``model`` at the record's first input and run it on the record; ``(samples, 3)``.
+
+    The columns are position, surface and current (zeros for a model without a motor).
 
     With ``until_s``, the run stops there and only the samples before it are returned (the model is left at
     ``until_s``, ready to go on: :func:`continue_run`).
@@ -80,12 +85,12 @@ def predict(model: ActuatorModel, data: MeasuredData, *, until_s: float | None =
     samples = t[t < end] if until_s is not None else t
     keep = bp_t < end if until_s is not None else np.ones(bp_t.size, dtype=bool)
     out = model.run_outputs(bp_t[keep], bp_u[keep], bp_h[keep], sample_times=samples, end_s=end)
-    return np.ascontiguousarray(out[0, :, :2])
+    return np.ascontiguousarray(out[0][:, COLUMNS])
 
 
 def continue_run(model: ActuatorModel, data: MeasuredData, start_s: float, end_s: float, *,
                  flip_load: bool = False) -> FloatArray:
-    """Run a model left at ``start_s`` on to ``end_s``; ``(samples, 2)`` at the record's samples in between.
+    """Run a model left at ``start_s`` on to ``end_s``; ``(samples, 3)`` at the record's samples in between.
 
     ``flip_load`` applies the load with the opposite sign (a hinge-moment sign error).
     """
@@ -99,7 +104,7 @@ def continue_run(model: ActuatorModel, data: MeasuredData, start_s: float, end_s
         seg_h = -seg_h
     samples = t[(t >= start_s) & (t < end_s)]
     out = model.run_outputs(seg_t, seg_u, seg_h, sample_times=samples, end_s=end_s)
-    return np.ascontiguousarray(out[0, :, :2])
+    return np.ascontiguousarray(out[0][:, COLUMNS])
 
 
 def snapshot(model: ActuatorModel) -> ActuatorModel:

@@ -24,7 +24,7 @@ from ema_sim.monitor.detect import Cusum, block_means, spread, threshold
 from ema_sim.monitor.isolate import Candidate, Estimate, Window, candidates, fit_candidate, isolate, signature
 from ema_sim.monitor.reference import Reference, predict
 
-OUTPUTS = ("position_deg", "surface_deg")
+OUTPUTS = ("position_deg", "surface_deg", "current_a")
 MIN_SPREAD_DEG = 1e-4
 """Floor on a block mean's spread (a noise-free simulated record would otherwise have none)."""
 MIN_SAMPLE_SPREAD_DEG = 1e-3
@@ -178,13 +178,14 @@ def watch(data: MeasuredData, reference: Reference, options: Options | None = No
         raise DataError(f"{data.source or 'data'}: {t[-1]:.1f} s of data leaves nothing to watch after the "
                         f"{opt.healthy_s:g} s healthy window")
     cpu0 = time.process_time()
-    pred = predict(reference.build(), data)
-    present = tuple(getattr(data, o) is not None for o in OUTPUTS)
+    model = reference.build()
+    pred = predict(model, data)
+    present = tuple(getattr(data, o) is not None and (o != "current_a" or model.has_current) for o in OUTPUTS)
     h = threshold(opt.false_alarms_per_hour, opt.block_s, opt.k)
     healthy = t < opt.healthy_s
     z: dict[str, FloatArray] = {}
     stats: dict[str, FloatArray] = {}
-    sample_sigma = [MIN_SAMPLE_SPREAD_DEG, MIN_SAMPLE_SPREAD_DEG]
+    sample_sigma = [MIN_SAMPLE_SPREAD_DEG] * len(OUTPUTS)
     block_t = np.zeros(0)
     first: tuple[int, str, Cusum] | None = None
     for j, name in enumerate(OUTPUTS):
@@ -225,7 +226,7 @@ def _window(data: MeasuredData, reference: Reference, pred: FloatArray, present:
     predict(model, data, until_s=onset)
     t = data.time_s - data.time_s[0]
     sel = (t >= onset) & (t < end)
-    return Window(data, model, onset, start, end, pred[sel], (sigma[0], sigma[1]), (present[0], present[1]))
+    return Window(data, model, onset, start, end, pred[sel], tuple(sigma), present)
 
 
 def _diagnose(data: MeasuredData, reference: Reference, pred: FloatArray, present: tuple[bool, ...],

@@ -27,6 +27,7 @@ from ema_sim.errors import EmaError
 from ema_sim.faults import parse_fault
 from ema_sim.faults.kinds import FloatArray
 from ema_sim.io.csv import MeasuredData
+from ema_sim.models import model_class
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.signals import parse_load, parse_maneuver
 from ema_sim.simulation import simulate
@@ -46,6 +47,20 @@ DEFAULT_SIZES: dict[str, tuple[float, ...]] = {
     "hm_sign": (1.0,),
 }
 """The kinds the second-order truth model has a stage for, at sizes the report's tolerances make meaningful."""
+HIGH_ORDER_SIZES: dict[str, tuple[float, ...]] = {
+    "jam": (1.0,),
+    "coulomb_friction": (0.5, 1.0),
+    "backlash": (1.0, 2.0),
+    "torque_constant": (-0.2, -0.3),
+    "current_limit": (-0.3, -0.5),
+    "delay": (0.003, 0.005),
+    "lvdt_bias": (0.05, 0.1),
+    "linkage": (-0.3,),
+    "hm_sign": (1.0,),
+}
+"""The kinds of the high-order truth models (hoad2, hoad3), at meaningful sizes."""
+CURRENT_NOISE_A = 0.05
+"""Noise on a recorded motor current, A rms (illustrative: the report does not publish the current's)."""
 DEFAULT_MANEUVERS = ("sine:amp_deg=3,freq_hz=0.5,cycles=40", "sine:amp_deg=1,freq_hz=2,cycles=160")
 
 
@@ -93,8 +108,14 @@ def measured(case: Case) -> MeasuredData:
         v = np.asarray(ch.position_deg_to_v(deg)) + rng.normal(0.0, FEEDBACK_NOISE_V, n)
         return np.asarray(ch.feedback_cal(np.round(v / FEEDBACK_QUANTUM_V) * FEEDBACK_QUANTUM_V), dtype=float)
 
+    current = rec.current_a[0] + rng.normal(0.0, CURRENT_NOISE_A, n) if model_has_current(case.model) else None
     return MeasuredData(rec.time_s, rec.command_deg[0], read(rec.position_deg[0]), read(rec.surface_deg[0]),
-                        rec.hinge_moment_inlb[0], source=f"{case.kind}:{case.size}:{case.seed}")
+                        rec.hinge_moment_inlb[0], current, source=f"{case.kind}:{case.size}:{case.seed}")
+
+
+def model_has_current(model: str) -> bool:
+    """The truth model knows its motor current (the high-order ones)."""
+    return bool(model_class(model).has_current)
 
 
 def run_case(case: Case) -> dict[str, Any]:

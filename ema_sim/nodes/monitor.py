@@ -1,9 +1,9 @@
 """``ema_monitor``: a lifecycle node watching EMAC channels against their reference model.
 
 A thin adapter over :class:`ema_sim.monitor.online.OnlineMonitor`. It reads the EMAC's input command
-(``/ema/emac/command``, V), the hinge moment (``/ema/load/hinge_moment``) and the LVDT feedback
-(``/ema/emac/feedback``, V), converts them with each channel's scaling, and steps one monitor per channel at each
-feedback frame. It publishes ``/diagnostics`` once a second (OK while watching, WARN while the healthy window
+(``/ema/emac/command``, V), the hinge moment (``/ema/load/hinge_moment``) and the LVDT feedback and motor current
+(``/ema/emac/feedback``, V and A), converts them with each channel's scaling, and steps one monitor per channel at
+each feedback frame. It publishes ``/diagnostics`` once a second (OK while watching, WARN while the healthy window
 calibrates, ERROR after a detection, with the statistic, threshold and the detection's key values) and each
 detection as JSON on ``/ema/monitor/detections``. Constructed unconfigured: ``configure`` makes its topics,
 ``activate`` starts watching, ``deactivate`` stops, ``cleanup`` removes them. The reference is a fidelity or an
@@ -147,7 +147,8 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
             pos = self.scalings[ch].feedback_v_to_deg(float(msg.position[i]))
             if not (math.isfinite(pos) and math.isfinite(self.command[ch])):
                 continue
-            d = mon.step(self.command[ch], self.load.get(ch, 0.0), pos)
+            cur = float(msg.effort[i]) if i < len(msg.effort) else math.nan
+            d = mon.step(self.command[ch], self.load.get(ch, 0.0), pos, current_a=cur)
             if d is not None:
                 out = String()
                 out.data = json.dumps({"channel": ch, **d.as_dict()}, allow_nan=False)
