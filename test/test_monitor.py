@@ -101,3 +101,18 @@ def test_the_command_writes_detections_with_the_contract_keys(tmp_path):
     d = json.loads(out.read_text())["detections"][0]
     assert {"time_s", "output", "kind", "parameter", "estimate", "uncertainty", "statistic"} <= set(d)
     assert d["kind"] == "lvdt_bias"
+
+
+def test_a_small_fault_campaign_writes_its_table_and_scores(tmp_path):
+    import pyarrow.parquet as pq  # noqa: PLC0415 - Parquet only here
+
+    from ema_sim.montecarlo.faults import Case, plot_campaign, run_campaign, summarize  # noqa: PLC0415
+
+    common = {"duration_s": 14.0, "onset_s": 10.0, "healthy_s": 8.0}
+    rows = run_campaign([Case("lvdt_bias", 0.1, MANEUVER.spec(), 0, **common),
+                         Case("none", 0.0, MANEUVER.spec(), 1, **common)], tmp_path, workers=0)
+    s = summarize(rows)
+    assert pq.read_table(tmp_path / "cases.parquet").num_rows == 2
+    assert s["confusion"] == {"lvdt_bias": {"lvdt_bias": 1}}
+    assert s["false_alarms"] == 0
+    assert all(p.is_file() for p in plot_campaign(rows, tmp_path))

@@ -34,14 +34,14 @@ def run(args: argparse.Namespace) -> int:
         summarize,
     )
 
-    table = HIGH_ORDER_SIZES if model_has_current(args.model) else DEFAULT_SIZES
-    kinds = table
+    sizes = HIGH_ORDER_SIZES if model_has_current(args.model) else DEFAULT_SIZES
+    kinds = sizes
     if args.kinds:
-        unknown = sorted(set(args.kinds) - set(table))
+        unknown = sorted(set(args.kinds) - set(sizes))
         if unknown:
             raise EmaError(f"fault kinds {args.model} has no stage for, or unknown: {', '.join(unknown)} "
-                           f"(kinds: {', '.join(table)})")
-        kinds = {k: table[k] for k in args.kinds}
+                           f"(kinds: {', '.join(sizes)})")
+        kinds = {k: sizes[k] for k in args.kinds}
     if args.seeds < 1:
         raise EmaError(f"--seeds must be at least 1, got {args.seeds}")
     all_cases = cases(kinds, args.maneuver or DEFAULT_MANEUVERS, seeds=args.seeds, clean=args.clean,
