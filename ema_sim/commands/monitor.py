@@ -9,11 +9,33 @@ from pathlib import Path
 from ema_sim.commands.common import Subparsers, check_channel
 
 
-def truth_columns(path: Path) -> dict[str, list[float]]:
-    """The ``fault_<kind>`` columns of a CSV that ``ema simulate --fault`` wrote (none for other files)."""
+def truth_columns(path: Path, channel: str = "left_wing", time_s: list[float] | None = None) -> dict[str, list[float]]:
+    """The injected truth, ``fault_<kind>`` → size at each sample; none for a record without it.
+
+    A CSV's ``fault_<kind>`` columns (``ema simulate --fault``), or a bag's ``/ema/faults/truth`` for ``channel``
+    sampled at ``time_s`` (from the record's start).
+    """
+    import numpy as np  # noqa: PLC0415 - loaded when this subcommand runs
+
+    from ema_sim.io import is_bag  # noqa: PLC0415 - loaded when this subcommand runs
+
+    if is_bag(path):
+        from ema_sim.io.bag import read_fault_truth  # noqa: PLC0415 - rosbags only for a bag
+
+        changes = read_fault_truth(path, channel)
+        if not changes or time_s is None:
+            return {}
+        t = np.asarray(time_s)
+        names = sorted({k for _, d in changes for k in d})
+        cols: dict[str, list[float]] = {"time_s": t.tolist()}
+        starts = np.array([c[0] for c in changes])
+        for name in names:
+            values = np.array([c[1].get(name, 0.0) for c in changes])
+            idx = np.searchsorted(starts, t, side="right") - 1
+            cols[name] = np.where(idx >= 0, values[np.clip(idx, 0, None)], 0.0).tolist()
+        return cols
     if path.is_dir() or path.suffix.lower() != ".csv":
         return {}
-    import numpy as np  # noqa: PLC0415 - loaded when this subcommand runs
 
     with path.open(encoding="utf-8") as fh:
         lines = [ln for ln in fh if not ln.startswith("#")]
@@ -71,7 +93,10 @@ def run(args: argparse.Namespace) -> int:
         unc = f" ± {d.uncertainty:.3g}" if np.isfinite(d.uncertainty) else ""
         print(f"{d.time_s:.3f} s  {d.output}: {d.kind} ({d.parameter} = {d.estimate:.4g}{unc}, nominal "
               f"{d.nominal:.4g}; size {d.size:.3g}), onset ~{d.onset_s:.3f} s, statistic {d.statistic:.1f}")
-    truth = truth_columns(args.data)
+    rel_t = (data.time_s - data.time_s[0]).tolist()
+    truth = truth_columns(args.data, channel.channel, rel_t)
+    tcols = {k: np.asarray(v) for k, v in truth.items() if k != "time_s"}
+    tt = np.asarray(truth.get("time_s", []))
     doc = verdict.as_dict()
     doc["data"] = str(args.data)
     if truth:
@@ -84,8 +109,6 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from ema_sim.monitor.plot import timeline_plot  # noqa: PLC0415 - plotting only when asked
 
-        tt = np.asarray(truth_columns(args.data).get("time_s", []))
-        tcols = {k: np.asarray(v) for k, v in truth_columns(args.data).items() if k != "time_s"}
         print(f"wrote {timeline_plot(verdict, args.plot, tcols or None, tt - tt[0] if tt.size else None)}")
     return 0
 
