@@ -19,7 +19,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ema_sim.benchmark import Benchmark, Result
 from ema_sim.config import load_channel
@@ -28,6 +27,7 @@ from ema_sim.io.csv import MeasuredData
 from ema_sim.models import create
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.monitor.online import OnlineMonitor
+from ema_sim.montecarlo.faults import ail_command
 from ema_sim.signals import parse_maneuver
 from ema_sim.simulation import Inputs, frame_inputs, run_maneuver, simulate
 
@@ -37,18 +37,6 @@ HOUR_S = 3600.0
 FRAME_HZ = 200.0
 SPRING_INLB_PER_DEG = 150.0
 """A hinge moment opposing deflection, like an aerodynamic load on a surface (illustrative)."""
-
-
-def _ail_command(cmd_deg: np.ndarray, ch_name: str, rng: np.random.Generator) -> np.ndarray:
-    """The FMU command as the actuator gets it through the AIL command path (delay, 50 Hz lag, quantum, noise)."""
-    ch = load_channel(ch_name)
-    v = np.asarray(ch.deg_to_v(cmd_deg), dtype=float)
-    delay = round(0.026 * FRAME_HZ)
-    v = np.concatenate([np.full(delay, v[0]), v[:-delay]])
-    a = np.exp(-2 * np.pi * 50.0 / FRAME_HZ)
-    v = lfilter([1 - a], [1, -a], v, zi=[a * v[0]])[0]
-    v = np.round((v + rng.normal(0.0, 0.003, v.size)) / 0.005) * 0.005
-    return np.asarray(ch.command_cal.inverse(v), dtype=float)
 
 
 def _feedback(deg: np.ndarray, ch_name: str, rng: np.random.Generator) -> np.ndarray:
@@ -63,7 +51,7 @@ def clean_channel(ch_name: str, seed: int, duration_s: float = HOUR_S) -> tuple[
     fmu = frame_inputs(parse_maneuver(FLIGHT), None, duration_s=duration_s, frame_hz=FRAME_HZ)
     cmd = fmu.command_deg
     hm = -SPRING_INLB_PER_DEG * cmd
-    seen = _ail_command(cmd, ch_name, rng)
+    seen = ail_command(cmd, ch_name, rng, FRAME_HZ)
     model = create("loada", ch_name)
     rec = run_maneuver(model, Inputs(fmu.time_s, seen, hm, duration_s), sample_hz=FRAME_HZ)
     held = np.minimum(np.searchsorted(fmu.time_s, rec.time_s, side="right") - 1, fmu.time_s.size - 1)

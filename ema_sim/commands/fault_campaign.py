@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     if args.seeds < 1:
         raise EmaError(f"--seeds must be at least 1, got {args.seeds}")
     all_cases = cases(kinds, args.maneuver or DEFAULT_MANEUVERS, seeds=args.seeds, clean=args.clean,
-                      reference=args.reference, model=args.model, load=args.load)
+                      reference=args.reference, model=args.model, load=args.load, environment=args.environment)
     print(f"{len(all_cases)} cases")
     table = run_campaign(all_cases, args.out, workers=args.workers, scheduler=args.scheduler)
     summary = summarize(table)
@@ -78,6 +78,9 @@ def register(sub: Subparsers) -> None:
     p.add_argument("--model", default="loada", help="truth model: loada, loac (second order) or hoad2, hoad3")
     p.add_argument("--reference", choices=("nominal", "learned"), default="nominal",
                    help="the monitor's reference: the truth model's nominal parameters, or learned (healthy window)")
+    p.add_argument("--environment", choices=("feedback", "ail"), default="feedback",
+                   help="feedback: the AIL feedback's noise and quantum on the readings; ail: also the AIL command "
+                        "path between the recorded command and the actuator (use with --reference learned)")
     p.add_argument("--workers", type=int, default=None, help="local Dask workers (0: run in this process)")
     p.add_argument("--scheduler", default=None, help="a Dask scheduler's address")
     p.set_defaults(func=run)

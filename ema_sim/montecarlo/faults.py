@@ -16,26 +16,32 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.signal import lfilter
 
 from ema_sim.config import load_channel
 from ema_sim.errors import EmaError
 from ema_sim.faults import parse_fault
 from ema_sim.faults.kinds import FloatArray
 from ema_sim.io.csv import MeasuredData
-from ema_sim.models import model_class
+from ema_sim.models import create, model_class
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.signals import parse_load, parse_maneuver
-from ema_sim.simulation import simulate
+from ema_sim.simulation import Inputs, frame_inputs, run_maneuver
 
 FEEDBACK_NOISE_V = 0.003
 """The AIL profile's feedback noise, V rms (config/ail.yaml)."""
 FEEDBACK_QUANTUM_V = 0.005
 """The FMU A/D quantum, V (config/ail.yaml)."""
+AIL_COMMAND_DELAY_S = 0.026
+"""The AIL command path's transport delay (config/ail.yaml)."""
+AIL_LAG_HZ = 50.0
+"""The FMU's first-order lag on the command (config/ail.yaml)."""
+FRAME_HZ = 200.0
 DEFAULT_SIZES: dict[str, tuple[float, ...]] = {
     "jam": (1.0,),
     "viscous_friction": (0.25, 0.5),
@@ -79,6 +85,9 @@ class Case:
     onset_s: float = 25.0
     healthy_s: float = 20.0
     false_alarms_per_hour: float = 0.1
+    environment: str = "feedback"
+    """``feedback``: the AIL feedback's noise and quantum on the readings; ``ail``: also the AIL command path
+    (26 ms, 50 Hz lag, 5 mV quantum, 3 mV noise) between the recorded FMU command and the actuator."""
     reference: str = "nominal"
     """``nominal``: the truth model's nominal parameters; ``learned``: the channel's second order learned on the
     healthy window (:func:`ema_sim.monitor.learn`)."""
@@ -99,9 +108,13 @@ def measured(case: Case) -> MeasuredData:
     ch = load_channel(case.channel)
     faults = [] if case.kind == "none" else [parse_fault(f"{case.kind}:at_s={case.onset_s},size={case.size}")
                                              if case.kind != "jam" else parse_fault(f"jam:at_s={case.onset_s}")]
-    _, rec, _ = simulate(case.model, parse_maneuver(case.maneuver), parse_load(case.load), channel=case.channel,
-                         duration_s=case.duration_s, faults=faults)
     rng = np.random.default_rng(case.seed)
+    fmu = frame_inputs(parse_maneuver(case.maneuver), parse_load(case.load), duration_s=case.duration_s)
+    seen = ail_command(fmu.command_deg, case.channel, rng) if case.environment == "ail" else fmu.command_deg
+    rec = run_maneuver(create(case.model, case.channel), Inputs(fmu.time_s, seen, fmu.hinge_moment_inlb,
+                                                                fmu.duration_s), faults=faults)
+    held = np.minimum(np.searchsorted(fmu.time_s, rec.time_s, side="right") - 1, fmu.time_s.size - 1)
+    rec = replace(rec, command_deg=fmu.command_deg[None, held])  # the record holds the FMU's command
     n = rec.time_s.size
 
     def read(deg: FloatArray) -> FloatArray:
@@ -111,6 +124,23 @@ def measured(case: Case) -> MeasuredData:
     current = rec.current_a[0] + rng.normal(0.0, CURRENT_NOISE_A, n) if model_has_current(case.model) else None
     return MeasuredData(rec.time_s, rec.command_deg[0], read(rec.position_deg[0]), read(rec.surface_deg[0]),
                         rec.hinge_moment_inlb[0], current, source=f"{case.kind}:{case.size}:{case.seed}")
+
+
+def ail_command(command_deg: FloatArray, channel: str, rng: np.random.Generator,
+                frame_hz: float = FRAME_HZ) -> FloatArray:
+    """The FMU's frame commands as the actuator gets them through the AIL command path (config/ail.yaml).
+
+    26 ms transport delay, the FMU's 50 Hz first-order lag, 3 mV rms noise and the 5 mV D/A quantum, on the
+    ±10 V command signal.
+    """
+    ch = load_channel(channel)
+    v = np.asarray(ch.deg_to_v(command_deg), dtype=float)
+    delay = round(AIL_COMMAND_DELAY_S * frame_hz)
+    v = np.concatenate([np.full(delay, v[0]), v[:-delay]]) if delay else v
+    a = math.exp(-2.0 * math.pi * AIL_LAG_HZ / frame_hz)
+    v = lfilter([1.0 - a], [1.0, -a], v, zi=[a * v[0]])[0]
+    v = np.round((v + rng.normal(0.0, FEEDBACK_NOISE_V, v.size)) / FEEDBACK_QUANTUM_V) * FEEDBACK_QUANTUM_V
+    return np.asarray(ch.command_cal.inverse(v), dtype=float)
 
 
 def model_has_current(model: str) -> bool:
