@@ -116,7 +116,7 @@ def candidates(model: ActuatorModel, data: MeasuredData) -> list[Candidate]:
     out: list[Candidate] = []
     for kind, cls in FAULTS.items():
         if cls.stage == "output":
-            if kind == "lvdt_scale" or data.position_deg is not None:
+            if data.position_deg is not None:
                 out.append(Candidate(kind, {"lvdt_bias": "bias_deg", "lvdt_drift": "drift_dps",
                                             "lvdt_scale": "scale"}[kind], 0.0, -math.inf, math.inf))
             continue
