@@ -116,3 +116,13 @@ def test_a_small_fault_campaign_writes_its_table_and_scores(tmp_path):
     assert s["confusion"] == {"lvdt_bias": {"lvdt_bias": 1}}
     assert s["false_alarms"] == 0
     assert all(p.is_file() for p in plot_campaign(rows, tmp_path))
+
+
+def test_a_report_escalated_to_the_high_order_physics_gives_that_reference(tmp_path):
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps({"data": "x.csv", "channel": "left_wing", "outputs": ["position_deg"],
+                                "final": {"model": "hoad3 (physical parameters fitted)",
+                                          "params": {"command_delay_s": 0.005, "coulomb_friction_lbf": 41.0}}}))
+    ref = from_report(path, load_channel("left_wing"))
+    assert ref.model == "hoad3"
+    assert ref.overrides == {"command_delay_s": 0.005, "coulomb_friction_lbf": 41.0}

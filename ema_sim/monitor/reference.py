@@ -24,6 +24,7 @@ from ema_sim.identify.problem import Problem
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models import ActuatorModel, create, model_names
 from ema_sim.models.base import O_CUR, O_POS, O_SURF
+from ema_sim.models.registry import model_class
 from ema_sim.models.second_order import SecondOrderParams
 
 COLUMNS = [O_POS, O_SURF, O_CUR]
@@ -130,9 +131,13 @@ def from_report(path: str | Path, channel: ChannelConfig) -> Reference:
     rep = read_report(path)
     if rep.channel and rep.channel != channel.channel:
         raise DataError(f"{path}: an identification of channel {rep.channel!r}, not {channel.channel!r}")
-    model = rep.model if rep.model in model_names() else "second_order"
-    fields = set(SecondOrderParams.__dataclass_fields__)
-    values = {k: float(v) for k, v in rep.values.items() if k in fields and math.isfinite(v)}
+    named = rep.model.split()[0] if rep.model else ""  # "hoad3 (physical parameters fitted)"
+    model = named if named in model_names() else "second_order"
+    cls = model_class(model)
+    defaults = cls.default_params(channel)
+    # the scalar parameters only: a report gives a curve's (tuple-valued) parameters one number each
+    values = {k: float(v) for k, v in rep.values.items()
+              if isinstance(getattr(defaults, k, None), float) and math.isfinite(v)}
     return Reference(model, channel, values, f"{model} of the identify report {path}")
 
 
