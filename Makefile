@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # The packages `make typecheck` (and so `make test`) checks with mypy --strict (config: pyproject.toml).
 TYPED  := ema_sim/models ema_sim/signals ema_sim/environment ema_sim/identify ema_sim/io ema_sim/analysis ema_sim/montecarlo ema_sim/export \
           ema_msgs_py ema_sim/ail ema_sim/commands ema_sim/run.py ema_sim/suite.py ema_sim/launching.py ema_sim/demo.py ema_sim/cli.py \
-          ema_sim/nodes ema_sim/emac
+          ema_sim/nodes ema_sim/emac ema_sim/faults ema_sim/monitor
 
 .PHONY: venv test test-slow lint typecheck demo bench bench-check docs clean
 

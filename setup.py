@@ -47,6 +47,7 @@ setup(
             "fmu_bridge = ema_sim.nodes.bridge:main",
             "fmu = ema_sim.nodes.fmu:main",
             "ema_container = ema_sim.nodes.container:main",
+            "ema_monitor = ema_sim.nodes.monitor:main",
         ],
     },
 )

@@ -121,7 +121,15 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
               {"data": "name of a node that is up and subscribed"}, per_frame=False),
     TopicSpec("/diagnostics", DIAGNOSTIC_ARRAY, EVENT_QOS, "emac, testenv", "monitors",
               {"status": "one status per channel: brake, failure, counters of rejected inputs"}, per_frame=False),
+    TopicSpec("/ema/faults/truth", STRING, EVENT_QOS, "emac (faults injected: emac.faults)", "recorder, scoring",
+              {"data": "JSON {channel, time_s, faults: {fault_<kind>: size in}}, at each change of an injected "
+                       "fault's size"}, per_frame=False),
+    TopicSpec("/ema/monitor/detections", STRING, EVENT_QOS, "ema_monitor", "operators, recorder",
+              {"data": "JSON of a detection: channel, time_s, output, kind, parameter, estimate, uncertainty, "
+                       "statistic"}, per_frame=False),
 )}
+FAULT_TRUTH = "/ema/faults/truth"
+MONITOR_DETECTIONS = "/ema/monitor/detections"
 
 
 def topic(name: str) -> TopicSpec:

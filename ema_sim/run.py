@@ -152,10 +152,16 @@ class RunDescription:
     """The test environment's noise seed (default: the profile's)."""
     namespace: str = ""
     """ROS namespace of every node (``/aircraft2``): every topic of the run moves with it."""
+    faults: list[str] = field(default_factory=list)
+    """Faults the EMACs inject on a schedule (``emac.faults`` specs, times from the channel's start)."""
 
     def __post_init__(self) -> None:
         # `ema` imports this module at every start (commands/launch.py); the switches import python-control
+        from ema_sim.faults import parse_fault  # noqa: PLC0415 - loaded when a run is described
         from ema_sim.switches import element_names, environment_elements, model_overrides  # noqa: PLC0415 - 1.2 s
+
+        for spec in self.faults:
+            parse_fault(spec)  # a bad spec is one clear error before any node starts
 
         if self.emac_box is not None:
             self.emac = "box" if self.emac_box else "channels"
@@ -262,7 +268,8 @@ class RunDescription:
         for name in self.emac_nodes():
             chans = self.emac_channels if name == "emac" else [name[len("emac_"):]]
             out[name] = {**common, **sim, "model": self.model, "channels": chans, "disable": self.disable,
-                         "emac": {"frame_hz": self.frame_hz}}
+                         "emac": {"frame_hz": self.frame_hz, **({"faults": ";".join(self.faults)} if self.faults
+                                                                 else {})}}
         out["testenv"] = {**common, **sim, "profile": self.profile, "frame_hz": self.frame_hz,
                           "disable": list(environment_elements(self.disable)),
                           **({"seed": self.seed} if self.seed is not None else {})}

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from ema_sim import __version__
 from ema_sim.errors import EmaError
+from ema_sim.faults import Fault, run_faulted, truth_columns
 from ema_sim.models import ActuatorModel, Record, create
 from ema_sim.signals import Load, Maneuver
 from ema_sim.signals.loads import NoLoad
@@ -55,16 +56,26 @@ def dau_times(duration_s: float, sample_hz: float = DAU_HZ) -> FloatArray:
 
 
 def run_maneuver(model: ActuatorModel, inputs: Inputs, *, sample_hz: float = DAU_HZ,
-                 progress: Callable[[float], None] | None = None) -> Record:
-    """Trim the model at the first input and run it through ``inputs``, sampled at ``sample_hz``."""
+                 progress: Callable[[float], None] | None = None, faults: Sequence[Fault] = ()) -> Record:
+    """Trim the model at the first input and run it through ``inputs``, sampled at ``sample_hz``.
+
+    ``faults`` are injected on their schedules (:func:`ema_sim.faults.run_faulted`).
+    """
     model.trim(inputs.command_deg[0], inputs.hinge_moment_inlb[0])
     samples = dau_times(inputs.duration_s, sample_hz)
+    if faults:
+        return run_faulted(model, inputs.time_s, inputs.command_deg, inputs.hinge_moment_inlb, samples,
+                           inputs.duration_s, faults, progress=progress)
     return model.run(inputs.time_s, inputs.command_deg, inputs.hinge_moment_inlb,
                      sample_times=samples, end_s=inputs.duration_s, progress=progress)
 
 
-def csv_columns(model: ActuatorModel, record: Record, i: int = 0) -> dict[str, FloatArray]:
-    """The data-contract columns of one instance, with the ±10 V signals and current where known."""
+def csv_columns(model: ActuatorModel, record: Record, i: int = 0,
+                faults: Sequence[Fault] = ()) -> dict[str, FloatArray]:
+    """The data-contract columns of one instance, with the ±10 V signals and current where known.
+
+    With ``faults``, the injected truth follows: one ``fault_<kind>`` column each, its size at each sample.
+    """
     ch = model.channel
     cols = {
         "time_s": record.time_s,
@@ -77,20 +88,24 @@ def csv_columns(model: ActuatorModel, record: Record, i: int = 0) -> dict[str, F
         cols["current_a"] = record.current_a[i]
     cols["command_v"] = np.asarray(ch.deg_to_v(record.command_deg[i]))
     cols["position_v"] = np.asarray(ch.position_deg_to_v(record.position_deg[i]))
+    cols.update(truth_columns(faults, record.time_s))
     return cols
 
 
 def simulate(model_name: str, maneuver: Maneuver, load: Load | None = None, *, channel: str = "left_wing",
              rate_hz: float | None = None, duration_s: float | None = None, frame_hz: float = FRAME_HZ,
              sample_hz: float = DAU_HZ, progress: Callable[[float], None] | None = None,
-             **overrides: Any) -> tuple[ActuatorModel, Record, dict[str, Any]]:
-    """Build ``model_name`` for ``channel`` and run the maneuver; returns model, record and metadata."""
+             faults: Sequence[Fault] = (), **overrides: Any) -> tuple[ActuatorModel, Record, dict[str, Any]]:
+    """Build ``model_name`` for ``channel`` and run the maneuver; returns model, record and metadata.
+
+    ``faults`` are injected on their schedules; the metadata names them (``faults``, ``;``-separated specs).
+    """
     kwargs: dict[str, Any] = dict(overrides)
     if rate_hz is not None:
         kwargs["rate_hz"] = rate_hz
     model = create(model_name, channel, **kwargs)
     inputs = frame_inputs(maneuver, load, duration_s=duration_s, frame_hz=frame_hz)
-    record = run_maneuver(model, inputs, sample_hz=sample_hz, progress=progress)
+    record = run_maneuver(model, inputs, sample_hz=sample_hz, progress=progress, faults=faults)
     meta = {
         "generator": f"ema simulate (ema_sim {__version__})",
         "model": model.name,
@@ -102,6 +117,8 @@ def simulate(model_name: str, maneuver: Maneuver, load: Load | None = None, *, c
         "sample_hz": f"{sample_hz:g}",
         "duration_s": f"{inputs.duration_s:g}",
     }
+    if faults:
+        meta["faults"] = ";".join(f.spec() for f in faults)
     if overrides:
         meta["overrides"] = ",".join(f"{k}={v}" for k, v in overrides.items())
     return model, record, meta

@@ -37,9 +37,11 @@ LAYERS: list[tuple[str, ...]] = [
     ("ema_sim.parameters",),
     ("ema_sim.config",),
     ("ema_sim.models", "ema_sim.signals"),
+    ("ema_sim.faults",),
     ("ema_sim.environment", "ema_sim.simulation", "ema_sim.io"),
     ("ema_sim.switches", "ema_sim.analysis", "ema_sim.emac"),
     ("ema_sim.identify", "ema_sim.ail"),
+    ("ema_sim.monitor",),
     ("ema_sim.montecarlo", "ema_sim.nodes", "ema_sim.export"),
     ("ema_sim.run",),
     ("ema_sim.suite", "ema_sim.launching"),
@@ -48,8 +50,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("ema_sim.demo",),
 ]
 LAYER = {package: k for k, packages in enumerate(LAYERS) for package in packages}
-PURE = ("ema_sim.models", "ema_sim.signals", "ema_sim.environment", "ema_sim.switches", "ema_sim.parameters",
-        "ema_sim.config", "ema_sim.calibration", "ema_sim.errors")
+PURE = ("ema_sim.models", "ema_sim.signals", "ema_sim.faults", "ema_sim.environment", "ema_sim.switches",
+        "ema_sim.parameters", "ema_sim.config", "ema_sim.calibration", "ema_sim.errors")
 FOREIGN = ("rclpy", "rosbags", "mcap", "ema_msgs_py.ros", "ema_msgs_py.typestore")
 """What no module of the pure layers may import (the models are pure: no ROS, no bag I/O). The contract's pure
 modules (``ema_msgs_py.contract``: the channel names, the scaling) are allowed: they import nothing but the

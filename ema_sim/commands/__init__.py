@@ -11,6 +11,8 @@ COMMANDS: tuple[str, ...] = (
     "analyze",
     "identify",
     "identify_consistency",
+    "monitor",
+    "fault_campaign",
     "loes",
     "acceptance",
     "bench",

@@ -33,6 +33,7 @@ def _config(args: argparse.Namespace) -> tuple[RunDescription, str, str, float]:
         layout=args.layout, emac="box" if args.emac_box else args.emac, domain_id=args.domain_id,
         disable=args.disable, rt_priority=args.rt_priority, window=args.window, fmu=args.fmu,
         open_loop=args.open_loop, bungee_inlb=args.bungee, seed=args.seed, namespace=args.namespace,
+        faults=args.fault,
     )
     what = "every channel, with the vehicle and autopilot in the loop" if args.fmu else ", ".join(cfg.channels)
     return cfg, cfg.test_name, what, cfg.run_s
@@ -137,6 +138,9 @@ def register(sub: Subparsers) -> None:
     p.add_argument("--emac-box", action="store_true", help="shorthand for --emac box")
     p.add_argument("--window", type=int, default=1,
                    help="lockstep: frames the clock may run ahead of the slowest EMAC (1: strictly frame by frame)")
+    p.add_argument("--fault", action="append", default=[], metavar="KIND:FIELD=VALUE,...",
+                   help="a fault the EMACs inject on a schedule (repeatable; docs/monitor.md); its truth is "
+                        "recorded on /ema/faults/truth")
     p.add_argument("--disable", action="append", default=[],
                    help="switch an element off: the test environment's delay, lag, quantization, noise (or one "
                         "path's, command.delay...) and the model's dead_band")

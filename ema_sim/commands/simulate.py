@@ -23,20 +23,23 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
+    from ema_sim.faults import parse_fault  # noqa: PLC0415 - loaded when this subcommand runs
     from ema_sim.io.csv import write_csv  # noqa: PLC0415 - keep `ema --help` fast
     from ema_sim.simulation import csv_columns, simulate  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     maneuver = parse_maneuver(args.maneuver)
+    faults = [parse_fault(text) for text in args.fault]
     load = parse_load(args.load) if args.load else None
     bar = ProgressBar(f"{args.model} {args.channel}")
     try:
         model, record, meta = simulate(
             args.model, maneuver, load, channel=args.channel, rate_hz=args.rate, duration_s=args.duration,
-            frame_hz=args.frame_hz, sample_hz=args.sample_hz, progress=bar, **parse_overrides(args.overrides),
+            frame_hz=args.frame_hz, sample_hz=args.sample_hz, progress=bar, faults=faults,
+            **parse_overrides(args.overrides),
         )
     finally:
         bar.close()
-    write_csv(args.csv, csv_columns(model, record), meta)
+    write_csv(args.csv, csv_columns(model, record, faults=faults), meta)
     span = f"{record.time_s.size} samples over {meta['duration_s']} s"
     print(f"wrote {args.csv}: {span} ({model.name}, {model.channel.channel})")
     return 0
@@ -60,5 +63,10 @@ def register(sub: Subparsers) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the maneuver's length)")
     p.add_argument("--frame-hz", type=float, default=200.0, help="FMU frame rate of the command (200)")
     p.add_argument("--sample-hz", type=float, default=1000.0, help="DAU sample rate of the CSV (1000)")
+    p.add_argument("--fault", action="append", default=[], metavar="KIND:FIELD=VALUE,...",
+                   help="inject a fault on a schedule, e.g. coulomb_friction:at_s=5,ramp_s=2,size=0.5 (repeatable; "
+                   "kinds: coulomb_friction, viscous_friction, jam, backlash, torque_constant, current_limit, delay, "
+                   "lvdt_bias, lvdt_drift, lvdt_scale, linkage, hm_sign; docs/faults.md); the truth goes in "
+                   "fault_<kind> columns")
     p.add_argument("--csv", required=True, type=Path, help="output CSV")
     p.set_defaults(func=run)

@@ -26,6 +26,7 @@ from ema_msgs_py.contract import Scaling, scaling_of
 from ema_sim.emac.crosstalk import Crosstalk
 from ema_sim.emac.failures import Failure, HardOver, Stall, Zero, parse_failure
 from ema_sim.errors import ConfigError
+from ema_sim.faults import Fault, FaultSchedule, parse_faults
 from ema_sim.models.base import ActuatorModel, Flags, Sample
 from ema_sim.parameters import param
 
@@ -57,6 +58,9 @@ class EmacSettings:
                                            default=20000.0, min=1.0, max=1e7)
     failure: str = param("-", "failure mode: none, stuck, hard_over:direction=±1, zero, power_loss, "
                          "stall:load_factor=X", default="none")
+    faults: str = param("-", "faults injected on a schedule, ';'-separated specs with times from the channel's start: "
+                        "coulomb_friction:at_s=5,ramp_s=2,size=0.5 (docs/faults.md); none: no fault",
+                        default="none")
     seed: int = param("-", "crosstalk noise seed", default=0, min=0, max=2**62)
     stamp_tolerance_s: float = param("s", "real time: a command stamped further ahead of the last one taken than "
                                      "the wall time since it came plus this is dropped (future_stamp; a burst of "
@@ -165,6 +169,8 @@ class EmacChannel:
         self.scaling = scaling or scaling_of(self.cfg)
         self.frame_s = self.settings.frame_s
         self.failure: Failure = parse_failure(self.settings.failure)
+        self.schedule = FaultSchedule(model, parse_faults(self.settings.faults))
+        """The injected faults (their truth: :meth:`fault_truth`)."""
         self.motor_power_on = self.settings.motor_power_on
         self.crosstalk = Crosstalk(crosstalk_noise_pp_v, self.settings.seed, stream)
         self.counters = dict.fromkeys(COUNTERS, 0)
@@ -253,6 +259,27 @@ class EmacChannel:
         self._load_inlb = h
         return InputStatus.OK
 
+    def set_faults(self, text: str) -> tuple[Fault, ...]:
+        """Replace the injected faults (``;``-separated specs, times from the channel's start; ``none``: none).
+
+        Parameters
+        ----------
+        text : str
+            The specs.
+
+        Returns
+        -------
+        tuple of Fault
+            The faults now scheduled.
+        """
+        self.schedule = FaultSchedule(self.model, parse_faults(text))
+        return self.schedule.faults
+
+    def fault_truth(self) -> dict[str, float]:
+        """Each injected fault's size in at the last frame (``fault_<kind>``: empty without faults)."""
+        frames = self.counters["frames"]
+        return self.schedule.truth(frames * self.frame_s) if self.schedule.faults else {}
+
     def set_failure(self, failure: Failure | str) -> Failure:
         """Switch the failure mode (takes effect at the next frame).
 
@@ -312,7 +339,15 @@ class EmacChannel:
             command_deg = self._command_deg()
             if isinstance(self.failure, Stall):
                 hm += self._stall_load(command_deg)
-            fb = self._frame_feedback(self.model.step_values(command_deg, hm, self.frame_s), hm)
+            t = (self.counters["frames"] - 1) * self.frame_s
+            sched = self.schedule
+            if sched.faults:
+                sched.frame(t, self.last.position_deg)
+                fb = self._frame_feedback(self.model.step_values(command_deg, sched.load(t, hm), self.frame_s), hm)
+                pos = sched.reading(t + self.frame_s, fb.position_deg)
+                fb = _replace(fb, position_deg=pos, position_v=self.scaling.feedback_deg_to_v(pos))
+            else:
+                fb = self._frame_feedback(self.model.step_values(command_deg, hm, self.frame_s), hm)
         if braked:
             self.counters["braked_frames"] += 1
         noise = self.crosstalk.step(activity)

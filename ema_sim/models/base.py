@@ -253,6 +253,19 @@ class ActuatorModel(ABC):
             An instance of :attr:`params_class`.
         """
 
+    def retune(self, **values: float) -> None:  # noqa: ARG002 - the families' signature
+        """Change parameters of every instance from the present model time, states kept (a fault's schedule).
+
+        The families with a parameter kernel override this; a linear model has one LTI system and no
+        parameter to change while it runs.
+
+        Parameters
+        ----------
+        **values : float
+            Parameter name → new value (validated like an override).
+        """
+        raise EmaError(f"{self.name} has no parameters to change while it runs")
+
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
         """The held command whose equilibrium is ``position_deg`` (families with command maps refine).
 

@@ -26,6 +26,7 @@ parameter (``stuck``, ``hard_over:direction=-1``, ``zero``, ``power_loss``, ``st
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -281,7 +282,13 @@ class EmacNode(SuiteNode):
             old, self.wait_s = self.wait_s, float(value)
             return f"emac.lockstep_wait_s: {old:g} → {self.wait_s:g} s"
 
+        def faults(value: Any) -> str:
+            specs = [u.set_faults(str(value)) for u in self.units.values()]
+            text = "; ".join(f.spec() for f in specs[0]) if specs and specs[0] else "none"
+            return f"emac.faults: {text} on {', '.join(self.channels)} (times from each channel's start)"
+
         setting("watchdog_timeout_s", "s")
+        on("emac.faults", faults)
         setting("hinge_moment_limit_inlb", "in·lb")
         on("emac.failure", failure)
         on("emac.motor_power_on", power)
@@ -291,6 +298,8 @@ class EmacNode(SuiteNode):
         ports = self.ports
         self.outputs = Outputs(self, ports, self.channels, self.frame_id, self.has_current)
         self.diag_pub = self.outputs.diagnostics
+        self.truth_pub = self.create_publisher(String, ct.endpoint(ct.FAULT_TRUTH), qos(ct.EVENT_QOS))
+        self._truth: dict[str, dict[str, float]] = {}
         # Real time: a command is the frame's event; the frame takes the hinge moment and the crosstalk sources
         # waiting for it (they need not wake the process). Lockstep waits on every input of the frame.
         at_frame = not self.lockstep
@@ -685,6 +694,7 @@ class EmacNode(SuiteNode):
         self.model_ns = start_ns + self.frame_ns
         self._observe_own(out)
         self._publish(self.model_ns, out)
+        self._publish_truth()
         # After the frame's feedback is out (0.2 ms for five channels), once a second of model time and at
         # once when a brake or a failure changed (once for the frame, however many channels changed).
         self._frames_to_diagnostics -= 1
@@ -692,6 +702,19 @@ class EmacNode(SuiteNode):
             self._diagnose_now = False
             self._frames_to_diagnostics = self._diagnostics_every
             self._publish_diagnostics()
+
+    def _publish_truth(self) -> None:
+        """The injected faults' sizes on their own topic, at each change (a bag of the run can be scored)."""
+        for ch, unit in self.units.items():
+            if not unit.schedule.faults:
+                continue
+            truth = unit.fault_truth()
+            if truth != self._truth.get(ch):
+                self._truth[ch] = truth
+                msg = String()
+                msg.data = json.dumps({"channel": ch, "time_s": unit.counters["frames"] * unit.frame_s,
+                                       "faults": truth})
+                self.truth_pub.publish(msg)
 
     def _observe_own(self, out: dict[str, Feedback]) -> None:
         """An EMAC box: its channels are each other's crosstalk sources."""

@@ -12,9 +12,9 @@ One job per module: :mod:`.writer` (and :mod:`.storage`, rosbags' internals), :m
 """
 
 from ema_sim.io.bag.layout import METADATA_KEYS, SIDES
-from ema_sim.io.bag.reader import BagInfo, bag_channels, bag_info, read_bag, read_joint_topic
+from ema_sim.io.bag.reader import BagInfo, bag_channels, bag_info, read_bag, read_fault_truth, read_joint_topic
 from ema_sim.io.bag.reindex import ReindexReport, reindex_bag
 from ema_sim.io.bag.writer import BagWriter, write_bag
 
 __all__ = ["METADATA_KEYS", "SIDES", "BagInfo", "BagWriter", "ReindexReport", "bag_channels", "bag_info", "read_bag",
-           "read_joint_topic", "reindex_bag", "write_bag"]
+           "read_fault_truth", "read_joint_topic", "reindex_bag", "write_bag"]

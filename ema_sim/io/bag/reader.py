@@ -482,3 +482,32 @@ def read_bag(path: str | Path, channel: str | None = None, *, side: str = "emac"
         rate_dps=cols["rate_dps"],
         extra=_other_side(src, channel, stamps, side, sc),
     )
+
+
+def read_fault_truth(path: str | Path, channel: str) -> list[tuple[float, dict[str, float]]]:
+    """The faults a run's EMAC injected into one channel, from ``/ema/faults/truth``: (time, sizes) at each change.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag.
+    channel : str
+        The channel.
+
+    Returns
+    -------
+    list of tuple
+        Channel time (s from its start) and ``fault_<kind>`` → size from then on; empty without faults.
+    """
+    src = _open(path)
+    out: list[tuple[float, dict[str, float]]] = []
+    if ct.FAULT_TRUTH not in src.topics:
+        return out
+    for _, _, raw in src.messages({ct.FAULT_TRUTH}):
+        try:
+            doc = json.loads(ts.deserialize(raw, ct.STRING).data)
+        except (ValueError, AttributeError, KeyError):
+            continue
+        if doc.get("channel") == channel:
+            out.append((float(doc["time_s"]), {str(k): float(v) for k, v in doc["faults"].items()}))
+    return out

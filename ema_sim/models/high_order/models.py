@@ -121,17 +121,38 @@ class HighOrderModel(ActuatorModel):
         )
         if self.continuous and any(getattr(prm, f) > 0.0 for prm in self.params for f in ENVIRONMENT_FIELDS):
             raise EmaError(f"{self.name} has no flight/test environment (delay, quantization, noise): use hoad2/hoad3")
-        fb = self.channel.feedback_cal
-        self._P = np.stack([
-            prm.kernel_vector(figure33=self.figure33, bound=b, hysteresis=self.hysteresis, noise=self.noise,
-                              feedback_cal=(fb.c0, fb.c1, fb.c2, fb.c3))
-            for prm, b in zip(self.params, self.bounds, strict=True)
-        ])
+        self._P = self._kernel_vectors()
         # a delay between two steps blends the inputs of both (:func:`~ema_sim.models.high_order.hoad.split_delay`)
         step = 1.0 / self.rate_hz if not self.continuous and self.rate_hz else 0.0
         self._max_delay_s = float(self._P[:, P.command_delay_s].max()) + step
         self._power = np.ones(self.n)
         self.trim()
+
+    def _kernel_vectors(self) -> FloatArray:
+        fb = self.channel.feedback_cal
+        return np.stack([
+            prm.kernel_vector(figure33=self.figure33, bound=b, hysteresis=self.hysteresis, noise=self.noise,
+                              feedback_cal=(fb.c0, fb.c1, fb.c2, fb.c3))
+            for prm, b in zip(self.params, self.bounds, strict=True)
+        ])
+
+    def retune(self, **values: float) -> None:
+        """Change parameters from the present model time; states, delay buffers and noise streams are kept.
+
+        Parameters
+        ----------
+        **values : float
+            Parameter name → new value.
+        """
+        if "feedback_delay_s" in values:
+            raise EmaError(f"{self.name}: the feedback delay's buffer is sized at construction; it cannot change "
+                           "while the model runs")
+        if self.continuous and any(v > 0.0 for k, v in values.items() if k in ENVIRONMENT_FIELDS):
+            raise EmaError(f"{self.name} has no flight/test environment (delay, quantization, noise): use hoad2/hoad3")
+        self.params = [prm.replace(**values) for prm in self.params]
+        self._P = self._kernel_vectors()
+        step = 1.0 / self.rate_hz if not self.continuous and self.rate_hz else 0.0
+        self._max_delay_s = max(self._max_delay_s, float(self._P[:, P.command_delay_s].max()) + step)
 
     @classmethod
     def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:  # noqa: D102

@@ -88,6 +88,22 @@ class SecondOrderModel(ActuatorModel):
     def max_delay_s(self) -> float:  # noqa: D102
         return self._max_delay_s
 
+    def retune(self, **values: float) -> None:
+        """Change parameters from the present model time; states, delay history and clock are kept.
+
+        Parameters
+        ----------
+        **values : float
+            Parameter name → new value.
+        """
+        if "feedback_delay_s" in values:
+            raise EmaError(f"{self.name}: the feedback delay's ring is sized at construction; it cannot change "
+                           "while the model runs")
+        self.params = [prm.replace(**values) for prm in self.params]
+        self._P = np.stack([prm.kernel_vector() for prm in self.params])
+        self._on = stage_set.kernel_set(int(stages_on_any(self._P)))
+        self._max_delay_s = max(self._max_delay_s, float(self._P[:, P.delay_s].max()))
+
     def trim_command(self, position_deg: FloatArray, hinge_moment_inlb: FloatArray) -> FloatArray:
         """Invert stages 2 and 5 (quantization is left to land within half a step).
 
