@@ -39,6 +39,8 @@ SUBCOMMANDS: dict[str, str] = {
     "bag": "bag",
     "ail": "ail",
     "montecarlo": "montecarlo",
+    "monitor": "monitor",
+    "fault-campaign": "fault_campaign",
     "export": "export",
     "verify": "export",
     "schema": "schema",
