@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from ema_sim.commands.common import Subparsers
+from ema_sim.errors import EmaError
 
 
 def run(args: argparse.Namespace) -> int:
@@ -22,7 +23,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
-    from ema_sim.errors import EmaError  # noqa: PLC0415 - loaded when this subcommand runs
     from ema_sim.montecarlo.faults import (  # noqa: PLC0415 - loaded when this subcommand runs
         DEFAULT_MANEUVERS,
         DEFAULT_SIZES,

@@ -6,7 +6,14 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
+from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.commands.common import Subparsers, check_channel
+from ema_sim.io import is_bag, load_data
+from ema_sim.io.bag import read_fault_truth
+from ema_sim.models import model_names
+from ema_sim.monitor import Options, check_inputs, from_name, from_report, learn, watch
 
 
 def truth_columns(path: Path, channel: str = "left_wing", time_s: list[float] | None = None) -> dict[str, list[float]]:
@@ -15,12 +22,7 @@ def truth_columns(path: Path, channel: str = "left_wing", time_s: list[float] | 
     A CSV's ``fault_<kind>`` columns (``ema simulate --fault``), or a bag's ``/ema/faults/truth`` for ``channel``
     sampled at ``time_s`` (from the record's start).
     """
-    import numpy as np  # noqa: PLC0415 - loaded when this subcommand runs
-
-    from ema_sim.io import is_bag  # noqa: PLC0415 - loaded when this subcommand runs
-
     if is_bag(path):
-        from ema_sim.io.bag import read_fault_truth  # noqa: PLC0415 - rosbags only for a bag
 
         changes = read_fault_truth(path, channel)
         if not changes or time_s is None:
@@ -62,13 +64,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success (with or without a detection).
     """
-    import numpy as np  # noqa: PLC0415 - loaded when this subcommand runs
-
-    from ema_sim.analysis.pipeline import resolve_channel  # noqa: PLC0415 - loaded when this subcommand runs
-    from ema_sim.io import load_data  # noqa: PLC0415 - loaded when this subcommand runs
-    from ema_sim.models import model_names  # noqa: PLC0415 - loaded when this subcommand runs
-    from ema_sim.monitor import Options, check_inputs, from_name, from_report, learn, watch  # noqa: PLC0415
-
     check_channel(args.channel)
     data = load_data(args.data, channel=args.channel)
     check_inputs(data, assume_no_load=args.assume_no_load)
