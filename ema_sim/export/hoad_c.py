@@ -26,6 +26,7 @@ from ema_sim import calibration as cal
 from ema_sim import parameters as pm
 from ema_sim.export.csource import API, HEADER, PARAM_INDEX, c_double, c_string
 from ema_sim.export.hoad_stages import stages_c
+from ema_sim.export.target import ExportError, ExportTarget
 from ema_sim.models import noise as nz
 from ema_sim.models import stages as st
 from ema_sim.models.base import HISTORY_START_S, OUTPUT_FIELDS
@@ -667,3 +668,29 @@ def write_sources(directory: Path, values: HoadValues) -> list[Path]:
         path.write_text(text, encoding="utf-8")
         out.append(path)
     return out
+
+
+FRAME_HZ = 1_000.0
+"""The frame ``ema verify`` drives an exported high-order model at (10 of its steps; any whole number works)."""
+
+
+def target_values(target: ExportTarget) -> HoadValues:
+    """What the C sources of a high-order target hold: its truth's kernel vector, the channel's command calibration.
+
+    Parameters
+    ----------
+    target : ExportTarget
+        A high-order target.
+
+    Returns
+    -------
+    HoadValues
+        Name, description, kernel vector, calibration, seed, rate.
+    """
+    if not target.high_order:
+        raise ExportError(f"{target.model} is not a high-order model")
+    model = target.truth_model()
+    c = model.channel.command_cal
+    vector = target.kernel_vector()
+    return HoadValues(target.model, target.description, vector, (c.c0, c.c1, c.c2, c.c3),
+                      int(target.options.get("seed", 0.0)), target.rate_hz)
