@@ -41,6 +41,8 @@ LINEAR_NO_JSBSIM = ("a linear model has no JSBSim system: JSBSim has no discrete
 """Why ``ema export --jsbsim`` refuses ``loes``, ``hoalm`` and ``sloac``."""
 HIGH_ORDER = ("hoad2", "hoad3")
 """The high-order discrete models, exported as their own 10 kHz kernel (:mod:`ema_sim.export.hoad_c`)."""
+HIGH_ORDER_FRAME_HZ = 1_000.0
+"""The frame a high-order export is driven at by ``ema verify`` (10 of its 10 kHz steps; any whole number works)."""
 HIGH_ORDER_DEFAULTS: dict[str, float] = {"bound": 0.0, "hysteresis": 0.0, "noise": 1.0, "seed": 0.0}
 """The high-order models' options (figure 35's compliance bound, figure 36's damping, the noise and its seed)."""
 HIGH_ORDER_NO_JSBSIM = ("the high-order model has no JSBSim system: its motor, current loop, PWM, bus, friction and "
@@ -109,6 +111,20 @@ class ExportTarget:
     def high_order(self) -> bool:
         """A high-order discrete model (figure 30's 10 kHz kernel), not figure 26's."""
         return self.high_order_params is not None
+
+    @property
+    def frame_hz(self) -> float:
+        """The rate a host drives the export at, one input per frame: the model's own, a high-order model's 1 kHz."""
+        if self.high_order and self.rate_hz > HIGH_ORDER_FRAME_HZ:
+            return self.rate_hz / self.steps_per_frame
+        return self.rate_hz
+
+    @property
+    def steps_per_frame(self) -> int:
+        """The model's steps in one frame of :attr:`frame_hz`."""
+        if self.high_order and self.rate_hz > HIGH_ORDER_FRAME_HZ:
+            return max(round(self.rate_hz / HIGH_ORDER_FRAME_HZ), 1)
+        return 1
 
     def kernel_vector(self) -> FloatArray:
         """The exported kernel's parameter vector (what the C model's defaults hold).
@@ -375,9 +391,9 @@ def from_registry(name: str, channel: str, *, rate_hz: float | None = None) -> E
                             model.rate_hz, False, "registry",
                             [f"{key} steps its own fixed {model.rate_hz:g} Hz kernel: a host's frame (an FMU's "
                              "communication step) must be a whole number of its steps",
-                             "the noise is on, drawn from ema_sim's own generator (xorshift64* seeded by splitmix64, "
-                             "ziggurat normals), so the export is the model bit for bit; --set noise=0 turns it off, "
-                             "--set seed=N picks the stream"],
+                             "its noise is drawn from ema_sim's own generator (xorshift64* seeded by splitmix64, "
+                             "ziggurat normals), so the export is the model bit for bit with the noise on; --set "
+                             "noise=0 turns it off, --set seed=N picks the stream"],
                             dict(HIGH_ORDER_DEFAULTS), high)
     kernel, rate, backward = _kernel_for(key, rate_hz)
     model = create(key, channel)
