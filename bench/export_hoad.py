@@ -75,7 +75,8 @@ def numba_steps_per_s() -> float:
     from importlib.util import module_from_spec, spec_from_file_location  # noqa: PLC0415 - the sibling script
 
     spec = spec_from_file_location("ema_bench_jsbsim_side", Path(__file__).with_name("jsbsim_side.py"))
-    assert spec is not None and spec.loader is not None
+    if spec is None or spec.loader is None:
+        raise FileNotFoundError("bench/jsbsim_side.py")
     side = module_from_spec(spec)
     spec.loader.exec_module(side)
     return float(side.ema_ratio("hoad3", DURATION_S)) * RATE_HZ

@@ -179,7 +179,9 @@ Simulate = Callable[..., dict[str, FloatArray]]
 
 
 def _simulator(target: ExportTarget, rate_hz: float | None = None) -> Simulate:
-    model = (target if rate_hz is None or target.truth in CONTINUOUS else replace(target, rate_hz=rate_hz)).truth_model()
+    if rate_hz is not None and target.truth not in CONTINUOUS:
+        target = replace(target, rate_hz=rate_hz)
+    model = target.truth_model()
 
     def simulate(t: FloatArray, cmd: FloatArray, hm: FloatArray, shift_s: float = 0.0) -> dict[str, FloatArray]:
         model.trim(cmd[0], hm[0])

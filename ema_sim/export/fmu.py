@@ -602,6 +602,41 @@ def parameter_range(name: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _parameter_variables(target: ExportTarget, units: set[str]) -> list[str]:
+    """The kernel's parameters as fixed FMU parameters (figure 26's or figure 30's slots), their units added."""
+    if target.linear:
+        return []
+    vector = target.kernel_vector()
+    out: list[str] = []
+    if target.high_order:
+        for slot, row in enumerate(hoad_c.slot_rows()):
+            lo, hi = row.lo, row.hi
+            if row.off is not None:
+                lo, hi = min(lo, row.off), max(hi, row.off)
+            punit = _unit(row.unit)
+            if punit:
+                units.add(punit)
+            low = "(" if row.lo_exclusive else "["
+            off = f"; {row.off:g} switches it off" if row.off is not None else ""
+            out.append(_real(row.name, PARAM_VR0 + slot, "parameter", "fixed",
+                             f"{row.description}; range {low}{row.lo:g}, {row.hi:g}] {row.unit}{off}",
+                             unit=punit, start=float(vector[slot]), initial="exact", lo=lo, hi=hi))
+        return out
+    for name, m in pm.metas(SecondOrderParams).items():
+        if m.kernel is None:
+            continue
+        slot = getattr(P, m.kernel)
+        lo, hi = parameter_range(name)
+        punit = _unit(m.unit)
+        if punit:
+            units.add(punit)
+        off = f"; {m.off:g} switches it off" if m.off is not None else ""
+        out.append(_real(m.kernel, PARAM_VR0 + slot, "parameter", "fixed",
+                         f"{m.description}; range {m.range_text()}{off}", unit=punit, start=float(vector[slot]),
+                         initial="exact", lo=lo, hi=hi))
+    return out
+
+
 def model_description(target: ExportTarget) -> str:
     """``modelDescription.xml``.
 
@@ -653,33 +688,7 @@ def model_description(target: ExportTarget) -> str:
             units.add(unit)
             variables.append(_real(name, PARAM_VR0 + slot, "parameter", "fixed", desc, unit=unit, start=value,
                                    initial="exact", lo=value, hi=value))
-    vector = target.kernel_vector() if not target.linear else None
-    if target.high_order and vector is not None:
-        for slot, row in enumerate(hoad_c.slot_rows()):
-            lo, hi = row.lo, row.hi
-            if row.off is not None:
-                lo, hi = min(lo, row.off), max(hi, row.off)
-            punit = _unit(row.unit)
-            if punit:
-                units.add(punit)
-            low = "(" if row.lo_exclusive else "["
-            off = f"; {row.off:g} switches it off" if row.off is not None else ""
-            variables.append(_real(row.name, PARAM_VR0 + slot, "parameter", "fixed",
-                                   f"{row.description}; range {low}{row.lo:g}, {row.hi:g}] {row.unit}{off}",
-                                   unit=punit, start=float(vector[slot]), initial="exact", lo=lo, hi=hi))
-    metas = {} if (target.linear or target.high_order) else pm.metas(SecondOrderParams)
-    for name, m in metas.items():
-        if m.kernel is None or vector is None:
-            continue
-        slot = getattr(P, m.kernel)
-        lo, hi = parameter_range(name)
-        punit = _unit(m.unit)
-        if punit:
-            units.add(punit)
-        off = f"; {m.off:g} switches it off" if m.off is not None else ""
-        variables.append(_real(m.kernel, PARAM_VR0 + slot, "parameter", "fixed",
-                               f"{m.description}; range {m.range_text()}{off}",
-                               unit=punit, start=float(vector[slot]), initial="exact", lo=lo, hi=hi))
+    variables.extend(_parameter_variables(target, units))
     outputs = "".join(f'      <Unknown index="{k}"/>\n' for k in output_index)
     unit_defs = "".join(
         f"    <Unit name={quoteattr(u)}>{UNITS.get(u, '')}</Unit>\n" for u in sorted(units))

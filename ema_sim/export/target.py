@@ -269,8 +269,9 @@ def from_manifest(doc: dict[str, Any]) -> ExportTarget:
         params.validate()
         high = None
         if "high_order_params" in doc:
-            high = HighOrderParams(**{k: tuple(_from_json_float(x) for x in v) if isinstance(v, list)
-                                      else _from_json_float(v) for k, v in doc["high_order_params"].items()})
+            values: dict[str, Any] = {k: tuple(_from_json_float(x) for x in v) if isinstance(v, list)
+                                      else _from_json_float(v) for k, v in doc["high_order_params"].items()}
+            high = HighOrderParams(**values)
             high.validate()
         return ExportTarget(model=str(doc["model"]), truth=str(doc["truth"]), channel=str(doc["channel"]),
                             params=params, rate_hz=float(doc["rate_hz"]), backward=bool(doc["backward"]),
