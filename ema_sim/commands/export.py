@@ -35,6 +35,10 @@ def run_export(args: argparse.Namespace) -> int:
         from ema_sim.export.target import LINEAR_NO_JSBSIM  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
         raise ExportError(f"{target.model}: {LINEAR_NO_JSBSIM}")
+    if args.jsbsim and target.high_order:
+        from ema_sim.export.target import HIGH_ORDER_NO_JSBSIM  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
+
+        raise ExportError(f"{target.model}: {HIGH_ORDER_NO_JSBSIM}")
     print(target.description)
     for note in target.notes:
         print(f"  note: {note}")
@@ -135,9 +139,10 @@ def register(sub: Subparsers) -> None:
     p = sub.add_parser("export", help="export a model as an FMI 2.0 FMU, a JSBSim system or C sources",
                        description="Export a second-order model (loada, loadf; loac and second_order through LOADA's "
                                    "kernel), a linear model (loes, hoalm, sloac: its zero-order-hold state space; "
-                                   "FMU and C) or an `ema identify --json` report's final model.")
+                                   "FMU and C), a high-order discrete model (hoad2, hoad3: its 10 kHz kernel; FMU "
+                                   "and C) or an `ema identify --json` report's final model.")
     p.add_argument("model", metavar="MODEL_OR_REPORT",
-                   help="loada, loadf, loac, second_order, loes, hoalm, sloac, or a report .json")
+                   help="loada, loadf, loac, second_order, loes, hoalm, sloac, hoad2, hoad3, or a report .json")
     p.add_argument("--channel", default=None, help="EMAC channel (default left_wing; a report's own)")
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    help="override a model parameter (repeatable)")

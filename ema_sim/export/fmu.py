@@ -27,7 +27,7 @@ from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
 from ema_sim import parameters as pm
-from ema_sim.export import csource, harness, lti
+from ema_sim.export import csource, harness, hoad_c, lti
 from ema_sim.export.target import ExportError, ExportTarget
 from ema_sim.models.second_order.params import P, SecondOrderParams
 
@@ -44,6 +44,15 @@ OUTPUTS: tuple[tuple[str, str, str, str], ...] = (
 """Output name, unit, output slot, description (value references 2, 3, 4)."""
 FLAGS_VR = 5
 """The Integer output ``flags``."""
+HIGH_ORDER_OUTPUTS: tuple[tuple[str, str, int, str], ...] = (
+    ("current_a", "A", 6, "motor current"),
+    ("bus_v", "V", 7, "150 V bus voltage (0 while the motor power is off)"),
+)
+"""A high-order model's further outputs: name, unit, value reference, description."""
+POWER_VR = 8
+"""A high-order model's Real input ``motor_power`` (1 on, 0 off: the brake holds)."""
+SEED_VR = 9
+"""A high-order model's Integer parameter ``noise_seed``."""
 PARAM_VR0 = 100
 """The parameter of kernel slot i has value reference ``PARAM_VR0 + i``."""
 STEP_RTOL = 1e-6
@@ -86,6 +95,10 @@ WRAPPER = r"""/* FMI 2.0 co-simulation wrapper of the exported EMA model. Genera
 #define EMA_VR_HINGE_MOMENT 1
 #define EMA_VR_FLAGS @FLAGS_VR@
 #define EMA_VR_PARAM0 @PARAM_VR0@
+#define EMA_VR_CURRENT @CURRENT_VR@
+#define EMA_VR_BUS @BUS_VR@
+#define EMA_VR_POWER @POWER_VR@
+#define EMA_VR_SEED @SEED_VR@
 
 typedef enum { EMA_INSTANTIATED, EMA_INITIALIZING, EMA_STEPPING, EMA_TERMINATED, EMA_FAILED } ema_phase;
 
@@ -96,6 +109,8 @@ typedef struct {
     ema_phase phase;
     double params[EMA_N_PARAMS];
     double command, hinge_moment;
+    double power;     /* the high-order model's motor power input (1 on, 0 off) */
+    long long seed;   /* its noise seed */
     double start_time;
     int dirty;
     ema_model *m;
@@ -119,8 +134,14 @@ static fmi2Status ensure_model(ema_instance *c) {
     if (c->m && !c->dirty) return fmi2OK;
     char msg[256];
     ema_delete(c->m);
+#ifdef EMA_HIGH_ORDER
+    c->m = ema_new_seeded(c->params, ema_default_rate_hz, ema_default_backward, c->command, c->hinge_moment,
+                          c->seed, msg, sizeof msg);
+    if (c->m) ema_set_power(c->m, c->power > 0.5);
+#else
     c->m = ema_new(c->params, ema_default_rate_hz, ema_default_backward, c->command, c->hinge_moment, msg,
                    sizeof msg);
+#endif
     if (!c->m) return fail(c, msg);
     c->dirty = 0;
     return fmi2OK;
@@ -155,6 +176,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->logging = loggingOn;
     c->phase = EMA_INSTANTIATED;
     memcpy(c->params, ema_default_params, sizeof c->params);
+    c->power = 1.0;
+#ifdef EMA_HIGH_ORDER
+    c->seed = ema_default_seed;
+#endif
     c->dirty = 1;
     return c;
 }
@@ -211,6 +236,10 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     c->m = NULL;
     memcpy(c->params, ema_default_params, sizeof c->params);
     c->command = c->hinge_moment = 0.0;
+    c->power = 1.0;
+#ifdef EMA_HIGH_ORDER
+    c->seed = ema_default_seed;
+#endif
     c->dirty = 1;
     c->phase = EMA_INSTANTIATED;
     return fmi2OK;
@@ -227,6 +256,13 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         } else if (r >= 2 && r < 5) {
             if (c->phase != EMA_STEPPING && ensure_model(c) != fmi2OK) return fmi2Error;
             value[i] = ema_output(c->m, ema_output_slots[r - 2]);
+#ifdef EMA_HIGH_ORDER
+        } else if (r == EMA_VR_CURRENT || r == EMA_VR_BUS) {
+            if (c->phase != EMA_STEPPING && ensure_model(c) != fmi2OK) return fmi2Error;
+            value[i] = ema_output(c->m, r == EMA_VR_CURRENT ? EMA_O_CURRENT_A : EMA_O_BUS_V);
+        } else if (r == EMA_VR_POWER) {
+            value[i] = c->power;
+#endif
         } else if (r >= EMA_VR_PARAM0 && r < EMA_VR_PARAM0 + EMA_N_PARAMS) {
             value[i] = c->params[r - EMA_VR_PARAM0];
         } else {
@@ -245,6 +281,12 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             if (r == EMA_VR_COMMAND) c->command = value[i];
             else c->hinge_moment = value[i];
             if (c->phase != EMA_STEPPING) c->dirty = 1;
+#ifdef EMA_HIGH_ORDER
+        } else if (r == EMA_VR_POWER) {
+            if (value[i] != 0.0 && value[i] != 1.0) return fail(c, "fmi2SetReal: motor_power is 1 (on) or 0 (off)");
+            c->power = value[i];
+            if (c->phase != EMA_STEPPING) c->dirty = 1;
+#endif
         } else if (r >= EMA_VR_PARAM0 && r < EMA_VR_PARAM0 + EMA_N_PARAMS) {
             if (c->phase == EMA_STEPPING) return fail(c, "fmi2SetReal: the parameters are fixed after initialization");
             c->params[r - EMA_VR_PARAM0] = value[i];
@@ -259,6 +301,12 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
     ema_instance *c = comp;
     for (size_t i = 0; i < nvr; i++) {
+#ifdef EMA_HIGH_ORDER
+        if (vr[i] == EMA_VR_SEED) {
+            value[i] = (fmi2Integer)c->seed;
+            continue;
+        }
+#endif
         if (vr[i] != EMA_VR_FLAGS) return fail(c, "fmi2GetInteger: unknown value reference");
         if (c->phase != EMA_STEPPING && ensure_model(c) != fmi2OK) return fmi2Error;
         value[i] = (fmi2Integer)ema_output(c->m, EMA_O_FLAGS);
@@ -267,9 +315,20 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
 }
 
 fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+#ifdef EMA_HIGH_ORDER
+    ema_instance *c = comp;
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] != EMA_VR_SEED) return fail(c, "fmi2SetInteger: not an Integer parameter");
+        if (c->phase == EMA_STEPPING) return fail(c, "fmi2SetInteger: the parameters are fixed after initialization");
+        c->seed = value[i];
+        c->dirty = 1;
+    }
+    return fmi2OK;
+#else
     (void)vr;
     (void)value;
     return nvr ? fail(comp, "fmi2SetInteger: no Integer input or parameter") : fmi2OK;
+#endif
 }
 
 fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
@@ -367,18 +426,34 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     char msg[256];
     if (c->phase != EMA_STEPPING) return fail(c, "fmi2DoStep: not initialized (or terminated, or failed)");
     double dt = ema_step_size(c->m);
+#ifdef EMA_HIGH_ORDER
+    /* a frame of a whole number of the model's steps, the inputs held over it */
+    double ratio = communicationStepSize / dt;
+    long n = (long)floor(ratio + 0.5);
+    if (!(n >= 1 && fabs(communicationStepSize - (double)n * dt) <= EMA_STEP_RTOL * dt)) {
+        snprintf(msg, sizeof msg, "fmi2DoStep: step %.17g s is not a whole number of the model's steps of %.17g s "
+                 "(%g Hz)", communicationStepSize, dt, 1.0 / dt);
+        return fail(c, msg);
+    }
+#else
     if (!(fabs(communicationStepSize - dt) <= EMA_STEP_RTOL * dt)) {
         snprintf(msg, sizeof msg, "fmi2DoStep: step %.17g s is not the model's step %.17g s (%g Hz): this FMU steps "
                  "at its own rate only", communicationStepSize, dt, 1.0 / dt);
         return fail(c, msg);
     }
+#endif
     double expected = c->start_time + ema_time(c->m);
     if (!(fabs(currentCommunicationPoint - expected) <= 0.5 * dt)) {
         snprintf(msg, sizeof msg, "fmi2DoStep: at %.17g s, but the model has stepped to %.17g s",
                  currentCommunicationPoint, expected);
         return fail(c, msg);
     }
+#ifdef EMA_HIGH_ORDER
+    ema_set_power(c->m, c->power > 0.5);
+    ema_advance(c->m, c->command, c->hinge_moment, n);
+#else
     ema_step(c->m, c->command, c->hinge_moment);
+#endif
     return fmi2OK;
 }
 
@@ -433,7 +508,9 @@ def wrapper() -> str:
     slots = ", ".join(slot for _, _, slot, _ in OUTPUTS)
     text = WRAPPER
     for key, value in (("@STEP_RTOL@", repr(STEP_RTOL)), ("@FLAGS_VR@", str(FLAGS_VR)),
-                       ("@PARAM_VR0@", str(PARAM_VR0)), ("@OUTPUT_SLOTS@", slots)):
+                       ("@PARAM_VR0@", str(PARAM_VR0)), ("@OUTPUT_SLOTS@", slots),
+                       ("@CURRENT_VR@", str(HIGH_ORDER_OUTPUTS[0][2])), ("@BUS_VR@", str(HIGH_ORDER_OUTPUTS[1][2])),
+                       ("@POWER_VR@", str(POWER_VR)), ("@SEED_VR@", str(SEED_VR))):
         text = text.replace(key, value)
     return text
 
@@ -469,7 +546,7 @@ def guid(target: ExportTarget) -> str:
         ``{xxxxxxxx-...}``.
     """
     key = f"{target.model}|{target.channel}|{target.rate_hz!r}|{target.backward}|" + ",".join(
-        repr(float(v)) for v in target.params.kernel_vector())
+        repr(float(v)) for v in target.kernel_vector())
     if target.options:
         key += "|" + ",".join(f"{k}={v!r}" for k, v in sorted(target.options.items()))
     return "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "ema_sim:" + key)) + "}"
@@ -525,6 +602,41 @@ def parameter_range(name: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _parameter_variables(target: ExportTarget, units: set[str]) -> list[str]:
+    """The kernel's parameters as fixed FMU parameters (figure 26's or figure 30's slots), their units added."""
+    if target.linear:
+        return []
+    vector = target.kernel_vector()
+    out: list[str] = []
+    if target.high_order:
+        for slot, row in enumerate(hoad_c.slot_rows()):
+            lo, hi = row.lo, row.hi
+            if row.off is not None:
+                lo, hi = min(lo, row.off), max(hi, row.off)
+            punit = _unit(row.unit)
+            if punit:
+                units.add(punit)
+            low = "(" if row.lo_exclusive else "["
+            off = f"; {row.off:g} switches it off" if row.off is not None else ""
+            out.append(_real(row.name, PARAM_VR0 + slot, "parameter", "fixed",
+                             f"{row.description}; range {low}{row.lo:g}, {row.hi:g}] {row.unit}{off}",
+                             unit=punit, start=float(vector[slot]), initial="exact", lo=lo, hi=hi))
+        return out
+    for name, m in pm.metas(SecondOrderParams).items():
+        if m.kernel is None:
+            continue
+        slot = getattr(P, m.kernel)
+        lo, hi = parameter_range(name)
+        punit = _unit(m.unit)
+        if punit:
+            units.add(punit)
+        off = f"; {m.off:g} switches it off" if m.off is not None else ""
+        out.append(_real(m.kernel, PARAM_VR0 + slot, "parameter", "fixed",
+                         f"{m.description}; range {m.range_text()}{off}", unit=punit, start=float(vector[slot]),
+                         initial="exact", lo=lo, hi=hi))
+    return out
+
+
 def model_description(target: ExportTarget) -> str:
     """``modelDescription.xml``.
 
@@ -540,37 +652,44 @@ def model_description(target: ExportTarget) -> str:
     """
     ident = model_identifier(target)
     variables: list[str] = []
+    output_index: list[int] = []
     units: set[str] = set()
+    # a high-order model's inputs are discrete (held from one communication point to the next): a host (FMPy) then
+    # feeds each frame the value logged for it, never one interpolated between two frames at a rounded time
+    variability = "discrete" if target.high_order else "continuous"
     for i, (name, unit, desc) in enumerate(INPUTS):
-        variables.append(_real(name, i, "input", "continuous", desc, unit=unit, start=0.0))
+        variables.append(_real(name, i, "input", variability, desc, unit=unit, start=0.0))
         units.add(unit)
+    if target.high_order:
+        variables.append(_real("motor_power", POWER_VR, "input", "discrete", "motor power: 1 on, 0 off (the bridge "
+                               "opens, the brake holds, the bus reads 0 V), held over the step", start=1.0))
     for j, (name, unit, _, desc) in enumerate(OUTPUTS):
         variables.append(_real(name, 2 + j, "output", "discrete", desc, unit=unit, initial="calculated"))
+        output_index.append(len(variables))
         units.add(unit)
+    flag_text = ("limit flags: 1 rate, 2 position, 4 free play, 16 current, 32 PWM dead band, 64 brake, 128 stall"
+                 if target.high_order else "limit flags: 1 rate, 2 position, 4 free-play stop, 8 threshold, 16 current")
     variables.append(f'    <ScalarVariable name="flags" valueReference="{FLAGS_VR}" causality="output" '
-                     'variability="discrete" initial="calculated" description="limit flags: 1 rate, 2 position, '
-                     '4 free-play stop, 8 threshold, 16 current">\n      <Integer/>\n    </ScalarVariable>')
+                     f'variability="discrete" initial="calculated" description="{flag_text}">\n      <Integer/>\n'
+                     '    </ScalarVariable>')
+    output_index.append(len(variables))
+    if target.high_order:
+        for name, unit, vr, desc in HIGH_ORDER_OUTPUTS:
+            variables.append(_real(name, vr, "output", "discrete", desc, unit=unit, initial="calculated"))
+            output_index.append(len(variables))
+            units.add(unit)
+        seed = int(target.options.get("seed", 0.0))
+        variables.append(f'    <ScalarVariable name="noise_seed" valueReference="{SEED_VR}" causality="parameter" '
+                         'variability="fixed" initial="exact" description="the noise seed (the stream of ema_sim\'s '
+                         f'generator; the model\'s seed= option)">\n      <Integer start="{seed}"/>\n'
+                         '    </ScalarVariable>')
     if target.linear:
         for slot, (name, unit, desc, value) in enumerate(lti.parameter_rows(target)):
             units.add(unit)
             variables.append(_real(name, PARAM_VR0 + slot, "parameter", "fixed", desc, unit=unit, start=value,
                                    initial="exact", lo=value, hi=value))
-    metas = {} if target.linear else pm.metas(SecondOrderParams)
-    vector = target.params.kernel_vector()
-    for name, m in metas.items():
-        if m.kernel is None:
-            continue
-        slot = getattr(P, m.kernel)
-        lo, hi = parameter_range(name)
-        punit = _unit(m.unit)
-        if punit:
-            units.add(punit)
-        off = f"; {m.off:g} switches it off" if m.off is not None else ""
-        variables.append(_real(m.kernel, PARAM_VR0 + slot, "parameter", "fixed",
-                               f"{m.description}; range {m.range_text()}{off}",
-                               unit=punit, start=float(vector[slot]), initial="exact", lo=lo, hi=hi))
-    n_in = len(INPUTS)
-    outputs = "".join(f'      <Unknown index="{n_in + j + 1}"/>\n' for j in range(len(OUTPUTS) + 1))
+    variables.extend(_parameter_variables(target, units))
+    outputs = "".join(f'      <Unknown index="{k}"/>\n' for k in output_index)
     unit_defs = "".join(
         f"    <Unit name={quoteattr(u)}>{UNITS.get(u, '')}</Unit>\n" for u in sorted(units))
     sources = "".join(f'      <File name="{f}"/>\n' for f in (*harness.sources(target), WRAPPER_FILE))

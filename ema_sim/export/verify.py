@@ -214,7 +214,7 @@ def truth_runner(target: ExportTarget) -> Callable[[FloatArray, FloatArray], tup
         ``run(command, hinge_moment) -> (outputs, seconds)``.
     """
     model = target.truth_model()
-    dt = 1.0 / target.rate_hz
+    dt = 1.0 / target.frame_hz
 
     def run(command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> tuple[dict[str, FloatArray], float]:
         n = command_deg.size
@@ -283,8 +283,9 @@ def compare(artefact: Artefact, maneuver: str, load: str | None = None,
         e = got[o] - truth[o]
         rms[o] = float(np.sqrt(np.mean(e**2))) if np.all(np.isfinite(e)) else math.inf
         worst[o] = float(np.max(np.abs(e))) if np.all(np.isfinite(e)) else math.inf
-    return Comparison(maneuver, load or "none", cmd.size, rms, worst, steps_per_second(cmd.size, artefact.seconds),
-                      steps_per_second(cmd.size, seconds))
+    steps = cmd.size * artefact.target.steps_per_frame
+    return Comparison(maneuver, load or "none", steps, rms, worst, steps_per_second(steps, artefact.seconds),
+                      steps_per_second(steps, seconds))
 
 
 def unit_ratios(channel: str) -> dict[str, float]:

@@ -87,13 +87,17 @@ def command_in(params: FloatArray, c0: float, c1: float, c2: float, c3: float, b
 FEEDBACK_TOL = 1e-15
 """Relative Newton step at which stage 17's inverse calibration stops (every sample; the command path runs
 its steps to the end)."""
-FASTMATH = {"contract", "arcp", "nsz"}
-"""The discrete kernel's floating-point flags (its feedback path is compiled with them, explicitly)."""
 
 
-@borrowing(error_model="numpy", fastmath=FASTMATH)
-def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UIntArray) -> float:
-    """Stages 16–17 at a sample instant ``s``: LVDT degrees → volts (+ noise) → 5 mV → degrees.
+@borrowing(error_model="numpy")
+def feedback_deg(p: FloatArray, lvdt_in: float, noise_v: float) -> float:
+    """Stages 16–17 at a sample instant: LVDT degrees → volts (+ noise) → 5 mV → degrees.
+
+    The noise is the step's (:func:`run_discrete` draws it once a step, like the command's), so the
+    outputs do not depend on when or how often the model is sampled: an FMU sampled at its
+    communication points gives the same bits as a run sampled at its record's instants. Compiled
+    without fast-math, like the whole kernel, so a C transcription (:mod:`ema_sim.export.hoad_stages`)
+    returns the same bits.
 
     Parameters
     ----------
@@ -101,12 +105,8 @@ def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UI
         Kernel parameters.
     lvdt_in : float
         The delayed filtered LVDT (in).
-    s : float
-        The sample instant (s).
-    x : numpy.ndarray
-        The instance's state (its feedback-noise columns advance).
-    rng : numpy.ndarray
-        The instance's generator state.
+    noise_v : float
+        The feedback noise now (V).
 
     Returns
     -------
@@ -120,12 +120,7 @@ def feedback_deg(p: FloatArray, lvdt_in: float, s: float, x: FloatArray, rng: UI
     c2, c3 = p[P.feedback_cal_c2_deg_per_v2], p[P.feedback_cal_c3_deg_per_v3]
     volts = cubic_inverse(c0, c1, c2, c3, deg, FEEDBACK_TOL)
     if p[P.feedback_noise_v] > 0.0:
-        bw = p[P.noise_bandwidth_hz]
-        decay = math.exp(-TWO_PI * bw * max(s - x[X.feedback_noise_time_s], 0.0)) if bw > 0.0 else 0.0
-        innovation = p[P.feedback_noise_v] * math.sqrt(1.0 - decay * decay)
-        x[X.feedback_noise_v] = nz.band_limited_step(x[X.feedback_noise_v], decay, innovation, rng)
-        x[X.feedback_noise_time_s] = s
-        volts += x[X.feedback_noise_v]
+        volts += noise_v
     return cubic(c0, c1, c2, c3, quantize(volts, p[P.quantization_v]))
 
 
@@ -161,7 +156,7 @@ def split_delay(delay_s: float, dt: float) -> tuple[int, float]:
     return m, (w if w > DELAY_STEP_EPS else 0.0)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=FASTMATH)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffers: FloatArray, power: FloatArray,  # noqa: PLR0912, PLR0915 - one compiled loop
                  bp_t: FloatArray, cmd_in: FloatArray, cmd_slope: FloatArray, bp_h: FloatArray, t0: float, dt: float,
                  n_steps: int, sample_t: FloatArray, out: FloatArray) -> None:
@@ -229,6 +224,7 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         decay_bus = math.exp(-dt / (rsrc * p[P.bus_capacitance_f]))
         a_cmd = math.exp(-TWO_PI * p[P.noise_bandwidth_hz] * dt) if p[P.noise_bandwidth_hz] > 0.0 else 0.0
         w_cmd = p[P.command_noise_v] * math.sqrt(1.0 - a_cmd * a_cmd)
+        w_fbn = p[P.feedback_noise_v] * math.sqrt(1.0 - a_cmd * a_cmd)
         n_delay, w_fb = split_delay(p[P.feedback_delay_s], dt)
         n_delay = min(n_delay, nbuf - 2)
         _, w_cmd_delay = split_delay(delay, dt)
@@ -247,6 +243,7 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         lf = x[X.lvdt_filtered_in]
         vbus = x[X.bus_v]
         ncmd = x[X.command_noise_v]
+        nfb = x[X.feedback_noise_v]
         xi = x[X.integral_in_s]
         flags = int(x[X.flags])
         head = int(x[X.delay_head])
@@ -262,7 +259,7 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
                 if w_fb > 0.0:
                     older = buf[head - n_delay - 1 if head > n_delay else head - n_delay - 1 + nbuf]
                     lagged += w_fb * (older - lagged)
-                row[O_POS] = feedback_deg(p, lagged, sample_t[js], x, rng)
+                row[O_POS] = feedback_deg(p, lagged, nfb)
                 row[O_SURF] = xs * p[P.deg_per_in]
                 row[O_RATE] = vm * p[P.deg_per_in]
                 row[O_CUR] = cur
@@ -277,6 +274,7 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
             flags = 0
             # stages 1–3: delayed, quantized command with noise (volts → inches at its calibration slope)
             ncmd = nz.band_limited_step(ncmd, a_cmd, w_cmd, rng)
+            nfb = nz.band_limited_step(nfb, a_cmd, w_fbn, rng)  # stage 17's, drawn with the step's
             xc = cmd_in[i, jd] + ncmd * cmd_slope[i, jd]
             xc_hi = xc  # the command one step older, when the delay falls between two steps and it differs
             if w_cmd_delay > 0.0:
@@ -341,6 +339,7 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         x[X.lvdt_filtered_in] = lf
         x[X.bus_v] = vbus
         x[X.command_noise_v] = ncmd
+        x[X.feedback_noise_v] = nfb
         x[X.integral_in_s] = xi
         x[X.flags] = flags
         x[X.delay_head] = head

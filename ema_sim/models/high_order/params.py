@@ -369,7 +369,7 @@ P = pm.kernel_layout(HighOrderParams, KERNEL_EXTRA)
 
 X = pm.slots("HighOrderState", (
     "x_motor_in", "v_motor_in_s", "x_surface_in", "v_surface_in_s", "current_a", "lvdt_filtered_in", "bus_v",
-    "integral_in_s", "command_noise_v", "feedback_noise_v", "feedback_noise_time_s", "flags", "delay_head",
+    "integral_in_s", "command_noise_v", "feedback_noise_v", "flags", "delay_head",
 ))
 """State columns shared by the implementations; the continuous model integrates the first :data:`N_CONTINUOUS`."""
 N_STATE = len(X)
