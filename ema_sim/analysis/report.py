@@ -16,6 +16,7 @@ import numpy as np
 from ema_sim import __version__
 from ema_sim.analysis.estimation.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
 from ema_sim.analysis.formatting.markdown import bullets, image, quality, table
+from ema_sim.analysis.formatting.units import in_unit, texts_in_unit
 from ema_sim.analysis.pipeline import spread
 from ema_sim.analysis.plots import plot_key
 from ema_sim.analysis.registry import TESTS
@@ -74,7 +75,7 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
     doc["second_order_fits"] = [f.as_dict() for f in ra.fits]
     doc["not_computed"] = ra.not_computed
     doc["notes"] = ra.notes
-    return dict(_clean(doc))
+    return dict(texts_in_unit(_clean(doc), d.unit))
 
 
 SLOPE_METHOD = ("slope of the straight middle (20-80 %) of every move of the output that its command outran, "
@@ -216,6 +217,11 @@ def _each_assumption(ra: RecordAnalysis) -> list[str]:
 
 
 def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
+    """One record's section, in the record's unit (:func:`~ema_sim.analysis.formatting.units.in_unit`)."""
+    return [in_unit(line, ra.data.unit) for line in _record_lines(i, ra, plots)]
+
+
+def _record_lines(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
     lines = _header(i, ra, plots)
     for test in TESTS:
         results = ra.of(test)
