@@ -147,12 +147,18 @@ def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
     return dict(_clean({
         "tool": "ema analyze", "version": __version__,
         "records": [record_json(r) for r in records],
-        "second_order_spread": spread(fits) if fits else None,
+        "second_order_spread": texts_in_unit(_clean(spread(fits)), _one_unit(records)) if fits else None,
         "command_error_bounds": bounds,
         "uncertainty_method": UNCERTAINTY_METHOD,
         "rw13_check": {"area_inlb": RW13_AREA_INLB, "peak_in": RW13_PEAK_IN,
                        "h_lb_per_in": hysteretic_damping_constant(RW13_AREA_INLB, RW13_PEAK_IN)},
     }))
+
+
+def _one_unit(records: Sequence[RecordAnalysis]) -> str:
+    """The records' unit when they share one (texts across them are then in it), else ``deg`` (as written)."""
+    units = {r.data.unit for r in records}
+    return units.pop() if len(units) == 1 else "deg"
 
 
 # ---------------------------------------------------------------------------------------------- Markdown
@@ -274,6 +280,7 @@ def to_markdown(records: Sequence[RecordAnalysis], plots: dict[str, str]) -> str
              "does, so the figure says how the record was logged).", ""]
     for i, ra in enumerate(records):
         lines += _record_md(i, ra, plots)
+    across = len(lines)
     fits = [f for r in records for f in r.fits]
     if len(fits) > 1:
         lines += ["## Spread across tests (figure 23)", ""]
@@ -292,4 +299,6 @@ def to_markdown(records: Sequence[RecordAnalysis], plots: dict[str, str]) -> str
         lines += ["## Command-error bounds over all calibrations (figure 27)", "",
                   f"{len(cals)} calibrations: |Kb| ≤ {max(abs(c.error.kb) for c in cals):.5f}, |offset| ≤ "
                   f"{max(abs(c.error.offset_deg) for c in cals):.4f}°.", ""]
+    unit = _one_unit(records)
+    lines[across:] = [in_unit(line, unit) for line in lines[across:]]
     return "\n".join(lines) + "\n"
