@@ -346,4 +346,4 @@ def from_report(path: Path, channel: str | None = None, *, rate_hz: float | None
     if declared in CONTINUOUS:
         notes.append(f"declared model {declared} is continuous: exported as LOADA's forward Euler at {rate:g} Hz; "
                      f"`ema verify` measures that discretisation against {declared}")
-    return ExportTarget(kernel, declared, report_channel, params, rate, backward, str(path), notes)
+    return ExportTarget(kernel, declared, config.channel, params, rate, backward, str(path), notes)
