@@ -186,3 +186,15 @@ def test_evidence_speaks_of_ramps_only_when_the_command_ramps():
     assert not ramps(square)
     assert "ramps" not in effect.evidence(square)
     assert "ramps" in effect.evidence(ramp)
+
+
+def test_a_generic_actuator_s_report_exports_on_the_stand_in_configuration(tmp_path):
+    from ema_sim.export.target import resolve  # noqa: PLC0415 - the export layer only for this test
+
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps({"channel": GENERIC, "baseline": {"model": "second_order"}, "final": {
+        "model": "second_order + time_delay", "params": {"wn_rad_s": 61.0, "zeta": 0.7, "delay_s": 0.006},
+        "fields": {"wn_rad_s": "wn_rad_s", "zeta": "zeta", "delay_s": "delay_s"}}}))
+    target = resolve(str(path))
+    assert target.channel == "left_wing"
+    assert target.params.delay_s == 0.006
