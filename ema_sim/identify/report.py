@@ -20,6 +20,7 @@ import numpy as np
 
 from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.estimation.noise import input_independence, whiteness
+from ema_sim.analysis.formatting.units import texts_in_unit
 from ema_sim.config import GENERIC
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
@@ -320,7 +321,8 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         text = implementation_warning(result, impl)
         if text:
             warnings.append(text)
-    out: dict[str, Any] = strict(report)
+    # every text in the record's unit (a stage's words in degrees said in mm on a linear rig)
+    out: dict[str, Any] = texts_in_unit(strict(report), report["unit"])
     return out
 
 
