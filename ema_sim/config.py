@@ -25,6 +25,11 @@ from ema_sim.calibration import Cubic
 from ema_sim.errors import ConfigError, UnknownNameError
 
 CHANNELS: tuple[str, ...] = contract.CHANNELS
+GENERIC = "generic"
+"""The channel reported for a record of no X-43A channel: a generic actuator, its travel measured from the record."""
+STAND_IN = "left_wing"
+"""The configuration a generic actuator is run with: its nominal second-order values start the fits; its travel is
+replaced by the record's, and no X-43A table applies."""
 """The five EMAC channels (section 1.4), as the topic contract names them: one ``config/<channel>.yaml`` each."""
 
 RAD2DEG = 180.0 / math.pi

@@ -161,7 +161,8 @@ def test_unrecognisable_record_says_what_is_missing(tmp_path):
     rec = json.loads(out.read_text())["records"][0]
     assert rec["not_computed"]["compliance"] == "no hinge moment: compliance not computed"
     assert rec["not_computed"]["regeneration"].startswith("no bus voltage column")
-    assert any("no channel in the metadata" in n for n in rec["notes"])
+    assert any("no X-43A channel in the metadata" in n and "generic actuator" in n for n in rec["notes"])
+    assert rec["channel"] == "generic"
 
 
 def test_a_reader_failure_is_one_data_error_line(monkeypatch, capsys):

@@ -80,7 +80,9 @@ def test_a_drag_on_the_reading_no_effect_names_is_discovered_and_closes_the_loop
     assert any("sign(rate)" in n for n in terms), terms
     (stage,) = [s for s in result.stages if s.stage == "discovery"]
     assert stage.status == "kept", stage.reason
-    assert stage.rms_deg_after["position_deg"] < 0.7 * stage.rms_deg_before["position_deg"]
+    # sign(rate) alone: the rate·|rate| and acceleration terms that also cut the error here disagree between the
+    # record's halves beyond their uncertainty (their sign, or 2x), so they do not hold
+    assert stage.rms_deg_after["position_deg"] < 0.95 * stage.rms_deg_before["position_deg"]
     assert "discovered" in result.discovered
 
 

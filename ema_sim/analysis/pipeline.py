@@ -32,7 +32,7 @@ from ema_sim.analysis.records import causality, series
 from ema_sim.analysis.records.command_hold import CommandHold, detect_command_hold, given, lag_band
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
-from ema_sim.config import CHANNELS, ChannelConfig, load_channel
+from ema_sim.config import CHANNELS, STAND_IN, ChannelConfig, load_channel
 from ema_sim.io.csv import MeasuredData
 
 RECOGNISED = 0.1
@@ -62,10 +62,11 @@ def resolve_channel(data: MeasuredData, requested: str | None) -> tuple[ChannelC
         return load_channel(requested), None
     if meta in CHANNELS:
         return load_channel(meta), None
-    why = f"metadata channel {meta!r} is not one of ours" if meta else "no channel in the metadata"
-    return load_channel("left_wing"), (f"{why}: left_wing's configuration used (crank arm, calibration slopes) as "
-                                       "a stand-in; no X-43A table (crosstalk threshold, rated slew) applies to the "
-                                       "record")
+    why = f"metadata channel {meta!r} is not an X-43A channel" if meta else "no X-43A channel in the metadata"
+    return load_channel(STAND_IN), (f"{why} and none given: a generic actuator, its travel measured from the "
+                                    "record, its fits started from nominal second-order values; no X-43A figure "
+                                    "(travel, rated slew, crosstalk threshold) applies, and a logged load would be "
+                                    "converted with a nominal crank arm")
 
 
 def measure_outputs(data: MeasuredData) -> dict[str, NoiseFloor]:

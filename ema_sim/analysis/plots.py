@@ -77,7 +77,7 @@ def overview(ra: RecordAnalysis, path: Path) -> None:
             a.axvspan(t[s.start], t[s.stop - 1], color=SEGMENT_COLORS[k % len(SEGMENT_COLORS)], zorder=0)
         ax[0].text(t[s.start], ax[0].get_ylim()[1], f" {s.kind}", va="top", fontsize=8)
     ax[-1].set_xlabel("time, s")
-    ax[0].set_title(f"{Path(d.source).name or 'record'}: {ra.channel.channel}")
+    ax[0].set_title(f"{Path(d.source).name or 'record'}: {ra.channel_name}")
     figure.save(fig, path)
 
 

@@ -17,6 +17,7 @@ from ema_sim import __version__
 from ema_sim.analysis.contract import analyze_schema
 from ema_sim.analysis.estimation.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
 from ema_sim.analysis.formatting.markdown import bullets, image, quality, table
+from ema_sim.analysis.formatting.units import in_unit, texts_in_unit
 from ema_sim.analysis.pipeline import spread
 from ema_sim.analysis.plots import plot_key
 from ema_sim.analysis.registry import TESTS
@@ -63,7 +64,7 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
     d = ra.data
     t = d.time_s
     doc: dict[str, Any] = {
-        "data": d.source, "channel": ra.channel.channel, "samples": len(d), "sample_hz": d.sample_hz,
+        "data": d.source, "channel": ra.channel_name, "samples": len(d), "sample_hz": d.sample_hz,
         "duration_s": float(t[-1] - t[0]), "outputs": d.outputs, "unit": d.unit, "metadata": d.metadata,
         "noise_deg": ra.noise_deg, "resolution_deg": ra.resolution_deg,
         "noise": {k: v.as_dict() for k, v in ra.noise.items()},
@@ -76,7 +77,7 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
     doc["second_order_fits"] = [f.as_dict() for f in ra.fits]
     doc["not_computed"] = ra.not_computed
     doc["notes"] = ra.notes
-    return dict(_clean(doc))
+    return dict(texts_in_unit(_clean(doc), d.unit))
 
 
 SLOPE_METHOD = ("slope of the straight middle (20-80 %) of every move of the output that its command outran, "
@@ -148,7 +149,7 @@ def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
     doc = dict(_clean({
         "tool": "ema analyze", "version": __version__,
         "records": [record_json(r) for r in records],
-        "second_order_spread": spread(fits) if fits else None,
+        "second_order_spread": texts_in_unit(_clean(spread(fits)), _one_unit(records)) if fits else None,
         "command_error_bounds": bounds,
         "uncertainty_method": UNCERTAINTY_METHOD,
         "rw13_check": {"area_inlb": RW13_AREA_INLB, "peak_in": RW13_PEAK_IN,
@@ -156,6 +157,12 @@ def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
     }))
     check(doc, analyze_schema(), "ema analyze")
     return doc
+
+
+def _one_unit(records: Sequence[RecordAnalysis]) -> str:
+    """The records' unit when they share one (texts across them are then in it), else ``deg`` (as written)."""
+    units = {r.data.unit for r in records}
+    return units.pop() if len(units) == 1 else "deg"
 
 
 # ---------------------------------------------------------------------------------------------- Markdown
@@ -181,7 +188,7 @@ def _header(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
     lines = [f"## Record {i + 1}: `{d.source}`", ""]
     res = ", ".join(f"{k} {v:g}{ra.unit}" if v else f"{k} continuous" for k, v in ra.resolution_deg.items())
     lines += table(["channel", "samples", "rate", "span", "outputs", "noise floor", "resolution", "command"], [[
-        ra.channel.channel, f"{len(d):,}", f"{d.sample_hz:.6g} Hz", f"{t[-1] - t[0]:.4g} s", ", ".join(d.outputs),
+        ra.channel_name, f"{len(d):,}", f"{d.sample_hz:.6g} Hz", f"{t[-1] - t[0]:.4g} s", ", ".join(d.outputs),
         ", ".join(f"{k} {v:.2g}{ra.unit}" for k, v in ra.noise_deg.items()), res,
         "sampled" if ra.command.assumed_sampled else "held"]])
     lines += [f"Command: {ra.command.statement}.", ""]
@@ -220,6 +227,11 @@ def _each_assumption(ra: RecordAnalysis) -> list[str]:
 
 
 def _record_md(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
+    """One record's section, in the record's unit (:func:`~ema_sim.analysis.formatting.units.in_unit`)."""
+    return [in_unit(line, ra.data.unit) for line in _record_lines(i, ra, plots)]
+
+
+def _record_lines(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
     lines = _header(i, ra, plots)
     for test in TESTS:
         results = ra.of(test)
@@ -272,6 +284,7 @@ def to_markdown(records: Sequence[RecordAnalysis], plots: dict[str, str]) -> str
              "does, so the figure says how the record was logged).", ""]
     for i, ra in enumerate(records):
         lines += _record_md(i, ra, plots)
+    across = len(lines)
     fits = [f for r in records for f in r.fits]
     if len(fits) > 1:
         lines += ["## Spread across tests (figure 23)", ""]
@@ -290,4 +303,6 @@ def to_markdown(records: Sequence[RecordAnalysis], plots: dict[str, str]) -> str
         lines += ["## Command-error bounds over all calibrations (figure 27)", "",
                   f"{len(cals)} calibrations: |Kb| ≤ {max(abs(c.error.kb) for c in cals):.5f}, |offset| ≤ "
                   f"{max(abs(c.error.offset_deg) for c in cals):.4f}°.", ""]
+    unit = _one_unit(records)
+    lines[across:] = [in_unit(line, unit) for line in lines[across:]]
     return "\n".join(lines) + "\n"

@@ -37,7 +37,7 @@ def _summary(ra: RecordAnalysis) -> list[str]:
     from ema_sim.analysis.report import slope_statement  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     d = ra.data
-    lines = [f"{d.source}: {len(d)} samples at {d.sample_hz:.6g} Hz, channel {ra.channel.channel}; "
+    lines = [f"{d.source}: {len(d)} samples at {d.sample_hz:.6g} Hz, channel {ra.channel_name}; "
              f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}",
              f"  command: {ra.command.statement}"]
     if ra.command.leads:
@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
+    from ema_sim.analysis.formatting.units import in_unit  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.records.loading import load_record  # noqa: PLC0415 - keep `ema --help` fast
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
@@ -108,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
 
     records = analyze_records(data, options, progress)
     for ra in records:
-        print("\n".join(_summary(ra)))
+        print("\n".join(in_unit(line, ra.data.unit) for line in _summary(ra)))
     if args.json:
         out = Path(args.json)
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ema_sim import __version__
-from ema_sim.config import load_channel
+from ema_sim.config import GENERIC, STAND_IN, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.export.csource import ModelValues
 from ema_sim.models import ActuatorModel, create
@@ -453,7 +453,9 @@ def from_report(path: Path, channel: str | None = None, *, rate_hz: float | None
     if declared in LINEAR:
         raise ExportError(f"{path}: the declared model {declared} is linear; export it from the registry "
                           f"(`ema export {declared} --set NAME=VALUE`)")
-    base: SecondOrderParams = create(declared, load_channel(report_channel)).params[0]  # type: ignore[attr-defined]
+    # a generic actuator's fits started from the stand-in's nominal values: its parameters are read against them
+    config = load_channel(STAND_IN if report_channel == GENERIC else report_channel)
+    base: SecondOrderParams = create(declared, config).params[0]  # type: ignore[attr-defined]
     values: dict[str, float] = {}
     for reported, value in fitted.items():
         key = fields.get(reported, "hysteresis_freq_hz" if reported == "load_freq_hz" else reported)
@@ -473,4 +475,4 @@ def from_report(path: Path, channel: str | None = None, *, rate_hz: float | None
     if declared in CONTINUOUS:
         notes.append(f"declared model {declared} is continuous: exported as LOADA's forward Euler at {rate:g} Hz; "
                      f"`ema verify` measures that discretisation against {declared}")
-    return ExportTarget(kernel, declared, report_channel, params, rate, backward, str(path), notes)
+    return ExportTarget(kernel, declared, config.channel, params, rate, backward, str(path), notes)

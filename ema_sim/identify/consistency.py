@@ -40,7 +40,7 @@ from typing import Any
 
 from scipy.stats import chi2
 
-from ema_sim.config import load_channel
+from ema_sim.config import GENERIC, STAND_IN, load_channel
 from ema_sim.errors import DataError, SpecError
 from ema_sim.identify.effects import KEYS
 from ema_sim.identify.physical import ESCALATE_TO
@@ -330,7 +330,7 @@ def _mapping(doc: Mapping[str, Any], key: str, where: str, source: str) -> Mappi
 @cache
 def _channel_params(channel: str) -> SecondOrderParams:
     """The channel's configured second-order parameters (what a report key's unit factor reads)."""
-    return SecondOrderParams.from_channel(load_channel(channel))
+    return SecondOrderParams.from_channel(load_channel(STAND_IN if channel == GENERIC else channel))
 
 
 def _factor(field: str, key: str, channel: str) -> float:

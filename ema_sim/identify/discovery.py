@@ -52,6 +52,16 @@ MAX_LOOP_TERMS = 3
 LOOP_KINDS = ("motion", "either")
 MAX_NFEV = 30
 WHITENESS_LAGS = 50
+EQUIVALENT: dict[str, tuple[str, ...]] = {
+    "command_gain": ("command", "position"),
+    "command_bias": ("1",),
+    "static_threshold": ("sign(rate)",),
+    "time_delay": ("rate",),
+    "lag_filter": ("rate",),
+}
+"""Named effects and the library terms that, where they act, do what the effect does: a gain error on the command is
+a term in the command (or the position, inside the loop), a bias a constant, a threshold a drag that reverses with
+the motion, a delay or a lag a term in the rate. Such a term is reported as the named effect's equivalent."""
 
 
 @dataclass
@@ -109,6 +119,25 @@ class Discovery:
         where = "inside the loop" if c.where == "inside the loop" else "on the reading"
         return f"discovered: {', '.join(names)} {where}"
 
+    def equivalents(self, effects: Sequence[str]) -> list[tuple[str, str]]:
+        """(named effect, kept term) pairs where a kept term does what the named effect does (:data:`EQUIVALENT`).
+
+        Parameters
+        ----------
+        effects : sequence of str
+            The named effects (vocabulary names).
+
+        Returns
+        -------
+        list
+            Each named effect with a kept term equivalent to it.
+        """
+        c = self.kept
+        if c is None:
+            return []
+        names = [n for ts in c.terms.values() for n, *_ in ts]
+        return [(e, n) for e in effects for n in names if n in EQUIVALENT.get(e, ())]
+
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON (the report's ``discovered``).
 
@@ -135,6 +164,22 @@ class Discovery:
                               for n, v, s, u in ts] for o, ts in c.terms.items()},
             })
         return out
+
+
+def named_stands(named_rms: Mapping[str, float], noise: Mapping[str, float]) -> bool:
+    """Whether named effects explain the record: every output within :data:`STRUCTURED` times its noise floor.
+
+    A model of named physical effects that leaves no more than that is not replaced by discovered terms,
+    however much better they fit: what is left is within the noise, and the named effects say what it is.
+
+    Parameters
+    ----------
+    named_rms : mapping
+        Each output's rms error of the model with the named effects.
+    noise : mapping
+        Each output's noise floor.
+    """
+    return all(v <= STRUCTURED * noise[o] for o, v in named_rms.items())
 
 
 def _selected(s: Selected) -> dict[str, Any]:

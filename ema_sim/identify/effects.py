@@ -16,8 +16,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ema_sim.identify.problem import Problem
+from ema_sim.identify.settled import NOISE_MARGIN
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
@@ -271,6 +273,8 @@ class Effect:
     """The parameters that are this effect's alone (its fields when None): once they are fitted, it is in.
     A nonlinear compliance also fits (and reports) the compliance below its knee, which a linear
     compliance found earlier may already have."""
+    ramp_clause: str = ""
+    """The part of :attr:`signature` that only a command that ramps can show (left out of the evidence otherwise)."""
     measured: bool = False
     """Its probes are read off the record (a rate limit at the output's speed plateau): its fit starts from
     them as they are, not scaled by what the residual would ask of them linearly."""
@@ -318,6 +322,18 @@ class Effect:
             changes["hysteresis_freq_hz"] = ctx.problem.load_freq_hz
         return p.replace(**changes)
 
+    def evidence(self, command: NDArray[np.float64]) -> str:
+        """Its signature in words that fit the record: a clause about ramps only where the command ramps.
+
+        Parameters
+        ----------
+        command : numpy.ndarray
+            The record's command as logged.
+        """
+        if self.ramp_clause and self.ramp_clause in self.signature and not ramps(command):
+            return " ".join(self.signature.replace(self.ramp_clause, "").split())
+        return self.signature
+
 
 def _fs(ctx: Context) -> float:
     return ctx.problem.sample_hz
@@ -338,6 +354,51 @@ def _off(ctx: Context, name: str) -> bool:
 
 def _min(name: str, value: float, what: str) -> Check:
     return lambda v, _ctx: None if v[name] >= value else f"{what} {v[name]:.4g} is below {value:g}"
+
+
+def _dead_band(name: str, value: float, what: str, half: float = 1.0) -> Check:
+    """:func:`_min`, and no dead band (its half width: ``half`` × the value) wider than the settled error.
+
+    An output that settles on its command leaves nothing for a threshold or a free play to explain
+    (:mod:`ema_sim.identify.settled`): a wider one stands in for something else, and is not added.
+    """
+    floor = _min(name, value, what)
+
+    def check(v: Values, ctx: Context) -> str | None:
+        low = floor(v, ctx)
+        if low is not None:
+            return low
+        p = ctx.problem
+        settled = p.settled
+        noise = p.sigma_deg["position_deg" if "position_deg" in p.outputs else "surface_deg"]
+        if settled is None or half * v[name] <= settled.limit(noise):
+            return None
+        unit = p.data.unit
+        return (f"{what} {v[name]:.4g} {unit} is larger than any error the output settles to at the end of the "
+                f"command's holds (median {settled.median_abs:.3g}, largest {settled.max_abs:.3g} {unit} over "
+                f"{settled.holds} holds, + half a count and {NOISE_MARGIN:g}× the noise floor: "
+                f"{settled.limit(noise):.3g}): it explains no settled error, it stands in for something else")
+    return check
+
+
+RAMP_SAMPLES = 5
+"""A command that moves the same way in at least this many consecutive small steps ramps (a jump is one step)."""
+
+
+def ramps(command: NDArray[np.float64]) -> bool:
+    """Whether a command ramps: :data:`RAMP_SAMPLES` consecutive changes of one sign (a square wave only jumps).
+
+    Parameters
+    ----------
+    command : numpy.ndarray
+        The command as logged.
+    """
+    d = np.sign(np.diff(np.asarray(command, dtype=float)))
+    same = (d[1:] == d[:-1]) & (d[1:] != 0.0)
+    if same.size < RAMP_SAMPLES - 1:
+        return False
+    window = np.convolve(same.astype(float), np.ones(RAMP_SAMPLES - 1), mode="valid")
+    return bool(np.any(window >= RAMP_SAMPLES - 1))
 
 
 SUB_SAMPLE_FLOOR = 0.1
@@ -534,9 +595,9 @@ EFFECTS: tuple[Effect, ...] = (
            applies=lambda ctx: ctx.problem.measured_rate_dps > 5.0 and _loaded(ctx) and ctx.params.k2_dps_per_lb == 0.0,
            check=_load_rate_check, own=("k2_dps_per_lb",)),
     Effect("static_threshold", "feedback", ("threshold_deg",),
-           "the surface lags slow ramps and ignores small command changes",
+           "the output lags slow ramps and ignores small command changes", ramp_clause="lags slow ramps and",
            probes=lambda _ctx: [{"threshold_deg": 0.01}, {"threshold_deg": 0.05}],
-           applies=lambda ctx: ctx.params.threshold_deg == 0.0, check=_min("threshold_deg", 1e-3, "threshold")),
+           applies=lambda ctx: ctx.params.threshold_deg == 0.0, check=_dead_band("threshold_deg", 1e-3, "threshold")),
     Effect("servo_integral", "feedback", ("integral_hz",),
            "slow creep after steps and a load droop that washes out: the loop integrates its error",
            probes=lambda _ctx: [{"integral_hz": 0.1}], applies=lambda ctx: _off(ctx, "integral_hz"),

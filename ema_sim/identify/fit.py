@@ -274,8 +274,41 @@ def block_covariance(residuals: Sequence[FloatArray], jacobians: Sequence[FloatA
         kernel = np.concatenate([acov[:0:-1], acov])  # R is Toeplitz: R·J is a convolution
         rj = np.column_stack([fftconvolve(j[:, c], kernel, mode="same") for c in range(j.shape[1])])
         middle += j.T @ rj
-    out[np.ix_(moved, moved)] = inv @ middle @ inv
+    out[np.ix_(moved, moved)] = inv @ _nearest_psd(middle) @ inv
     return out
+
+
+def _nearest_psd(m: FloatArray) -> FloatArray:
+    """The symmetric positive semi-definite matrix nearest ``m`` (its negative eigenvalues set to zero).
+
+    The coloured-residual middle term sums a truncated autocovariance, which need not be positive
+    semi-definite: left as it is, a covariance built on it can give correlations beyond ±1.
+    """
+    sym = 0.5 * (m + m.T)
+    if not np.all(np.isfinite(sym)):
+        return sym
+    w, v = np.linalg.eigh(sym)
+    return np.asarray((v * np.clip(w, 0.0, None)) @ v.T, dtype=float)
+
+
+def correlation(cov: FloatArray) -> FloatArray:
+    """Correlations of a covariance matrix, within ±1 (NaN where a variance is zero or not finite).
+
+    Parameters
+    ----------
+    cov : numpy.ndarray
+        A covariance matrix (from :func:`covariance` or :func:`block_covariance`).
+
+    Returns
+    -------
+    numpy.ndarray
+        The correlation matrix, clipped to [-1, 1] against rounding.
+    """
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(d, d)
+    bad = ~np.isfinite(corr) | (np.outer(d, d) <= 0.0)
+    return np.where(bad, np.nan, np.clip(corr, -1.0, 1.0))
 
 
 def rms(problem: Problem, f: Fit) -> dict[str, float]:

@@ -31,7 +31,7 @@ from ema_sim.config import ChannelConfig
 from ema_sim.identify import artefacts
 from ema_sim.identify.criteria import MAX_DELTA_BIC, MIN_EXCESS_SHARE, simulator_error
 from ema_sim.identify.declared import HIGH_ORDER, declared
-from ema_sim.identify.discovery import Discovery, discover
+from ema_sim.identify.discovery import STRUCTURED, Discovery, discover, named_stands
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
 from ema_sim.identify.fit import TINY, Fit, evaluate, rms
 from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal
@@ -355,10 +355,18 @@ def _rival(chain: _Chain, disc: Discovery) -> tuple[str, str] | None:
     effects = ", ".join(s.effect for s in r.steps)
     if d > -MAX_DELTA_BIC:
         return None
+    same = other.equivalents([s.effect for s in r.steps])
+    if same or named_stands(rms(p, named), p.sigma_deg):
+        pairs = "; ".join(f"the discovered {t} is {e}'s equivalent" for e, t in same)
+        why = (f"{pairs}: the named physical effect stands" if same else
+               f"the named effects already explain it to within {STRUCTURED:g}× the noise floor: they stand")
+        r.notes.append(f"the discovered {other.label()} fit the record better than {effects} "
+                       f"(ΔBIC {d:+.1f}), but {why}")
+        return None
     if d > MAX_DELTA_BIC:
         r.ambiguities.append(f"the vocabulary's {effects} and the discovered {other.label()} explain the record about "
-                             f"equally (ΔBIC {d:+.1f}): the record cannot decide between them; the named effects "
-                             "are kept")
+                             f"equally (ΔBIC {d:+.1f}): the discovered terms are the named effects' equivalent "
+                             "on this record; the named effects are kept")
         return None
     if worse(rms(p, alt.fit), chain.limit()):
         return None

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ema_sim.identify.declared import run_declared
-from ema_sim.identify.fit import block_covariance, finite
+from ema_sim.identify.fit import block_covariance, correlation, finite
 from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread, result
 from ema_sim.identify.problem import Problem
 from ema_sim.models import model_parameters
@@ -544,9 +544,7 @@ def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArr
         sigma[i] = abs(scale) * float(sx[j]) if math.isfinite(sx[j]) else math.inf
         if not math.isfinite(sx[j]) or sx[j] > 1.0:
             vague.append(name)
-    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr_m = cov / np.outer(d, d)
+    corr_m = correlation(cov)
     corr = {free[a]: {free[b]: float(corr_m[a, b]) for b in range(len(free)) if b != a and np.isfinite(corr_m[a, b])}
             for a in range(len(free))}
     return sigma, corr, vague

@@ -32,6 +32,7 @@ from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
 from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
+from ema_sim.identify.settled import Settled, settled_error
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models.base import O_POS, O_RATE, O_SURF
 from ema_sim.models.second_order import SecondOrder, SecondOrderParams
@@ -291,6 +292,13 @@ class Problem:
         window = max(round(0.015 * self.sample_hz) | 1, 5)
         rate = savgol_filter(self.data.column(output), window, 2, deriv=1, delta=1.0 / self.sample_hz)
         return float(np.percentile(np.abs(rate), 99.9))
+
+    @cached_property
+    def settled(self) -> Settled | None:
+        """Where the actuator's output settles at the end of the command's holds (:mod:`ema_sim.identify.settled`)."""
+        output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
+        count = None if self.noise is None else self.noise[output].resolution
+        return settled_error(self.time_s, self.data.command_deg, self.data.column(output), count)
 
     @cached_property
     def measured_slew(self) -> Slew:

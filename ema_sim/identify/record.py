@@ -83,6 +83,8 @@ class Record:
     """Rms of the logged stamps about the least-squares line through them (0 for uniform stamps)."""
     sensor_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Output → (lower, upper) saturation its log shows (:func:`sensor_range`); the model's output is clipped there."""
+    generic: bool = False
+    """No X-43A channel given or named by the record: a generic actuator, its travel measured from the record."""
 
     @property
     def unit(self) -> str:
@@ -339,4 +341,5 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         notes.append(f"{name} reads exactly {' and '.join(sides)} again and again, with no noise on them: a sensor's "
                      "saturation or a clipped log, not a mechanical stop (which shows the noise); the model's "
                      f"{name} is clipped there as the sensor clips it")
-    return Record(data, channel, noise, hold, travel, notes, warnings, scatter, saturation)
+    return Record(data, channel, noise, hold, travel, notes, warnings, scatter, saturation,
+                  generic=channel_note is not None)

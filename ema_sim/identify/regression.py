@@ -12,8 +12,10 @@ left first, while
 After each entry a term already in that no longer passes (:data:`ALPHA_OUT`) leaves again. Each term's
 coefficients carry a coloured-residual uncertainty (Morelli and Klein), its share of the variance (what
 it adds when entered last), its significance, and whether the record agrees with itself about it: the
-same terms fitted on each half of the record must give coefficients within three combined sigma (or
-30 %) and of the same sign. A term that does not hold up is returned as tried and dropped, with why.
+same terms fitted on each half of the record must give coefficients within three combined sigma and
+of the same sign (a share of their size is no excuse: two halves that disagree beyond their
+uncertainty say the term is no property of the record). A term that does not hold up is returned as
+tried and dropped, with why.
 """
 
 from __future__ import annotations
@@ -37,10 +39,9 @@ MIN_SHARE = 0.02
 """Share of the residual's variance above the noise floor a term must remove to enter."""
 MAX_TERMS = 6
 HALF_SIGMA = 3.0
-HALF_RELATIVE = 0.3
 UNEXCITED = 0.05
 """A half in which a term's columns carry less than this share of their energy in the other half does not
-excite it: the term is judged on the half that does."""
+excite it: the halves are still compared, within their (then large) combined uncertainty."""
 MAX_LAG = 200
 CONSTANT = "1"
 """The constant term's name."""
@@ -325,23 +326,22 @@ def _halves(e: FloatArray, chosen: list[Term]) -> dict[str, Halves]:
         (c1, s1, n1), (c2, s2, n2) = fits
         pair = (tuple(float(v) for v in c1[k]), tuple(float(v) for v in c2[k]))
         e1, e2 = float(np.sum(n1[k])), float(np.sum(n2[k]))
-        if min(e1, e2) < UNEXCITED * max(e1, e2):
-            out[term.name] = (True, "excited in one half of the record only: judged on that half", pair)
-            continue
+        unexcited = min(e1, e2) < UNEXCITED * max(e1, e2)
         if term.width == 2:  # a tone: compare its amplitude and phase as one complex number
             z1, z2 = complex(c1[k][0], c1[k][1]), complex(c2[k][0], c2[k][1])
             spread = math.hypot(float(np.hypot(*s1[k])), float(np.hypot(*s2[k])))
-            agree = abs(z1 - z2) <= max(HALF_SIGMA * spread, HALF_RELATIVE * max(abs(z1), abs(z2)))
+            agree = abs(z1 - z2) <= HALF_SIGMA * spread
             same_sign = True
         else:
             d = np.abs(c1[k] - c2[k])
             spread_v = np.hypot(s1[k], s2[k])
-            agree = bool(np.all((d <= HALF_SIGMA * spread_v) | (d <= HALF_RELATIVE * np.maximum(np.abs(c1[k]),
-                                                                                                 np.abs(c2[k])))))
-            same_sign = bool(np.all(np.sign(c1[k]) == np.sign(c2[k])))
+            agree = bool(np.all(d <= HALF_SIGMA * spread_v))
+            same_sign = unexcited or bool(np.all(np.sign(c1[k]) == np.sign(c2[k])))
         if agree and same_sign:
-            out[term.name] = (True, "", pair)
+            out[term.name] = (True, "excited in one half of the record only: the other half's wide uncertainty "
+                                    "agrees with it" if unexcited else "", pair)
         else:
             text = ", ".join(f"{a:.3g} / {b:.3g}" for a, b in zip(*pair, strict=True))
-            out[term.name] = (False, f"the two halves of the record disagree about it ({text})", pair)
+            out[term.name] = (False, f"the two halves of the record disagree about it beyond their uncertainty "
+                                     f"({text})", pair)
     return out

@@ -20,6 +20,8 @@ import numpy as np
 
 from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.estimation.noise import input_independence, whiteness
+from ema_sim.analysis.formatting.units import texts_in_unit
+from ema_sim.config import GENERIC
 from ema_sim.identify.contract import identify_schema
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
@@ -73,7 +75,7 @@ def _physical_final(result: Identification) -> dict[str, Any]:
         "declared": {k: ([_round(float(q)) for q in v] if isinstance(v, tuple) else _round(float(v)))
                      for k, v in pf.declared.items()},
         "fields": {k: k for k in pf.fitted},
-        "uncertainty": {k: _round(v, 3) for k, v in pf.sigma.items()},
+        "uncertainty": _determined({k: _round(v, 3) for k, v in pf.sigma.items()}),
         "correlation": {a: {b: _round(r, 4) for b, r in row.items()} for a, row in pf.correlation.items()},
         "not_determined": list(pf.held),
         "grid_searched": [],
@@ -247,7 +249,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             {
                 "effect": s.effect,
                 "params": {k: _round(v) for k, v in s.params.items()},
-                "uncertainty": {k: _round(v, 3) for k, v in s.sigma.items()},
+                "uncertainty": _determined({k: _round(v, 3) for k, v in s.sigma.items()}),
                 "rms_deg_before": {k: _round(v) for k, v in s.rms_deg_before.items()},
                 "rms_deg_after": {k: _round(v) for k, v in s.rms_deg_after.items()},
                 "evidence": s.evidence,
@@ -262,12 +264,16 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
             "model": model_name(result),
             "params": _params(result, final),
             "fields": {names[f]: f for f in final.free},
-            "uncertainty": {names[f]: _round(v * _factor(result, final, f), 3) for f, v in final.sigma.items()},
+            "uncertainty": _determined({names[f]: _round(v * _factor(result, final, f), 3)
+                                        for f, v in final.sigma.items()}),
             "relative_uncertainty": ({names[f]: _round(v, 3) for f, v in ident.relative_sigma.items()}
                                      if ident is not None else {}),
             "correlation": ({names[a]: {names[b]: _round(r, 4) for b, r in row.items()}
                              for a, row in ident.correlation.items()} if ident is not None else {}),
-            "not_determined": [names[f] for f in ident.not_determined] if ident is not None else [],
+            "not_determined": list(dict.fromkeys(
+                ([names[f] for f in ident.not_determined] if ident is not None else [])
+                + [names[f] for f, v in final.sigma.items() if v == 0.0])),
+            "not_determined_reason": {names[f]: ZERO_SIGMA for f, v in final.sigma.items() if v == 0.0},
             "grid_searched": [names[f] for f in final.free if final.jac_free and f not in final.jac_free],
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
@@ -285,6 +291,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "stages": [o.as_dict() for o in result.stages],
         "failures": [{"stage": f.stage, "error": f.error, "where": f.where} for f in failures],
         "discovered": result.discovery.as_dict() if result.discovery is not None else None,
+        "discovered_terms": _discovered_terms(result),
         "artefacts": result.artefacts,
         "ambiguities": result.ambiguities,
         "warnings": warnings,
@@ -302,7 +309,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
              "reason": v.reason}
             for v in result.verdicts if not v.accepted
         ],
-        "channel": p.channel.channel,
+        "channel": GENERIC if record is not None and record.generic else p.channel.channel,
         "samples": int(p.time_s.size),
         "sample_hz": _round(p.sample_hz),
         "simulator_error_deg": {o: _round(v, 3) for o, v in result.simulator_error_deg.items()},
@@ -316,9 +323,31 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         text = implementation_warning(result, impl)
         if text:
             warnings.append(text)
-    out: dict[str, Any] = strict(report)
+    # every text in the record's unit (a stage's words in degrees said in mm on a linear rig)
+    out: dict[str, Any] = texts_in_unit(strict(report), report["unit"])
     check(out, identify_schema(), "ema identify")
     return out
+
+
+ZERO_SIGMA = ("not determined: its one-sigma came out exactly 0 (the fit cannot move it, or it sits on a bound), "
+              "which is no measured uncertainty")
+"""Why an uncertainty of exactly 0 is reported as null."""
+
+
+def _determined(sigma: Mapping[str, float]) -> dict[str, float | None]:
+    """One-sigma values with an exact 0 (no uncertainty measured, never a perfect one) made null."""
+    return {k: (None if v == 0.0 else v) for k, v in sigma.items()}
+
+
+def _discovered_terms(result: Identification) -> list[dict[str, Any]]:
+    """The discovered terms the final model carries: each with where it acts, its coefficients and one-sigma."""
+    disc = result.discovery
+    kept = disc.kept if disc is not None and result.discovered else None
+    if kept is None:
+        return []
+    return [{"term": n, "on": o.split("_")[0], "placement": kept.where, "coefficient": [_round(c) for c in v],
+             "uncertainty": [None if x == 0.0 else _round(x, 3) for x in sg], "unit": u}
+            for o, ts in kept.terms.items() for n, v, sg, u in ts]
 
 
 def _sub_sample_delays(result: Identification) -> list[str]:
@@ -406,11 +435,15 @@ def summary(report: dict[str, Any]) -> str:
         lines.append(f"  + {a['effect']} {_fmt_params(a['params'])}: rms {_fmt_rms(a['rms_deg_before'], unit)} → "
                      f"{_fmt_rms(a['rms_deg_after'], unit)}")
         lines.append(f"      {a['evidence']}")
-    if not report["added"]:
+    terms = report.get("discovered_terms") or []
+    for t in terms:
+        lines.append(f"  + discovered {_fmt_term(t)}")
+    if not report["added"] and not terms:
         lines.append("  nothing added: no effect paid for itself")
     for r in report.get("removed", []):
         lines.append(f"  − {r['effect']} taken out again: {r['reason']}")
     f = report["final"]
+    lines.append(f"final model: {f['model']}")
     lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'], unit)} "
                  f"({', '.join(f'{v:.2f}× noise' for v in f['rms_over_noise'].values())})")
     lines += [f"warning: {w}" for w in report.get("warnings", [])]
@@ -424,6 +457,18 @@ def _num(v: Any, spec: str = ".4g") -> str:
 
 def _fmt_params(params: dict[str, Any]) -> str:
     return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
+
+
+def _fmt_sigma(sigma: dict[str, Any]) -> str:
+    """One-sigma values, a null one (an exact 0: :data:`ZERO_SIGMA`) said as not determined."""
+    return ", ".join(f"{k} {'not determined' if v is None else _num(v)}" for k, v in sigma.items()) or "(none)"
+
+
+def _fmt_term(t: dict[str, Any]) -> str:
+    """A discovered term: its name, where it acts, its coefficients ± one-sigma and unit."""
+    coef = ", ".join(f"{_num(c)} ± {'not determined' if s is None else _num(s, '.2g')}"
+                     for c, s in zip(t["coefficient"], t["uncertainty"], strict=False))
+    return f"{t['term']} ({t['on']}, {t['placement']}): {coef} {t['unit']}".rstrip()
 
 
 def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
@@ -500,15 +545,30 @@ def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
 
 
 
+def _md_terms(report: dict[str, Any]) -> list[str]:
+    """The discovered terms of the final model as a table (none: nothing)."""
+    terms = report.get("discovered_terms") or []
+    if not terms:
+        return []
+    rows = ["Discovered terms (beyond the vocabulary) the final model carries:", "",
+            "| term | acts on | placement | coefficient | ±1σ | unit |", "| --- | --- | --- | --- | --- | --- |"]
+    for t in terms:
+        sig = ", ".join("not determined" if x is None else _num(x, ".3g") for x in t["uncertainty"])
+        coef = ", ".join(_num(c, ".6g") for c in t["coefficient"])
+        rows.append(f"| {t['term']} | {t['on']} | {t['placement']} | {coef} | {sig} | {t['unit'].strip()} |")
+    return [*rows, ""]
+
+
 def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path:
     """``report.md``: the summary, the record, the warnings, the errors, the effects, the diagnosis."""
     p = result.problem
+    unit = report.get("unit", "deg")
     md = ["# Identification report", "", "```", summary(report), "```", "", "## The record", ""]
     md += [f"- {n}" for n in report.get("notes", [])]
     md += ["", "## Warnings", ""]
     md += [f"- {w}" for w in report.get("warnings", [])] or ["None."]
     md += ["", "## Error before and after", "",
-           "| | output | rms, deg | max abs, deg | NRMSE | rms / noise | white |",
+           f"| | output | rms, {unit} | max abs, {unit} | NRMSE | rms / noise | white |",
            "| --- | --- | --- | --- | --- | --- | --- |"]
     ref = report["reference"]
     for o in p.outputs:
@@ -524,14 +584,19 @@ def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path
     if report["added"]:
         md += ["| effect | parameters | ±1σ | evidence |", "| --- | --- | --- | --- |"]
         for a in report["added"]:
-            md.append(f"| {a['effect']} | {_fmt_params(a['params'])} | {_fmt_params(a['uncertainty'])} | "
+            md.append(f"| {a['effect']} | {_fmt_params(a['params'])} | {_fmt_sigma(a['uncertainty'])} | "
                       f"{a['evidence']} |")
+    elif report.get("discovered_terms"):
+        md.append("No effect of the vocabulary: the final model carries the discovered terms below instead.")
     else:
         md.append("None: no candidate paid for itself.")
-    md += ["", "## Final parameters", "", "| parameter | value | ±1σ |", "| --- | --- | --- |"]
+    md += ["", "## Final model", "", f"`{report['final']['model']}`", ""]
+    md += _md_terms(report)
+    md += ["## Final parameters", "", "| parameter | value | ±1σ |", "| --- | --- | --- |"]
     unc = report["final"]["uncertainty"]
     for k, v in report["final"]["params"].items():
-        md.append(f"| {k} | {_num(v, '.6g')} | {_num(unc.get(k, '—'), '.3g')} |")
+        sg = unc.get(k, "—")
+        md.append(f"| {k} | {_num(v, '.6g')} | {'not determined' if sg is None else _num(sg, '.3g')} |")
     if report.get("removed"):
         md += ["", "## Effects taken out again", "", "| effect | where | parameters | why |",
                "| --- | --- | --- | --- |"]

@@ -14,7 +14,7 @@ Safeguards (the contract's rules for every report):
   fitted both ways and the interpretation that fits clearly better (ΔBIC ≤ −10) is taken, and said;
 * an accepted effect's rivals (another effect that explains the same residual: a gain error or a
   slow settling tail, a threshold or a stop) are fitted too and the better kept by BIC; when the
-  record cannot decide, both are said to fit;
+  record fits both about equally, the better is reported and the other named as its equivalent;
 * after the loop each added effect is switched off in the final model: one whose removal no longer
   fails the acceptance criteria, or whose final value fails its physical check, has collapsed to
   "off" and is taken out again (the model refitted without it), with the reason;
@@ -268,7 +268,7 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
         fitted = f"corner 2ζωn = {new.params.zeta * new.params.wn_rad_s / math.pi:.3g} Hz"
     removed = tuple(KEYS[f].name if f in KEYS else f for f in cur.free if f not in new.free)
     instead = f"; replaces {', '.join(removed)}" if removed else ""
-    evidence = (f"{effect.signature} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
+    evidence = (f"{effect.evidence(problem.data.command_deg)} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
                 f"{where}{instead}; error above the noise floor: {cut}")
     steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence, removed))
     for companion in effect.companions:
@@ -496,8 +496,8 @@ def _pick(problem: Problem, cur: Fit, fitted: list[tuple[Fit, Candidate]]
             said.append(
                 f"{best[1].effect.name} ({best[1].effect.where}) and {other[1].effect.name} ({other[1].effect.where}) "
                 f"explain the same residual about equally (ΔBIC {d:.1f}, their corrections correlate "
-                f"{float(np.dot(change, alt)) / denom:.2f}): the record cannot decide between them; "
-                f"{best[1].effect.name} is kept")
+                f"{float(np.dot(change, alt)) / denom:.2f}): on this record they are equivalent, one effect with "
+                f"two names; {best[1].effect.name} is reported, {other[1].effect.name} is its equivalent")
     return best, said
 
 

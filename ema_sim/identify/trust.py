@@ -29,6 +29,7 @@ from ema_sim.analysis.estimation.noise import COMMAND_COUNTS_SPANNED, detect_res
 from ema_sim.analysis.records.series import holds
 from ema_sim.identify.effects import FREE, KEYS, Free
 from ema_sim.identify.fit import Fit, covariance
+from ema_sim.identify.fit import correlation as correlation_of
 from ema_sim.identify.outcome import REFERENCE, Identification
 from ema_sim.identify.problem import Problem
 from ema_sim.models.second_order import SecondOrderParams
@@ -215,9 +216,7 @@ def identifiability(problem: Problem, fit: Fit) -> Identifiability:
     """
     names = list(fit.jac_free)
     cov = covariance(problem, fit.residual, fit.jacobian) if names else np.zeros((0, 0))
-    d = np.sqrt(np.clip(np.diag(cov), 0.0, None)) if names else np.zeros(0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(d, d)
+    corr = correlation_of(cov)
     rel = {}
     for name in fit.free:
         value = float(getattr(fit.params, name))

@@ -222,8 +222,10 @@ class Transitions:
 
     @staticmethod
     def _mean_se(values: list[float]) -> tuple[float, float | None]:
+        """Mean and standard error (None when not determined: one value, or all identical, a spread of 0)."""
         v = np.array(values)
-        return float(np.mean(v)), (float(np.std(v, ddof=1) / np.sqrt(v.size)) if v.size > 1 else None)
+        se = float(np.std(v, ddof=1) / np.sqrt(v.size)) if v.size > 1 else 0.0
+        return float(np.mean(v)), (se if se > 0.0 else None)
 
     @property
     def settled(self) -> int:

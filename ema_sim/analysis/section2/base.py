@@ -29,7 +29,7 @@ from ema_sim.analysis.estimation.quality import QUALITY_WORDS, Quality, worst
 from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.section2.segments import Recognition, Segment
-from ema_sim.config import ChannelConfig
+from ema_sim.config import GENERIC, ChannelConfig
 from ema_sim.io.csv import MeasuredData
 
 if TYPE_CHECKING:
@@ -146,6 +146,11 @@ class RecordAnalysis:
     def channel_named(self) -> bool:
         """The record is of an X-43A channel, named by ``--channel`` or by the record itself."""
         return not self.stand_in
+
+    @property
+    def channel_name(self) -> str:
+        """What the record is of, as reported: its X-43A channel, or ``generic`` (an actuator of no X-43A channel)."""
+        return self.channel.channel if self.channel_named else GENERIC
 
     @property
     def noise_deg(self) -> dict[str, float]:

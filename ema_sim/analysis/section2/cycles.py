@@ -360,8 +360,8 @@ class Cycles(Section2Test[CycleResult]):
                 oc, oc_se = tr.overshoot_command
                 of, of_se = tr.overshoot_final
                 lines.append(f"- {tr.direction} changes ({len(tr.readings)}, {tr.change:+.4g}{u}): "
-                             f"{tr.settling_command.statement}; overshoot past the command {oc:.1f} ± "
-                             f"{num(oc_se, '.2g')} %, past its own last value {of:.1f} ± {num(of_se, '.2g')} %")
+                             f"{tr.settling_command.statement}; overshoot past the command {oc:.1f} %"
+                             f"{_pm(oc_se)}, past its own last value {of:.1f} %{_pm(of_se)}")
             sl = r.slope
             lines.append(f"- slope of the rate-limited moves: {num(sl.rate, '.4g', f' {u.strip()}/s')}"
                          + (f" ± {sl.sigma:.2g}" if sl.sigma else "") + f" ({sl.moves} of {sl.seen} moves)")
@@ -415,3 +415,8 @@ class Cycles(Section2Test[CycleResult]):
 
 
 TEST = Cycles()
+
+
+def _pm(sigma: float | None) -> str:
+    """`` ± σ``, or that the spread is not determined (None: one reading, or identical ones, a spread of 0)."""
+    return f" ± {sigma:.2g}" if sigma is not None else " (its spread not determined)"
