@@ -123,6 +123,7 @@ class Final(TypedDict):
     relative_uncertainty: NotRequired[Params]
     correlation: dict[str, Params]
     not_determined: list[str]
+    not_determined_reason: NotRequired[dict[str, str]]
     grid_searched: list[str]
     hinge_moment_reversed: bool
     curves: NotRequired[dict[str, list[Num]]]
@@ -172,6 +173,17 @@ class Excitation(TypedDict):
     content_hz: Num
 
 
+class DiscoveredTerm(TypedDict):
+    """A discovered term the final model carries: where it acts, its coefficients and their one-sigma."""
+
+    term: str
+    on: str
+    placement: str
+    coefficient: list[Num]
+    uncertainty: list[Num]
+    unit: str
+
+
 class IdentifyReport(TypedDict):
     """``ema identify``'s report: the record, the declared model, what was added and why, and the final model."""
 
@@ -191,6 +203,7 @@ class IdentifyReport(TypedDict):
     stages: list[dict[str, object]]
     failures: list[Failure]
     discovered: dict[str, object] | None
+    discovered_terms: list[DiscoveredTerm]
     artefacts: list[dict[str, object]]
     ambiguities: list[str]
     warnings: list[str]
