@@ -134,3 +134,34 @@ def test_a_command_with_an_unknown_name_is_counted_once_under_one_reason(make_no
     assert sum(node.drops.values()) == 3
     assert node.drops["malformed"] == 1  # which value belongs to which name is unknown: malformed, nothing else
     assert node.drops["unknown_names"] == 2  # one a message, however many names it misspells
+
+
+@pytest.mark.parametrize("lockstep", [False, True])
+def test_a_malformed_command_is_never_applied_and_counted_once(make_node, lockstep):
+    """Short or long arrays, NaN, a value no converter reads: dropped whole, counted once each under
+    ``malformed``, the channel holding its last good command (before, ``position=[1.0, 2.0]`` was counted and
+    still drove the channel to 0.99 V); in lockstep the frame goes ahead on the held command, without a wait."""
+    node = make_node()
+    take = node.ports.take[ct.EMAC_COMMAND]
+    if lockstep:
+        node.lockstep = True
+        node.ports.take[ct.CLOCK_TOPIC] = node._on_clock
+        node.ports.alive = {ct.HINGE_MOMENT: 0}
+        node._on_clock(BASE_NS)
+        node.poll()
+    bad = [["left_wing"], [1.0, 2.0]], [["left_wing"], [float("nan")]], [["left_wing"], [50.0]], [["left_wing"], []]
+    messages = [(["left_wing"], [0.5])] * 3 + list(bad) + [(["left_wing"], [0.5])]
+    for k, (names, values) in enumerate(messages):
+        take(JointFrame(BASE_NS + k * F_NS, names, values))
+        node.wall["t"] += F_S
+        if lockstep:
+            node._on_clock(BASE_NS + (k + 1) * F_NS)
+        node.poll()
+    unit = node.units["left_wing"]
+    assert node.drops["malformed"] == len(bad)
+    assert sum(node.drops.values()) == len(bad)
+    assert unit.command_v == 0.5
+    assert unit.counters["rejected_commands"] == unit.counters["clamped_commands"] == 0
+    assert node.waits_given_up == 0
+    if lockstep:
+        assert len(node.ports.sent[ct.EMAC_FEEDBACK]) == len(messages) + 1  # every frame stepped, the start's too
