@@ -119,6 +119,9 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
               {"data": "the test's parameters as JSON (also in the bag's metadata)"}, per_frame=False),
     TopicSpec("/ema/ready", STRING, LATCHED_QOS, "every suite node", "simclock, maneuver, fmu",
               {"data": "name of a node that is up and subscribed"}, per_frame=False),
+    TopicSpec("/ema/nodes", STRING, LATCHED_QOS, "every suite node", "every suite node, ema launch",
+              {"data": "JSON: a node's full name, pid, host and start time; the younger of two nodes of one name "
+                       "refuses to run"}, per_frame=False),
     TopicSpec("/diagnostics", DIAGNOSTIC_ARRAY, EVENT_QOS, "emac, testenv", "monitors",
               {"status": "one status per channel: brake, failure, counters of rejected inputs"}, per_frame=False),
     TopicSpec("/ema/faults/truth", STRING, EVENT_QOS, "emac (faults injected: emac.faults)", "recorder, scoring",
@@ -210,6 +213,7 @@ JOINT_STATES = "/ema/joint_states"
 CLOCK_TOPIC = "/clock"
 TEST = "/ema/test"
 READY = "/ema/ready"
+NODES = "/ema/nodes"
 DIAGNOSTICS = "/diagnostics"
 
 

@@ -1,7 +1,10 @@
 """Real time: which stamped FMU commands the EMAC takes, and when it follows a clock that moved.
 
 Each command carries its FMU frame's stamp. The EMAC takes a command stamped after the last one it took
-(its *anchor*) and counts the frames missing between the two. A command that does not fit the anchor is
+(its *anchor*) and tells the frames missing between the two apart: those the wall time since the anchor
+also had room for are a *gap* (the publisher paused, stamps off the frame grid, a publisher's jitter: the
+watchdog's business, never a loss), those beyond it are *lost* (the stamps ran ahead of the wall time, a
+backlog whose queue overflowed: commands that were sent and never came). A command that does not fit the anchor is
 dropped and counted:
 
 * ``out_of_order``: stamped at or before the anchor (an older frame's command, a duplicate);
@@ -49,9 +52,13 @@ class Check(NamedTuple):
 
     verdict: Verdict
     missing: int = 0
-    """Frames of commands missing between the anchor and this command (taken in sequence only)."""
+    """Frames of commands lost between the anchor and this command (taken in sequence only): missing stamps
+    beyond what the wall time since the anchor had room for."""
     previous_ns: int | None = None
     """The anchor before this command (the stamp the clock jumped from, on a resync)."""
+    gap: int = 0
+    """Frames of commands missing between the anchor and this command that the wall time since the anchor also
+    had room for (a pause or jitter of the publisher: not a loss)."""
 
 
 class CommandClock:
@@ -98,7 +105,8 @@ class CommandClock:
         Returns
         -------
         Check
-            The verdict, the frames missing before it (taken in sequence) and the anchor before it.
+            The verdict, the frames lost before it (taken in sequence), the anchor before it and the frames of
+            a gap in publishing before it.
         """
         anchor = self.anchor
         if anchor is None:
@@ -107,7 +115,9 @@ class CommandClock:
         if self._fits(stamp_ns, wall_s, anchor):
             self.anchor = (stamp_ns, wall_s)
             self._misfit, self._misfits = None, 0
-            return Check(Verdict.TAKEN, max(round((stamp_ns - anchor[0]) / self.frame_ns) - 1, 0), anchor[0])
+            missing = max(round((stamp_ns - anchor[0]) / self.frame_ns) - 1, 0)
+            gap = min(missing, max(round((wall_s - anchor[1]) * NS / self.frame_ns) - 1, 0))
+            return Check(Verdict.TAKEN, missing - gap, anchor[0], gap)
         in_run = self._misfit is not None and self._fits(stamp_ns, wall_s, self._misfit)
         self._misfits = self._misfits + 1 if in_run else 1
         self._misfit = (stamp_ns, wall_s)

@@ -34,6 +34,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.errors import EmaError
 from ema_sim.nodes import lifetime, realtime
+from ema_sim.nodes.names import NameClaim
 from ema_sim.nodes.params import Declared, Spec, cli_overrides, names_list
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
@@ -120,6 +121,8 @@ class SuiteNode(Node):
         """Announce readiness as soon as matched (the maneuver node announces itself when it starts)."""
         self._last_log: dict[str, float] = {}
         self._ready_pub = self.create_publisher(String, ct.endpoint(ct.READY), qos(ct.LATCHED_QOS))
+        self.name_claim = NameClaim(self)
+        """Its claim on its name: an older node of the same name stops this one (:mod:`ema_sim.nodes.names`)."""
         self._ready_sent = False
         self._matched_since: float | None = None
         self.running_cpu_s: float | None = None
@@ -406,6 +409,8 @@ def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any])
 
     while stop["signal"] is None and not finished():
         for node in nodes:
+            if node.name_claim.taken_by is not None:
+                raise EmaError(node.name_claim.refusal() or "")
             if not node._ready_sent:
                 node.check_ready()
         timeout = MAX_SPIN_S
@@ -428,8 +433,10 @@ def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, Any]) -> None:
     The loop runs once per message taken (a channel node of the ``processes`` layout: 2 to 7 a frame, its
     driver 21), so its own overhead counts: no closures or generators, the bound methods looked up once.
     """
-    poll, check_ready, spin_once = node.poll, node.check_ready, executor.spin_once
+    poll, check_ready, spin_once, claim = node.poll, node.check_ready, executor.spin_once, node.name_claim
     while stop["signal"] is None and not (node.done and node.ends_process):
+        if claim.taken_by is not None:  # an older node has this name: stop with one error naming it
+            raise EmaError(claim.refusal() or "")
         if not node._ready_sent:
             check_ready()
         timeout = poll()

@@ -45,8 +45,8 @@ from ema_sim.emac.stamps import CommandClock, FrameGate, Lateness, Verdict
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import create, model_names
 from ema_sim.nodes.common import MAX_SPIN_S, DurationHistogram, SuiteNode, command_line, run
+from ema_sim.nodes.emac_inputs import OUT_OF_RANGE_FACTOR, StampPolicy, pick
 from ema_sim.nodes.emac_params import (
-    KNOWN,
     channel_specs,
     check_files,
     default_name,
@@ -76,9 +76,12 @@ __all__ = [
 
 NS = 1_000_000_000
 DROPS = ("malformed", "unknown_names", "no_names", "lost_commands", "out_of_order", "future_stamp")
-"""Why an input was dropped: a message whose arrays do not match its names; names that are no channel; a
-message without names; commands missing from the stream (a gap in the stamps: lost in the middleware or
-never sent); a command older than the last one taken; an input stamped implausibly far ahead (real time:
+"""Why an input was dropped, each message under one reason (:func:`~ema_sim.nodes.emac_inputs.pick`): a
+message whose arrays do not match its names or whose value for a hosted channel is not a number or out of
+range (dropped whole); names that are no channel; a message without names; commands sent and lost (stamps
+that ran further ahead than the wall time since: a backlog that overflowed a queue; a pause in publishing is
+a gap, ``command_gaps``, not a loss); a command older than the last one taken; an input stamped implausibly
+far ahead (real time:
 of the last command and the wall time since, :class:`~ema_sim.emac.stamps.CommandClock`; lockstep: of the
 node's clock by more than :data:`LOCKSTEP_LEAD_FRAMES`)."""
 LOCKSTEP_LEAD_FRAMES = 20
@@ -222,6 +225,12 @@ class EmacNode(SuiteNode):
         self.published = 0
         self.commands_taken = 0
         """Command messages taken (each a frame in real time)."""
+        self.command_gaps = 0
+        """Real time: gaps in publishing (stamps that skipped frames the wall time also skipped): not losses."""
+        self.gap_frames = 0
+        """Real time: frames without a command in those gaps (the watchdog brakes a channel in a long one)."""
+        self.stamp_policy = StampPolicy(self.frame_ns)
+        """How the commands are stamped, stated once (see :mod:`ema_sim.nodes.emac_inputs`)."""
         self.drops = dict.fromkeys(DROPS, 0)
         """Inputs dropped, by reason (:data:`DROPS`): each is counted, logged (throttled) and in ``/diagnostics``."""
         self.last_fault_wall = -math.inf
@@ -319,19 +328,25 @@ class EmacNode(SuiteNode):
             return
         self.arrivals += 1
         try:
-            values = self._pick(msg, msg.position, "position", "command")
+            values = self._pick(msg, msg.position, "position", "command", self._command_limits)
             stamp = msg.stamp_ns
             now = time.monotonic()
             fresh = False
             if self.lockstep:  # a command for frame t: the suite's time has reached t
                 if not self._on_input_stamp(stamp, "command"):
                     return
-            elif stamp and values:  # real time: an unstamped command (0) is the next frame's, stamped when stepped
+                if values is None:  # dropped: the frame goes ahead on the held command (no wait for it)
+                    self.commands.push(stamp, ({}, now, False))
+                    return
+            if values and (line := self.stamp_policy.observe(stamp)) is not None:
+                self.get_logger().info(line)
+            # real time: an unstamped command (0) is the next frame's, stamped when stepped
+            if not self.lockstep and stamp and values:
                 check = self.command_clock.check(stamp, now)
                 if not self._stamp_taken(check, stamp):
                     return
                 fresh = check.verdict is Verdict.RESYNC
-            if values:
+            if values:  # None (dropped) or {} (none of ours): nothing to apply
                 self.commands.push(stamp, (values, now, fresh))
                 self.commands_taken += 1
                 self.mark_running()
@@ -342,9 +357,14 @@ class EmacNode(SuiteNode):
         """Real time: count, log and say whether to take a command the command clock judged (``check``)."""
         verdict = check.verdict
         if verdict is Verdict.TAKEN:
+            if check.gap > 0:
+                self.command_gaps += 1
+                self.gap_frames += check.gap
             if check.missing > 0:
-                self._drop("lost_commands", f"{check.missing} frame(s) of commands missing before the one stamped "
-                           f"{stamp / NS:.6f} s (lost on the way, or never sent)", check.missing)
+                self._drop("lost_commands", f"{check.missing} frame(s) of commands lost before the one stamped "
+                           f"{stamp / NS:.6f} s (its stamp ran {check.missing} frames further ahead than the wall "
+                           "time since the last one: sent faster than the frames and dropped on the way)",
+                           check.missing)
             return True
         last = check.previous_ns / NS
         if verdict is Verdict.RESYNC:
@@ -372,10 +392,12 @@ class EmacNode(SuiteNode):
             return
         self.arrivals += 1
         try:
-            values = self._pick(msg, msg.effort, "effort", "hinge moment")
+            values = self._pick(msg, msg.effort, "effort", "hinge moment", self._load_limits)
             if self.lockstep and not self._on_input_stamp(msg.stamp_ns, "hinge moment"):
                 return
-            if values:
+            if values is None and self.lockstep:  # dropped: the frame goes ahead on the held hinge moment
+                self.loads.push(msg.stamp_ns, {})
+            elif values:
                 self.loads.push(msg.stamp_ns, values)
         except Exception as exc:
             self._bad(f"hinge-moment message dropped: {exc}")
@@ -450,31 +472,28 @@ class EmacNode(SuiteNode):
         except EmaError as exc:
             self._bad(f"{channel}: failure request ignored: {exc}")
 
-    def _pick(self, msg: JointFrame, array: list[float], field: str, what: str) -> dict[str, float]:
-        """This node's channels out of a frame; every malformed part is counted and logged (throttled).
+    def _pick(self, msg: JointFrame, array: list[float], field: str, what: str,
+              limits: dict[str, float]) -> dict[str, float] | None:
+        """This node's channels out of a frame, or None when it is dropped whole (counted once, logged throttled).
 
-        A JointState's arrays are empty or as long as its names. A hosted channel without a value gets NaN,
-        which the channel rejects and counts; names that are no channel, a message without names and a
-        length mismatch (wherever the hosted channel stands) are counted as drops.
+        See :func:`~ema_sim.nodes.emac_inputs.pick`: a malformed message is never applied.
         """
-        names = msg.name
-        if not names:
-            if array:
-                self._drop("no_names", f"{what} message without joint names ({len(array)} {field} values) dropped")
-            return {}
-        if len(array) != len(names):
-            self._drop("malformed", f"{what} message with {len(names)} names and {len(array)} {field} values: "
-                       f"the values past the arrays' end are dropped")
-        unknown = [n for n in names if n not in KNOWN]
-        if unknown:
-            self._drop("unknown_names", f"{what} for unknown joint(s) {', '.join(map(repr, unknown[:5]))} dropped "
-                       f"(channels: {', '.join(CHANNELS)})", len(unknown))
-        out: dict[str, float] = {}
-        units = self.units
-        for i, name in enumerate(names):
-            if name in units:
-                out[name] = float(array[i]) if i < len(array) else math.nan
-        return out
+        picked = pick(msg.name, array, limits, field, what)
+        if picked.reason is not None:
+            self._drop(picked.reason, picked.text)
+            if picked.reason != "unknown_names":
+                return None
+        return picked.values
+
+    @property
+    def _command_limits(self) -> dict[str, float]:
+        """The largest command each hosted channel takes (beyond it a command is malformed), V."""
+        return {ch: OUT_OF_RANGE_FACTOR * u.scaling.full_scale_v for ch, u in self.units.items()}
+
+    @property
+    def _load_limits(self) -> dict[str, float]:
+        """Any finite hinge moment is taken (the channel clamps it to its limit)."""
+        return dict.fromkeys(self.units, math.inf)
 
     def _bad(self, text: str) -> None:
         """A message that could not be decoded."""
@@ -732,6 +751,8 @@ class EmacNode(SuiteNode):
                     "late_commands": str(self.late_commands), "command_resyncs": str(self.command_resyncs),
                     "clock_resets": str(self.clock_resets), "skipped_frames": str(self.skipped_frames),
                     "bad_messages": str(self.bad_messages), "waits_given_up": str(self.waits_given_up),
+                    "command_stamps": self.stamp_policy.policy, "command_gaps": str(self.command_gaps),
+                    "gap_frames": str(self.gap_frames),
                     **{f"dropped_{k}": str(v) for k, v in self.drops.items()}}
         self.diag_pub.publish(diagnostics(
             self.get_clock().now().to_msg(), self.fqn, self.units, counters,
@@ -745,7 +766,8 @@ class EmacNode(SuiteNode):
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
             "skipped_frames": self.skipped_frames, "dropped": dict(self.drops), "commands": self.commands_taken,
             "late_commands": self.late_commands, "command_resyncs": self.command_resyncs,
-            "clock_resets": self.clock_resets,
+            "clock_resets": self.clock_resets, "command_stamps": self.stamp_policy.policy,
+            "command_gaps": self.command_gaps, "gap_frames": self.gap_frames,
             "turnaround_p50_ms": self.turnaround.percentile_ms(50),
             "turnaround_p99_ms": self.turnaround.percentile_ms(99),
             "turnaround_max_ms": self.turnaround.percentile_ms(100),

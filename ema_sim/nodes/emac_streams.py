@@ -213,7 +213,11 @@ class Outputs:
 
 def diagnostics(stamp: Time, fqn: str, units: Mapping[str, EmacChannel], counters: Mapping[str, str], *,
                 recent_fault: bool, hold_s: float, inactive: bool = False) -> DiagnosticArray:
-    """Per channel: ERROR while failing, WARN while braked, inactive or after a recent dropped input, else OK.
+    """Per channel: ERROR while failing, WARN while inactive or after a recent dropped input, else OK.
+
+    WARN is for what an operator must act on (a publisher that sends what the node drops, a managed node left
+    inactive). A brake engaged is the channel doing its job (the watchdog when commands pause, the motor power
+    switched off): OK, and the message says why.
 
     Parameters
     ----------
@@ -243,10 +247,12 @@ def diagnostics(stamp: Time, fqn: str, units: Mapping[str, EmacChannel], counter
         st = unit.status()
         failing = unit.failure.kind != "none"
         level = DiagnosticStatus.ERROR if failing else (
-            DiagnosticStatus.WARN if unit.last.braked or recent_fault or inactive else DiagnosticStatus.OK)
+            DiagnosticStatus.WARN if recent_fault or inactive else DiagnosticStatus.OK)
+        braked = ("brake engaged (motor power off)" if not unit.motor_power_on else
+                  "brake engaged (no command within the watchdog)")
         text = (f"failure {unit.failure.spec()}" if failing else "inactive (managed node): brake held" if inactive
-                else "brake engaged" if unit.last.braked else
-                f"inputs dropped in the last {hold_s:g} s" if recent_fault else "nominal")
+                else f"inputs dropped in the last {hold_s:g} s" if recent_fault else
+                braked if unit.last.braked else "nominal")
         st.update(counters)
         msg.status.append(DiagnosticStatus(
             level=level, name=f"{fqn}: {ch}", message=text, hardware_id=unit.model.name,
