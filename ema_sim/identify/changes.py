@@ -225,8 +225,13 @@ def period_s(time_s: FloatArray, command: FloatArray) -> float | None:
     lo, hi = math.ceil(MIN_WINDOW_S / dt), n // 2
     if hi <= lo:
         return None
-    k = lo + int(np.argmax(norm[lo:hi]))
-    return float(k * dt) if norm[k] >= PERIODIC else None
+    above = np.flatnonzero(norm[lo:hi] >= PERIODIC)
+    if above.size == 0:
+        return None
+    # the first run of lags above the threshold holds the period (its multiples come later, as high)
+    run = above[: int(np.argmax(np.diff(above) > 1)) + 1] if np.any(np.diff(above) > 1) else above
+    k = lo + int(run[np.argmax(norm[lo + run])])
+    return float(k * dt)
 
 
 def _rest_end(command: FloatArray, near: int, reach: int) -> tuple[int, int]:
@@ -277,6 +282,13 @@ def windows(problem: Problem) -> tuple[list[Window], str]:
         count = PLAIN_WINDOWS if span >= PLAIN_WINDOWS * MIN_WINDOW_S else 2
         length = span / count
         how = f"the command does not repeat: {count} parts of about {length:.3g} s, cut where it rests"
+        reach = round(SNAP_SHARE * length / dt)
+        cuts = [first] + [_rest_end(u, int(np.searchsorted(t, t[first] + k * length)), reach)[0]
+                          for k in range(1, count)] + [t.size]
+    if period is not None and len(cuts) < 3:  # a period too long for two windows: equal parts instead
+        count = PLAIN_WINDOWS if span >= PLAIN_WINDOWS * MIN_WINDOW_S else 2
+        length = span / count
+        how = f"the command repeats every {period:.3g} s, longer than half the record: {count} parts of {length:.3g} s"
         reach = round(SNAP_SHARE * length / dt)
         cuts = [first] + [_rest_end(u, int(np.searchsorted(t, t[first] + k * length)), reach)[0]
                           for k in range(1, count)] + [t.size]
