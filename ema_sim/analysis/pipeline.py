@@ -28,7 +28,7 @@ from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise, with_res
 from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
 from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.recognize import recognize
-from ema_sim.analysis.records import causality, series
+from ema_sim.analysis.records import causality, series, stamps
 from ema_sim.analysis.records.command_hold import CommandHold, detect_command_hold, given, lag_band
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
@@ -185,6 +185,10 @@ def _analyze(data: MeasuredData, options: Options, noise: dict[str, NoiseFloor],
         ra.notes.append(ch_note)
     if "resampled" in data.metadata:
         ra.notes.append(data.metadata["resampled"])
+    jitter = stamps.measure(raw_stamps)
+    if jitter.jitters and data.outputs:
+        ra.notes.append(f"{jitter.statement(stamps.output_rate(jitter, data.column(data.outputs[0])), data.unit)}; no "
+                        "effect of the actuator is read into it")
     ra.notes += rec.notes
     say(RECOGNISED)
     for k, test in enumerate(TESTS):

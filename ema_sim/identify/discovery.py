@@ -251,9 +251,10 @@ def regress(problem: Problem, fit: Fit) -> Discovery:
     out = Discovery()
     unit = _unit(problem)
     for o, e in problem.errors_deg(fit.sim).items():
-        sigma = problem.sigma_deg[o]
+        scale = problem.scale(o)  # the noise floor, with the stamps' timing error in it when the fit weighs it
+        sigma = float(np.sqrt(np.mean(np.square(scale))))
         value = float(np.sqrt(np.mean(e**2)))
-        white = whiteness(e / sigma, lags=WHITENESS_LAGS, fitted_params=len(fit.free)).white
+        white = whiteness(e / scale, lags=WHITENESS_LAGS, fitted_params=len(fit.free)).white
         found = Found(o, value, sigma, white, Regression())
         if found.structured:
             terms = [t.rows(problem.mask) for t in _terms(problem, fit.sim, o, e)]

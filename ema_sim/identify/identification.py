@@ -28,7 +28,7 @@ import numpy as np
 
 from ema_sim.analysis.records.command_hold import HoldMode
 from ema_sim.config import ChannelConfig
-from ema_sim.identify import artefacts
+from ema_sim.identify import artefacts, changes, timing
 from ema_sim.identify.criteria import MAX_DELTA_BIC, MIN_EXCESS_SHARE, simulator_error
 from ema_sim.identify.declared import HIGH_ORDER, declared
 from ema_sim.identify.discovery import STRUCTURED, Discovery, discover, named_stands
@@ -202,7 +202,12 @@ def _identify(problem: Problem, record: Record, model: str, overrides: dict[str,
         trivial = reference_fit(problem, base)
         fitted = (trivial, trivial)
     cur, start = fitted
+    weighed, said = timing.weigh(problem, record.stamps, cur, record.unit) if record.stamps else (False, "")
+    if weighed:  # the weights changed: the baseline refitted under them, its start re-evaluated
+        cur = fit_model(problem, cur.params, cur.free, flip=cur.flip)
+        start = evaluate(problem, start.params, start.free, flip=start.flip)
     result = Identification(problem, model, cur, cur, record=record, start=start, notes=notes)
+    result.timing = said
     result.failures += failures
     result.artefacts = [a.as_dict() for a in found]
     result.as_declared = decl
@@ -251,8 +256,35 @@ def _stages(chain: _Chain, key: str, base: Any, decl: AsDeclared | None, *, fail
         result.escalated = escalation(problem, result)
         if result.escalated:
             chain.run("physics", lambda: _escalate(chain))
+    if max_effects > 0 and not failed:
+        _changes(chain, base)
     if discover_terms and max_effects > 0:
-        chain.run("discovery", lambda: _discovery(chain))
+        if result.changes is not None and result.changes.changed:
+            result.stages.append(Outcome("discovery", "skipped", "the record changed over its length: terms regressed "
+                                         "on the whole of it would stand in for the change", chain.now, chain.now, 0.0))
+        else:
+            chain.run("discovery", lambda: _discovery(chain))
+
+
+def _changes(chain: _Chain, base: Any) -> None:
+    """The final model refitted on windows of the record (:mod:`.changes`), said as a stage of its own.
+
+    An effect that stood in for a change is taken out although the whole record's error rises: that error was the
+    change's, not the effect's to explain.
+    """
+    clock = Clock()
+    before = chain.now
+    saved = _snapshot(chain.result)
+    found = guarded("changes", chain.result.failures,
+                    lambda: changes.analyse(chain.problem, chain.result, base, chain.say))
+    if found is None:
+        _restore(chain.result, saved)
+        status, reason = "failed", "the windowed refit failed: no change over the record is reported"
+    else:
+        chain.result.changes = found
+        status = "kept" if found.proxies else "nothing to add"
+        reason = "; ".join(found.proxies) or found.skipped or "; ".join(found.statements)
+    chain.result.stages.append(Outcome("changes", status, reason, before, chain.now, clock.elapsed_s))
 
 
 def _balance(chain: _Chain, free: list[str]) -> None:

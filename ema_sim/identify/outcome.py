@@ -18,6 +18,7 @@ from ema_sim.identify.record import Record
 from ema_sim.identify.stages import Failure, Outcome
 
 if TYPE_CHECKING:
+    from ema_sim.identify.changes import Changes
     from ema_sim.identify.discovery import Discovery
 
 REFERENCE = "position = command"
@@ -127,6 +128,10 @@ class Identification:
     """Explanations the record cannot choose between, one line each."""
     warnings: list[str] = field(default_factory=list)
     """What the stages flag (a trade not kept, a stage that failed), one line each, for the report's warnings."""
+    changes: Changes | None = None
+    """The final model refitted on windows of the record: what changes over it (:mod:`ema_sim.identify.changes`)."""
+    timing: str = ""
+    """What the stamps' jitter sets and whether the fit weighs it (:mod:`ema_sim.identify.timing`); empty: uniform."""
 
 
 def model_name(result: Identification) -> str:

@@ -135,6 +135,13 @@ class Problem:
     out of the weighted residual (variable projection: :meth:`set_output_terms`)."""
     reused: int = field(init=False, default=0)
     """Of :attr:`simulations`, the runs answered from the ones kept instead of run again."""
+    timing_s: float = field(init=False, default=0.0)
+    """Rms error of the stamps against the instants the outputs were sampled at, when the record shows one
+    (:meth:`set_timing`); 0: none."""
+    timing_rates: dict[str, FloatArray] = field(init=False, default_factory=dict)
+    """Per output, the measured rate at every sample the timing weights were made from (:meth:`set_timing`)."""
+    sample_sigma: dict[str, FloatArray] = field(init=False, default_factory=dict)
+    """Per output, each fitted sample's floor with the stamps' timing error in it (empty: the noise floor alone)."""
     _kept: OrderedDict[tuple[object, ...], FloatArray] = field(init=False, repr=False, compare=False,
                                                                default_factory=OrderedDict)
     """The latest runs, by what determines them: a fit's Jacobian restarts from the point its residual has just
@@ -234,6 +241,30 @@ class Problem:
         idx = np.clip(np.searchsorted(self.time_s, self._bp_t + 1e-12, side="right") - 1, 0, self.time_s.size - 1)
         return np.asarray(signal, dtype=float)[idx]
 
+    def set_timing(self, timing_s: float, rates: Mapping[str, FloatArray]) -> None:
+        """Weigh each sample by its noise floor with the stamps' timing error in it: ``√(σ² + (rate·timing)²)``.
+
+        A stamp ``δt`` off the instant its sample was taken at leaves ``rate × δt`` between any model and the
+        output (:mod:`ema_sim.analysis.records.stamps`): that share of the error is the logger's, so a sample
+        taken while the output moves fast weighs less, and no effect of the actuator pays for absorbing it.
+
+        Parameters
+        ----------
+        timing_s : float
+            The stamps' rms timing error, s (0: every sample weighs by the noise floor alone again).
+        rates : mapping
+            Output → its measured rate at every sample of the record (unit/s).
+        """
+        self.timing_s = timing_s
+        self.timing_rates = {o: np.asarray(r, dtype=float) for o, r in rates.items()} if timing_s > 0.0 else {}
+        self.sample_sigma = {} if timing_s <= 0.0 else {
+            o: np.sqrt(self.sigma_deg[o] ** 2 + (timing_s * np.asarray(rates[o])[self.mask]) ** 2)
+            for o in self.outputs}
+
+    def scale(self, output: str) -> float | FloatArray:
+        """What an output's error is divided by in the weighted residual: its floor (per sample with timing)."""
+        return self.sample_sigma.get(output, self.sigma_deg[output])
+
     def set_output_terms(self, terms: dict[str, FloatArray]) -> None:
         """Terms whose best combination is added to each output's model at every evaluation (variable projection).
 
@@ -246,7 +277,9 @@ class Problem:
         for o, cols in terms.items():
             if cols.size == 0:
                 continue
-            u, sv, _ = np.linalg.svd(cols / self.sigma_deg[o], full_matrices=False)
+            scale = self.scale(o)
+            u, sv, _ = np.linalg.svd(cols / (scale[:, None] if isinstance(scale, np.ndarray) else scale),
+                                     full_matrices=False)
             self.projections[o] = u[:, sv > 1e-10 * float(sv[0])]
 
     @property
@@ -472,7 +505,7 @@ class Problem:
         """
         parts = []
         for o in self.outputs:
-            part = (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.sigma_deg[o]
+            part = (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.scale(o)
             if o in self.weights:
                 part = part * self.weights[o]
             basis = self.projections.get(o)

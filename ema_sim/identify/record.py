@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation.noise import NoiseFloor
 from ema_sim.analysis.pipeline import command_hold, measure_outputs
-from ema_sim.analysis.records import series
+from ema_sim.analysis.records import stamps as stamp_jitter
 from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.section2.base import Options
 from ema_sim.config import ChannelConfig
@@ -83,6 +83,8 @@ class Record:
     """Rms of the logged stamps about the least-squares line through them (0 for uniform stamps)."""
     sensor_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Output → (lower, upper) saturation its log shows (:func:`sensor_range`); the model's output is clipped there."""
+    stamps: stamp_jitter.Stamps | None = None
+    """The stamps' scatter about a uniform grid (:mod:`ema_sim.analysis.records.stamps`)."""
     generic: bool = False
     """No X-43A channel given or named by the record: a generic actuator, its travel measured from the record."""
 
@@ -323,14 +325,12 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         notes.append(f"command {hold.statement}")
     if hold.leads:
         warnings.append(hold.leads)
-    k = np.arange(data.time_s.size, dtype=float)
-    trend = np.polyval(np.polyfit(k, data.time_s, 1), k)
-    scatter = 0.0 if series.is_uniform(data.time_s) else float(np.std(data.time_s - trend))
-    if scatter:
-        dt = np.diff(data.time_s)
-        notes.append(f"time stamps jitter (intervals {1e3 * dt.min():.3g}-{1e3 * dt.max():.3g} ms, "
-                     f"{1e3 * scatter:.2g} ms rms about a uniform grid): fitted on the record's own stamps, "
-                     "nothing straightened or resampled")
+    stamps = stamp_jitter.measure(data.time_s)
+    scatter = stamps.scatter_s
+    if stamps.jitters:
+        rate = stamp_jitter.output_rate(stamps, data.column(data.outputs[0]))
+        notes.append(f"{stamps.statement(rate, data.unit)}: fitted on the record's own stamps, nothing straightened "
+                     "or resampled")
     notes.append(f"travel: {travel.statement}")
     if travel.outside:
         warnings.append(f"data outside the declared travel: {travel.statement}")
@@ -341,5 +341,5 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         notes.append(f"{name} reads exactly {' and '.join(sides)} again and again, with no noise on them: a sensor's "
                      "saturation or a clipped log, not a mechanical stop (which shows the noise); the model's "
                      f"{name} is clipped there as the sensor clips it")
-    return Record(data, channel, noise, hold, travel, notes, warnings, scatter, saturation,
+    return Record(data, channel, noise, hold, travel, notes, warnings, scatter, saturation, stamps,
                   generic=channel_note is not None)

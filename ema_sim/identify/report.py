@@ -219,6 +219,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
     diagnosis = guarded("diagnosis", failures, lambda: diagnose(result))
     warnings += diagnosis.warnings if diagnosis is not None else []
     warnings += result.warnings + result.ambiguities + _sub_sample_delays(result)
+    warnings += result.changes.warnings if result.changes is not None else []
     slope = guarded("slew", failures, lambda: _slew(result))
     if slope is not None and slope[1]:
         warnings.append(slope[1])
@@ -296,7 +297,11 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         "ambiguities": result.ambiguities,
         "warnings": warnings,
         "diagnosis": diagnosis.as_dict() if diagnosis is not None else None,
-        "notes": (record.notes if record else []) + result.notes + ([p.unfitted_start] if p.unfitted_start else []),
+        "notes": (record.notes if record else []) + result.notes + ([p.unfitted_start] if p.unfitted_start else [])
+        + ([result.timing] if result.timing else []),
+        "changes": result.changes.as_dict() if result.changes is not None else None,
+        "stamps": ({**record.stamps.as_dict(), "weighed_timing_ms": 1e3 * p.timing_s, "statement": result.timing}
+                   if record is not None and record.stamps is not None else None),
         "command": {**(record.hold.as_dict() if record else {}),
                     "fitted_as": "sampled" if p.command_sampled else "held"},
         "travel_deg": ({"declared": list(record.travel.declared), "used": list(record.travel.limits),
@@ -446,6 +451,10 @@ def summary(report: dict[str, Any]) -> str:
     lines.append(f"final model: {f['model']}")
     lines.append(f"final: {_fmt_params(f['params'])}; rms {_fmt_rms(f['rms_deg'], unit)} "
                  f"({', '.join(f'{v:.2f}× noise' for v in f['rms_over_noise'].values())})")
+    changes = report.get("changes") or {}
+    if changes.get("changed"):
+        lines.append("the record changed: the final values are the whole record's equivalents; per window:")
+        lines += [f"  {s}" for s in changes.get("statements", [])]
     lines += [f"warning: {w}" for w in report.get("warnings", [])]
     return "\n".join(lines)
 
@@ -602,6 +611,7 @@ def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path
                "| --- | --- | --- | --- |"]
         md += [f"| {r['effect']} | {r['where']} | {_fmt_params(r['params'])} | {r['reason']} |"
                for r in report["removed"]]
+    md += _changes_md(report.get("changes"))
     md += ["", "## What the final model leaves (residual diagnosis)", ""]
     md += [f"- {line}" for line in report["diagnosis"]["text"]]
     if report["rejected"]:
@@ -611,6 +621,25 @@ def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path
     md += ["", "![residual](residual.png)", "", "![fit](fit.png)", ""]
     (out / "report.md").write_text("\n".join(md), encoding="utf-8")
     return out / "report.md"
+
+
+def _changes_md(changes: dict[str, Any] | None) -> list[str]:
+    """The section on the parameters fitted per window of the record (empty when they were not)."""
+    if not changes or not changes.get("parameters"):
+        return []
+    md = ["", "## Over the record: the parameters per window", "", f"Windows: {changes['how']}.", ""]
+    windows = changes["windows_s"]
+    head = " | ".join(f"{a:.4g}-{b:.4g} s" for a, b in windows)
+    md += [f"| parameter | trend | {head} |", "| --- | --- | " + " | ".join("---" for _ in windows) + " |"]
+    for t in changes["parameters"]:
+        cells = " | ".join(f"{_num(v, '.4g')} ± {_num(s, '.2g')}" for v, s in zip(t["values"], t["sigma"], strict=True))
+        md.append(f"| {t['parameter']} | {t['trend']} | {cells} |")
+    if changes.get("bandwidth_hz"):
+        md.append("| bandwidth, Hz | | " + " | ".join(_num(b, ".3g") for b in changes["bandwidth_hz"]) + " |")
+    md.append("")
+    md += [f"- {s}" for s in changes.get("statements", [])]
+    md += [f"- {s}" for s in changes.get("proxies_removed", [])]
+    return md
 
 
 __all__ = ["FREE", "strict", "summary", "to_json", "write_json", "write_report", "write_residuals"]

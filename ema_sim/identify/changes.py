@@ -1,0 +1,515 @@
+"""A record that changed, said so: the final model's parameters fitted on parts of the record, and their trend.
+
+One model fitted to a whole record is an average. When the actuator changed while it was recorded (a
+winding that heats and loses gain, a fieldbus whose delay wanders), that average fits no part of the
+record well, the error left is far above the floor, and the search takes in whatever effect absorbs
+some of the change (a rate limit that slows the fast moves the early, faster part makes). So, once the
+model is chosen:
+
+1. **Windows of the record's own excitation.** A command that repeats (the autocorrelation of the
+   command has a peak of at least :data:`PERIODIC` at a lag of :data:`MIN_WINDOW_S` or more) is cut at
+   its period, each window one or more whole periods (at most :data:`MAX_WINDOWS`), so that every window
+   carries the same excitation and differs only in time; any other record in :data:`PLAIN_WINDOWS` equal
+   parts. Each cut is moved to the end of the longest rest of the command near it, and each window's fit
+   runs its model from up to :data:`LEAD_S` before the cut, on the samples before it, not fitted.
+2. **The final model's parameters refitted on each window** with identification's own fit
+   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with its coloured-residual
+   uncertainty. A parameter **changes** when its windows disagree beyond their uncertainty (χ² of the
+   values about their weighted mean with p below :data:`CHANGE_P`) by at least :data:`MIN_CHANGE` of its
+   value (a model's mismatch with a plant moves a fitted value by a few per cent between windows that
+   excite it alike). Its **trend** is the weighted straight line through the windows' values: it *falls*
+   or *grows* when the line's slope is :data:`TREND_SIGMA` of its uncertainty and the line explains at
+   least :data:`LINEAR_SHARE` of the values' spread about their mean; otherwise it *wanders* (the range is
+   given). The report gives the value per window, not one equivalent for the whole.
+3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
+   record allows: the windows refitted without it. When the windows, each with its own parameters, do
+   not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
+   effect only helped the whole-record fit because of the change: it is taken out, and said so.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2 as chi2_dist
+
+from ema_sim.identify.criteria import MAX_DELTA_BIC
+from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
+from ema_sim.identify.fit import TINY, Fit
+from ema_sim.identify.outcome import Identification, Removal, Step
+from ema_sim.identify.problem import SETTLE_S, Problem
+from ema_sim.identify.stepwise import fit_model, no_worse, offs
+from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.io.csv import MeasuredData
+from ema_sim.models.second_order import SecondOrderParams
+
+FloatArray = NDArray[np.float64]
+MIN_WINDOW_S = 5.0
+"""The shortest window fitted (and the shortest period of a repeating command taken as one)."""
+MAX_WINDOWS = 8
+PLAIN_WINDOWS = 4
+"""Windows of a record whose command does not repeat (halves for one shorter than four of :data:`MIN_WINDOW_S`)."""
+PERIODIC = 0.9
+"""Normalised autocorrelation of the command at its period for it to count as repeating."""
+LEAD_S = 0.5
+"""A window's model runs from this much before its first fitted sample (within the rest before it)."""
+SNAP_SHARE = 0.25
+"""A cut moves to the end of the longest rest of the command within this share of a window around it."""
+CHANGE_P = 1e-3
+MIN_CHANGE = 0.05
+TREND_SIGMA = 3.0
+LINEAR_SHARE = 0.8
+LABELS = {"wn_rad_s": "ωn (wn_rad_s)", "zeta": "ζ (zeta)", "delay_s": "the command delay (delay_s)",
+          "feedback_delay_s": "the feedback delay (feedback_delay_s)"}
+"""How a parameter is named in the statements (the vocabulary's report name otherwise)."""
+DISPLAY = {"delay_s": (1e3, "ms"), "feedback_delay_s": (1e3, "ms"), "wn_rad_s": (1.0, "rad/s")}
+"""Parameters shown in another unit than the model's: factor and unit."""
+
+
+@dataclass(frozen=True)
+class Window:
+    """One part of the record: its fitted samples, and where its model starts running."""
+
+    lead: int
+    """Index of the first sample the window's model runs from (not fitted before :attr:`start`)."""
+    start: int
+    end: int
+    """One past the last sample."""
+    start_s: float
+    end_s: float
+
+
+@dataclass
+class WindowFit:
+    """The fits of one model on every window."""
+
+    free: tuple[str, ...]
+    fits: list[Fit]
+    n: int
+    """Residual entries over all windows."""
+
+    @property
+    def rss(self) -> float:
+        """Summed weighted residual over the windows."""
+        return float(sum(f.rss for f in self.fits))
+
+    @property
+    def parameters(self) -> int:
+        """Parameters fitted over all windows."""
+        return len(self.free) * len(self.fits)
+
+
+@dataclass(frozen=True)
+class Track:
+    """One parameter across the windows, and what its values say."""
+
+    name: str
+    values: tuple[float, ...]
+    sigma: tuple[float, ...]
+    times_s: tuple[float, ...]
+    """Each window's middle, s from the record's start."""
+    chi2: float
+    dof: int
+    p_value: float
+    slope_per_s: float
+    slope_sigma: float
+    kind: str
+    """``steady``, ``falls``, ``grows``, ``wanders`` or ``not determined``."""
+
+    @property
+    def changed(self) -> bool:
+        """The parameter changes over the record beyond its uncertainty."""
+        return self.kind in ("falls", "grows", "wanders")
+
+    def statement(self, bandwidths: tuple[float, ...] = ()) -> str:
+        """The track in words: per-window values with ±1σ, the fitted slope or the range."""
+        k, unit = DISPLAY.get(self.name, (1.0, ""))
+        u = f" {unit}" if unit else ""
+        label = LABELS.get(self.name, KEYS[self.name].name if self.name in KEYS else self.name)
+        per = ", ".join(f"{k * v:.4g} ± {k * s:.2g}" for v, s in zip(self.values, self.sigma, strict=True))
+        if not self.changed:
+            return (f"{label} holds over the record: {per}{u} on {len(self.values)} windows "
+                    f"(χ² {self.chi2:.3g} on {self.dof} degrees of freedom)")
+        span = self.times_s[-1] - self.times_s[0] if len(self.times_s) > 1 else 0.0
+        mean = float(np.mean(self.values))
+        if self.kind == "wanders":
+            how = (f"wanders between {k * min(self.values):.4g} and {k * max(self.values):.4g}{u} (not a straight "
+                   f"trend: the line through the windows leaves most of their spread)")
+        else:
+            total = self.slope_per_s * span
+            how = (f"{self.kind} from {k * self.values[0]:.4g}{u} to {k * self.values[-1]:.4g}{u} (fitted slope "
+                   f"{k * self.slope_per_s:+.3g} ± {k * self.slope_sigma:.2g}{u} per s, "
+                   f"{100 * total / mean if mean else 0.0:+.0f} % over {span:.3g} s)")
+        text = (f"{label} changes over the record beyond its uncertainty: it {how}; per window of the record "
+                f"{per}{u} (χ² {self.chi2:.3g} on {self.dof} degrees of freedom, p {self.p_value:.2g})")
+        if bandwidths and self.name in ("wn_rad_s", "zeta"):
+            text += (f"; the servo's bandwidth per window {', '.join(f'{b:.3g}' for b in bandwidths)} Hz "
+                     f"({'falls' if bandwidths[-1] < bandwidths[0] else 'grows'} from {bandwidths[0]:.3g} to "
+                     f"{bandwidths[-1]:.3g} Hz)")
+        return text
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        return {"parameter": self.name, "trend": self.kind, "values": list(self.values), "sigma": list(self.sigma),
+                "window_mid_s": list(self.times_s), "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
+                "slope_per_s": self.slope_per_s, "slope_sigma_per_s": self.slope_sigma}
+
+
+@dataclass
+class Changes:
+    """What the windowed refits found (module docstring)."""
+
+    windows: list[Window] = field(default_factory=list)
+    how: str = ""
+    """How the windows were cut, in words."""
+    tracks: list[Track] = field(default_factory=list)
+    bandwidth_hz: tuple[float, ...] = ()
+    """The final model's linear bandwidth on each window."""
+    rms_over_noise: dict[str, float] = field(default_factory=dict)
+    """Each output's rms over its floor with the parameters fitted per window (the whole record's model for
+    comparison is the final one)."""
+    statements: list[str] = field(default_factory=list)
+    proxies: list[str] = field(default_factory=list)
+    """Effects taken out because they only stood in for the change, one line each."""
+    skipped: str = ""
+
+    @property
+    def changed(self) -> bool:
+        """Some parameter changes over the record."""
+        return any(t.changed for t in self.tracks)
+
+    @property
+    def warnings(self) -> list[str]:
+        """The lines a reader must not miss: the trends and the proxies taken out."""
+        return [t.statement(self.bandwidth_hz) for t in self.tracks if t.changed] + self.proxies
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        return {"changed": self.changed, "how": self.how, "skipped": self.skipped or None,
+                "windows_s": [[w.start_s, w.end_s] for w in self.windows],
+                "parameters": [t.as_dict() for t in self.tracks],
+                "bandwidth_hz": list(self.bandwidth_hz), "rms_over_noise_windowed": self.rms_over_noise,
+                "proxies_removed": self.proxies, "statements": self.statements}
+
+
+# ------------------------------------------------------------------------------------------ windows
+def period_s(time_s: FloatArray, command: FloatArray) -> float | None:
+    """The command's period when it repeats (module docstring), else None.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times, s.
+    command : numpy.ndarray
+        The command.
+
+    Returns
+    -------
+    float or None
+        The period, s.
+    """
+    u = command - float(np.mean(command))
+    n = u.size
+    dt = float(time_s[-1] - time_s[0]) / max(n - 1, 1)
+    if n < 8 or not np.any(u) or dt <= 0.0:
+        return None
+    spec = np.fft.rfft(u, 2 * n)
+    acf = np.fft.irfft(spec * np.conj(spec))[:n]
+    norm = acf / np.maximum(acf[0] * (n - np.arange(n)) / n, TINY)  # unbiased: each lag over its overlap
+    lo, hi = math.ceil(MIN_WINDOW_S / dt), n // 2
+    if hi <= lo:
+        return None
+    above = np.flatnonzero(norm[lo:hi] >= PERIODIC)
+    if above.size == 0:
+        return None
+    # the first run of lags above the threshold holds the period (its multiples come later, as high)
+    run = above[: int(np.argmax(np.diff(above) > 1)) + 1] if np.any(np.diff(above) > 1) else above
+    k = lo + int(run[np.argmax(norm[lo + run])])
+    return float(k * dt)
+
+
+def _rest_end(command: FloatArray, near: int, reach: int) -> tuple[int, int]:
+    """The end of the longest rest of the command within ``reach`` samples of ``near``, and the rest's length."""
+    lo, hi = max(1, near - reach), min(command.size - 1, near + reach)
+    if hi <= lo:
+        return near, 0
+    moving = np.flatnonzero(np.diff(command[lo - 1:hi + 1]) != 0.0) + lo  # a sample where a new level starts
+    edges = np.concatenate([[lo], moving, [hi]])
+    lengths = np.diff(edges)
+    k = int(np.argmax(lengths))
+    return int(edges[k + 1]), int(lengths[k])
+
+
+def windows(problem: Problem) -> tuple[list[Window], str]:
+    """The windows the final model is refitted on, and how they were cut (module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+
+    Returns
+    -------
+    tuple
+        The windows (empty: the record is too short for two) and a sentence.
+    """
+    t = problem.time_s
+    u = problem.data.command_deg
+    first = int(np.argmax(problem.mask))
+    span = float(t[-1] - t[first])
+    dt = span / max(t.size - first - 1, 1)
+    period = period_s(t[first:], u[first:])
+    if period is not None:
+        periods = int(span // period)
+        per = max(1, math.ceil(periods / MAX_WINDOWS))
+        length = per * period
+        # every cut at one phase of the period: the end of the command's longest rest in the first period
+        rest_end, _ = _rest_end(u, first + round(0.5 * period / dt), round(0.5 * period / dt))
+        starts = [float(t[rest_end]) + k * length for k in range(periods)]
+        starts = [s for s in starts if s + length <= t[-1] + 0.5 * dt]
+        how = (f"the command repeats every {period:.3g} s: windows of {per} period{'s' if per > 1 else ''} "
+               f"({length:.3g} s) each, the same excitation in each")
+        cuts = [int(np.searchsorted(t, s - 0.5 * dt)) for s in starts]
+        if cuts:
+            cuts.append(min(int(np.searchsorted(t, starts[-1] + length - 0.5 * dt)), t.size))
+    else:
+        count = PLAIN_WINDOWS if span >= PLAIN_WINDOWS * MIN_WINDOW_S else 2
+        length = span / count
+        how = f"the command does not repeat: {count} parts of about {length:.3g} s, cut where it rests"
+        reach = round(SNAP_SHARE * length / dt)
+        cuts = [first] + [_rest_end(u, int(np.searchsorted(t, t[first] + k * length)), reach)[0]
+                          for k in range(1, count)] + [t.size]
+    if period is not None and len(cuts) < 3:  # a period too long for two windows: equal parts instead
+        count = PLAIN_WINDOWS if span >= PLAIN_WINDOWS * MIN_WINDOW_S else 2
+        length = span / count
+        how = f"the command repeats every {period:.3g} s, longer than half the record: {count} parts of {length:.3g} s"
+        reach = round(SNAP_SHARE * length / dt)
+        cuts = [first] + [_rest_end(u, int(np.searchsorted(t, t[first] + k * length)), reach)[0]
+                          for k in range(1, count)] + [t.size]
+    if len(cuts) < 3 or length < MIN_WINDOW_S:
+        return [], f"the record ({span:.3g} s fitted) is too short for two windows of {MIN_WINDOW_S:g} s"
+    lead = round(LEAD_S / dt)
+    out = []
+    for a, b in itertools.pairwise(cuts):
+        if b - a < 10:
+            continue
+        start = a if a <= first else max(0, a - lead)
+        out.append(Window(0 if a <= first else start, a, b, float(t[a]), float(t[b - 1])))
+    return (out, f"{how}: {len(out)} windows") if len(out) >= 2 else ([], "the record's windows are too short")
+
+
+def _sub(data: MeasuredData, a: int, b: int) -> MeasuredData:
+    """Samples ``a`` to ``b`` of a record (every per-sample column)."""
+    changes: dict[str, Any] = {}
+    for f in fields(data):
+        value = getattr(data, f.name)
+        if isinstance(value, np.ndarray) and value.shape[:1] == data.time_s.shape:
+            changes[f.name] = value[a:b]
+    changes["extra"] = {k: v[a:b] for k, v in data.extra.items()}
+    return replace(data, **changes)
+
+
+def window_problem(problem: Problem, w: Window) -> Problem:
+    """The record's window as a problem of its own: same noise floors, command timing, sensor range and stamps.
+
+    Parameters
+    ----------
+    problem : Problem
+        The whole record.
+    w : Window
+        The window.
+
+    Returns
+    -------
+    Problem
+        Fitted on the window's samples, its model run from :attr:`Window.lead`.
+    """
+    t = problem.time_s
+    settle = float(t[w.start] - t[w.lead]) if w.lead < w.start else problem.settle_s
+    sub = Problem(_sub(problem.data, w.lead, w.end), problem.channel, step_s=problem.step_s,
+                  settle_s=settle if settle > 0.0 else SETTLE_S, noise=problem.noise,
+                  command_sampled=problem.command_sampled, output_range=dict(problem.output_range))
+    if problem.timing_s > 0.0:
+        sub.set_timing(problem.timing_s, {o: r[w.lead:w.end] for o, r in problem.timing_rates.items()})
+    return sub
+
+
+def fit_windows(subs: list[Problem], params: SecondOrderParams, free: tuple[str, ...], flip: bool) -> WindowFit:
+    """``free`` of ``params`` fitted on every window (never worse than at ``params``).
+
+    Parameters
+    ----------
+    subs : list of Problem
+        The windows (:func:`window_problem`).
+    params : SecondOrderParams
+        The start (everything not fitted stays as here).
+    free : tuple of str
+        The parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed.
+
+    Returns
+    -------
+    WindowFit
+        One fit per window.
+    """
+    fits = [no_worse(sub, params, free, fit_model(sub, params, free, flip=flip)) for sub in subs]
+    return WindowFit(free, fits, sum(sub.n_fit for sub in subs))
+
+
+def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
+    """One parameter across the windows, and its trend (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        The model parameter.
+    wf : WindowFit
+        The windows' fits.
+    ws : list of Window
+        The windows.
+
+    Returns
+    -------
+    Track
+        Its values, uncertainty and trend.
+    """
+    values = np.array([float(getattr(f.params, name)) for f in wf.fits])
+    sigma = np.array([float(f.sigma.get(name, math.inf)) for f in wf.fits])
+    times = np.array([0.5 * (w.start_s + w.end_s) for w in ws])
+    free = FREE.get(name)
+    bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)
+                                              or v >= free.high - 1e-6 * (free.high - free.low)) for v in values])
+    ok = np.isfinite(sigma) & (sigma > 0.0) & ~bounded
+    base = (name, tuple(values.tolist()), tuple(sigma.tolist()), tuple(times.tolist()))
+    if ok.sum() < 2:
+        return Track(*base, math.nan, 0, math.nan, math.nan, math.nan, "not determined")
+    v, s, x = values[ok], sigma[ok], times[ok]
+    w = 1.0 / s**2
+    mean = float(np.sum(w * v) / np.sum(w))
+    chi2 = float(np.sum(w * (v - mean) ** 2))
+    dof = int(v.size - 1)
+    p = float(chi2_dist.sf(chi2, dof))
+    xm = float(np.sum(w * x) / np.sum(w))
+    sxx = float(np.sum(w * (x - xm) ** 2))
+    slope = float(np.sum(w * (x - xm) * (v - mean)) / sxx) if sxx > 0 else 0.0
+    line = mean + slope * (x - xm)
+    chi2_line = float(np.sum(w * (v - line) ** 2))
+    inflate = max(1.0, chi2_line / max(v.size - 2, 1))
+    slope_sigma = math.sqrt(inflate / sxx) if sxx > 0 else math.inf
+    relative = float(np.ptp(v)) / max(abs(mean), TINY)
+    if p >= CHANGE_P or relative < MIN_CHANGE:
+        kind = "steady"
+    elif abs(slope) >= TREND_SIGMA * slope_sigma and (chi2 - chi2_line) >= LINEAR_SHARE * chi2:
+        kind = "falls" if slope < 0 else "grows"
+    else:
+        kind = "wanders"
+    return Track(*base, chi2, dof, p, slope, slope_sigma, kind)
+
+
+# ------------------------------------------------------------------------------------------ the stage
+def _pays(without: WindowFit, with_: WindowFit) -> float:
+    """ΔBIC of ``with_`` against ``without`` over all windows (each window its own parameters)."""
+    n = with_.n
+    q = with_.parameters - without.parameters
+    return n * math.log(max(with_.rss, TINY) / max(without.rss, TINY)) + q * math.log(max(n, 2))
+
+
+def analyse(problem: Problem, result: Identification, declared: SecondOrderParams,
+            say: Callable[[str], None] = lambda _m: None) -> Changes:
+    """Refit the final model on windows of the record, report what changes, take out what stood in for it.
+
+    ``result.final``, ``steps`` and ``removed`` change when an effect is taken out (module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    result : Identification
+        The identification so far (its final model is the vocabulary's: the declared model and its effects).
+    declared : SecondOrderParams
+        The declared model's starting values (an effect's off value where it has none).
+    say : callable
+        Progress lines.
+
+    Returns
+    -------
+    Changes
+        The windows, each parameter's track, the proxies taken out.
+    """
+    out = Changes()
+    final = result.final
+    if result.final_model or result.physical is not None or not final.free:
+        out.skipped = "the final model has no vocabulary parameters to refit on parts of the record"
+        return out
+    ws, how = windows(problem)
+    out.how = how
+    if not ws:
+        out.skipped = how
+        return out
+    out.windows = ws
+    subs = [window_problem(problem, w) for w in ws]
+    cur = fit_windows(subs, final.params, final.free, final.flip)
+    out.tracks = [track(f, cur, ws) for f in final.free]
+    say(f"changes: {how}; " + ", ".join(f"{t.name} {t.kind}" for t in out.tracks))
+    if out.changed:
+        cur = _proxies(problem, result, declared, subs, cur, out, say)
+        out.tracks = [track(f, cur, ws) for f in result.final.free]
+    out.bandwidth_hz = tuple(bandwidth_hz(f.params) for f in cur.fits)
+    out.rms_over_noise = {
+        o: float(np.sqrt(sum(float(np.sum(sub.errors_deg(f.sim)[o] ** 2)) for sub, f in zip(subs, cur.fits,
+                                                                                              strict=True))
+                         / sum(int(sub.mask.sum()) for sub in subs))) / problem.sigma_deg[o]
+        for o in problem.outputs}
+    changed = [t for t in out.tracks if t.changed]
+    if changed:
+        out.statements = [t.statement(out.bandwidth_hz) for t in changed]
+        out.statements.append(
+            f"the record changed while it was logged: one set of parameters is an equivalent of the whole that fits "
+            f"no part of it; with them fitted per window ({how}) the error is "
+            f"{', '.join(f'{o} {v:.3g}×' for o, v in out.rms_over_noise.items())} the noise floor")
+    else:
+        out.statements = [f"the parameters hold over the record ({how}): "
+                          + "; ".join(t.statement() for t in out.tracks if t.kind != "not determined")]
+    return out
+
+
+def _proxies(problem: Problem, result: Identification, declared: SecondOrderParams, subs: list[Problem],
+             cur: WindowFit, out: Changes, say: Callable[[str], None]) -> WindowFit:
+    """Take out each added effect the windows, each with its own parameters, do not need (module docstring)."""
+    changed = ", ".join(t.name for t in out.tracks if t.changed)
+    for step in reversed(list(result.steps)):
+        effect = BY_KEY.get(f"{step.effect}/{step.where}")
+        final = result.final
+        if effect is None or not effect.fields or not all(f in final.free for f in effect.owned):
+            continue
+        off = offs(effect.owned, declared)
+        free = tuple(f for f in final.free if f not in off)
+        if not free:
+            continue
+        without = fit_windows(subs, final.params.replace(**off), free, final.flip)
+        d = _pays(without, cur)
+        say(f"  changes: {effect.name} on windows with their own parameters: ΔBIC {d:+.1f}")
+        if d <= MAX_DELTA_BIC:
+            continue
+        refit = no_worse(problem, final.params.replace(**off), free,
+                         fit_model(problem, final.params.replace(**off), free, flip=final.flip))
+        why = (f"only stood in for a change over the record ({changed} changes between windows): with the "
+               f"parameters fitted per window the record does not need it (ΔBIC {d:+.1f} over the windows)")
+        out.proxies.append(f"{_name(effect, step)} taken out: it {why}")
+        result.steps.remove(step)
+        result.removed.append(Removal(step.effect, step.where, dict(step.params), why))
+        result.final = refit
+        cur = without
+    return cur
+
+
+def _name(effect: Effect, step: Step) -> str:
+    values = ", ".join(f"{k} {v:.4g}" for k, v in step.params.items())
+    return f"{effect.name} ({values})" if values else effect.name

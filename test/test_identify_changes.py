@@ -1,0 +1,156 @@
+"""A record that changed is said to have changed; the stamps' jitter is measured and absorbed by no effect.
+
+Records come from ``changing_records`` (a second-order servo of its own, integrated on a 0.1 ms grid and
+logged at 100 Hz in counts with noise): a bandwidth that falls 25 % over the record, a transport delay that
+wanders between 2 and 12 ms, a steady servo, and a steady servo whose integer-ms stamps jitter ±2 ms.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from changing_records import BLOCK_S, record
+
+from ema_sim.analysis.pipeline import resolve_channel
+from ema_sim.analysis.records import stamps
+from ema_sim.identify import changes
+from ema_sim.identify.declared import declared
+from ema_sim.identify.identification import identify
+from ema_sim.identify.outcome import Identification, Step
+from ema_sim.identify.problem import Problem
+from ema_sim.identify.record import prepare
+from ema_sim.identify.report import summary, to_json, write_report
+from ema_sim.identify.stepwise import fit_model, start_point
+
+DURATION_S = 24.0
+
+
+def _fitted(data, free_extra=(), start=None):
+    """The record prepared, its problem, and the declared second order fitted (with ``free_extra`` free too)."""
+    ch, note = resolve_channel(data, None)
+    rec = prepare(data, ch, channel_note=note)
+    problem = Problem(rec.data, rec.channel, noise=rec.noise, command_sampled=rec.command_sampled,
+                      output_range=rec.sensor_range)
+    base, free = declared("second_order", rec.channel, {}, 0.0)
+    params = start_point(problem, base, free, False).replace(**(start or {}))
+    fit = fit_model(problem, params, (*free, *free_extra), flip=False)
+    return problem, Identification(problem, "second_order", fit, fit, record=rec), base
+
+
+def _falling():
+    return record(DURATION_S, seed=3, wn=lambda t: 40.0 * (1.0 - 0.25 * t / DURATION_S))
+
+
+def _track(found, name):
+    return next(t for t in found.tracks if t.name == name)
+
+
+def test_stamps_jitter_measured_with_the_floor_it_sets():
+    rng = np.random.default_rng(5)
+    true = np.arange(3000) / 100.0
+    jittery = np.round((true + rng.uniform(-0.002, 0.002, true.size)) * 1e3) / 1e3
+    st = stamps.measure(jittery)
+    assert st.jitters
+    assert st.step_s == pytest.approx(1e-3)
+    assert st.interval_s == pytest.approx(0.01, rel=1e-4)
+    assert st.scatter_s == pytest.approx(np.sqrt(0.002**2 / 3 + 1e-6 / 12), rel=0.1)
+    assert 0.0019 <= st.peak_s <= 0.0026
+    rate = np.full(true.size, 100.0)
+    assert st.floor(rate)[0] == pytest.approx(100.0 * st.scatter_s)
+    assert "rate × jitter" in st.statement(rate)
+    assert not stamps.measure(np.round(true * 1e3) / 1e3).jitters
+
+
+def test_timing_error_from_a_residual_that_only_the_stamps_explain():
+    rng = np.random.default_rng(6)
+    rate = 80.0 * np.sin(np.linspace(0.0, 60.0, 20000))
+    e = rng.normal(0.0, 0.002, rate.size) + rate * rng.normal(0.0, 0.0012, rate.size)
+    assert stamps.timing_error(e, 0.002, rate) == pytest.approx(0.0012, rel=0.1)
+    assert stamps.timing_error(rng.normal(0.0, 0.002, rate.size), 0.002, rate) < 2e-4
+
+
+def test_windows_are_the_periods_of_a_repeating_command():
+    problem, _, _ = _fitted(record(DURATION_S, seed=1))
+    ws, how = changes.windows(problem)
+    assert changes.period_s(problem.time_s, problem.data.command_deg) == pytest.approx(BLOCK_S, abs=0.02)
+    assert len(ws) >= 3
+    assert all(w.end_s - w.start_s == pytest.approx(BLOCK_S, abs=0.05) for w in ws)
+    assert "repeats every" in how
+
+
+def test_a_falling_bandwidth_is_reported_with_its_trend():
+    problem, result, base = _fitted(_falling())
+    found = changes.analyse(problem, result, base)
+    wn = _track(found, "wn_rad_s")
+    assert wn.kind == "falls"
+    assert wn.values[-1] < 0.9 * wn.values[0]  # windows 12 s apart of a 24 s fall by 25 %: 0.87
+    assert wn.slope_per_s < -3.0 * wn.slope_sigma
+    assert found.changed
+    assert found.bandwidth_hz[-1] < found.bandwidth_hz[0]
+    text = " ".join(found.statements)
+    assert "falls" in text
+    assert "bandwidth" in text
+
+
+def test_a_steady_servo_holds():
+    problem, result, base = _fitted(record(DURATION_S, seed=2))
+    found = changes.analyse(problem, result, base)
+    assert found.tracks
+    assert not found.changed
+    assert not found.warnings
+
+
+def test_a_wandering_delay_is_reported_as_changing():
+    data = record(30.0, seed=4, delay_s=lambda t: 0.007 + 0.005 * np.sin(2.0 * np.pi * t / 30.0 + 0.5))
+    problem, result, base = _fitted(data, ("delay_s",), {"delay_s": 0.006})
+    found = changes.analyse(problem, result, base)
+    delay = _track(found, "delay_s")
+    assert delay.changed
+    assert max(delay.values) - min(delay.values) > 0.004
+    assert any("delay" in s and "changes over the record" in s for s in found.statements)
+
+
+def test_an_added_effect_the_windows_do_not_need_is_taken_out():
+    # the falling servo fitted with a command delay as if the search had added it: each window, fitted with its own
+    # parameters, does not need it, so it is taken out and said to have stood in for the change
+    problem, result, base = _fitted(_falling(), ("delay_s",), {"delay_s": 0.004})
+    result.steps.append(Step("time_delay", "command", {"delay_s": float(result.final.params.delay_s)}, {}, {}, {},
+                             "a stand-in"))
+    found = changes.analyse(problem, result, base)
+    assert len(found.proxies) == 1
+    assert "stood in for a change over the record" in found.proxies[0]
+    assert not result.steps
+    assert [r.effect for r in result.removed] == ["time_delay"]
+    assert "delay_s" not in result.final.free
+    assert _track(found, "wn_rad_s").kind == "falls"
+
+
+def test_jitter_only_adds_nothing_and_names_the_jitter():
+    data = record(DURATION_S, seed=7, stamp_error_s=0.002)
+    ch, note = resolve_channel(data, None)
+    rec = prepare(data, ch, channel_note=note)
+    result = identify(rec.data, rec.channel, record=rec)
+    assert not result.steps
+    assert not result.discovered
+    assert result.problem.timing_s == pytest.approx(rec.stamps.scatter_s)
+    report = to_json(result, "jitter")
+    assert report["stamps"]["jitters"]
+    assert any("rate × jitter" in n for n in report["notes"])
+
+
+@pytest.mark.slow
+def test_identify_reports_the_trend_in_console_json_and_report(tmp_path):
+    data = _falling()
+    ch, note = resolve_channel(data, None)
+    rec = prepare(data, ch, channel_note=note)
+    result = identify(rec.data, rec.channel, record=rec)
+    report = json.loads(json.dumps(to_json(result, "drift"), allow_nan=False))
+    assert report["changes"]["changed"]
+    wn = next(p for p in report["changes"]["parameters"] if p["parameter"] == "wn_rad_s")
+    assert wn["trend"] == "falls"
+    assert "falls" in summary(report)
+    md = write_report(result, report, tmp_path).read_text(encoding="utf-8")
+    assert "## Over the record: the parameters per window" in md
+    assert any(s["stage"] == "changes" for s in report["stages"])
