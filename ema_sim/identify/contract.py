@@ -204,6 +204,8 @@ class IdentifyReport(TypedDict):
     failures: list[Failure]
     discovered: dict[str, object] | None
     discovered_terms: list[DiscoveredTerm]
+    changes: dict[str, object] | None
+    stamps: dict[str, object] | None
     artefacts: list[dict[str, object]]
     ambiguities: list[str]
     warnings: list[str]

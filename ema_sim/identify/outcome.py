@@ -7,7 +7,7 @@ report (:mod:`ema_sim.identify.report`) reads; they hold no logic beyond naming 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -18,13 +18,30 @@ from ema_sim.identify.record import Record
 from ema_sim.identify.stages import Failure, Outcome
 
 if TYPE_CHECKING:
-    from ema_sim.identify.changes import Changes
     from ema_sim.identify.discovery import Discovery
 
 REFERENCE = "position = command"
 """The trivial model every report compares with (and falls back on)."""
 AS_DECLARED = " (as declared)"
 """How a model name reads when the declared model, run as it is, is the final model (no parameters fitted)."""
+
+class Changes(Protocol):
+    """What the windowed refits found (:class:`ema_sim.identify.changes.Changes`), as the outcome holds it.
+
+    A protocol, so this module, which the refits' own module imports, needs nothing from it.
+    """
+
+    @property
+    def changed(self) -> bool:
+        """Whether a parameter changes over the record beyond its uncertainty."""
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the report warns of."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+
 @dataclass(frozen=True)
 class Step:
     """One accepted effect and the error before and after it."""
