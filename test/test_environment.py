@@ -162,7 +162,7 @@ def test_bad_profiles_are_one_clear_error():
 @pytest.mark.parametrize("name", ["ail", "flight", "emac"])
 def test_suite_parameter_files_carry_units_in_every_name(name):
     unit = re.compile(r"_(deg|v|inlb|s|hz)$")
-    plain = {"profile", "seed", "failure", "motor_power_on", "resync_commands"}  # names, seeds, switches, counts
+    plain = {"profile", "seed", "failure", "faults", "motor_power_on", "resync_commands"}  # names, specs, seeds
 
     def walk(mapping):
         for key, value in mapping.items():

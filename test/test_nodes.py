@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -447,6 +448,7 @@ def test_a_lone_node_loop_polls_spins_and_stops_as_the_composed_loop_does():
         def __init__(self, timeouts):
             self.timeouts = list(timeouts)
             self.done, self.ends_process, self._ready_sent, self.checks = False, True, False, 0
+            self.name_claim = SimpleNamespace(taken_by=None)  # no other node of its name
 
         def check_ready(self):
             self.checks += 1

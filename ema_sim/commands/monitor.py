@@ -21,6 +21,15 @@ def truth_columns(path: Path, channel: str = "left_wing", time_s: list[float] | 
 
     A CSV's ``fault_<kind>`` columns (``ema simulate --fault``), or a bag's ``/ema/faults/truth`` for ``channel``
     sampled at ``time_s`` (from the record's start).
+
+    Parameters
+    ----------
+    path : Path
+        The record's file.
+    channel : str
+        The channel watched.
+    time_s : list[float] | None
+        The record's sample times, s.
     """
     if is_bag(path):
 

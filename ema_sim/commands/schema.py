@@ -17,7 +17,13 @@ SCHEMAS: dict[str, Callable[[], dict[str, object]]] = {"identify": identify_sche
 
 
 def text(report: str) -> str:
-    """The schema of ``report`` as the indented JSON the docs publish (``docs/schema/REPORT.schema.json``)."""
+    """The schema of ``report`` as the indented JSON the docs publish (``docs/schema/REPORT.schema.json``).
+
+    Parameters
+    ----------
+    report : str
+        Which report: ``identify`` or ``analyze``.
+    """
     return json.dumps(SCHEMAS[report](), indent=2, ensure_ascii=False) + "\n"
 
 

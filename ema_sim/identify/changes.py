@@ -128,7 +128,13 @@ class Track:
         return self.kind in ("falls", "grows", "wanders")
 
     def statement(self, bandwidths: tuple[float, ...] = ()) -> str:
-        """The track in words: per-window values with ±1σ, the fitted slope or the range."""
+        """The track in words: per-window values with ±1σ, the fitted slope or the range.
+
+        Parameters
+        ----------
+        bandwidths : tuple[float, ...]
+            The bandwidth per window, Hz (said beside ωn), empty when not measured.
+        """
         k, unit = DISPLAY.get(self.name, (1.0, ""))
         u = f" {unit}" if unit else ""
         label = LABELS.get(self.name, KEYS[self.name].name if self.name in KEYS else self.name)

@@ -262,7 +262,13 @@ class Problem:
             for o in self.outputs}
 
     def scale(self, output: str) -> float | FloatArray:
-        """What an output's error is divided by in the weighted residual: its floor (per sample with timing)."""
+        """What an output's error is divided by in the weighted residual: its floor (per sample with timing).
+
+        Parameters
+        ----------
+        output : str
+            The output column.
+        """
         return self.sample_sigma.get(output, self.sigma_deg[output])
 
     def set_output_terms(self, terms: dict[str, FloatArray]) -> None:

@@ -43,7 +43,13 @@ class Settled:
     """The output's count (0: continuous), in the record's unit."""
 
     def limit(self, noise: float) -> float:
-        """The largest dead band (half width) the settled errors can explain, the output's noise floor given."""
+        """The largest dead band (half width) the settled errors can explain, the output's noise floor given.
+
+        Parameters
+        ----------
+        noise : float
+            The output's noise floor, in the record's unit.
+        """
         return self.max_abs + 0.5 * self.count + NOISE_MARGIN * noise
 
 

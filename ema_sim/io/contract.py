@@ -112,7 +112,15 @@ def schema_of(td: type, title: str) -> dict[str, object]:
 
 
 def violations(report: Mapping[str, object], schema: Mapping[str, object]) -> list[str]:
-    """Every place ``report`` breaks ``schema``, as ``path: message`` lines (empty when it holds)."""
+    """Every place ``report`` breaks ``schema``, as ``path: message`` lines (empty when it holds).
+
+    Parameters
+    ----------
+    report : Mapping[str, object]
+        The report, as it will be written.
+    schema : Mapping[str, object]
+        Its schema (:func:`schema_of`).
+    """
     validator = jsonschema.Draft202012Validator(schema)
     out = []
     for err in sorted(validator.iter_errors(report), key=lambda e: list(map(str, e.absolute_path))):

@@ -95,7 +95,21 @@ class Case:
 
 def cases(kinds: dict[str, tuple[float, ...]] | None = None, maneuvers: Sequence[str] = DEFAULT_MANEUVERS,
           seeds: int = 2, clean: int = 2, **common: Any) -> list[Case]:
-    """Every combination, plus ``clean`` fault-free cases per maneuver and seed."""
+    """Every combination, plus ``clean`` fault-free cases per maneuver and seed.
+
+    Parameters
+    ----------
+    kinds : dict[str, tuple[float, ...]] | None
+        The fault kinds.
+    maneuvers : Sequence[str]
+        The maneuvers.
+    seeds : int
+        The seeds.
+    clean : int
+        Clean cases (no fault) per maneuver and seed, for the false-alarm rate.
+    common : object
+        Settings every case shares.
+    """
     kinds = DEFAULT_SIZES if kinds is None else kinds
     out = [Case(k, s, m, seed, **common) for k, sizes in kinds.items() for s in sizes for m in maneuvers
            for seed in range(seeds)]
@@ -104,7 +118,13 @@ def cases(kinds: dict[str, tuple[float, ...]] | None = None, maneuvers: Sequence
 
 
 def measured(case: Case) -> MeasuredData:
-    """The case's record as the AIL test environment measures it."""
+    """The case's record as the AIL test environment measures it.
+
+    Parameters
+    ----------
+    case : Case
+        The case.
+    """
     ch = load_channel(case.channel)
     faults = [] if case.kind == "none" else [parse_fault(f"{case.kind}:at_s={case.onset_s},size={case.size}")
                                              if case.kind != "jam" else parse_fault(f"jam:at_s={case.onset_s}")]
@@ -132,6 +152,17 @@ def ail_command(command_deg: FloatArray, channel: str, rng: np.random.Generator,
 
     26 ms transport delay, the FMU's 50 Hz first-order lag, 3 mV rms noise and the 5 mV D/A quantum, on the
     ±10 V command signal.
+
+    Parameters
+    ----------
+    command_deg : FloatArray
+        The commands, deg.
+    channel : str
+        The channel.
+    rng : np.random.Generator
+        The random generator of the case.
+    frame_hz : float
+        The flight computer's frame rate, Hz.
     """
     ch = load_channel(channel)
     v = np.asarray(ch.deg_to_v(command_deg), dtype=float)
@@ -144,12 +175,24 @@ def ail_command(command_deg: FloatArray, channel: str, rng: np.random.Generator,
 
 
 def model_has_current(model: str) -> bool:
-    """The truth model knows its motor current (the high-order ones)."""
+    """The truth model knows its motor current (the high-order ones).
+
+    Parameters
+    ----------
+    model : str
+        The model's name.
+    """
     return bool(model_class(model).has_current)
 
 
 def run_case(case: Case) -> dict[str, Any]:
-    """Simulate, measure and watch one case; one table row."""
+    """Simulate, measure and watch one case; one table row.
+
+    Parameters
+    ----------
+    case : Case
+        The case.
+    """
     data = measured(case)
     t0 = time.process_time()
     ch = load_channel(case.channel)
@@ -178,6 +221,17 @@ def run_campaign(all_cases: Sequence[Case], out: str | Path, *, workers: int | N
     -------
     list of dict
         One row a case.
+
+    Parameters
+    ----------
+    all_cases : Sequence[Case]
+        Every case of the campaign.
+    out : str | Path
+        The output directory.
+    workers : int | None
+        Local Dask workers (0: in this process).
+    scheduler : str | None
+        A running Dask scheduler's address, instead of a local cluster.
     """
     import pyarrow as pa  # noqa: PLC0415 - Parquet only when a campaign is written
     import pyarrow.parquet as pq  # noqa: PLC0415 - the same
@@ -207,7 +261,13 @@ def _median(values: list[float]) -> float | None:
 
 
 def summarize(rows: Rows) -> dict[str, Any]:
-    """Detection delay per kind, missed detections, false alarms per hour, confusion matrix, estimate errors."""
+    """Detection delay per kind, missed detections, false alarms per hour, confusion matrix, estimate errors.
+
+    Parameters
+    ----------
+    rows : Rows
+        One row per case, as run.
+    """
     faulty = [r for r in rows if r["kind"] != "none"]
     watched_h = sum(r["watched_s"] for r in rows) / 3600.0
     per_kind: dict[str, Any] = {}
@@ -244,7 +304,15 @@ def summarize(rows: Rows) -> dict[str, Any]:
 
 
 def plot_campaign(rows: Rows, out: str | Path) -> list[Path]:
-    """``confusion.png`` (isolated against injected kind) and ``delay.png`` (detection delay per kind)."""
+    """``confusion.png`` (isolated against injected kind) and ``delay.png`` (detection delay per kind).
+
+    Parameters
+    ----------
+    rows : Rows
+        One row per case, as run.
+    out : str | Path
+        The output directory.
+    """
     import matplotlib as mpl  # noqa: PLC0415 - plotting only when asked
 
     mpl.use("Agg")

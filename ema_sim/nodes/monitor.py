@@ -49,6 +49,8 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
         Builds the node's topic ports (:class:`~ema_sim.nodes.ports.Ports`).
     name : str
         The node's name.
+    options : Any
+        Passed on to :class:`~ema_sim.nodes.common.SuiteNode` (its hosting options).
     """
 
     def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "ema_monitor",
@@ -85,7 +87,13 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
 
     # ----------------------------------------------------------------- lifecycle
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:  # noqa: ARG002
-        """Make the topics; inactive: frames are dropped."""
+        """Make the topics; inactive: frames are dropped.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The lifecycle state the transition starts from.
+        """
         pubs, subs = set(self.publishers), set(self.every_subscription())
         self.ports = self.ports_factory(self)
         self.diag_pub = self.create_publisher(DiagnosticArray, ct.endpoint(ct.DIAGNOSTICS), qos(ct.EVENT_QOS))
@@ -98,17 +106,35 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:  # noqa: ARG002
-        """Start watching."""
+        """Start watching.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The lifecycle state the transition starts from.
+        """
         self.active = True
         return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:  # noqa: ARG002
-        """Stop watching (frames dropped)."""
+        """Stop watching (frames dropped).
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The lifecycle state the transition starts from.
+        """
         self.active = False
         return TransitionCallbackReturn.SUCCESS
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:  # noqa: ARG002
-        """Remove the topics."""
+        """Remove the topics.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The lifecycle state the transition starts from.
+        """
         for e in self._entities:
             if e in self.publishers:
                 self.destroy_publisher(e)
@@ -118,7 +144,13 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:  # noqa: ARG002
-        """End the process."""
+        """End the process.
+
+        Parameters
+        ----------
+        state : LifecycleState
+            The lifecycle state the transition starts from.
+        """
         self.done = True
         return TransitionCallbackReturn.SUCCESS
 
