@@ -505,6 +505,24 @@ def write_sources(directory: Path, values: ModelValues) -> list[Path]:
     """
     directory.mkdir(parents=True, exist_ok=True)
     texts = {HEADER: header(), STAGES_FILE: stages_file(), KERNEL_FILE: KERNEL, CONFIG_FILE: config(values)}
+    return write_texts(directory, texts)
+
+
+def write_texts(directory: Path, texts: dict[str, str]) -> list[Path]:
+    """Write each named text into ``directory``, in order.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+        Where (it exists).
+    texts : dict
+        File name → its text.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
     out = []
     for name, text in texts.items():
         path = directory / name

@@ -24,7 +24,7 @@ import numpy as np
 
 from ema_sim import calibration as cal
 from ema_sim import parameters as pm
-from ema_sim.export.csource import API, HEADER, PARAM_INDEX, c_double, c_string
+from ema_sim.export.csource import API, HEADER, PARAM_INDEX, c_double, c_string, write_texts
 from ema_sim.export.hoad_stages import stages_c
 from ema_sim.export.target import ExportError, ExportTarget
 from ema_sim.models import noise as nz
@@ -664,12 +664,7 @@ def write_sources(directory: Path, values: HoadValues) -> list[Path]:
     directory.mkdir(parents=True, exist_ok=True)
     texts = {HEADER: header(), STAGES_FILE: STAGES_PREAMBLE + _tables() + stages_c(), KERNEL_FILE: KERNEL,
              CONFIG_FILE: config(values)}
-    out = []
-    for name, text in texts.items():
-        path = directory / name
-        path.write_text(text, encoding="utf-8")
-        out.append(path)
-    return out
+    return write_texts(directory, texts)
 
 
 FRAME_HZ = 1_000.0
