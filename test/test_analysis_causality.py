@@ -6,6 +6,7 @@ from scipy.signal import lfilter
 
 from ema_sim.analysis.estimation import causal
 from ema_sim.analysis.estimation.harmonics import Harmonic, lag_at_fundamental
+from ema_sim.analysis.estimation.second_order_fit import fit_step, simulate
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.analysis.records import causality
 from ema_sim.analysis.records.command_hold import detect_command_hold
@@ -154,3 +155,18 @@ def test_resampling_a_held_command_does_not_delay_it():
     shift = np.array([grid[np.argmin(np.abs(grid - x))] - x for x in logged])
     assert np.all(np.abs(shift) <= 0.5 * 0.0111)
     assert abs(float(np.mean(shift))) < 0.001
+
+
+def test_a_sampled_step_fit_whose_delay_sits_on_its_lead_bound_says_why() -> None:
+    """An output logged ahead of its sampled demand drives the fit's delay to the search's lower bound: the note
+    says that bound is the earliest a sampled command can have changed and names a lead's causes."""
+    dt = 0.01
+    t = np.arange(0.0, 3.0, dt)
+    cmd = np.where(t >= 0.5, 2.0, 0.0)
+    y = simulate(cmd, dt, 60.0, 0.8, 0.0)
+    ahead = np.concatenate([y[2:], [y[-1], y[-1]]])  # the output two samples early: a lead no servo has
+    fit = fit_step(t, cmd, ahead, test="step", output_name="position", sampled=True)
+    assert fit.actuator_delay_s < 0.0
+    assert fit.quality in ("on_bound", "non_causal")
+    assert "leads its command" in fit.quality_note or "leads the command" in fit.quality_note
+    assert "sampled" in fit.quality_note

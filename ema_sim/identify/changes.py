@@ -14,13 +14,10 @@ model is chosen:
    runs its model from up to :data:`LEAD_S` before the cut, on the samples before it, not fitted.
 2. **The final model's parameters refitted on each window** with identification's own fit
    (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with its coloured-residual
-   uncertainty. A parameter **changes** when its windows disagree beyond their uncertainty (χ² of the
-   values about their weighted mean with p below :data:`CHANGE_P`) by at least :data:`MIN_CHANGE` of its
-   value (a model's mismatch with a plant moves a fitted value by a few per cent between windows that
-   excite it alike). Its **trend** is the weighted straight line through the windows' values: it *falls*
-   or *grows* when the line's slope is :data:`TREND_SIGMA` of its uncertainty and the line explains at
-   least :data:`LINEAR_SHARE` of the values' spread about their mean; otherwise it *wanders* (the range is
-   given). The report gives the value per window, not one equivalent for the whole.
+   uncertainty. Whether a parameter **changes**, and its **trend** (falls, grows or wanders), is decided by
+   :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze`` applies to a periodic
+   test's cycles; a value on its search's bound does not vote. The report gives the value per window, not
+   one equivalent for the whole.
 3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
    record allows: the windows refitted without it. When the windows, each with its own parameters, do
    not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
@@ -37,8 +34,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2 as chi2_dist
 
+from ema_sim.analysis.estimation.trend import trend
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
 from ema_sim.identify.fit import TINY, Fit
@@ -61,10 +58,6 @@ LEAD_S = 0.5
 """A window's model runs from this much before its first fitted sample (within the rest before it)."""
 SNAP_SHARE = 0.25
 """A cut moves to the end of the longest rest of the command within this share of a window around it."""
-CHANGE_P = 1e-3
-MIN_CHANGE = 0.05
-TREND_SIGMA = 3.0
-LINEAR_SHARE = 0.8
 LABELS = {"wn_rad_s": "ωn (wn_rad_s)", "zeta": "ζ (zeta)", "delay_s": "the command delay (delay_s)",
           "feedback_delay_s": "the feedback delay (feedback_delay_s)"}
 """How a parameter is named in the statements (the vocabulary's report name otherwise)."""
@@ -370,7 +363,7 @@ def fit_windows(subs: list[Problem], params: SecondOrderParams, free: tuple[str,
 
 
 def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
-    """One parameter across the windows, and its trend (module docstring).
+    """One parameter across the windows, and its trend (:func:`ema_sim.analysis.estimation.trend.trend`).
 
     Parameters
     ----------
@@ -392,31 +385,9 @@ def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
     free = FREE.get(name)
     bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)
                                               or v >= free.high - 1e-6 * (free.high - free.low)) for v in values])
-    ok = np.isfinite(sigma) & (sigma > 0.0) & ~bounded
-    base = (name, tuple(values.tolist()), tuple(sigma.tolist()), tuple(times.tolist()))
-    if ok.sum() < 2:
-        return Track(*base, math.nan, 0, math.nan, math.nan, math.nan, "not determined")
-    v, s, x = values[ok], sigma[ok], times[ok]
-    w = 1.0 / s**2
-    mean = float(np.sum(w * v) / np.sum(w))
-    chi2 = float(np.sum(w * (v - mean) ** 2))
-    dof = int(v.size - 1)
-    p = float(chi2_dist.sf(chi2, dof))
-    xm = float(np.sum(w * x) / np.sum(w))
-    sxx = float(np.sum(w * (x - xm) ** 2))
-    slope = float(np.sum(w * (x - xm) * (v - mean)) / sxx) if sxx > 0 else 0.0
-    line = mean + slope * (x - xm)
-    chi2_line = float(np.sum(w * (v - line) ** 2))
-    inflate = max(1.0, chi2_line / max(v.size - 2, 1))
-    slope_sigma = math.sqrt(inflate / sxx) if sxx > 0 else math.inf
-    relative = float(np.ptp(v)) / max(abs(mean), TINY)
-    if p >= CHANGE_P or relative < MIN_CHANGE:
-        kind = "steady"
-    elif abs(slope) >= TREND_SIGMA * slope_sigma and (chi2 - chi2_line) >= LINEAR_SHARE * chi2:
-        kind = "falls" if slope < 0 else "grows"
-    else:
-        kind = "wanders"
-    return Track(*base, chi2, dof, p, slope, slope_sigma, kind)
+    tr = trend(values, sigma, times, usable=~bounded)
+    return Track(name, tr.values, tr.sigma, tr.times_s, tr.chi2, tr.dof, tr.p_value, tr.slope_per_s, tr.slope_sigma,
+                 tr.kind)
 
 
 # ------------------------------------------------------------------------------------------ the stage

@@ -432,6 +432,10 @@ def assess(values: dict[str, float], sigmas: dict[str, float], active: NDArray[n
                 what += " (the record's Nyquist frequency)"
             if k == 2 and side == "lower" and bound == 0.0:
                 what += " (the response starts at the command's sample: a sampled command?)"
+            elif k == 2 and side == "lower" and bound < 0.0:
+                what += (" (the earliest a command sampled from a running demand can have changed before it was "
+                         "logged; an output earlier still leads its command, which no servo does: the logging, "
+                         "a resampling, or a demand that is itself a filtered target)")
             on.append(what)
     if on:
         return "on_bound", "; ".join(on)
@@ -542,8 +546,11 @@ def fit_step(time_s: FloatArray, command_deg: FloatArray, output: FloatArray, *,
         note += (f"; with the command allowed to have changed up to a sample before it was logged (sampled, "
                  f"not held) the fit gives a delay of {1e3 * early.delay_s.value:.2f} ms and RMS {early.rms:.3g} "
                  f"(against {rms:.3g}): rerun with --command sampled if the rig samples its demand")
-    if sampled and quality == "ok" and causal.delay_leads(theta[2] + 0.5 * dt, sig[2]):
-        quality, note = "non_causal", causal.delay_note(theta[2] + 0.5 * dt, sig[2])
+    if sampled and quality in ("ok", "on_bound") and causal.delay_leads(theta[2] + 0.5 * dt, sig[2]):
+        # A lead is flagged with its causes whether or not it sits on the search's bound: on the bound it is
+        # the largest lead the search allows, and no servo leads at all.
+        lead = causal.delay_note(theta[2] + 0.5 * dt, sig[2])
+        quality, note = "non_causal", f"{lead}; {note}" if note else lead
     return SecondOrderFit(
         test=test, method="time-domain least squares on the step", output=output_name,
         wn_rad_s=_estimate(values, sig, sig_w, 0), zeta=_estimate(values, sig, sig_w, 1),

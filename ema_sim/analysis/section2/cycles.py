@@ -13,7 +13,10 @@ one test measured ``n`` times:
   command before the next one is *unsettled*, with the error left;
 * **repeatability**: the rms of each output cycle about the mean output cycle;
 * **slope**: :func:`ema_sim.analysis.estimation.slew.measure` on the stretch, the same measurement ``ema identify``
-  restarts its rate limit from.
+  restarts its rate limit from;
+* **change over the test**: the second order fitted on each cycle, its bandwidth and delay tested for a
+  trend (:mod:`ema_sim.analysis.estimation.cycle_changes`): an actuator that changed while it was recorded
+  is said to, with the values per cycle.
 
 Each figure is a :class:`~ema_sim.analysis.estimation.quality.Measurement`: a value with its uncertainty, or
 "not measured: why".
@@ -30,6 +33,7 @@ from numpy.typing import NDArray
 from typing_extensions import override
 
 from ema_sim.analysis.estimation import settling, slew
+from ema_sim.analysis.estimation.cycle_changes import CycleChanges, cycle_changes
 from ema_sim.analysis.estimation.frf import COHERENCE_GOOD
 from ema_sim.analysis.estimation.grid import decimal_grid
 from ema_sim.analysis.estimation.harmonics import (
@@ -96,6 +100,8 @@ class CycleResult:
         The positions' unit as the report writes it (``°``, `` mm``).
     notes : list
         Notes.
+    changes : CycleChanges
+        The second order fitted on each cycle, and whether its bandwidth and delay changed over the test.
     """
 
     kind: str
@@ -115,6 +121,7 @@ class CycleResult:
     spread_output: FloatArray
     unit: str = "°"
     notes: list[str] = field(default_factory=list)
+    changes: CycleChanges = field(default_factory=CycleChanges)
 
     @property
     def saturated(self) -> bool:
@@ -159,7 +166,7 @@ class CycleResult:
             "transitions": [tr.as_dict() for tr in self.transitions], "lag_s": self.lag.as_dict(),
             "repeatability_rms": self.repeatability, "output_peak_to_peak": self.output_span,
             "slope": self.slope.as_dict(), "quality": self.quality, "quality_note": self.quality_note,
-            "notes": self.notes,
+            "notes": self.notes, "changes": self.changes.as_dict(),
         }
 
 
@@ -288,9 +295,12 @@ def analyze_cycles(ra: RecordAnalysis, seg: Segment, p: Periodicity) -> CycleRes
            Measurement(None, None, "not_determined",
                        f"not measured: a {p.shape} dwells; its transitions are read instead"))
     rep, mean_y, spread_y, mean_u = _repeatability(tb, t, y, p)
+    changes = (CycleChanges(skipped=f"not read: {saturated}") if saturated else
+               cycle_changes(tb, t, u, y, p, d.sample_hz, harmonics=harmonics, held=not ra.command.assumed_sampled,
+                             output=name))
     return CycleResult(seg.kind, name, float(t[p.start]), float(t[p.stop - 1]), p, harmonics,
                        bandwidth(harmonics, saturated), trans, lag, rep, float(np.ptp(mean_y)), slope, mean_u, mean_y,
-                       spread_y, ra.unit, notes)
+                       spread_y, ra.unit, notes, changes)
 
 
 def periodicity_of(ra: RecordAnalysis, seg: Segment) -> Periodicity | None:
@@ -367,6 +377,9 @@ class Cycles(Section2Test[CycleResult]):
                          + (f" ± {sl.sigma:.2g}" if sl.sigma else "") + f" ({sl.moves} of {sl.seen} moves)")
             lines.append(f"- repeatability: the output's cycles lie {r.repeatability:.3g}{u} rms about their mean "
                          f"({100 * r.repeatability / max(r.output_span, 1e-12):.2g} % of its peak to peak)")
+            ch = r.changes
+            lines.append("- change over the test: " + ("; ".join(ch.statements) if ch.statements else
+                                                      f"not read: {ch.skipped}"))
             lines.append("")
             lines += bullets(r.notes)
             lines += image(img, "periodic test")
@@ -380,6 +393,8 @@ class Cycles(Section2Test[CycleResult]):
         lines += [f"  {tr.direction}: {tr.settling_command.statement}" for tr in r.transitions]
         if p.shape in TRACKING_SHAPES:
             lines.append(f"  tracking: {r.lag.statement}")
+        lines += [f"  {text}" for text, tr in zip(r.changes.statements, (r.changes.bandwidth, r.changes.delay),
+                                                   strict=False) if tr is not None and tr.changed]
         return lines
 
     @override
