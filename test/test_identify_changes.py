@@ -12,17 +12,22 @@ import json
 import numpy as np
 import pytest
 from changing_records import BLOCK_S, record
+from scipy.optimize import brentq
 
 from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.analysis.records import stamps
+from ema_sim.config import load_channel
 from ema_sim.identify import changes
 from ema_sim.identify.declared import declared
+from ema_sim.identify.fit import Fit
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import Identification, Step
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_report
 from ema_sim.identify.stepwise import fit_model, start_point
+from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.models.second_order import SecondOrderParams
 
 DURATION_S = 24.0
 
@@ -154,3 +159,30 @@ def test_identify_reports_the_trend_in_console_json_and_report(tmp_path):
     md = write_report(result, report, tmp_path).read_text(encoding="utf-8")
     assert "## Over the record: the parameters per window" in md
     assert any(s["stage"] == "changes" for s in report["stages"])
+
+
+def test_wn_and_zeta_that_trade_while_the_bandwidth_holds_are_no_change_of_the_record():
+    """Windows of an unchanged overdamped servo land at different (ωn, ζ) of one ridge: not reported as a change;
+    a bandwidth that moves is still a change."""
+    base = SecondOrderParams.basic(load_channel("left_wing"))
+    first = base.replace(wn_rad_s=175.0, zeta=2.35)
+    target = bandwidth_hz(first)
+    second = base.replace(wn_rad_s=brentq(lambda w: bandwidth_hz(base.replace(wn_rad_s=w, zeta=2.0)) - target,
+                                          50.0, 400.0), zeta=2.0)
+
+    def fits(*params):
+        return changes.WindowFit(("wn_rad_s", "zeta"), [Fit(p, False, ("wn_rad_s", "zeta"), np.zeros((1, 3)),
+                                                            np.zeros(1), np.zeros((1, 2)), {}) for p in params], 2)
+
+    def moving(name, a, b):
+        return changes.Track(name, (a, b), (0.01, 0.01), (3.0, 9.0), 1e4, 1, 0.0, (b - a) / 6.0, 0.01, "wanders")
+
+    tracks = [moving("wn_rad_s", first.wn_rad_s, second.wn_rad_s), moving("zeta", 2.35, 2.0)]
+    kept, why = changes._on_the_ridge(tracks, fits(first, second))
+    assert [t.kind for t in kept] == ["steady", "steady"]
+    assert "bandwidth holds" in why[0]
+    slower = base.replace(wn_rad_s=120.0, zeta=2.0)
+    kept, why = changes._on_the_ridge([moving("wn_rad_s", 175.0, 120.0), moving("zeta", 2.35, 2.0)],
+                                      fits(first, slower))
+    assert [t.kind for t in kept] == ["wanders", "wanders"]
+    assert why == []

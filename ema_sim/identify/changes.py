@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis.estimation.trend import trend
+from ema_sim.analysis.estimation.trend import MIN_CHANGE, trend
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
 from ema_sim.identify.fit import TINY, Fit
@@ -433,11 +433,11 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
     out.windows = ws
     subs = [window_problem(problem, w) for w in ws]
     cur = fit_windows(subs, final.params, final.free, final.flip)
-    out.tracks = [track(f, cur, ws) for f in final.free]
+    out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in final.free], cur)
     say(f"changes: {how}; " + ", ".join(f"{t.name} {t.kind}" for t in out.tracks))
     if out.changed:
         cur = _proxies(problem, result, declared, subs, cur, out, say)
-        out.tracks = [track(f, cur, ws) for f in result.final.free]
+        out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in result.final.free], cur)
     out.bandwidth_hz = tuple(bandwidth_hz(f.params) for f in cur.fits)
     out.rms_over_noise = {
         o: float(np.sqrt(sum(float(np.sum(sub.errors_deg(f.sim)[o] ** 2)) for sub, f in zip(subs, cur.fits,
@@ -454,7 +454,31 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
     else:
         out.statements = [f"the parameters hold over the record ({how}): "
                           + "; ".join(t.statement() for t in out.tracks if t.kind != "not determined")]
+    out.statements += ridge
     return out
+
+
+def _on_the_ridge(tracks: list[Track], wf: WindowFit) -> tuple[list[Track], list[str]]:
+    """ωn and ζ that move together while the servo's bandwidth holds are one response fitted two ways, not a change.
+
+    An overdamped or poorly excited second order is determined along one combination of ωn and ζ (its
+    bandwidth) far better than along the other: windows of an unchanged actuator land at different points
+    of that ridge. When the bandwidth per window varies by less than
+    :data:`~ema_sim.analysis.estimation.trend.MIN_CHANGE`, ωn's and ζ's differences are not reported as a
+    change of the record; the reason is given instead.
+    """
+    pair = [t for t in tracks if t.name in ("wn_rad_s", "zeta") and t.changed]
+    if not pair or len(wf.fits) < 2:
+        return tracks, []
+    bw = np.array([bandwidth_hz(f.params) for f in wf.fits])
+    spread = float(np.ptp(bw)) / max(float(np.mean(bw)), TINY)
+    if spread >= MIN_CHANGE:
+        return tracks, []
+    names = " and ".join(LABELS[t.name] for t in pair)
+    text = (f"{names} differ between the windows beyond their uncertainty, but the servo's bandwidth holds "
+            f"({', '.join(f'{b:.3g}' for b in bw)} Hz, within {100 * spread:.1f} %): the windows fit one response "
+            "along the ridge where ωn and ζ trade against each other, not an actuator that changed")
+    return [replace(t, kind="steady") if t in pair else t for t in tracks], [text]
 
 
 def _proxies(problem: Problem, result: Identification, declared: SecondOrderParams, subs: list[Problem],

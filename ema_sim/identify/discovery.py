@@ -185,7 +185,8 @@ def named_stands(named_rms: Mapping[str, float], noise: Mapping[str, float]) -> 
 def _selected(s: Selected) -> dict[str, Any]:
     return {"term": s.term.name, "coefficient": list(s.coef), "uncertainty": list(s.sigma), "unit": s.term.unit,
             "amplitude": s.amplitude, "variance_share": s.share, "p_value": s.p_value,
-            "halves": [list(h) for h in s.halves], "holds": s.holds, "why": s.why, "meaning": s.term.meaning,
+            "halves": [[v if math.isfinite(v) else None for v in h] for h in s.halves], "holds": s.holds,
+            "why": s.why, "meaning": s.term.meaning,
             "acts": s.term.kind}
 
 

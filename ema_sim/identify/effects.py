@@ -374,10 +374,11 @@ def _dead_band(name: str, value: float, what: str, half: float = 1.0) -> Check:
         if settled is None or half * v[name] <= settled.limit(noise):
             return None
         unit = p.data.unit
-        return (f"{what} {v[name]:.4g} {unit} is larger than any error the output settles to at the end of the "
+        return (f"{what} {v[name]:.4g} {unit} is larger than the errors the output settles to at the end of the "
                 f"command's holds (median {settled.median_abs:.3g}, largest {settled.max_abs:.3g} {unit} over "
-                f"{settled.holds} holds, + half a count and {NOISE_MARGIN:g}× the noise floor: "
-                f"{settled.limit(noise):.3g}): it explains no settled error, it stands in for something else")
+                f"{settled.holds} holds; a band at most the largest and twice the median, + half a count and "
+                f"{NOISE_MARGIN:g}× the noise floor: {settled.limit(noise):.3g}): it explains no settled error, it "
+                "stands in for something else")
     return check
 
 

@@ -14,8 +14,10 @@ coefficients carry a coloured-residual uncertainty (Morelli and Klein), its shar
 it adds when entered last), its significance, and whether the record agrees with itself about it: the
 same terms fitted on each half of the record must give coefficients within three combined sigma and
 of the same sign (a share of their size is no excuse: two halves that disagree beyond their
-uncertainty say the term is no property of the record). A term that does not hold up is returned as
-tried and dropped, with why.
+uncertainty say the term is no property of the record), and each half must find it on its own (its
+coefficient :data:`HALF_FOUND` standard errors of that half from zero: halves 14× apart that "agree" only
+within a wide uncertainty have not both found it). A half that does not excite a term gives no coefficient
+for it. A term that does not hold up is returned as tried and dropped, with why.
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ MIN_SHARE = 0.02
 """Share of the residual's variance above the noise floor a term must remove to enter."""
 MAX_TERMS = 6
 HALF_SIGMA = 3.0
+HALF_FOUND = 2.0
+"""Standard errors of its own half a term's coefficient must reach on each half that excites it."""
 UNEXCITED = 0.05
 """A half in which a term's columns carry less than this share of their energy in the other half does not
 excite it: the halves are still compared, within their (then large) combined uncertainty."""
@@ -324,24 +328,34 @@ def _halves(e: FloatArray, chosen: list[Term]) -> dict[str, Halves]:
         k = slice(col, col + term.width)
         col += term.width
         (c1, s1, n1), (c2, s2, n2) = fits
-        pair = (tuple(float(v) for v in c1[k]), tuple(float(v) for v in c2[k]))
         e1, e2 = float(np.sum(n1[k])), float(np.sum(n2[k]))
         unexcited = min(e1, e2) < UNEXCITED * max(e1, e2)
+        # a half that does not excite the term measures nothing about it: no coefficient (NaN)
+        quiet1, quiet2 = unexcited and e1 < e2, unexcited and e2 <= e1
+        pair = (tuple(math.nan if quiet1 else float(v) for v in c1[k]),
+                tuple(math.nan if quiet2 else float(v) for v in c2[k]))
         if term.width == 2:  # a tone: compare its amplitude and phase as one complex number
             z1, z2 = complex(c1[k][0], c1[k][1]), complex(c2[k][0], c2[k][1])
-            spread = math.hypot(float(np.hypot(*s1[k])), float(np.hypot(*s2[k])))
-            agree = abs(z1 - z2) <= HALF_SIGMA * spread
+            r1, r2 = float(np.hypot(*s1[k])), float(np.hypot(*s2[k]))
+            agree = abs(z1 - z2) <= HALF_SIGMA * math.hypot(r1, r2)
+            found = abs(z1) > HALF_FOUND * r1 and abs(z2) > HALF_FOUND * r2
             same_sign = True
         else:
             d = np.abs(c1[k] - c2[k])
             spread_v = np.hypot(s1[k], s2[k])
             agree = bool(np.all(d <= HALF_SIGMA * spread_v))
+            found = bool(np.all(np.abs(c1[k]) > HALF_FOUND * s1[k]) and np.all(np.abs(c2[k]) > HALF_FOUND * s2[k]))
             same_sign = unexcited or bool(np.all(np.sign(c1[k]) == np.sign(c2[k])))
-        if agree and same_sign:
+        if agree and same_sign and (found or unexcited):
             out[term.name] = (True, "excited in one half of the record only: the other half's wide uncertainty "
                                     "agrees with it" if unexcited else "", pair)
+        elif agree and same_sign:
+            text = ", ".join(f"{a:.3g} ± {sa:.2g} / {b:.3g} ± {sb:.2g}"
+                             for a, b, sa, sb in zip(c1[k], c2[k], s1[k], s2[k], strict=True))
+            out[term.name] = (False, f"not found by each half of the record on its own ({text}): the whole "
+                                     "record's significance rests on one part of it", pair)
         else:
-            text = ", ".join(f"{a:.3g} / {b:.3g}" for a, b in zip(*pair, strict=True))
+            text = ", ".join(f"{a:.3g} / {b:.3g}" for a, b in zip(c1[k], c2[k], strict=True))
             out[term.name] = (False, f"the two halves of the record disagree about it beyond their uncertainty "
                                      f"({text})", pair)
     return out

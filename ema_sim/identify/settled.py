@@ -5,10 +5,12 @@ command by up to its width. A record whose output settles on the command leaves 
 threshold larger than the settled error it would explain is a proxy for something else (a friction,
 a slow tail), and identification does not add it (:mod:`ema_sim.identify.effects`).
 
-The settled error of one hold is the median of output − command over the last :data:`TAIL` of it;
-a dead band may be as wide as the largest of their magnitudes, plus half the output's count (an output
-in counts cannot settle closer than that) and :data:`NOISE_MARGIN` times its noise floor. (A real dead
-band leaves errors anywhere up to its width: the median is reported, the largest bounds it.)
+The settled error of one hold is the median of output − command over the last :data:`TAIL` of it.
+A real dead band of half width d leaves the output anywhere within it, so its holds' settled errors
+spread from 0 to d, their median near d/2: a dead band may be as wide as the largest of the errors,
+but no wider than twice their median (one hold that stopped far off, on a load or a stall, is no
+band the others show), plus half the output's count (an output in counts cannot settle closer than
+that) and :data:`NOISE_MARGIN` times its noise floor.
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ class Settled:
         noise : float
             The output's noise floor, in the record's unit.
         """
-        return self.max_abs + 0.5 * self.count + NOISE_MARGIN * noise
+        return min(self.max_abs, 2.0 * self.median_abs) + 0.5 * self.count + NOISE_MARGIN * noise
 
 
 def _holds(time_s: FloatArray, command: FloatArray) -> list[tuple[int, int]]:
