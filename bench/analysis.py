@@ -13,7 +13,7 @@ import numpy as np
 
 from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.benchmark import Benchmark, Result, jsbsim_seconds, timed
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.signals import parse_maneuver
 from ema_sim.simulation import csv_columns, simulate
 

@@ -23,7 +23,7 @@ import numpy as np
 from ema_sim.benchmark import Benchmark, Result
 from ema_sim.config import load_channel
 from ema_sim.faults import parse_fault
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import create
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.monitor.online import OnlineMonitor

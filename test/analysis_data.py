@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 
 from ema_sim.config import load_channel
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.signals import parse_load, parse_maneuver
 from ema_sim.simulation import csv_columns, simulate
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numba as nb
 import numpy as np
 
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 SIM_S = 1e-4
 

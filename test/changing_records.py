@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 TICK_S = 1e-4
 BLOCK_S = 6.0

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ema_sim.config import load_channel
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.second_order import Loac, SecondOrderParams
 
 EFFECT_FIELDS = {  # vocabulary effect -> the model field its parameter lands in

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import create
 
 FINE_S = 0.001

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 STEP_S = 0.00025
 """Integration step of the drive, s."""

@@ -11,7 +11,7 @@ from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.analysis.records import causality
 from ema_sim.analysis.records.command_hold import detect_command_hold
 from ema_sim.analysis.records.series import uniform_record
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 FINE_S = 1e-4
 

@@ -7,7 +7,7 @@ from scipy.signal import chirp
 from ema_sim.analysis.estimation.cycle_changes import CycleChanges, bandwidth_hz
 from ema_sim.analysis.estimation.trend import trend
 from ema_sim.analysis.pipeline import Options, analyze_record
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 FINE_HZ = 2000.0
 LOG_HZ = 200.0

@@ -8,7 +8,7 @@ from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.config import load_channel
 from ema_sim.identify.identification import identify
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 FINE_S = 2e-4
 

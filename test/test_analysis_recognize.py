@@ -9,7 +9,7 @@ from analysis_data import delayed, measured
 from ema_sim.analysis.pipeline import analyze_record
 from ema_sim.analysis.recognize import recognize
 from ema_sim.analysis.records import series
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.signals import parse_maneuver
 
 CASES = [

@@ -20,7 +20,7 @@ from ema_sim.analysis.plots import has_load, write_plots
 from ema_sim.analysis.records.command_hold import detect_command_hold
 from ema_sim.analysis.report import to_json, to_markdown
 from ema_sim.cli import main
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 
 def kinds(ra):

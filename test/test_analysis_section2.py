@@ -11,7 +11,7 @@ from ema_sim.analysis.pipeline import Options, analyze_record, analyze_records
 from ema_sim.analysis.section2.hysteresis import hysteretic_damping_constant
 from ema_sim.calibration import command_error
 from ema_sim.config import load_channel
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 STAIRCASE = "staircase:step_deg=5,max_deg=40,hold_s=3"
 LOAD_STEPS = "steps:step_inlb=222.5,max_inlb=1780,hold_s=2"

@@ -6,7 +6,7 @@ import pytest
 from ema_sim.analysis.records.series import Hold
 from ema_sim.analysis.section2.calibration_fit import fit_calibration, pooled_bounds
 from ema_sim.calibration import CommandError
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 KB, OFFSET_DEG = 0.004, -0.03
 LEVELS_DEG = np.arange(-20.0, 20.1, 5.0)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from ema_sim.analysis.pipeline import analyze_record
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 SURFACE_DELAY_S = 0.004
 FEEDBACK_DELAY_S = 0.002

@@ -25,7 +25,8 @@ from ema_sim.export.cstages import STAGES
 from ema_sim.export.diagnose import diagnose
 from ema_sim.export.target import LINEAR, NOT_EXPORTABLE, ExportError, resolve
 from ema_sim.export.verify import compare, sign_and_units, verify
-from ema_sim.io.csv import MeasuredData, write_csv
+from ema_sim.io.csv import write_csv
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import create
 from ema_sim.models.second_order.figure26 import HISTORY_SIZE
 from ema_sim.models.second_order.params import N_STATE, P, SecondOrderParams

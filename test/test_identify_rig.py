@@ -32,7 +32,7 @@ from ema_sim.identify.record import prepare, sensor_range, travel_limits
 from ema_sim.identify.report import strict, to_json
 from ema_sim.identify.stepwise import STEP_RISE, no_worse, prune
 from ema_sim.identify.trust import frequency_hz, on_bound
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.second_order import Loac
 
 # The tests of the module fixture ``rig`` run in one worker (test/conftest.py's SHARED_FIXTURES): the records are

@@ -14,7 +14,8 @@ import pytest
 from ema_sim.config import load_channel
 from ema_sim.errors import DataError
 from ema_sim.faults import parse_fault
-from ema_sim.io.csv import MeasuredData, write_csv
+from ema_sim.io.csv import write_csv
+from ema_sim.io.measured import MeasuredData
 from ema_sim.monitor import Cusum, Options, check_inputs, from_name, from_report, threshold, watch
 from ema_sim.monitor.detect import arl0
 from ema_sim.signals import parse_load, parse_maneuver

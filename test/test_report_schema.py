@@ -22,7 +22,7 @@ from ema_sim.analysis.report import to_json
 from ema_sim.commands.schema import SCHEMAS, text
 from ema_sim.identify.contract import identify_schema
 from ema_sim.io.contract import STRICT_ENV, ReportContractError, check, schema_of, violations
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 ROOT = Path(__file__).resolve().parents[1]
 

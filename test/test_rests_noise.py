@@ -22,7 +22,7 @@ from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import OutputDiagnosis, _floor_caveat, _hunting_rings
 from ema_sim.identify.record import prepare
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 LC_HZ = 37.0
 LC_AMP_MM = 0.035

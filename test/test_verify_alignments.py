@@ -16,7 +16,8 @@ from ema_sim.export import csource, fmu, hoad_c
 from ema_sim.export.diagnose import diagnose
 from ema_sim.export.target import resolve
 from ema_sim.export.verify import unit_ratios
-from ema_sim.io.csv import MeasuredData, write_csv
+from ema_sim.io.csv import write_csv
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.high_order.params import P
 
 fmpy = pytest.importorskip("fmpy")

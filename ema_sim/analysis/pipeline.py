@@ -1,6 +1,6 @@
 """``ema analyze``'s engine: recognise a record's tests and run every section-2 test on it.
 
-:func:`analyze_record` takes one :class:`~ema_sim.io.csv.MeasuredData` (a rig's CSV or a bag), and
+:func:`analyze_record` takes one :class:`~ema_sim.io.measured.MeasuredData` (a rig's CSV or a bag), and
 
 1. measures each output's noise floor and resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`),
    read where the output cannot move (:func:`ema_sim.analysis.estimation.noise.with_rests`: a limit cycle at
@@ -33,7 +33,7 @@ from ema_sim.analysis.records.command_hold import CommandHold, detect_command_ho
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
 from ema_sim.config import CHANNELS, STAND_IN, ChannelConfig, load_channel
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 RECOGNISED = 0.1
 """Share of a record's analysis reported done once its tests are recognised."""

@@ -55,7 +55,7 @@ from ema_sim.analysis.section2.segments import (
     Segment,
 )
 from ema_sim.errors import EmaError
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.signals import Load, Maneuver, parse_load, parse_maneuver
 
 FloatArray = NDArray[np.float64]

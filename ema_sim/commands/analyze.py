@@ -15,7 +15,7 @@ from ema_sim.progress import ProgressBar
 
 if TYPE_CHECKING:
     from ema_sim.analysis.section2.base import RecordAnalysis
-    from ema_sim.io.csv import MeasuredData
+    from ema_sim.io.measured import MeasuredData
 
 PROGRESS_S = 3.0
 """A record longer than this says on stderr, at once, that it is being analysed, and shows a progress bar."""

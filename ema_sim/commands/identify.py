@@ -17,7 +17,8 @@ from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals
 
 if TYPE_CHECKING:
-    from ema_sim.io.csv import MeasuredData, RigFormat
+    from ema_sim.io.csv import RigFormat
+    from ema_sim.io.measured import MeasuredData
 
 
 def load_measured(path: Path, channel: str | None, rig: RigFormat | None = None) -> MeasuredData:

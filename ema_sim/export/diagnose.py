@@ -28,7 +28,7 @@ import numpy as np
 from ema_sim.errors import DataError
 from ema_sim.export.target import CONTINUOUS, ExportTarget
 from ema_sim.export.verify import unit_ratios
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.arrays import FloatArray
 
 EXPLAINED = 0.2

@@ -43,7 +43,7 @@ from ema_sim.identify.outcome import Identification, Removal, Step
 from ema_sim.identify.problem import SETTLE_S, Problem
 from ema_sim.identify.stepwise import fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.second_order import SecondOrderParams
 
 FloatArray = NDArray[np.float64]

@@ -41,7 +41,7 @@ from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
 from ema_sim.identify.record import Record, prepare
 from ema_sim.identify.stages import Clock, Outcome, allow, ceiling, guarded, trade, worse
 from ema_sim.identify.stepwise import MAX_EFFECTS, as_declared, choose_hold, fit_model, prune, reference_fit, search
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 BALANCE_WEIGHTS = (4.0, 16.0, 64.0)
 """Weights tried on an output the baseline leaves worse than the reference, until it no longer does."""

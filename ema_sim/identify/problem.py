@@ -33,7 +33,7 @@ from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.identify.settled import Settled, settled_error
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.base import O_POS, O_RATE, O_SURF
 from ema_sim.models.second_order import SecondOrder, SecondOrderParams
 

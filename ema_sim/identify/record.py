@@ -41,7 +41,7 @@ from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.section2.base import Options
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 MAX_ABS = 1e6
 """No command or output in degrees or millimetres is this large: such a column is not what it is named."""

@@ -1,7 +1,7 @@
 """Data in and out: the measured-data CSV contract and rosbag2 (MCAP) bags of the node suite.
 
 :func:`load_data` is the one entry point of the offline tools: a CSV file or a bag directory (or its
-``.mcap`` file) becomes :class:`~ema_sim.io.csv.MeasuredData`.
+``.mcap`` file) becomes :class:`~ema_sim.io.measured.MeasuredData`.
 """
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ema_sim.errors import DataError
-from ema_sim.io.csv import MeasuredData, RigFormat, read_csv, read_rig
+from ema_sim.io.csv import RigFormat, read_csv, read_rig
+from ema_sim.io.measured import MeasuredData
 
 
 def is_bag(path: str | Path) -> bool:

@@ -23,7 +23,7 @@ from scipy.optimize import minimize_scalar
 from ema_sim.faults.kinds import FAULTS, SECOND_ORDER, FloatArray, Jam
 from ema_sim.faults.schedule import model_family
 from ema_sim.identify.fit import block_covariance
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import ActuatorModel
 from ema_sim.monitor.reference import continue_run, snapshot
 from ema_sim.parameters import metas

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import ActuatorModel
 from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.monitor.detect import Cusum, spread, threshold

@@ -21,7 +21,7 @@ from ema_sim.faults.kinds import FloatArray
 from ema_sim.identify.consistency import read_report
 from ema_sim.identify.fit import fit
 from ema_sim.identify.problem import Problem
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import ActuatorModel, create, model_names
 from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.models.registry import model_class

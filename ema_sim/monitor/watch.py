@@ -19,7 +19,7 @@ import numpy as np
 
 from ema_sim.errors import DataError
 from ema_sim.faults.kinds import FAULTS, FloatArray
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.monitor.detect import Cusum, block_means, spread, threshold
 from ema_sim.monitor.isolate import Candidate, Estimate, Window, candidates, fit_candidate, isolate, signature
 from ema_sim.monitor.reference import Reference, predict

@@ -27,7 +27,7 @@ from ema_sim.config import load_channel
 from ema_sim.errors import EmaError
 from ema_sim.faults import parse_fault
 from ema_sim.faults.kinds import FloatArray
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models import create, model_class
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.signals import parse_load, parse_maneuver

@@ -14,7 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ema_sim.errors import DataError, EmaError
-from ema_sim.io.csv import MeasuredData, RigFormat, read_csv, read_rig
+from ema_sim.io.csv import RigFormat, read_csv, read_rig
+from ema_sim.io.measured import MeasuredData
 
 BAG_SUFFIXES = (".mcap", ".db3")
 

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.errors import DataError
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 FloatArray = NDArray[np.float64]
 

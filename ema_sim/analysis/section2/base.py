@@ -30,7 +30,7 @@ from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.section2.segments import Recognition, Segment
 from ema_sim.config import GENERIC, ChannelConfig
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 if TYPE_CHECKING:
     from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit

@@ -36,7 +36,7 @@ from ema_sim.analysis.records.series import Hold, settled
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, MoveRun, Reading
 from ema_sim.calibration import CommandError, Cubic, command_error, four_corner_bounds
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 FloatArray = NDArray[np.float64]
 

@@ -2,7 +2,7 @@
 
 The node suite's recorder writes every topic as it arrives (raw CDR, no re-serialisation) with the
 test's parameters in the bag's ``custom_data`` and, as JSON, on the latched ``/ema/test`` topic.
-:func:`read_bag` turns one channel of a bag into :class:`~ema_sim.io.csv.MeasuredData` in degrees
+:func:`read_bag` turns one channel of a bag into :class:`~ema_sim.io.measured.MeasuredData` in degrees
 through the calibration curves recorded with it. A bag cut short is still read: one whose writer was
 stopped by SIGTERM or Ctrl-C is complete; one whose ``metadata.yaml`` never got written (the writer
 was killed) is read record by record from its MCAP file up to the last complete chunk.

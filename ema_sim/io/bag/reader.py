@@ -1,6 +1,6 @@
 """Reading suite bags: their topics, metadata and channels, and one channel as measured data.
 
-:func:`read_bag` turns one channel of a bag into :class:`~ema_sim.io.csv.MeasuredData` in degrees
+:func:`read_bag` turns one channel of a bag into :class:`~ema_sim.io.measured.MeasuredData` in degrees
 through the calibration curves recorded with it. A bag whose ``metadata.yaml`` never got written (the
 writer was killed) is read record by record from its MCAP file up to the last complete chunk.
 """
@@ -26,7 +26,8 @@ from ema_msgs_py import typestore as ts
 from ema_sim.config import scaling
 from ema_sim.errors import DataError
 from ema_sim.io.bag.layout import SIDES, FloatArray
-from ema_sim.io.csv import MIN_ROWS, MeasuredData
+from ema_sim.io.csv import MIN_ROWS
+from ema_sim.io.measured import MeasuredData
 
 
 @dataclass
