@@ -21,7 +21,7 @@ from ema_sim.analysis.formatting.units import in_unit, texts_in_unit
 from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.config import GENERIC, load_channel
 from ema_sim.identify.discovery import Closure, Discovery, named_stands
-from ema_sim.identify.effects import BY_KEY, ramps
+from ema_sim.identify.effects import BY_KEY, FREE, ramps
 from ema_sim.identify.fit import block_covariance, correlation
 from ema_sim.identify.identification import identify
 from ema_sim.identify.library import library
@@ -118,10 +118,48 @@ def test_a_threshold_wider_than_the_settled_error_is_not_added():
                               data=SimpleNamespace(unit="mm"))
     check = BY_KEY["static_threshold/feedback"].check
     ctx = SimpleNamespace(problem=problem)
-    assert check({"threshold_deg": 0.006}, ctx) is None  # within the settled error, half a count and 3x noise
+    # the median settled error, half a count and 3 standard errors of that median over the holds
+    assert settled.limit == pytest.approx(settled.median_abs + 0.0005 + 3 * settled.median_se)
+    assert settled.limit < 0.005
+    assert check({"threshold_deg": 0.0045}, ctx) is None
+    assert check({"threshold_deg": 0.006}, ctx) is not None
     why = check({"threshold_deg": 0.764}, ctx)
     assert why is not None
     assert "settles to" in why
+
+
+def test_an_output_in_counts_that_settles_on_its_command_leaves_room_for_half_a_count_and_no_more():
+    """Holds that agree to the count read the settled error exactly: the half count is the only margin."""
+    t = np.arange(4000) / 100.0
+    cmd = np.repeat(np.tile([0.0, 1.0], 20), 100)
+    settled = settled_error(t, cmd, cmd.copy(), 0.01)
+    assert settled is not None
+    assert settled.median_abs == 0.0
+    assert settled.limit == pytest.approx(0.005)
+
+
+def test_one_hold_that_stopped_far_off_is_no_band_the_others_show():
+    """The threshold stops the output at its band's edge on every hold: the typical hold bounds it, not one outlier."""
+    t = np.arange(4000) / 100.0
+    cmd = np.repeat(np.tile([0.0, 1.0], 20), 100)
+    pos = cmd + 0.002 * np.sign(np.sin(t))
+    pos[1850:1900] += 0.05  # one hold stalls 0.05 off
+    settled = settled_error(t, cmd, pos, None)
+    assert settled is not None
+    assert settled.max_abs > 0.045
+    assert settled.median_abs == pytest.approx(0.002)
+    assert settled.limit < 0.02
+
+
+def test_a_fitted_dead_band_is_bounded_by_what_the_records_holds_allow():
+    """The record's own bound lowers the search's upper bound, never below its lower one."""
+    free = FREE["threshold_deg"]
+    assert free.capped(None) is free
+    assert free.capped(free.high * 2) is free
+    capped = free.capped(0.05)
+    assert capped.high == 0.05
+    assert capped.low == free.low
+    assert free.capped(free.low / 10).high == free.low
 
 
 def test_a_named_effect_that_explains_the_record_stands_and_a_matching_term_is_its_equivalent():

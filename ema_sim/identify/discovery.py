@@ -317,7 +317,7 @@ class _InLoop:
     def __init__(self, problem: Problem, cur: Fit, signals: FloatArray, scale: FloatArray) -> None:
         self.problem = problem
         self.cur = cur
-        self.free = [FREE[f] for f in cur.free]
+        self.free = [FREE[f].capped(problem.caps.get(f)) for f in cur.free]
         self.signals = signals
         """``(terms, breakpoints)``: each term's signal at the model's input breakpoints."""
         self.scale = scale

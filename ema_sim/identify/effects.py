@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -68,6 +68,18 @@ class Free:
             The model's value.
         """
         return self.scale * math.exp(x) if self.log else self.scale * x
+
+    def capped(self, high: float | None) -> Free:
+        """The same parameter with its upper bound lowered to ``high`` (never below its lower bound).
+
+        Parameters
+        ----------
+        high : float or None
+            The record's own bound on it (None: the physical range as it is).
+        """
+        if high is None or high >= self.high:
+            return self
+        return replace(self, high=max(high, self.low))
 
     def x_bounds(self) -> tuple[float, float]:
         """Bounds in optimiser coordinates.
@@ -370,15 +382,13 @@ def _dead_band(name: str, value: float, what: str, half: float = 1.0) -> Check:
             return low
         p = ctx.problem
         settled = p.settled
-        noise = p.sigma_deg["position_deg" if "position_deg" in p.outputs else "surface_deg"]
-        if settled is None or half * v[name] <= settled.limit(noise):
+        if settled is None or half * v[name] <= settled.limit * (1.0 + 1e-9):
             return None
         unit = p.data.unit
-        return (f"{what} {v[name]:.4g} {unit} is larger than the errors the output settles to at the end of the "
-                f"command's holds (median {settled.median_abs:.3g}, largest {settled.max_abs:.3g} {unit} over "
-                f"{settled.holds} holds; a band at most the largest and twice the median, + half a count and "
-                f"{NOISE_MARGIN:g}× the noise floor: {settled.limit(noise):.3g}): it explains no settled error, it "
-                "stands in for something else")
+        return (f"{what} {v[name]:.4g} {unit} is larger than the error the output settles to at the end of the "
+                f"command's holds (median {settled.median_abs:.3g} ± {settled.median_se:.2g}, largest "
+                f"{settled.max_abs:.3g} {unit} over {settled.holds} holds; + half a count and {NOISE_MARGIN:g} "
+                f"standard errors: {settled.limit:.3g}): it explains no settled error, it stands in for something else")
     return check
 
 

@@ -172,7 +172,7 @@ def fit(
     max_nfev : int
         Most residual evaluations of the optimiser.
     """
-    free = [FREE[f] for f in free_fields]
+    free = [FREE[f].capped(problem.caps.get(f)) for f in free_fields]
     obj = _Objective(problem, base, free, flip)
     x0 = np.array([f.to_x(getattr(base, f.field)) for f in free], dtype=float)
     if free:

@@ -333,6 +333,16 @@ class Problem:
         return float(np.percentile(np.abs(rate), 99.9))
 
     @cached_property
+    def caps(self) -> dict[str, float]:
+        """The record's own upper bounds on fitted parameters.
+
+        A dead band no wider than the holds' settled errors allow (:meth:`ema_sim.identify.settled.Settled.limit`):
+        a threshold the holds support is fitted within that.
+        """
+        settled = self.settled
+        return {} if settled is None else {"threshold_deg": settled.limit}
+
+    @cached_property
     def settled(self) -> Settled | None:
         """Where the actuator's output settles at the end of the command's holds (:mod:`ema_sim.identify.settled`)."""
         output = "position_deg" if "position_deg" in self.outputs else "surface_deg"

@@ -6,15 +6,20 @@ threshold larger than the settled error it would explain is a proxy for somethin
 a slow tail), and identification does not add it (:mod:`ema_sim.identify.effects`).
 
 The settled error of one hold is the median of output − command over the last :data:`TAIL` of it.
-A real dead band of half width d leaves the output anywhere within it, so its holds' settled errors
-spread from 0 to d, their median near d/2: a dead band may be as wide as the largest of the errors,
-but no wider than twice their median (one hold that stopped far off, on a load or a stall, is no
-band the others show), plus half the output's count (an output in counts cannot settle closer than
-that) and :data:`NOISE_MARGIN` times its noise floor.
+A static threshold (a dead band on the servo's error) stops the output at the edge of its band: on
+every hold the servo reaches without overshooting, the settled error is the band's half width, and
+an overshoot leaves it inside. So the typical (median) hold's settled error bounds the half width:
+a wider band contradicts most holds. The bound adds half the output's count (an output in counts
+cannot settle closer than that) and :data:`NOISE_MARGIN` standard errors of that median over the
+holds (holds that agree to the count read it exactly; noisy ones less so). The largest settled error
+is reported beside it (one hold that stopped far off, on a load or a stall, is no band the others
+show). A threshold the record pays for is fitted within this bound (:attr:`ema_sim.identify.problem.Problem.caps`)
+and said to be held there when the fit asked for more.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,7 +33,9 @@ TAIL = 0.3
 MIN_HOLDS = 3
 """Fewer holds than this say nothing about where the output settles."""
 NOISE_MARGIN = 3.0
-"""Noise floors a settled error may be read short by."""
+"""Standard errors of the median settled error it may be read short by."""
+MEDIAN_EFFICIENCY = 1.2533
+"""A median's standard error over the mean's, for Gaussian noise (√(π/2))."""
 
 
 @dataclass(frozen=True)
@@ -43,16 +50,13 @@ class Settled:
     """How many holds it was read on."""
     count: float
     """The output's count (0: continuous), in the record's unit."""
+    median_se: float = 0.0
+    """Standard error of :attr:`median_abs` from the holds' scatter, in the record's unit."""
 
-    def limit(self, noise: float) -> float:
-        """The largest dead band (half width) the settled errors can explain, the output's noise floor given.
-
-        Parameters
-        ----------
-        noise : float
-            The output's noise floor, in the record's unit.
-        """
-        return min(self.max_abs, 2.0 * self.median_abs) + 0.5 * self.count + NOISE_MARGIN * noise
+    @property
+    def limit(self) -> float:
+        """The widest dead band (half width) the settled errors can explain (module docstring)."""
+        return self.median_abs + 0.5 * self.count + NOISE_MARGIN * self.median_se
 
 
 def _holds(time_s: FloatArray, command: FloatArray) -> list[tuple[int, int]]:
@@ -91,4 +95,5 @@ def settled_error(time_s: FloatArray, command: FloatArray, output: FloatArray, c
     for a, b in spans:
         k = a + int((1.0 - TAIL) * (b - a))
         errs.append(abs(float(np.median(output[k:b] - command[k:b]))))
-    return Settled(float(np.median(errs)), float(np.max(errs)), len(errs), float(count or 0.0))
+    se = MEDIAN_EFFICIENCY * float(np.std(errs, ddof=1)) / math.sqrt(len(errs))
+    return Settled(float(np.median(errs)), float(np.max(errs)), len(errs), float(count or 0.0), se)

@@ -268,8 +268,12 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
         fitted = f"corner 2ζωn = {new.params.zeta * new.params.wn_rad_s / math.pi:.3g} Hz"
     removed = tuple(KEYS[f].name if f in KEYS else f for f in cur.free if f not in new.free)
     instead = f"; replaces {', '.join(removed)}" if removed else ""
+    held = [f for f in effect.fields if f in problem.caps
+            and float(getattr(new.params, f)) >= problem.caps[f] * (1.0 - 1e-6)]
+    at_cap = "".join(f"; held at {_fmt(problem.caps[f])} {problem.data.unit}, the widest dead band the settled errors "
+                     "of the command's holds allow (the fit asked for more)" for f in held)
     evidence = (f"{effect.evidence(problem.data.command_deg)} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
-                f"{where}{instead}; error above the noise floor: {cut}")
+                f"{where}{instead}{at_cap}; error above the noise floor: {cut}")
     steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence, removed))
     for companion in effect.companions:
         extra = BY_KEY[companion]
