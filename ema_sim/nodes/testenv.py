@@ -6,13 +6,20 @@ is the frame it came in, its content is what the environment made of it. The pro
 ail|flight|none`` or a parameter file) sets transport delay, the FMU's 50 Hz lags, 5 mV quantization
 and noise; ``--disable`` switches elements off. A non-finite value passes through untouched and
 unfiltered (it does not poison the filters); the EMAC rejects it and counts it.
+
+Each path's elements (``command.noise_rms_v``, ``feedback.delay_s``, ``command.lag_hz``,
+``command.quantization_v``...) can be set at run time (``ros2 param set``, a ``set_parameters`` call): the
+change is logged and applies from the next frame, each channel's path rebuilt in steady state at its last
+input (the delay line and the lag start from it; the noise restarts its stream). The profile, the elements
+switched off, the seed, the full scale and the frame rate are read when the node starts.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 from rcl_interfaces.msg import ParameterType
@@ -28,7 +35,7 @@ from ema_sim.parameters import metas
 
 
 def profile_specs(profile: Profile) -> list[Spec]:
-    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them), read-only.
+    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them); the paths' run-time.
 
     Each path element's description, unit and range come from its declaration (:class:`PathSpec`'s metadata).
 
@@ -42,13 +49,14 @@ def profile_specs(profile: Profile) -> list[Spec]:
     list of Spec
         The seed and full scale, then one declaration per element of each path (``command.lag_hz``...).
     """
-    out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62),
+    out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62,
+                why="every channel's noise stream is seeded once, at start, so a run is reproducible"),
            Spec("full_scale_v", profile.full_scale_v, "converters' full scale", "V", 0.1, 1000.0)]
     for path in PATHS:
         for key, m in metas(PathSpec).items():
             high = m.max if math.isfinite(m.max) else None
             out.append(Spec(f"{path}.{key}", getattr(getattr(profile, path), key), f"{path} path: {m.description}",
-                            m.unit, min(m.min, m.off if m.off is not None else m.min), high))
+                            m.unit, min(m.min, m.off if m.off is not None else m.min), high, read_only=False))
     return out
 
 
@@ -70,10 +78,14 @@ class TestEnvNode(SuiteNode):
         super().__init__(name, args)
         self.ports = ports(self)
         own = self.params.declare([
-            Spec("profile", "none", "test environment: ail, flight, none, or a profile parameter file"),
+            Spec("profile", "none", "test environment: ail, flight, none, or a profile parameter file",
+                 why="the profile sets every element's default when the node starts; set the elements themselves "
+                     "(command.noise_rms_v...) at run time"),
             Spec("disable", [], "elements switched off: delay, lag, quantization, noise, or command.X / feedback.X",
-                 kind=ParameterType.PARAMETER_STRING_ARRAY),
-            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5),
+                 kind=ParameterType.PARAMETER_STRING_ARRAY,
+                 why="applied to the profile when the node starts; set an element to 0 at run time to switch it off"),
+            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5,
+                 why="the delay lines and the lags are sampled on this frame, set up at start"),
         ], name)
         loaded = load_profile(own["profile"])
         values = self.params.declare(profile_specs(loaded), f"{name}: profile {loaded.name}")
@@ -83,14 +95,43 @@ class TestEnvNode(SuiteNode):
         self.cmd_paths: dict[str, SignalPath] = {}
         self.fb_paths: dict[str, SignalPath] = {}
         self.cur_delays: dict[str, TransportDelay] = {}
+        self.last_in: dict[str, dict[str, float]] = {"command": {}, "feedback": {}, "current": {}}
+        """Each path's last finite input per channel: a path rebuilt at run time starts steady there."""
         self.frames = {"command": 0, "feedback": 0}
         self.passed_bad = 0
+        self.changes = 0
+        """Run-time changes applied (elements set through the parameters)."""
+        for path in PATHS:
+            for key in metas(PathSpec):
+                self.params.on_change(f"{path}.{key}", self._element_change(path, key))
         self.cmd_pub = self.ports.frame_publisher(ct.EMAC_COMMAND)
         self.fb_pub = self.ports.frame_publisher(ct.FMU_FEEDBACK)
         self.ports.frame_subscription(ct.FMU_COMMAND, self._on_command, self._bad_message)
         self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback, self._bad_message)
         d = self.profile.describe()
         self.get_logger().info(f"profile {d['profile']}: command {d['command_path']}; feedback {d['feedback_path']}")
+
+    def _element_change(self, path: str, key: str) -> Callable[[Any], str]:
+        """The run-time change of one element of one path (a :meth:`~ema_sim.nodes.params.Parameters.on_change`)."""
+        def apply(value: Any) -> str:
+            old = getattr(self.profile, path)
+            spec = PathSpec.from_mapping({**old.as_dict(), key: float(value)}, f"{self.get_name()}: {path}")
+            self.profile = replace(self.profile, command=spec) if path == "command" else \
+                replace(self.profile, feedback=spec)
+            paths = self.cmd_paths if path == "command" else self.fb_paths
+            make = self.profile.command_path if path == "command" else self.profile.feedback_path
+            for ch in paths:
+                stream = ct.CHANNELS.index(ch) if ch in ct.CHANNELS else list(paths).index(ch) + len(ct.CHANNELS)
+                paths[ch] = make(self.frame_s, stream, self.last_in[path].get(ch, 0.0))
+            if path == "feedback" and key == "delay_s":  # the motor current rides the feedback harness
+                for ch in self.cur_delays:
+                    self.cur_delays[ch] = self.profile.current_delay(self.frame_s)
+                    self.cur_delays[ch].reset(self.last_in["current"].get(ch, 0.0))
+            self.changes += 1
+            now = make(self.frame_s).describe()
+            return (f"{path}.{key}: {getattr(old, key):g} → {float(value):g} (from the next frame); {path} path now "
+                    f"{now}")
+        return apply
 
     def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> Any:
         path = table.get(channel)
@@ -113,9 +154,12 @@ class TestEnvNode(SuiteNode):
         try:
             pos = msg.position
             values = []
+            last = self.last_in["command"]
             for i, name in enumerate(msg.name):
                 v = float(pos[i]) if i < len(pos) else math.nan
                 values.append(self._through(self._path(self.cmd_paths, name, self.profile.command_path, v), v))
+                if math.isfinite(v):
+                    last[name] = v
             self.frames["command"] += 1
             self.mark_running()
             self.cmd_pub.publish(JointFrame(msg.stamp_ns, msg.name, values, frame_id=msg.frame_id))
@@ -127,11 +171,16 @@ class TestEnvNode(SuiteNode):
             pos, cur = [], []
             position, effort = msg.position, msg.effort
             with_current = len(effort) == len(msg.name)
+            last, last_a = self.last_in["feedback"], self.last_in["current"]
             for i, name in enumerate(msg.name):
                 v = float(position[i]) if i < len(position) else math.nan
                 pos.append(self._through(self._path(self.fb_paths, name, self.profile.feedback_path, v), v))
+                if math.isfinite(v):
+                    last[name] = v
                 if with_current:
                     a = float(effort[i])
+                    if math.isfinite(a):
+                        last_a[name] = a
                     delay = self.cur_delays.get(name)
                     if delay is None:
                         delay = self.cur_delays[name] = self.profile.current_delay(self.frame_s)
@@ -143,7 +192,8 @@ class TestEnvNode(SuiteNode):
             self.throttled("drop", f"feedback message dropped: {exc}")
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
-        return {"profile": self.profile.describe(), "frames": dict(self.frames), "passed_bad": self.passed_bad}
+        return {"profile": self.profile.describe(), "frames": dict(self.frames), "passed_bad": self.passed_bad,
+                "run_time_changes": self.changes}
 
 
 def parser() -> argparse.ArgumentParser:
