@@ -23,7 +23,8 @@ has a standby (:mod:`ema_sim.nodes.standby`): its interpreter started and its no
 need, it stands in at once, and a new standby is started :data:`STANDBY_AFTER_S` later (not to take the CPU
 from the node rejoining). Any other node that
 ends with an error stops the run. The suite ends when the maneuver node has finished and closed its bag; the
-others then get SIGINT, and SIGKILL only if they do not stop within a few seconds; if the launcher itself
+others then get SIGTERM (which a node takes as SIGINT once running, and which ends one still starting
+without a traceback), and SIGKILL only if they do not stop within a few seconds; if the launcher itself
 dies, each node gets SIGTERM from the kernel (:mod:`ema_sim.nodes.lifetime`). Each process's
 output goes to ``<bag>.logs/<process>.log``; each node prints a JSON summary line that :class:`Suite`
 collects by node name.
@@ -242,7 +243,7 @@ class Suite:
         return int(man.returncode)
 
     def stop(self) -> dict[str, int | None]:
-        """SIGINT to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
+        """SIGTERM to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
         self._stop_standbys()
         first = ("simclock", "maneuver", "fmu", "suite", "container")
         order = [*first, *[n for n in self.procs if n not in first]]
@@ -250,7 +251,7 @@ class Suite:
             proc = self.procs.get(name)
             if proc is not None and proc.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
-                    os.kill(proc.pid, signal.SIGINT)
+                    os.kill(proc.pid, signal.SIGTERM)
         deadline = time.monotonic() + STOP_TIMEOUT_S
         for proc in self.procs.values():
             try:

@@ -250,6 +250,39 @@ def test_ema_launch_stops_cleanly_on_sigterm_and_leaves_a_complete_bag(tmp_path)
     assert len(data) >= 100
 
 
+@pytest.mark.parametrize("when", ["importing", "nodes importing"])
+def test_ema_launch_interrupted_in_its_first_second_prints_no_traceback(tmp_path, when):
+    """Ctrl-C while ``ema`` imports its command, or once the suite's processes are started and importing: one
+    line, status 130, no traceback anywhere (the nodes, stopped with SIGTERM, end quietly). Python's verbose
+    imports say when each process is importing (numpy: well into its imports)."""
+    bag = tmp_path / "early"
+    logs = tmp_path / "early.logs"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain(12 + len(when))), PYTHONUNBUFFERED="1", PYTHONVERBOSE="1")
+    cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "step", "--lockstep", "--layout",
+           "processes", "--bag", str(bag)]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    mark = "import 'numpy'" if when == "importing" else "ema launch:"
+    seen = ""
+    while mark not in seen:
+        seen = proc.stdout.readline()
+        assert seen, "ema ended before it got there"
+    if when == "nodes importing":
+        deadline = time.monotonic() + 60
+        names = {"emac.log", "testenv.log", "simclock.log", "maneuver.log"}
+        while not (names <= {p.name for p in logs.glob("*.log")}
+                   and all("import 'numpy'" in (logs / n).read_text(errors="replace") for n in names)):
+            assert time.monotonic() < deadline, "the nodes never imported numpy"
+            assert proc.poll() is None
+        assert not any("EMA_SUMMARY" in p.read_text(errors="replace") for p in logs.glob("*.log"))
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=60)
+    assert "Traceback" not in out, out[-3000:]
+    assert proc.returncode == 130
+    assert ("ema: interrupted" if when == "importing" else "ema launch: interrupted; closing the bag") in out
+    for node_log in logs.glob("*.log"):
+        assert "Traceback" not in node_log.read_text(errors="replace"), node_log.name
+
+
 # --------------------------------------------------------------------------- bad messages, failures
 @pytest.fixture(scope="module")
 def ros_context():

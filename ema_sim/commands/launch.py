@@ -55,13 +55,13 @@ def run(args: argparse.Namespace) -> int:
     cfg, test, what, duration = _config(args)
     bag = cfg.bag_dir
     suite = Suite(cfg)
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the bag
-        signal.signal(signum, _interrupt)  # closed (SIGHUP: the terminal closed; SIGKILL: ema_sim.nodes.lifetime)
     mode = "lockstep" if args.lockstep else "real time"
-    print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, profile {args.profile}, {mode}, "
-          f"ROS_DOMAIN_ID {suite.domain_id}; logs and the run's parameters ({suite.params_file.name}) in "
-          f"{suite.log_dir}", flush=True)
-    try:
+    try:  # from the handlers on, a signal anywhere here (its first line printed or not) stops the suite
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the
+            signal.signal(signum, _interrupt)  # bag closed (SIGHUP: the terminal closed; SIGKILL: nodes.lifetime)
+        print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, profile {args.profile}, {mode}, "
+              f"ROS_DOMAIN_ID {suite.domain_id}; logs and the run's parameters ({suite.params_file.name}) in "
+              f"{suite.log_dir}", flush=True)
         suite.run(args.timeout)
     except KeyboardInterrupt:  # the suite is stopped: the bag is closed
         print("ema launch: interrupted; closing the bag", file=sys.stderr)
