@@ -100,6 +100,7 @@ class Suite:
         self.restarts: dict[str, int] = {}
         """Times each respawned process was started again."""
         self._standby: dict[str, subprocess.Popen[bytes]] = {}
+        self._stopping = False
         self._standby_due: dict[str, float] = {}
         """Respawned processes without a standby: when the next is started (monotonic)."""
         self.started = 0.0
@@ -136,6 +137,7 @@ class Suite:
     def start(self) -> None:
         """Write the run's parameter file and start every process (returns at once; the nodes find each other)."""
         cfg = self.cfg
+        self._stopping = False
         if self.bag.exists():
             raise EmaError(f"{self.bag} exists already; give a new bag directory")
         self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -227,6 +229,8 @@ class Suite:
                 status = proc.poll()
                 if name == self.fmu_process or status is None:
                     continue
+                if self._stopping:  # ending because the suite is being stopped (another thread): no restart
+                    continue
                 if name in self.cfg.respawn and self.restarts.get(name, 0) < RESPAWN_LIMIT:
                     self._respawn(name, status)
                 elif status != 0:
@@ -244,6 +248,7 @@ class Suite:
 
     def stop(self) -> dict[str, int | None]:
         """SIGTERM to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
+        self._stopping = True
         self._stop_standbys()
         first = ("simclock", "maneuver", "fmu", "suite", "container")
         order = [*first, *[n for n in self.procs if n not in first]]

@@ -1,9 +1,11 @@
-"""A run that survives a node: an EMAC killed mid-run (SIGKILL) in ``--layout processes --lockstep``.
+"""A run that survives a node: an EMAC killed mid-run (SIGKILL) in ``--layout processes``, lockstep and real time.
 
-The clock marks the dead channel ERROR on ``/diagnostics``, leaves it out of lockstep after ``stall_timeout_s``
+Lockstep: the clock marks the dead channel ERROR on ``/diagnostics``, leaves it out after ``stall_timeout_s``
 and goes on; the suite restarts the EMAC (``respawn``); the restarted EMAC starts on the clock's present frame
 and is back in lockstep; the bag says all of it. Waits on the run's own messages (``/clock``, ``/diagnostics``,
-the feedback), on a ROS domain of its own. The times from the kill to each are printed (``-s``).
+the feedback), on a ROS domain of its own. Real time: the test environment marks the channel ERROR while it is
+commanded without feedback, and OK once the restarted EMAC answers. The times from the kill to each are printed
+(``-s``).
 """
 
 import os
@@ -27,6 +29,7 @@ pytestmark = pytest.mark.ros
 OFFSET = 197
 KILLED = "right_wing"
 STATUS = f"simclock: lockstep {KILLED}"
+FEEDBACK_STATUS = f"/testenv: feedback {KILLED}"
 OK, ERROR = (int.from_bytes(level, "little") for level in (DiagnosticStatus.OK, DiagnosticStatus.ERROR))
 """The levels as numbers (rclpy gives bytes, a bag's messages numbers)."""
 
@@ -34,7 +37,8 @@ OK, ERROR = (int.from_bytes(level, "little") for level in (DiagnosticStatus.OK, 
 class Watch:
     """What the test sees of the run: the clock, the killed channel's feedback stamps and lockstep status."""
 
-    def __init__(self, context):
+    def __init__(self, context, status=STATUS):
+        self.status = status
         self.node = rclpy.create_node("respawn_watch", context=context)
         self.executor = make_executor(context)
         self.executor.add_node(self.node)
@@ -56,7 +60,7 @@ class Watch:
     def _on_diag(self, msg):
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec  # the clock's frame
         self.statuses += [(time.monotonic(), stamp, int.from_bytes(s.level, "little"), s.message)
-                          for s in msg.status if s.name == STATUS]
+                          for s in msg.status if s.name == self.status]
 
     def until(self, what, done, timeout_s=120.0):
         """Spin until ``done()``; the wall time it became true."""
@@ -126,3 +130,32 @@ def test_a_killed_emac_is_left_out_restarted_and_back_in_lockstep_while_the_run_
     assert said[first_out][0] == ERROR
     assert (OK, "in lockstep") in said[:first_out]
     assert (OK, "in lockstep") in said[first_out:]
+
+
+def test_a_killed_emac_in_real_time_is_error_while_commanded_and_ok_once_restarted(tmp_path):
+    cfg = SuiteConfig(bag=tmp_path / "bag", maneuver="steps:amps_deg=1/5,lead_s=0.2,hold_s=0.5", duration_s=60.0,
+                      channels=["left_wing"], emac_channels=["left_wing", KILLED], layout="processes",
+                      emac="channels", respawn=["emacs"], domain_id=free_domain_id(os.getpid() + OFFSET + 1))
+    suite = Suite(cfg)
+    with ros_context(OFFSET + 1) as context:
+        watch = Watch(context, FEEDBACK_STATUS)
+        suite.start()
+        waiter = threading.Thread(target=suite.wait, daemon=True)  # the launcher's loop: it restarts the EMAC
+        try:
+            waiter.start()
+            t_ok = watch.until("the channel's feedback status OK", lambda: watch.level_since(0.0, OK, "") is not None)
+            watch.until("feedback of the channel to kill", lambda: watch.feedback_ns > 0)
+            killed = suite.procs[f"emac_{KILLED}"]
+            os.kill(killed.pid, signal.SIGKILL)
+            t_kill = time.monotonic()
+            assert t_kill > t_ok
+            t_error = watch.until("ERROR status", lambda: watch.level_since(t_kill, ERROR, "no feedback") is not None)
+            t_back = watch.until("OK again", lambda: watch.level_since(t_error, OK, "feedback flowing") is not None)
+            print(f"real time: kill → ERROR {t_error - t_kill:.3f} s, → feedback back {t_back - t_kill:.3f} s")
+            assert suite.procs[f"emac_{KILLED}"].pid != killed.pid
+            assert suite.procs["maneuver"].poll() is None  # the run went on
+        finally:
+            suite.stop()
+            watch.node.destroy_node()
+    assert suite.restarts == {f"emac_{KILLED}": 1}
+    assert suite.summaries()["testenv"]["silences"] == 1
