@@ -176,18 +176,22 @@ class Suite:
         """Start a respawned process again after it ended with ``status`` (a line on stderr and in its log)."""
         count = self.restarts[name] = self.restarts.get(name, 0) + 1
         standby = self._standby.pop(name, None)
-        warm = standby is not None and standby.poll() is None and standby.stdin is not None
+        warm = False
+        if standby is not None and standby.poll() is None and standby.stdin is not None:
+            try:
+                standby.stdin.write(b"run\n")
+                standby.stdin.close()
+                self.procs[name] = standby
+                warm = True
+            except OSError:  # it ended between the look and the word: start one cold
+                pass
+        if not warm:
+            self._spawn(name)
         line = (f"ema launch: {name} ended (status {status}) before the {self.driver}; started again "
                 f"({'its standby' if warm else 'cold'}; {count} of at most {RESPAWN_LIMIT} restarts)")
         self._logs[name].write(f"{line}\n".encode())
         self._logs[name].flush()
         print(line, file=sys.stderr, flush=True)
-        if warm and standby is not None and standby.stdin is not None:
-            standby.stdin.write(b"run\n")
-            standby.stdin.close()
-            self.procs[name] = standby
-        else:
-            self._spawn(name)
         self._standby_due[name] = time.monotonic() + STANDBY_AFTER_S
 
     def _stop_standbys(self) -> None:
