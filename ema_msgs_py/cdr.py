@@ -130,6 +130,33 @@ def stamp_ns(raw: bytes | memoryview) -> int | None:
     return sec * NS + nsec
 
 
+def restamp(raw: bytes | memoryview, ns: int) -> bytes:
+    """The message with its leading stamp (the first field, a ``builtin_interfaces/Time``) set to ``ns``.
+
+    Parameters
+    ----------
+    raw : bytes or memoryview
+        The serialized message, either endianness, starting with a stamp (``rcl_interfaces/Log``, a Header...).
+    ns : int
+        The new stamp, ns (≥ 0).
+
+    Returns
+    -------
+    bytes
+        The same message, restamped.
+
+    Raises
+    ------
+    ValueError
+        The message is too short to hold a stamp.
+    """
+    if len(raw) < 12:
+        raise ValueError(f"a message of {len(raw)} bytes holds no stamp")
+    out = bytearray(raw)
+    struct.pack_into("<iI" if out[1] == 1 else ">iI", out, 4, ns // NS, ns % NS)
+    return bytes(out)
+
+
 _KNOWN: dict[int, list[tuple[bytes, struct.Struct, tuple[str, ...], str, tuple[int, int, int]]]] = {}
 """Layouts seen before, by message length: a publisher's names rarely change, so most takes are one
 ``startswith`` and one ``unpack_from``."""

@@ -122,8 +122,9 @@ TOPICS: dict[str, TopicSpec] = {t.name: t for t in (
     TopicSpec("/ema/nodes", STRING, LATCHED_QOS, "every suite node", "every suite node, ema launch",
               {"data": "JSON: a node's full name, pid, host and start time; the younger of two nodes of one name "
                        "refuses to run"}, per_frame=False),
-    TopicSpec("/diagnostics", DIAGNOSTIC_ARRAY, EVENT_QOS, "emac, testenv", "monitors",
-              {"status": "one status per channel: brake, failure, counters of rejected inputs"}, per_frame=False),
+    TopicSpec("/diagnostics", DIAGNOSTIC_ARRAY, EVENT_QOS, "emac, testenv, simclock", "monitors",
+              {"status": "one status per channel: brake, failure, counters of rejected inputs; simclock: each "
+                         "channel in lockstep, silent or left out"}, per_frame=False),
     TopicSpec("/ema/faults/truth", STRING, EVENT_QOS, "emac (faults injected: emac.faults)", "recorder, scoring",
               {"data": "JSON {channel, time_s, faults: {fault_<kind>: size in}}, at each change of an injected "
                        "fault's size"}, per_frame=False),

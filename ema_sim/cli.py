@@ -65,8 +65,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         The exit status: 0 on success, 2 for a user error (one line on stderr), 130 when interrupted.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    try:
+        parser = build_parser(argv)  # a second of imports: Ctrl-C here is an interruption too, not a traceback
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:
+        print("ema: interrupted", file=sys.stderr)
+        return 130
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:

@@ -4,7 +4,8 @@ The launch files and ``ema launch`` start the same processes from the same
 :class:`~ema_sim.run.RunDescription`: its :meth:`~ema_sim.run.RunDescription.processes` become
 ``launch_ros`` ``Node`` actions, each given the run's one parameter file (written next to the bag, as
 ``<bag>.logs/run.yaml``), its node name, the namespace and the ``/clock`` remapping (``clock_topic``); the
-driver's end shuts the launch down (its bag is then closed). Imports ``launch`` and ``launch_ros``, which a
+processes named by ``respawn`` are restarted when they end; the driver's end shuts the launch down (its bag is
+then closed). Imports ``launch`` and ``launch_ros``, which a
 ROS 2 install has.
 """
 
@@ -53,5 +54,6 @@ def _nodes(context: Any, layout: str) -> list[Any]:
     procs = run.processes()
     return [Node(package=PACKAGE, executable=proc.executable, name=proc.node_name, namespace=run.namespace or None,
                  parameters=[str(params)], remappings=remap, arguments=list(proc.arguments), output="screen",
+                 respawn=proc.name in run.respawn, respawn_delay=0.0,
                  on_exit=[Shutdown(reason=f"{run.driver} finished")] if proc is procs[-1] else None)
             for proc in procs]

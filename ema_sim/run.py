@@ -154,6 +154,12 @@ class RunDescription:
     """ROS namespace of every node (``/aircraft2``): every topic of the run moves with it."""
     faults: list[str] = field(default_factory=list)
     """Faults the EMACs inject on a schedule (``emac.faults`` specs, times from the channel's start)."""
+    respawn: list[str] = field(default_factory=list)
+    """Processes restarted when they end before the driver (names of :meth:`processes`, comma lists, ``emacs``
+    for every EMAC process of the ``processes`` layout); never the driver's (its end is the run's)."""
+    stall_timeout_s: float = 5.0
+    """Lockstep: wall seconds the clock waits for a silent EMAC before going on without it (it rejoins when its
+    feedback reaches the clock again, :mod:`ema_sim.nodes.clock`)."""
 
     def __post_init__(self) -> None:
         # `ema` imports this module at every start (commands/launch.py); the switches import python-control
@@ -187,6 +193,9 @@ class RunDescription:
         self.fmu_args = []
         self.namespace = _namespace(self.namespace)
         self._check_driver()
+        if not (math.isfinite(self.stall_timeout_s) and self.stall_timeout_s >= 0.0):
+            raise EmaError(f"the stall timeout must be a number of seconds ≥ 0, got {self.stall_timeout_s!r}")
+        self.respawn = self._respawned(self.respawn)
         if self.bag is None:
             from ema_sim.nodes.driver import stamped_bag  # noqa: PLC0415 - imports rclpy: only when a bag is named here
 
@@ -214,6 +223,25 @@ class RunDescription:
                               duration_s=self.duration_s)
             self.run_s = plan.duration_s
             self.test_name = plan.test
+
+    def _respawned(self, names: list[str]) -> list[str]:
+        """The processes to restart, ``emacs`` expanded and each checked (one clear error naming the choices)."""
+        procs = [p.name for p in self.processes()]
+        choices = [p for p in procs if p != self.driver_process]
+        out: list[str] = []
+        for name in (n.strip() for item in names for n in item.split(",") if n.strip()):
+            if name == "emacs":
+                if self.layout != "processes":
+                    raise EmaError(f"--respawn emacs needs --layout processes (the {self.layout} layout composes the "
+                                   f"EMACs in {procs[0]}); give --respawn {procs[0]} to restart that process")
+                picked = [n for n in self.emac_nodes() if n in procs]
+            elif name in choices:
+                picked = [name]
+            else:
+                raise EmaError(f"--respawn {name}: no process of this run to restart by that name; give emacs or one "
+                               f"of {', '.join(choices)} (the driver, {self.driver_process}, ends the run)")
+            out += [n for n in picked if n not in out]
+        return out
 
     # ----------------------------------------------------------------- nodes and processes
     @property
@@ -288,7 +316,8 @@ class RunDescription:
                                   if v is not None}}
         if self.lockstep:
             out["simclock"] = {**common, "wait_for": [*waited, self.driver], "channels": self.emac_channels,
-                               "window": self.window, "duration_s": self.run_s, "frame_hz": self.frame_hz}
+                               "window": self.window, "duration_s": self.run_s, "frame_hz": self.frame_hz,
+                               "stall_timeout_s": self.stall_timeout_s}
         for proc in self.processes():
             if proc.executable == CONTAINER:
                 out[CONTAINER] = {**sim, "nodes": list(proc.nodes), "measure_busy": self.measure_busy}
@@ -365,6 +394,8 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
     "open_loop": ("false", "with fmu: open-loop AIL"),
     "bungee": ("", "with fmu: bungee on the wings, in·lb"),
     "namespace": ("", "ROS namespace of every node, e.g. /aircraft2"),
+    "respawn": ("", "processes restarted when they end before the driver, comma-separated (emacs: every EMAC's)"),
+    "stall_timeout": ("5", "lockstep: wall seconds the clock waits for a silent EMAC before going on without it"),
     "clock_topic": ("/clock", "the topic the nodes take the lockstep clock from (/clock, ROS's; a relative name such "
                               "as clock: one clock per namespace, for two vehicles in lockstep on one graph)"),
 }
@@ -417,6 +448,7 @@ def from_launch_arguments(values: dict[str, str], layout: str) -> RunDescription
         lockstep = sim
     duration = number("duration")
     seed = number("seed")
+    stall = number("stall_timeout")
     return RunDescription(
         bag=Path(text("bag")) if text("bag") else None, model=text("model"), profile=text("profile"),
         test=text("test") or None, maneuver=text("maneuver") or None, load=text("load") or None,
@@ -425,5 +457,6 @@ def from_launch_arguments(values: dict[str, str], layout: str) -> RunDescription
         window=int(number("window") or 1), layout=layout, disable=[text("disable")],
         seed=None if seed is None else int(seed), rt_priority=int(number("rt_priority") or 0), fmu=fmu,
         open_loop=flag("open_loop"), bungee_inlb=number("bungee"), namespace=text("namespace"),
+        respawn=[text("respawn")] if text("respawn") else [], stall_timeout_s=5.0 if stall is None else stall,
     )
 

@@ -16,8 +16,15 @@ one box (default), or ``channels``, one EMAC node per channel.
 What runs where, and the one parameter file every process reads, is the run's
 :class:`~ema_sim.run.RunDescription` (the launch files under ``launch/`` start the same processes).
 The maneuver node waits for the others on ``/ema/ready`` and then records; under lockstep the clock
-waits for all of them. The suite ends when the maneuver node has finished and closed its bag; the
-others then get SIGINT, and SIGKILL only if they do not stop within a few seconds; if the launcher itself
+waits for all of them. A process named in the run's ``respawn`` that ends before the driver is started again
+at once, with the same command (at most :data:`RESPAWN_LIMIT` times; each restart is a line on stderr and in
+its log): a restarted EMAC rejoins the run, in lockstep on the clock's present frame. Each respawned process
+has a standby (:mod:`ema_sim.nodes.standby`): its interpreter started and its node's module imported ahead of
+need, it stands in at once, and a new standby is started :data:`STANDBY_AFTER_S` later (not to take the CPU
+from the node rejoining). Any other node that
+ends with an error stops the run. The suite ends when the maneuver node has finished and closed its bag; the
+others then get SIGTERM (which a node takes as SIGINT once running, and which ends one still starting
+without a traceback), and SIGKILL only if they do not stop within a few seconds; if the launcher itself
 dies, each node gets SIGTERM from the kernel (:mod:`ema_sim.nodes.lifetime`). Each process's
 output goes to ``<bag>.logs/<process>.log``; each node prints a JSON summary line that :class:`Suite`
 collects by node name.
@@ -42,6 +49,11 @@ from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS, Run
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
 STOP_TIMEOUT_S = 8.0
+RESPAWN_LIMIT = 5
+"""Restarts of one process in a run: a process that keeps ending is a fault to report, not to hide."""
+STANDBY_AFTER_S = 5.0
+"""After a standby stood in, wall seconds before the next standby of that process starts."""
+STANDBY = "ema_sim.nodes.standby"
 SuiteConfig = RunDescription
 """One run of the suite (the name the tests and benchmarks use)."""
 __all__ = ["DEFAULT_EMAC", "DEFAULT_LAYOUT", "EMAC_HOSTING", "LAYOUTS", "Suite", "SuiteConfig", "free_domain_id",
@@ -84,6 +96,13 @@ class Suite:
         """The run's one parameter file (:meth:`~ema_sim.run.RunDescription.parameter_file`)."""
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
+        self._commands: dict[str, list[str]] = {}
+        self.restarts: dict[str, int] = {}
+        """Times each respawned process was started again."""
+        self._standby: dict[str, subprocess.Popen[bytes]] = {}
+        self._stopping = False
+        self._standby_due: dict[str, float] = {}
+        """Respawned processes without a standby: when the next is started (monotonic)."""
         self.started = 0.0
         self.duration_s = cfg.run_s
 
@@ -118,6 +137,7 @@ class Suite:
     def start(self) -> None:
         """Write the run's parameter file and start every process (returns at once; the nodes find each other)."""
         cfg = self.cfg
+        self._stopping = False
         if self.bag.exists():
             raise EmaError(f"{self.bag} exists already; give a new bag directory")
         self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -129,10 +149,64 @@ class Suite:
             self._logs[proc.name] = log
             log.write((shlex.join(cmd) + "\n").encode())
             log.flush()
-            # A session of its own: the terminal's Ctrl-C reaches the launcher, which stops the nodes in order
-            # (the driver first: it closes the bag); the nodes end with it however it ends (PARENT_ENV).
-            self.procs[proc.name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env(),
-                                                     start_new_session=True)
+            self._commands[proc.name] = cmd
+            self._spawn(proc.name)
+        self._standby_due = dict.fromkeys(self.cfg.respawn, self.started)
+        self._start_standbys()
+
+    def _spawn(self, name: str) -> None:
+        # A session of its own: the terminal's Ctrl-C reaches the launcher, which stops the nodes in order
+        # (the driver first: it closes the bag); the nodes end with it however it ends (PARENT_ENV).
+        self.procs[name] = subprocess.Popen(self._commands[name], stdout=self._logs[name], stderr=subprocess.STDOUT,
+                                            env=self._env(), start_new_session=True)
+
+    def _start_standbys(self) -> None:
+        """Start the standbys that are due (:data:`STANDBY_AFTER_S` after the last stood in)."""
+        now = time.monotonic()
+        for name, due in list(self._standby_due.items()):
+            if now >= due:
+                del self._standby_due[name]
+                cmd = self._commands[name]
+                at = cmd.index("-m") + 1
+                self._standby[name] = subprocess.Popen([*cmd[:at], STANDBY, *cmd[at:]], stdin=subprocess.PIPE,
+                                                       stdout=self._logs[name], stderr=subprocess.STDOUT,
+                                                       env=self._env(), start_new_session=True)
+
+    def _respawn(self, name: str, status: int) -> None:
+        """Start a respawned process again after it ended with ``status`` (a line on stderr and in its log)."""
+        count = self.restarts[name] = self.restarts.get(name, 0) + 1
+        standby = self._standby.pop(name, None)
+        warm = False
+        if standby is not None and standby.poll() is None and standby.stdin is not None:
+            try:
+                standby.stdin.write(b"run\n")
+                standby.stdin.close()
+                self.procs[name] = standby
+                warm = True
+            except OSError:  # it ended between the look and the word: start one cold
+                pass
+        if not warm:
+            self._spawn(name)
+        line = (f"ema launch: {name} ended (status {status}) before the {self.driver}; started again "
+                f"({'its standby' if warm else 'cold'}; {count} of at most {RESPAWN_LIMIT} restarts)")
+        self._logs[name].write(f"{line}\n".encode())
+        self._logs[name].flush()
+        print(line, file=sys.stderr, flush=True)
+        self._standby_due[name] = time.monotonic() + STANDBY_AFTER_S
+
+    def _stop_standbys(self) -> None:
+        """End the standbys (end of input: each ends at once, or is killed if it is still importing)."""
+        self._standby_due.clear()
+        for proc in self._standby.values():
+            if proc.stdin is not None:
+                with contextlib.suppress(OSError):
+                    proc.stdin.close()
+            try:
+                proc.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        self._standby.clear()
 
     def wait(self, timeout_s: float | None = None) -> int:
         """Wait for the driver to finish (its bag closed).
@@ -155,10 +229,21 @@ class Suite:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         man = self.procs[self.fmu_process]
         while man.poll() is None:
-            for name, proc in self.procs.items():
-                if name != self.fmu_process and proc.poll() not in (None, 0):
+            for name, proc in list(self.procs.items()):
+                status = proc.poll()
+                if name == self.fmu_process or status is None:
+                    continue
+                if self._stopping:  # ending because the suite is being stopped (another thread): no restart
+                    continue
+                if name in self.cfg.respawn and self.restarts.get(name, 0) < RESPAWN_LIMIT:
+                    self._respawn(name, status)
+                elif status != 0:
                     self.stop()
-                    raise EmaError(f"node {name} exited with status {proc.returncode}; see {self.log_dir / name}.log")
+                    raise EmaError(f"node {name} exited with status {status}; see {self.log_dir / name}.log"
+                                   + (f" (restarted {RESPAWN_LIMIT} times already)" if name in self.cfg.respawn
+                                      else ""))
+            if self._standby_due:
+                self._start_standbys()
             if deadline is not None and time.monotonic() > deadline:
                 self.stop()
                 raise EmaError(f"the test did not finish within {timeout_s:g} s; see {self.log_dir}")
@@ -166,14 +251,16 @@ class Suite:
         return int(man.returncode)
 
     def stop(self) -> dict[str, int | None]:
-        """SIGINT to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
+        """SIGTERM to every process still running (the maneuver first: it closes the bag), then SIGKILL."""
+        self._stopping = True
+        self._stop_standbys()
         first = ("simclock", "maneuver", "fmu", "suite", "container")
         order = [*first, *[n for n in self.procs if n not in first]]
         for name in order:
             proc = self.procs.get(name)
             if proc is not None and proc.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
-                    os.kill(proc.pid, signal.SIGINT)
+                    os.kill(proc.pid, signal.SIGTERM)
         deadline = time.monotonic() + STOP_TIMEOUT_S
         for proc in self.procs.values():
             try:

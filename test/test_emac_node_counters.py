@@ -17,6 +17,7 @@ from test_emac_node_time import BASE_NS, F_NS, F_S, Log, replay
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.nodes import emac as emac_module
+from ema_sim.nodes import emac_frames, emac_receive, emac_state
 
 pytestmark = pytest.mark.ros
 
@@ -34,7 +35,8 @@ def make_node(context, monkeypatch):
 
     def make():
         wall = {"t": 1000.0}
-        monkeypatch.setattr(emac_module, "time", SimpleNamespace(monotonic=lambda: wall["t"]))
+        for module in (emac_module, emac_state, emac_receive, emac_frames):  # the node's layers read the wall clock
+            monkeypatch.setattr(module, "time", SimpleNamespace(monotonic=lambda: wall["t"]))
         node = emac_module.EmacNode(argparse.Namespace(channels=["left_wing"]), ports=ScriptedPorts, context=context)
         node.wall = wall
         node.log = Log()

@@ -18,6 +18,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.emac.stamps import CommandClock, FrameGate, Lateness, Verdict
 from ema_sim.nodes import emac as emac_module
+from ema_sim.nodes import emac_frames, emac_receive, emac_state
 
 F_NS = 5_000_000
 F_S = 0.005
@@ -93,7 +94,8 @@ def make_node(context, monkeypatch):
 
     def make(*ros_args):
         wall = {"t": 1000.0}
-        monkeypatch.setattr(emac_module, "time", SimpleNamespace(monotonic=lambda: wall["t"]))
+        for module in (emac_module, emac_state, emac_receive, emac_frames):  # the node's layers read the wall clock
+            monkeypatch.setattr(module, "time", SimpleNamespace(monotonic=lambda: wall["t"]))
         node = emac_module.EmacNode(argparse.Namespace(channels=["left_wing"]), ports=ScriptedPorts,
                                     context=context, cli_args=["--ros-args", *ros_args] if ros_args else None)
         node.wall = wall

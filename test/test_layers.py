@@ -1,4 +1,5 @@
-"""The package layers: every package imports only from layers below it, and no module import makes a circle.
+"""The package layers: every package imports only from layers below it, and no module import makes a circle;
+and the modules' size: one of more than 700 lines says in its docstring why one concept needs them.
 
 Read from the source, imports inside functions and under ``TYPE_CHECKING`` included, so a lazy import
 cannot hide an upward edge or a loop from the check. Layers, lowest first (a package may import its own
@@ -22,6 +23,7 @@ modules and any package of a lower layer, never a sibling of its own layer):
 """
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -208,3 +210,47 @@ def test_the_check_sees_lazy_imports_upward_and_circles(tmp_path):
     assert upward("ema_sim.models.a", "ema_sim.signals")  # a sibling of its own layer
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert circles({"a": {"b"}, "b": set()}) == []
+
+
+LONG_MODULE_LINES = 700
+"""A module longer than this says in its docstring why one concept needs more (:func:`long_module_reason`)."""
+
+
+def long_module_reason(path: Path) -> str | None:
+    """Why a module of more than :data:`LONG_MODULE_LINES` lines is one, or None when it is short or says nothing.
+
+    The docstring must say "in one module of about N lines" (across line breaks), N within 10 % of its length:
+    the sentence is the reason, and a figure gone stale means the module grew past what was argued for.
+    """
+    text = path.read_text(encoding="utf-8")
+    lines = text.count("\n")
+    if lines <= LONG_MODULE_LINES:
+        return ""
+    doc = " ".join((ast.get_docstring(ast.parse(text)) or "").split())
+    said = re.search(r"in one module of about (\d+) lines", doc)
+    if said is None or abs(int(said.group(1)) - lines) > 0.1 * lines:
+        return None
+    return doc
+
+
+def test_every_long_module_says_why_it_is_one():
+    bad = sorted(f"{m} ({p.read_text(encoding='utf-8').count(chr(10))} lines)" for m, p in modules().items()
+                 if long_module_reason(p) is None)
+    assert bad == []
+
+
+def test_the_length_check_sees_a_long_module_without_its_reason(tmp_path):
+    body = "x = 1\n" * 720
+    silent = tmp_path / "silent.py"
+    silent.write_text(f'"""A module."""\n{body}', encoding="utf-8")
+    argued = tmp_path / "argued.py"
+    argued.write_text(f'"""One concept in one module\nof about 720 lines: its parts belong together."""\n{body}',
+                      encoding="utf-8")
+    stale = tmp_path / "stale.py"
+    stale.write_text(f'"""One concept in one module of about 500 lines."""\n{body}', encoding="utf-8")
+    short = tmp_path / "short.py"
+    short.write_text('"""A module."""\nx = 1\n', encoding="utf-8")
+    assert long_module_reason(silent) is None
+    assert long_module_reason(stale) is None
+    assert long_module_reason(argued)
+    assert long_module_reason(short) == ""

@@ -123,6 +123,33 @@ def test_crosstalk_shows_on_the_right_wing_feedback_while_the_left_wing_slews(lo
         assert jumps(other) < 0.003  # nominal: only the actuator's smooth response to the command noise
 
 
+def test_a_lockstep_bag_is_dated_when_recorded_and_its_rosout_is_in_the_suites_time(lockstep_ail):
+    """The log times are the stamps from the recording's start (not 1970); ``/rosout`` entries, stamped by rcl
+    with the system clock, are restamped with the suite's time: each sits with the frames it speaks of."""
+    from rosbags.rosbag2 import Reader  # noqa: PLC0415
+
+    from ema_msgs_py import typestore as ts  # noqa: PLC0415
+
+    bag, _ = lockstep_ail
+    epoch = int(read_bag(bag).metadata["sim_epoch_ns"])
+    assert 0 < time.time_ns() - epoch < 3600 * 10**9  # the recording's start: today, not 1970
+    with Reader(bag) as reader:
+        assert reader.start_time >= epoch
+        feedback = [c for c in reader.connections if c.topic == "/ema/emac/feedback"]
+        for _, log_time, raw in reader.messages(connections=feedback):
+            msg = ts.deserialize(raw, "sensor_msgs/msg/JointState")
+            assert log_time == epoch + msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        rosout = [c for c in reader.connections if c.topic == "/rosout"]
+        entries = [(t, ts.deserialize(raw, "rcl_interfaces/msg/Log"))
+                   for _, t, raw in reader.messages(connections=rosout)]
+    assert len(entries) >= 4  # every node's start-up line at least
+    run_ns = round(2.2 * 10**9)  # the run: 440 frames
+    for log_time, entry in entries:
+        stamp = entry.stamp.sec * 10**9 + entry.stamp.nanosec
+        assert 0 <= stamp <= run_ns, (entry.name, entry.msg)  # the suite's time, not the system clock's
+        assert log_time == epoch + stamp
+
+
 def test_composed_layouts_record_the_same_bag_as_one_process_per_node(lockstep_ail, lockstep_composed):
     """In-process hand-over changes nothing a frame carries: every value of every channel, both sides."""
     bag, _, layout, emac = lockstep_composed
@@ -248,6 +275,39 @@ def test_ema_launch_stops_cleanly_on_sigterm_and_leaves_a_complete_bag(tmp_path)
     assert bag_info(bag).complete
     assert data.metadata["completed"] == "false"
     assert len(data) >= 100
+
+
+@pytest.mark.parametrize("when", ["importing", "nodes importing"])
+def test_ema_launch_interrupted_in_its_first_second_prints_no_traceback(tmp_path, when):
+    """Ctrl-C while ``ema`` imports its command, or once the suite's processes are started and importing: one
+    line, status 130, no traceback anywhere (the nodes, stopped with SIGTERM, end quietly). Python's verbose
+    imports say when each process is importing (numpy: well into its imports)."""
+    bag = tmp_path / "early"
+    logs = tmp_path / "early.logs"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain(12 + len(when))), PYTHONUNBUFFERED="1", PYTHONVERBOSE="1")
+    cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "step", "--lockstep", "--layout",
+           "processes", "--bag", str(bag)]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    mark = "import 'numpy'" if when == "importing" else "ema launch:"
+    seen = ""
+    while mark not in seen:
+        seen = proc.stdout.readline()
+        assert seen, "ema ended before it got there"
+    if when == "nodes importing":
+        deadline = time.monotonic() + 60
+        names = {"emac.log", "testenv.log", "simclock.log", "maneuver.log"}
+        while not (names <= {p.name for p in logs.glob("*.log")}
+                   and all("import 'numpy'" in (logs / n).read_text(errors="replace") for n in names)):
+            assert time.monotonic() < deadline, "the nodes never imported numpy"
+            assert proc.poll() is None
+        assert not any("EMA_SUMMARY" in p.read_text(errors="replace") for p in logs.glob("*.log"))
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=60)
+    assert "Traceback" not in out, out[-3000:]
+    assert proc.returncode == 130
+    assert ("ema: interrupted" if when == "importing" else "ema launch: interrupted; closing the bag") in out
+    for node_log in logs.glob("*.log"):
+        assert "Traceback" not in node_log.read_text(errors="replace"), node_log.name
 
 
 # --------------------------------------------------------------------------- bad messages, failures

@@ -213,6 +213,8 @@ def check_declared(client, node):
     assert not d["emac.failure"].read_only
     assert d["second_order.wn_rad_s"].read_only
     assert d["emac.frame_hz"].read_only
+    assert "(read-only: read when the node starts" in d["emac.frame_hz"].description  # and why
+    assert "read-only" not in d["emac.watchdog_timeout_s"].description
     from ema_sim.models.registry import model_parameters  # noqa: PLC0415
 
     wn = next(p for p in model_parameters("loada") if p.path == "second_order.wn_rad_s")  # the one declaration
@@ -275,6 +277,63 @@ def test_parameters_are_declared_described_and_changed_at_run_time_only_where_it
     assert "emac.watchdog_timeout_s: 0.05 → 0.6 s" in text
     assert "emac.failure: stuck" in text
     assert "emac.motor_power_on: False (brake engaged at the next frame)" in text
+
+
+def test_the_test_environment_takes_its_elements_at_run_time_and_says_why_the_rest_is_read_only(client, tmp_path):
+    """Quantization then noise set on the command path through set_parameters change what the EMAC gets; the
+    profile is refused, its descriptor saying why."""
+    log = tmp_path / "testenv.log"
+    proc = start(client.did, "ema_sim.nodes.testenv", "--profile", "none", log=log)
+    node = "/testenv"
+    try:
+        wait_for_node(client, "testenv", 60)
+        out, sent = [], [0]
+        client.node.create_subscription(
+            JointState, "/ema/emac/command", lambda m: out.append((m.header.stamp.nanosec, m.position[0])), RELIABLE)
+        fmu = client.node.create_publisher(JointState, "/ema/fmu/command", RELIABLE)
+
+        def send():
+            sent[0] += 1  # each command stamped with its number (the test environment keeps stamps)
+            msg = JointState(name=["left_wing"], position=[1.23])
+            msg.header.stamp.nanosec = sent[0]
+            fmu.publish(msg)
+
+        def through(n):
+            """What the test environment passes on for the next ``n`` 1.23 V commands sent from now."""
+            first = sent[0]
+
+            def taken():
+                send()
+                return len([v for k, v in out if k > first]) >= n
+            assert client.spin(20, taken), "no command passed on"
+            return [v for k, v in out if k > first][:n]
+
+        assert through(5) == [1.23] * 5  # profile none: a pass-through
+        described = client.call(DescribeParameters, f"{node}/describe_parameters", DescribeParameters.Request(
+            names=["command.quantization_v", "profile", "seed"])).descriptors
+        d = {x.name: x for x in described}
+        assert not d["command.quantization_v"].read_only
+        assert d["profile"].read_only
+        assert "read-only: the profile sets every element's default when the node starts" in d["profile"].description
+        assert "read-only: every channel's noise stream is seeded once" in d["seed"].description
+        refused = set_param(client, node, "profile", "ail")
+        assert not refused.successful
+        assert "read-only" in refused.reason
+
+        assert set_param(client, node, "command.quantization_v", 0.5).successful
+        assert through(5) == [1.0] * 5  # the next frame's command is quantized to 0.5 V
+        assert set_param(client, node, "command.noise_rms_v", 0.05).successful
+        noisy = np.array(through(200))
+        assert 0.03 < noisy.std() < 0.07
+        assert abs(noisy.mean() - 1.0) < 0.02
+        assert not set_param(client, node, "command.noise_rms_v", -1.0).successful  # out of range: refused
+        assert proc.poll() is None
+    finally:
+        stop(proc)
+    text = log.read_text()
+    assert "command.quantization_v: 0 → 0.5 (from the next frame); command path now quantization 500 mV" in text
+    assert "command.noise_rms_v: 0 → 0.05 (from the next frame)" in text
+    assert '"run_time_changes": 2' in text
 
 
 # --------------------------------------------------------------------------- 2. /clock from any publisher

@@ -33,7 +33,7 @@ def _config(args: argparse.Namespace) -> tuple[RunDescription, str, str, float]:
         layout=args.layout, emac="box" if args.emac_box else args.emac, domain_id=args.domain_id,
         disable=args.disable, rt_priority=args.rt_priority, window=args.window, fmu=args.fmu,
         open_loop=args.open_loop, bungee_inlb=args.bungee, seed=args.seed, namespace=args.namespace,
-        faults=args.fault,
+        faults=args.fault, respawn=args.respawn, stall_timeout_s=args.stall_timeout,
     )
     what = "every channel, with the vehicle and autopilot in the loop" if args.fmu else ", ".join(cfg.channels)
     return cfg, cfg.test_name, what, cfg.run_s
@@ -55,13 +55,13 @@ def run(args: argparse.Namespace) -> int:
     cfg, test, what, duration = _config(args)
     bag = cfg.bag_dir
     suite = Suite(cfg)
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the bag
-        signal.signal(signum, _interrupt)  # closed (SIGHUP: the terminal closed; SIGKILL: ema_sim.nodes.lifetime)
     mode = "lockstep" if args.lockstep else "real time"
-    print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, profile {args.profile}, {mode}, "
-          f"ROS_DOMAIN_ID {suite.domain_id}; logs and the run's parameters ({suite.params_file.name}) in "
-          f"{suite.log_dir}", flush=True)
-    try:
+    try:  # from the handlers on, a signal anywhere here (its first line printed or not) stops the suite
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the
+            signal.signal(signum, _interrupt)  # bag closed (SIGHUP: the terminal closed; SIGKILL: nodes.lifetime)
+        print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, profile {args.profile}, {mode}, "
+              f"ROS_DOMAIN_ID {suite.domain_id}; logs and the run's parameters ({suite.params_file.name}) in "
+              f"{suite.log_dir}", flush=True)
         suite.run(args.timeout)
     except KeyboardInterrupt:  # the suite is stopped: the bag is closed
         print("ema launch: interrupted; closing the bag", file=sys.stderr)
@@ -87,6 +87,12 @@ def _report(suite: Suite, bag: Path, bag_info: Callable[[Path], BagInfo]) -> Non
     if clock and clock.get("wall_s"):
         print(f"lockstep: {clock['sim_s']:.2f} s simulated in {clock['wall_s']:.2f} s "
               f"({clock['realtime_factor']:.2f}× real time, {clock['stalls']} stalls)")
+        if clock.get("left_out"):
+            print(f"lockstep: {clock['left_out']} channel(s) left out after stall_timeout_s, {clock['rejoined']} "
+                  f"rejoined (after {', '.join(f'{s:.2f}' for s in clock['rejoin_s']) or '-'} s); out at the end: "
+                  f"{', '.join(clock['out_of_lockstep']) or 'none'}")
+    for name, count in suite.restarts.items():
+        print(f"{name}: restarted {count} time(s) (--respawn)")
     man = sums.get(suite.driver, {})
     if "latency_p99_ms" in man:
         print(f"real time: command-to-feedback latency p50 {man['latency_p50_ms']:.2f} ms, "
@@ -138,6 +144,12 @@ def register(sub: Subparsers) -> None:
     p.add_argument("--emac-box", action="store_true", help="shorthand for --emac box")
     p.add_argument("--window", type=int, default=1,
                    help="lockstep: frames the clock may run ahead of the slowest EMAC (1: strictly frame by frame)")
+    p.add_argument("--respawn", action="append", default=[], metavar="PROCESS",
+                   help="restart this process when it ends before the driver (repeatable, comma-separated; emacs: "
+                        "every EMAC process of --layout processes)")
+    p.add_argument("--stall-timeout", type=float, default=5.0, metavar="S",
+                   help="lockstep: wall seconds the clock waits for a silent EMAC before going on without it "
+                        "(it rejoins when its feedback reaches the clock again; default 5)")
     p.add_argument("--fault", action="append", default=[], metavar="KIND:FIELD=VALUE,...",
                    help="a fault the EMACs inject on a schedule (repeatable; docs/monitor.md); its truth is "
                         "recorded on /ema/faults/truth")

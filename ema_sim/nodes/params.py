@@ -4,8 +4,9 @@ Every suite node declares all of its parameters when it starts (``ros2 param lis
 file is given), each with a descriptor: what it is, its unit, its range and whether it is read-only. A
 parameter file (``--params-file``) or a command-line flag overrides the declared default, which comes from
 the package's ``config/`` files. A run-time change (``ros2 param set``) of a parameter the node can apply
-mid-run (the EMAC's watchdog, failure and motor power) takes effect at the next frame and is logged; every
-other parameter is read-only, and ROS refuses the change with the reason (``Trying to set a read-only
+mid-run (the EMAC's watchdog, failure and motor power; the test environment's noise, delay, lag and
+quantization) takes effect at the next frame and is logged; every other parameter is read-only, its description
+says why (:attr:`Spec.why`), and ROS refuses the change with the reason (``Trying to set a read-only
 parameter``); a value outside the declared range is refused the same way.
 """
 
@@ -35,6 +36,8 @@ ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_
 """The list parameter types."""
 HUGE = sys.float_info.max
 """Open end of a range (a ROS range needs both ends)."""
+READ_AT_START = "read when the node starts (what it sets up is built once): restart the node to change it"
+"""Why a parameter is read-only, unless its :class:`Spec` says more."""
 
 @dataclass(frozen=True)
 class Spec:
@@ -49,6 +52,8 @@ class Spec:
     read_only: bool = True
     kind: int | None = None
     """A :class:`ParameterType` where the default cannot tell (an empty list)."""
+    why: str = ""
+    """Why it is read-only, in its description (empty: :data:`READ_AT_START`)."""
 
     def type(self) -> int:
         """The ROS parameter type."""
@@ -57,8 +62,10 @@ class Spec:
         return int(Parameter.Type.from_parameter_value(_plain(self.default)).value)
 
     def descriptor(self) -> ParameterDescriptor:
-        """The ROS descriptor: description (with the unit), range, read-only flag, type."""
+        """The ROS descriptor: description (with the unit, and why it is read-only), range, read-only flag, type."""
         text = self.description + (f" [{self.unit}]" if self.unit else "")
+        if self.read_only and "read-only" not in text:  # a description may say it already, with its reason
+            text += f" (read-only: {self.why or READ_AT_START})"
         d = ParameterDescriptor(name=self.name, type=self.type(), description=text, read_only=self.read_only)
         if self.unit:
             d.additional_constraints = f"unit: {self.unit}"

@@ -8,8 +8,12 @@ from composed nodes are serialized once, for the bag. The node's own publication
 publishes them. Per-frame topics the node does not read itself are taken at the node's frame
 (:meth:`Recorder.take`, :meth:`~ema_sim.nodes.ports.Ports.take_at_frame`), not on arrival: a recorder of
 the ``processes`` layout takes 21 messages a frame, and waking for each was most of its CPU. Under lockstep
-the log time of a stamped message is its stamp (a reproducible bag); in real time it is the receive time,
-as rosbag2 does (DDS's, for a message taken at the frame).
+the log time of a stamped message is its stamp (a reproducible bag, but for one offset), counted from the
+recording's start on the wall clock (whole seconds: ``sim_epoch_ns`` in the bag's metadata), so the bag is
+dated when it was recorded, not 1970, while the messages' own stamps keep the suite's time from 0; a message
+without a stamp is logged at the suite's time when it came, and ``/rosout`` entries, which rcl stamps with
+the system clock, are restamped with it too (an entry then sits with the frames it speaks of). In real time
+the log time is the receive time, as rosbag2 does (DDS's, for a message taken at the frame).
 """
 
 from __future__ import annotations
@@ -27,10 +31,14 @@ from ema_msgs_py import typestore as ts
 from ema_msgs_py.ros import message_class, qos
 from ema_sim.io.bag import BagWriter
 
+NS = 1_000_000_000
+
 LEADING_STAMP = {"sensor_msgs/msg/JointState", "diagnostic_msgs/msg/DiagnosticArray", "rosgraph_msgs/msg/Clock"}
 """Types whose serialization starts with a time stamp in the suite's time base (``/rosout`` stamps are
 always system time, so its messages are logged at their receive time)."""
 EXCLUDED = ("/parameter_events",)
+RESTAMPED = "/rosout"
+"""Under lockstep, the topic whose system-time stamps are replaced by the suite's time when recorded."""
 
 
 def leading_stamp_ns(raw: bytes) -> int | None:
@@ -90,6 +98,11 @@ class Recorder:
         self.namespace = node.get_namespace()
         self.ports = ports
         self._now_ns: Callable[[], int] = (lambda: node.get_clock().now().nanoseconds) if lockstep else time.time_ns
+        self.epoch_ns = time.time_ns() // NS * NS if lockstep else 0
+        """Lockstep: what the log times add to the suite's time (the recording's start, whole seconds); 0 in real
+        time."""
+        if lockstep:
+            writer.set_metadata("sim_epoch_ns", str(self.epoch_ns))
         for topic in own:  # the node's own publications: written as it publishes them, not taken back
             self._add(topic, ct.TOPICS[topic].msgtype)
         for name, spec in ct.TOPICS.items():
@@ -116,7 +129,8 @@ class Recorder:
             return
         self._last_clock = ns
         try:
-            self.writer.write(ct.CLOCK_TOPIC, ct.CLOCK, ns if self.lockstep else self._now_ns(), cdr.encode_clock(ns))
+            self.writer.write(ct.CLOCK_TOPIC, ct.CLOCK, ns + self.epoch_ns if self.lockstep else self._now_ns(),
+                              cdr.encode_clock(ns))
             self.last_message = time.monotonic()
             if self.on_clock is not None:
                 self.on_clock(ns)
@@ -145,7 +159,8 @@ class Recorder:
         stamp_ns : int
             Its stamp (ns).
         """
-        self.writer.write(topic, self.topics[topic], stamp_ns if self.lockstep else self._now_ns(), raw)
+        self.writer.write(topic, self.topics[topic], stamp_ns + self.epoch_ns if self.lockstep else self._now_ns(),
+                          raw)
 
     def take(self) -> int:
         """Record the messages waiting on the topics taken at the frame (the node calls it once a frame).
@@ -161,11 +176,16 @@ class Recorder:
     def _callback(self, topic: str, msgtype: str, stamped: bool) -> Callable[[bytes], None]:
         ports = self.ports
 
+        restamp = self.lockstep and topic == RESTAMPED
+
         def record(raw: bytes) -> None:
             try:
                 stamp = leading_stamp_ns(raw) if stamped and self.lockstep else None
                 received = None if self.lockstep else ports.received_ns  # DDS's receive time is system time
                 log_time = stamp if stamp is not None else (received or self._now_ns())
+                if restamp:  # the suite's time, as every other stamp of the bag
+                    raw = cdr.restamp(raw, log_time)
+                log_time += self.epoch_ns
                 self.writer.write(topic, msgtype, log_time, raw)
                 self.last_message = time.monotonic()
                 hook = self.hooks.get(topic)

@@ -6,29 +6,50 @@ is the frame it came in, its content is what the environment made of it. The pro
 ail|flight|none`` or a parameter file) sets transport delay, the FMU's 50 Hz lags, 5 mV quantization
 and noise; ``--disable`` switches elements off. A non-finite value passes through untouched and
 unfiltered (it does not poison the filters); the EMAC rejects it and counts it.
+
+Each path's elements (``command.noise_rms_v``, ``feedback.delay_s``, ``command.lag_hz``,
+``command.quantization_v``...) can be set at run time (``ros2 param set``, a ``set_parameters`` call): the
+change is logged and applies from the next frame, each channel's path rebuilt in steady state at its last
+input (the delay line and the lag start from it; the noise restarts its stream). The profile, the elements
+switched off, the seed, the full scale and the frame rate are read when the node starts.
+
+It sees every channel's feedback pass: a channel still commanded whose EMAC has sent no feedback for
+``silent_after_s`` (wall time; default the EMACs' watchdog) is ERROR on ``/diagnostics`` (``<node>: feedback
+<channel>``, a WARN line), OK again (an INFO line) when its feedback comes back, a restarted EMAC's. In lockstep
+the commands stop with the clock, which reports a silent EMAC itself (:mod:`ema_sim.nodes.clock`).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterType
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
+from ema_msgs_py.ros import qos
 from ema_sim.environment import Profile, SignalPath, TransportDelay, load_profile
 from ema_sim.environment.profile import PATHS, PathSpec
-from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.clock import watchdog_s
+from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list, nested
 from ema_sim.nodes.ports import Ports
 from ema_sim.parameters import metas
 
+CHECK_EVERY_S = 0.01
+"""How often the feedback of the commanded channels is checked (wall time)."""
+STATUS_EVERY_S = 1.0
+"""The feedback statuses are published at each change and at least this often."""
+
 
 def profile_specs(profile: Profile) -> list[Spec]:
-    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them), read-only.
+    """The profile's parameters (a profile file such as ``config/ail.yaml`` sets them); the paths' run-time.
 
     Each path element's description, unit and range come from its declaration (:class:`PathSpec`'s metadata).
 
@@ -42,13 +63,14 @@ def profile_specs(profile: Profile) -> list[Spec]:
     list of Spec
         The seed and full scale, then one declaration per element of each path (``command.lag_hz``...).
     """
-    out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62),
+    out = [Spec("seed", profile.seed, "noise seed of the test environment", low=0, high=2**62,
+                why="every channel's noise stream is seeded once, at start, so a run is reproducible"),
            Spec("full_scale_v", profile.full_scale_v, "converters' full scale", "V", 0.1, 1000.0)]
     for path in PATHS:
         for key, m in metas(PathSpec).items():
             high = m.max if math.isfinite(m.max) else None
             out.append(Spec(f"{path}.{key}", getattr(getattr(profile, path), key), f"{path} path: {m.description}",
-                            m.unit, min(m.min, m.off if m.off is not None else m.min), high))
+                            m.unit, min(m.min, m.off if m.off is not None else m.min), high, read_only=False))
     return out
 
 
@@ -70,11 +92,20 @@ class TestEnvNode(SuiteNode):
         super().__init__(name, args)
         self.ports = ports(self)
         own = self.params.declare([
-            Spec("profile", "none", "test environment: ail, flight, none, or a profile parameter file"),
+            Spec("profile", "none", "test environment: ail, flight, none, or a profile parameter file",
+                 why="the profile sets every element's default when the node starts; set the elements themselves "
+                     "(command.noise_rms_v...) at run time"),
             Spec("disable", [], "elements switched off: delay, lag, quantization, noise, or command.X / feedback.X",
-                 kind=ParameterType.PARAMETER_STRING_ARRAY),
-            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5),
+                 kind=ParameterType.PARAMETER_STRING_ARRAY,
+                 why="applied to the profile when the node starts; set an element to 0 at run time to switch it off"),
+            Spec("frame_hz", ct.FRAME_HZ, "FMU frame rate", "Hz", 1.0, 1e5,
+                 why="the delay lines and the lags are sampled on this frame, set up at start"),
+            Spec("silent_after_s", watchdog_s(), "wall seconds a commanded channel may go without its EMAC's "
+                 "feedback before its status is ERROR (default: the EMACs' watchdog)", "s", 0.0, 3600.0,
+                 read_only=False),
         ], name)
+        self.silent_s: float = own["silent_after_s"]
+        self.params.on_change("silent_after_s", self._set_silent)
         loaded = load_profile(own["profile"])
         values = self.params.declare(profile_specs(loaded), f"{name}: profile {loaded.name}")
         profile = Profile.from_parameters({"profile": loaded.name, **nested(values)}, f"{name} parameters")
@@ -83,14 +114,100 @@ class TestEnvNode(SuiteNode):
         self.cmd_paths: dict[str, SignalPath] = {}
         self.fb_paths: dict[str, SignalPath] = {}
         self.cur_delays: dict[str, TransportDelay] = {}
+        self.last_in: dict[str, dict[str, float]] = {"command": {}, "feedback": {}, "current": {}}
+        """Each path's last finite input per channel: a path rebuilt at run time starts steady there."""
         self.frames = {"command": 0, "feedback": 0}
         self.passed_bad = 0
+        self.changes = 0
+        """Run-time changes applied (elements set through the parameters)."""
+        self.commanded_at: dict[str, float] = {}
+        """Each channel's last command (wall) and, in ``first_command``, its first."""
+        self.first_command: dict[str, float] = {}
+        self.heard: dict[str, float] = {}
+        """Each channel's last feedback (wall)."""
+        self.silent: dict[str, float] = {}
+        """Channels commanded without feedback beyond ``silent_after_s``: since when (wall)."""
+        self.silences = 0
+        self.next_check = 0.0
+        self.status_due = 0.0
+        self.diag_pub = self.create_publisher(DiagnosticArray, ct.endpoint(ct.DIAGNOSTICS), qos(ct.EVENT_QOS))
+        for path in PATHS:
+            for key in metas(PathSpec):
+                self.params.on_change(f"{path}.{key}", self._element_change(path, key))
         self.cmd_pub = self.ports.frame_publisher(ct.EMAC_COMMAND)
         self.fb_pub = self.ports.frame_publisher(ct.FMU_FEEDBACK)
         self.ports.frame_subscription(ct.FMU_COMMAND, self._on_command, self._bad_message)
         self.ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_feedback, self._bad_message)
         d = self.profile.describe()
         self.get_logger().info(f"profile {d['profile']}: command {d['command_path']}; feedback {d['feedback_path']}")
+
+    def _set_silent(self, value: Any) -> str:
+        old, self.silent_s = self.silent_s, float(value)
+        return f"silent_after_s: {old:g} → {self.silent_s:g} s"
+
+    def poll(self) -> float:
+        """Check the commanded channels' feedback every :data:`CHECK_EVERY_S`; statuses at a change and each second."""
+        if not self.commanded_at:
+            return MAX_SPIN_S
+        now = time.monotonic()
+        if now < self.next_check:
+            return self.next_check - now
+        self.next_check = now + CHECK_EVERY_S
+        changed = False
+        for ch, last in self.commanded_at.items():
+            heard = self.heard.get(ch, self.first_command[ch])
+            if now - last < self.silent_s and now - heard > self.silent_s:  # commanded, and no feedback
+                if ch not in self.silent:
+                    self.silent[ch] = heard
+                    self.silences += 1
+                    changed = True
+                    self.get_logger().warning(f"{ch}: no feedback from its EMAC for {(now - heard) * 1e3:.0f} ms "
+                                              f"while commanded (silent_after_s {self.silent_s:g} s): ERROR")
+            elif ch in self.silent and self.heard.get(ch, -math.inf) > self.silent[ch]:
+                since = self.silent.pop(ch)
+                changed = True
+                self.get_logger().info(f"{ch}: feedback back after {now - since:.2f} s without")
+        if changed or now >= self.status_due:
+            self._status(now)
+        return CHECK_EVERY_S
+
+    def _status(self, now: float) -> None:
+        """Each commanded channel's feedback status on ``/diagnostics``."""
+        self.status_due = now + STATUS_EVERY_S
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        fqn = self.get_fully_qualified_name()
+        for ch in self.commanded_at:
+            if ch in self.silent:
+                level, text = DiagnosticStatus.ERROR, (f"no feedback from its EMAC for {now - self.silent[ch]:.2f} s "
+                                                       "while commanded")
+            else:
+                level, text = DiagnosticStatus.OK, "feedback flowing"
+            msg.status.append(DiagnosticStatus(level=level, name=f"{fqn}: feedback {ch}", message=text, hardware_id=ch,
+                                               values=[KeyValue(key="silences", value=str(self.silences))]))
+        self.diag_pub.publish(msg)
+
+    def _element_change(self, path: str, key: str) -> Callable[[Any], str]:
+        """The run-time change of one element of one path (a :meth:`~ema_sim.nodes.params.Parameters.on_change`)."""
+        def apply(value: Any) -> str:
+            old = getattr(self.profile, path)
+            spec = PathSpec.from_mapping({**old.as_dict(), key: float(value)}, f"{self.get_name()}: {path}")
+            self.profile = replace(self.profile, command=spec) if path == "command" else \
+                replace(self.profile, feedback=spec)
+            paths = self.cmd_paths if path == "command" else self.fb_paths
+            make = self.profile.command_path if path == "command" else self.profile.feedback_path
+            for ch in paths:
+                stream = ct.CHANNELS.index(ch) if ch in ct.CHANNELS else list(paths).index(ch) + len(ct.CHANNELS)
+                paths[ch] = make(self.frame_s, stream, self.last_in[path].get(ch, 0.0))
+            if path == "feedback" and key == "delay_s":  # the motor current rides the feedback harness
+                for ch in self.cur_delays:
+                    self.cur_delays[ch] = self.profile.current_delay(self.frame_s)
+                    self.cur_delays[ch].reset(self.last_in["current"].get(ch, 0.0))
+            self.changes += 1
+            now = make(self.frame_s).describe()
+            return (f"{path}.{key}: {getattr(old, key):g} → {float(value):g} (from the next frame); {path} path now "
+                    f"{now}")
+        return apply
 
     def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> Any:
         path = table.get(channel)
@@ -113,9 +230,17 @@ class TestEnvNode(SuiteNode):
         try:
             pos = msg.position
             values = []
+            last = self.last_in["command"]
+            now = time.monotonic()
+            at = self.commanded_at
             for i, name in enumerate(msg.name):
+                if name not in at:
+                    self.first_command[name] = now
+                at[name] = now
                 v = float(pos[i]) if i < len(pos) else math.nan
                 values.append(self._through(self._path(self.cmd_paths, name, self.profile.command_path, v), v))
+                if math.isfinite(v):
+                    last[name] = v
             self.frames["command"] += 1
             self.mark_running()
             self.cmd_pub.publish(JointFrame(msg.stamp_ns, msg.name, values, frame_id=msg.frame_id))
@@ -127,11 +252,19 @@ class TestEnvNode(SuiteNode):
             pos, cur = [], []
             position, effort = msg.position, msg.effort
             with_current = len(effort) == len(msg.name)
+            last, last_a = self.last_in["feedback"], self.last_in["current"]
+            now = time.monotonic()
+            heard = self.heard
             for i, name in enumerate(msg.name):
+                heard[name] = now
                 v = float(position[i]) if i < len(position) else math.nan
                 pos.append(self._through(self._path(self.fb_paths, name, self.profile.feedback_path, v), v))
+                if math.isfinite(v):
+                    last[name] = v
                 if with_current:
                     a = float(effort[i])
+                    if math.isfinite(a):
+                        last_a[name] = a
                     delay = self.cur_delays.get(name)
                     if delay is None:
                         delay = self.cur_delays[name] = self.profile.current_delay(self.frame_s)
@@ -143,7 +276,8 @@ class TestEnvNode(SuiteNode):
             self.throttled("drop", f"feedback message dropped: {exc}")
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
-        return {"profile": self.profile.describe(), "frames": dict(self.frames), "passed_bad": self.passed_bad}
+        return {"profile": self.profile.describe(), "frames": dict(self.frames), "passed_bad": self.passed_bad,
+                "run_time_changes": self.changes, "silences": self.silences}
 
 
 def parser() -> argparse.ArgumentParser:
