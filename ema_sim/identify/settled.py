@@ -11,10 +11,10 @@ every hold the servo reaches without overshooting, the settled error is the band
 an overshoot leaves it inside. So the typical (median) hold's settled error bounds the half width:
 a wider band contradicts most holds. The bound adds half the output's count (an output in counts
 cannot settle closer than that) and :data:`NOISE_MARGIN` standard errors of that median over the
-holds (holds that agree to the count read it exactly; noisy ones less so). The largest settled error
-is reported beside it (one hold that stopped far off, on a load or a stall, is no band the others
-show). A threshold the record pays for is fitted within this bound (:attr:`ema_sim.identify.problem.Problem.caps`)
-and said to be held there when the fit asked for more.
+holds, from their robust scatter (holds that agree to the count read it exactly; noisy ones less
+so). The largest settled error is reported beside it (one hold that stopped far off, on a load or a
+stall, is no band the others show). A threshold the record pays for is fitted within this bound
+(:attr:`ema_sim.identify.problem.Problem.caps`) and said to be held there when the fit asked for more.
 """
 
 from __future__ import annotations
@@ -34,6 +34,8 @@ MIN_HOLDS = 3
 """Fewer holds than this say nothing about where the output settles."""
 NOISE_MARGIN = 3.0
 """Standard errors of the median settled error it may be read short by."""
+MAD_TO_SIGMA = 1.4826
+"""A normal scatter's standard deviation over its median absolute deviation."""
 MEDIAN_EFFICIENCY = 1.2533
 """A median's standard error over the mean's, for Gaussian noise (√(π/2))."""
 
@@ -95,5 +97,6 @@ def settled_error(time_s: FloatArray, command: FloatArray, output: FloatArray, c
     for a, b in spans:
         k = a + int((1.0 - TAIL) * (b - a))
         errs.append(abs(float(np.median(output[k:b] - command[k:b]))))
-    se = MEDIAN_EFFICIENCY * float(np.std(errs, ddof=1)) / math.sqrt(len(errs))
+    spread = MAD_TO_SIGMA * float(np.median(np.abs(np.asarray(errs) - np.median(errs))))  # one odd hold sways it not
+    se = MEDIAN_EFFICIENCY * spread / math.sqrt(len(errs))
     return Settled(float(np.median(errs)), float(np.max(errs)), len(errs), float(count or 0.0), se)
