@@ -5,12 +5,14 @@ import pytest
 from scipy.signal import lfilter
 
 from ema_sim.analysis.estimation import causal
+from ema_sim.analysis.estimation.frf import FrequencyResponse
 from ema_sim.analysis.estimation.harmonics import Harmonic, lag_at_fundamental
 from ema_sim.analysis.estimation.second_order_fit import fit_step, simulate
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.analysis.records import causality
 from ema_sim.analysis.records.command_hold import detect_command_hold
 from ema_sim.analysis.records.series import uniform_record
+from ema_sim.analysis.section2.frequency_response import FrequencyResult
 from ema_sim.io.measured import MeasuredData
 
 FINE_S = 1e-4
@@ -170,3 +172,24 @@ def test_a_sampled_step_fit_whose_delay_sits_on_its_lead_bound_says_why() -> Non
     assert fit.quality in ("on_bound", "non_causal")
     assert "leads its command" in fit.quality_note or "leads the command" in fit.quality_note
     assert "sampled" in fit.quality_note
+
+
+def test_a_measured_response_whose_coherent_points_lead_is_not_causal_whatever_its_fit_says() -> None:
+    """A frequency response that leads at coherent points gets ``non_causal`` and the causes, on top of its fit's."""
+    f = np.geomspace(0.5, 5.0, 20)
+    phase = np.where((f > 2.5) & (f < 3.2), 1.0, -10.0 * f)  # a few points a degree ahead of the command
+    h = 10 ** (-0.1 / 20) * np.exp(1j * np.radians(phase))
+    fr = FrequencyResponse("position_deg", "sweep", f, h, np.full(f.size, 0.99), np.full(f.size, np.radians(0.2)),
+                           0.0, 30.0)
+    result = FrequencyResult("frequency_response", fr, None, "", [], None, "", None, None, (0.5, 5.0),
+                             bandwidth_quality="on_bound", bandwidth_quality_note="gain within 3 dB")
+    assert result.quality == "not_determined"  # no fit: the worst of all
+    assert "lead the command" in result.leads
+    assert "a servo never leads its command" in result.as_dict()["quality_note"]
+    clean = FrequencyResult("frequency_response", FrequencyResponse("position_deg", "sweep", f, 10 ** (-0.1 / 20)
+                                                                    * np.exp(-1j * np.radians(10.0 * f)),
+                                                                    np.full(f.size, 0.99),
+                                                                    np.full(f.size, np.radians(0.2)), 0.0, 30.0),
+                            None, "", [], None, "", None, None, (0.5, 5.0), bandwidth_quality="on_bound")
+    assert clean.leads == ""
+    assert clean.quality == "not_determined"

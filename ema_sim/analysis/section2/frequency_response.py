@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 from typing_extensions import override
 
+from ema_sim.analysis.estimation import causal
 from ema_sim.analysis.estimation.frf import (
     COHERENCE_GOOD,
     FrequencyResponse,
@@ -387,9 +388,23 @@ class FrequencyResult:
     bandwidth_quality_note: str = ""
 
     @property
+    def leads(self) -> str:
+        """Why the response is not causal: its coherent points whose phase leads beyond their uncertainty ("": none)."""
+        r = self.response
+        coherent = r.coherence >= COHERENCE_GOOD
+        sigma = np.degrees(r.random_error)
+        ahead = [i for i in np.flatnonzero(coherent) if causal.phase_leads(float(r.phase_deg[i]), float(sigma[i]))]
+        if not ahead:
+            return ""
+        worst_i = max(ahead, key=lambda i: float(r.phase_deg[i] / max(sigma[i], 1e-12)))
+        return (f"{len(ahead)} of {int(coherent.sum())} coherent points lead the command; the largest, "
+                + causal.phase_note(float(r.phase_deg[worst_i]), float(sigma[worst_i]), float(r.freq_hz[worst_i])))
+
+    @property
     def quality(self) -> Quality:
-        """The worse of the bandwidth's and the fit's."""
-        return worst(self.bandwidth_quality, self.fit.quality if self.fit else "not_determined")
+        """The worse of the bandwidth's and the fit's, and ``non_causal`` where coherent points lead."""
+        own = worst(self.bandwidth_quality, self.fit.quality if self.fit else "not_determined")
+        return worst(own, "non_causal") if self.leads else own
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for JSON.
@@ -410,7 +425,7 @@ class FrequencyResult:
             "phase_minus_90_hz": self.phase_90_hz, "at": self.at,
             "low_coherence_above_hz": self.low_coherence_above_hz, "coherence_note": self.coherence_note,
             "fit_band_hz": list(self.fit_band_hz), "second_order_fit": self.fit.as_dict() if self.fit else None,
-            "quality": self.quality,
+            "quality": self.quality, "quality_note": self.leads,
         }
         if self.overlay is not None:
             out["model_overlay"] = {"model": self.overlay_model, "at": at_frequencies(self.overlay, [
@@ -630,6 +645,8 @@ class FrequencyTest(Section2Test[FrequencyResult]):
                 lines.append(f"- command ±{sc.command_amplitude_deg:.3g}°, peak rate {sc.command_peak_rate_dps:.0f} °/s"
                              f"; slew {num(sc.measured_slew_dps, '.0f', ' °/s')} ({sc.slew_source}){sat}")
             lines.append(f"- {fr.coherence_note}")
+            if fr.leads:
+                lines.append(f"- not causal: {fr.leads}")
             if fr.fit:
                 ft = fr.fit
                 lines.append(f"- second order fitted over {fr.fit_band_hz[0]:.3g}-{fr.fit_band_hz[1]:.3g} Hz: "
@@ -665,7 +682,8 @@ class FrequencyTest(Section2Test[FrequencyResult]):
                      f"{fit.zeta.sigma:.2g}, delay {1e3 * fit.delay_s.value:.2f} ± {1e3 * fit.delay_s.sigma:.2g} ms")
             if fit.quality != "ok":
                 fit_s += f" [{fit.quality}: {fit.quality_note}]"
-        return [f"{r.kind} → {r.response.output}: −3 dB {bw}; {r.coherence_note}{fit_s}"]
+        lines = [f"{r.kind} → {r.response.output}: −3 dB {bw}; {r.coherence_note}{fit_s}"]
+        return [*lines, f"  not causal: {r.leads}"] if r.leads else lines
 
     @override
     def plot(self, ra: RecordAnalysis, r: FrequencyResult, path: Path) -> bool:
