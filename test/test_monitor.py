@@ -126,3 +126,51 @@ def test_a_report_escalated_to_the_high_order_physics_gives_that_reference(tmp_p
     ref = from_report(path, load_channel("left_wing"))
     assert ref.model == "hoad3"
     assert ref.overrides == {"command_delay_s": 0.005, "coulomb_friction_lbf": 41.0}
+
+
+def test_the_command_watches_a_bag_and_finds_the_fault_in_it(tmp_path):
+    """``ema monitor BAG``: a suite bag (MCAP) of a run with a delay fault, read back and watched."""
+    from ema_sim.cli import main  # noqa: PLC0415 - the command in process
+    from ema_sim.io.bag import write_bag  # noqa: PLC0415 - bags only here
+
+    faults = [parse_fault("delay:at_s=10,size=0.005")]
+    _, rec, _ = simulate("loada", MANEUVER, parse_load("const:inlb=800"), duration_s=14.0, sample_hz=200.0,
+                         faults=faults)
+    rng = np.random.default_rng(3)
+    n = rec.time_s.size
+    bag = write_bag(tmp_path / "run", {"time_s": rec.time_s, "command_deg": rec.command_deg[0],
+                                       "position_deg": rec.position_deg[0] + rng.normal(0.0, 0.01, n),
+                                       "surface_deg": rec.surface_deg[0] + rng.normal(0.0, 0.01, n),
+                                       "hinge_moment_inlb": rec.hinge_moment_inlb[0]},
+                    {"test": "monitor"}, channel="left_wing", frame_hz=200.0)
+    out = tmp_path / "v.json"
+    assert main(["monitor", str(bag), "--model", "loada", "--channel", "left_wing", "--healthy-s", "8",
+                 "--json", str(out)]) == 0
+    d = json.loads(out.read_text())["detections"][0]
+    assert d["kind"] == "delay"
+    assert 10.0 <= d["time_s"] <= 10.5
+    assert abs(d["size"] - 0.005) < 0.2 * 0.005
+
+
+def test_the_online_monitor_re_baselines_and_detects_a_second_fault():
+    """A longer delay, then a bias of the reading: each detected, isolated and sized against the model before it."""
+    from ema_sim.monitor.online import OnlineMonitor  # noqa: PLC0415 - the frame-by-frame path
+
+    faults = [parse_fault("delay:at_s=10,size=0.005"), parse_fault("lvdt_bias:at_s=16,size=0.1")]
+    _, rec, _ = simulate("loada", MANEUVER, parse_load("const:inlb=800"), duration_s=22.0, sample_hz=200.0,
+                         faults=faults)
+    rng = np.random.default_rng(5)
+    mon = OnlineMonitor(from_name("loada", load_channel("left_wing")), Options(healthy_s=HEALTHY_S, window_s=3.0))
+    found = []
+    for k in range(1, rec.time_s.size):
+        d = mon.step(rec.command_deg[0, k - 1], rec.hinge_moment_inlb[0, k - 1],
+                     rec.position_deg[0, k] + rng.normal(0.0, 0.01), rec.surface_deg[0, k] + rng.normal(0.0, 0.01))
+        if d is not None:
+            found.append(d)
+    assert [d.kind for d in found] == ["delay", "lvdt_bias"]
+    assert 10.0 <= found[0].time_s < 11.0
+    assert 16.0 <= found[1].time_s < 17.0
+    assert abs(found[0].size - 0.005) < 0.001
+    assert abs(found[1].size - 0.1) < 0.02
+    assert mon.reference.overrides["delay_s"] == found[0].estimate
+    assert mon.readings[0][:2] == ("lvdt_bias", found[1].estimate)

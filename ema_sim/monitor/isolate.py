@@ -151,7 +151,8 @@ def _run(win: Window, values: dict[str, float] | None, *, flip: bool = False) ->
     return continue_run(model, win.data, win.onset_s, win.end_s, flip_load=flip)
 
 
-def _jam_values(win: Window) -> dict[str, float]:
+def jam_values(win: Window) -> dict[str, float]:
+    """The reference's parameters seized where the window starts (a jam has no size to fit)."""
     family = model_family(win.model)
     held = float(win.nominal[0, 0]) if win.nominal.size else 0.0
     nominal: dict[str, float] = {}
@@ -178,7 +179,7 @@ def fit_candidate(win: Window, cand: Candidate) -> Estimate:
         Its estimate, one-sigma uncertainty, cost and score.
     """
     if cand.kind == "jam":
-        r = win.residual(_run(win, _jam_values(win)))
+        r = win.residual(_run(win, jam_values(win)))
         return _estimate(cand, 1.0, math.nan, r)
     if cand.kind == "hm_sign":
         r = win.residual(_run(win, None, flip=True))
