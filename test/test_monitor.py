@@ -174,3 +174,15 @@ def test_the_online_monitor_re_baselines_and_detects_a_second_fault():
     assert abs(found[1].size - 0.1) < 0.02
     assert mon.reference.overrides["delay_s"] == found[0].estimate
     assert mon.readings[0][:2] == ("lvdt_bias", found[1].estimate)
+
+
+def test_a_high_order_coulomb_friction_growth_is_sized_within_a_fifth():
+    """HOAD2's friction +50 % under steps and a reversing load: the reference dithers its friction as the actuator
+    does (a noise-free one sticks where the actuator slips and sizes the growth near +30 %)."""
+    from ema_sim.montecarlo.faults import Case, run_case  # noqa: PLC0415 - a campaign's case
+
+    row = run_case(Case("coulomb_friction", 0.5, "square:amp_deg=4,freq_hz=0.5,cycles=20", 3, model="hoad2",
+                        load="sine:amp_inlb=1500,freq_hz=0.25"))
+    assert row["isolated"] == "coulomb_friction"
+    assert row["delay_s"] <= 1.0
+    assert abs(row["size_estimate"] - 0.5) <= 0.1

@@ -31,6 +31,8 @@ COLUMNS = [O_POS, O_SURF, O_CUR]
 """The model outputs a monitor watches: position, surface, current (:data:`ema_sim.monitor.watch.OUTPUTS`)."""
 LEARNED_FIELDS = ("wn_rad_s", "zeta", "delay_s", "offset_deg")
 """What a learned nominal model fits on the healthy window (the rest stays at the channel's values)."""
+DITHER_SEED = 0x5EED
+"""The seed of a high-order reference's own command noise (any: only its statistics must be the actuator's)."""
 
 
 @dataclass(frozen=True)
@@ -55,10 +57,16 @@ class Reference:
     origin: str = ""
 
     def build(self) -> ActuatorModel:
-        """A fresh instance (no noise: the reference is the expected response)."""
+        """A fresh instance; a high-order one keeps its command noise in the loop, not its LVDT noise.
+
+        The command noise dithers the drive's dead band and the friction, as it does the actuator's: a
+        noise-free reference sticks where the actuator slips, so its Coulomb friction would have to be
+        smaller to match (fitted +30 % for a +50 % fault). Identification runs its physics the same way
+        (:func:`ema_sim.identify.physical.run_model`). The LVDT's noise is measurement noise only.
+        """
         kwargs: dict[str, object] = dict(self.overrides)
         if self.model in ("hoad2", "hoad3"):
-            kwargs["noise"] = False
+            kwargs.update(noise=True, seed=DITHER_SEED, feedback_noise_v=0.0)
         return create(self.model, self.channel, **kwargs)
 
 

@@ -131,8 +131,9 @@ def measured(case: Case) -> MeasuredData:
     rng = np.random.default_rng(case.seed)
     fmu = frame_inputs(parse_maneuver(case.maneuver), parse_load(case.load), duration_s=case.duration_s)
     seen = ail_command(fmu.command_deg, case.channel, rng) if case.environment == "ail" else fmu.command_deg
-    rec = run_maneuver(create(case.model, case.channel), Inputs(fmu.time_s, seen, fmu.hinge_moment_inlb,
-                                                                fmu.duration_s), faults=faults)
+    # a high-order truth's own noise (in the loop: it dithers the friction) is the case's, not one for all
+    truth = create(case.model, case.channel, **({"seed": case.seed} if model_has_current(case.model) else {}))
+    rec = run_maneuver(truth, Inputs(fmu.time_s, seen, fmu.hinge_moment_inlb, fmu.duration_s), faults=faults)
     held = np.minimum(np.searchsorted(fmu.time_s, rec.time_s, side="right") - 1, fmu.time_s.size - 1)
     rec = replace(rec, command_deg=fmu.command_deg[None, held])  # the record holds the FMU's command
     n = rec.time_s.size
