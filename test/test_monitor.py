@@ -15,7 +15,7 @@ from ema_sim.config import load_channel
 from ema_sim.errors import DataError
 from ema_sim.faults import parse_fault
 from ema_sim.io.csv import MeasuredData, write_csv
-from ema_sim.monitor import Cusum, Options, check_inputs, from_name, from_report, threshold, watch
+from ema_sim.monitor import Cusum, Options, check_inputs, from_name, from_report, learn, threshold, watch
 from ema_sim.monitor.detect import arl0
 from ema_sim.signals import parse_load, parse_maneuver
 from ema_sim.simulation import csv_columns, simulate
@@ -186,3 +186,17 @@ def test_a_high_order_coulomb_friction_growth_is_sized_within_a_fifth():
     assert row["isolated"] == "coulomb_friction"
     assert row["delay_s"] <= 1.0
     assert abs(row["size_estimate"] - 0.5) <= 0.1
+
+
+def test_a_learned_reference_is_the_fidelity_that_reproduces_the_healthy_window():
+    """A LOADA record learns the second order; a HOAD3 one under steps and a reversing load, whose step transients
+    no second order reproduces, gets HOAD3's physics, and its clean record raises no alarm."""
+    from ema_sim.montecarlo.faults import Case, measured  # noqa: PLC0415 - a campaign's record
+
+    ch = load_channel("left_wing")
+    assert learn(record(None), ch, HEALTHY_S).model == "second_order"
+    data = measured(Case("none", 0.0, "square:amp_deg=4,freq_hz=0.5,cycles=20", 1001, model="hoad3",
+                         load="sine:amp_inlb=1500,freq_hz=0.25"))
+    ref = learn(data, ch, 20.0)
+    assert ref.model == "hoad3"
+    assert watch(data, ref, Options(healthy_s=20.0)).detections == []
