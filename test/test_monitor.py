@@ -200,3 +200,17 @@ def test_a_learned_reference_is_the_fidelity_that_reproduces_the_healthy_window(
     ref = learn(data, ch, 20.0)
     assert ref.model == "hoad3"
     assert watch(data, ref, Options(healthy_s=20.0)).detections == []
+
+
+@pytest.mark.parametrize(("fault", "ruled_out"), [
+    ("lvdt_bias:at_s=10,size=0.1", {"viscous_friction", "backlash", "delay", "hm_sign", "jam"}),
+    ("delay:at_s=10,size=0.005", {"lvdt_bias", "lvdt_drift", "lvdt_scale", "jam"}),
+    ("jam:at_s=10", {"lvdt_bias", "lvdt_drift", "lvdt_scale"}),
+])
+def test_the_signature_rules_out_the_kinds_it_contradicts(fault, ruled_out):
+    """A bias moves the reading, not the surface; a delay moves both; a jam stops the rod: the kinds the signature
+    contradicts rank after the others, whatever their fits' scores."""
+    d = verdict(fault).detections[0]
+    assert {e.kind for e in d.ranking if e.veto} == ruled_out
+    vetoed = [bool(e.veto) for e in d.ranking]
+    assert vetoed == sorted(vetoed)

@@ -224,9 +224,9 @@ class OnlineMonitor:
                      tuple(self.sample_sigma),
                      (data.position_deg is not None, data.surface_deg is not None, data.current_a is not None))
         cands = candidates(win.model, data)
-        ranking = isolate(win, cands)
-        best = ranking[0]
         sig = signature(win, hm[1:])
+        ranking = isolate(win, cands, sig)
+        best = ranking[0]
         return Detection(t_det, output, best.kind, best.parameter, best.estimate, best.uncertainty, stat, onset,
                          best.nominal, fault_size(best.kind, best.parameter, best.nominal, best.estimate), ranking,
                          sig), win, cands
