@@ -188,17 +188,22 @@ def test_a_high_order_coulomb_friction_growth_is_sized_within_a_fifth():
     assert abs(row["size_estimate"] - 0.5) <= 0.1
 
 
-def test_a_learned_reference_is_the_fidelity_that_reproduces_the_healthy_window():
-    """A LOADA record learns the second order; a HOAD3 one under steps and a reversing load, whose step transients
-    no second order reproduces, gets HOAD3's physics, and its clean record raises no alarm."""
-    from ema_sim.montecarlo.faults import Case, measured  # noqa: PLC0415 - a campaign's record
+def test_a_learned_reference_is_the_fidelity_that_reproduces_the_healthy_window(monkeypatch):
+    """A LOADA record learns the second order. A HOAD3 actuator under steps and a reversing load, its command delay
+    and friction off the channel's values, learns HOAD3's physics with its delay fitted (no second order reproduces
+    its step transients, nor HOAD3 at the channel's values its delay), and its clean record raises no alarm."""
+    import ema_sim.montecarlo.faults as campaign  # noqa: PLC0415 - a campaign's record
+    from ema_sim.models import create  # noqa: PLC0415 - the off-nominal actuator
 
     ch = load_channel("left_wing")
     assert learn(record(None), ch, HEALTHY_S).model == "second_order"
-    data = measured(Case("none", 0.0, "square:amp_deg=4,freq_hz=0.5,cycles=20", 1001, model="hoad3",
-                         load="sine:amp_inlb=1500,freq_hz=0.25"))
+    monkeypatch.setattr(campaign, "create", lambda name, channel, **kw: create(
+        name, channel, **kw, command_delay_s=0.006, coulomb_friction_lbf=48.0))
+    data = campaign.measured(campaign.Case("none", 0.0, "square:amp_deg=4,freq_hz=0.5,cycles=20", 1001,
+                                           model="hoad3", load="sine:amp_inlb=1500,freq_hz=0.25"))
     ref = learn(data, ch, 20.0)
     assert ref.model == "hoad3"
+    assert ref.overrides["command_delay_s"] > 0.0045
     assert watch(data, ref, Options(healthy_s=20.0)).detections == []
 
 

@@ -2,9 +2,7 @@
 
 Three ways to name it: a fidelity (``loada``, ``hoad2``: the channel's nominal parameters), an ``ema
 identify`` report (its final model), or nothing, and then the nominal model is learned from a first
-window the user states is healthy: the channel's second-order pipeline (figure 26) with its ωn, ζ, delay and
-command bias fitted by identification's output-error least squares (:func:`ema_sim.identify.fit.fit`), or a
-high-order physics at the channel's values when it reproduces that window better (:func:`learn`).
+window the user states is healthy (:func:`ema_sim.monitor.learning.learn`).
 """
 
 from __future__ import annotations
@@ -20,20 +18,15 @@ from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError, EmaError
 from ema_sim.faults.kinds import FloatArray
 from ema_sim.identify.consistency import read_report
-from ema_sim.identify.fit import fit
-from ema_sim.identify.problem import Problem
 from ema_sim.io.csv import MeasuredData
 from ema_sim.models import ActuatorModel, create, model_names
 from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.models.registry import model_class
-from ema_sim.models.second_order import SecondOrderParams
 
 COLUMNS = [O_POS, O_SURF, O_CUR]
 """The model outputs a monitor watches: position, surface, current (:data:`ema_sim.monitor.watch.OUTPUTS`)."""
 LEARNED_FIELDS = ("wn_rad_s", "zeta", "delay_s", "offset_deg")
 """What a learned nominal model fits on the healthy window (the rest stays at the channel's values)."""
-PHYSICS = ("hoad2", "hoad3")
-"""The high-order models a learned reference may be (:func:`learn`)."""
 DITHER_SEED = 0x5EED
 """The seed of a high-order reference's own command noise (any: only its statistics must be the actuator's)."""
 
@@ -150,48 +143,6 @@ def from_report(path: str | Path, channel: ChannelConfig) -> Reference:
     values = {k: float(v) for k, v in rep.values.items()
               if isinstance(getattr(defaults, k, None), float) and math.isfinite(v)}
     return Reference(model, channel, values, f"{model} of the identify report {path}")
-
-
-def learn(data: MeasuredData, channel: ChannelConfig, healthy_s: float,
-          physics: tuple[str, ...] = PHYSICS) -> Reference:
-    """The model that best reproduces the first ``healthy_s`` seconds, stated healthy.
-
-    Candidates: the channel's second order with ωn, ζ, delay and command bias fitted there, and each of
-    ``physics`` (high-order models) at the channel's values. The one whose residual varies least on the
-    window's position and surface is kept (its centre does not count: the monitor centres the residual on the
-    healthy window). A second order cannot reproduce a high-order actuator's step transients, and a CUSUM
-    calibrated on its residual's spread would take those recurring transients for a fault; a high-order model
-    at the channel's values cannot reproduce an actuator behind another command path, which the fitted second
-    order learns.
-
-    Raises
-    ------
-    DataError
-        The record is shorter than 1.5 times the healthy window (too little would be left to watch).
-    """
-    t = data.time_s - data.time_s[0]
-    if t[-1] < 1.5 * healthy_s:
-        raise DataError(f"{data.source or 'data'}: {t[-1]:.1f} s of data leaves too little to watch after a "
-                        f"{healthy_s:g} s healthy window (give --model, or a shorter --healthy-s)")
-    first = window(data, 0.0, healthy_s)
-    base = SecondOrderParams.from_channel(channel)
-    result = fit(Problem(first, channel), base, LEARNED_FIELDS, max_nfev=60)
-    values = {k: float(v) for k, v in result.params.as_dict().items()}
-    text = ", ".join(f"{k}={values[k]:.4g}" for k in LEARNED_FIELDS)
-    learned = Reference("second_order", channel, values,
-                        f"the channel's second order with {text} learned on the first {healthy_s:g} s")
-    scored = [(spread_on(first, learned), learned)]
-    for name in physics:
-        ref = Reference(name, channel, {}, f"{name} at the channel's values, chosen on the first {healthy_s:g} s")
-        scored.append((spread_on(first, ref), ref))
-    return min(scored, key=lambda sr: sr[0])[1]
-
-
-def spread_on(data: MeasuredData, reference: Reference) -> float:
-    """The variance of the reference's residual on a record, summed over position and surface (deg²)."""
-    pred = predict(reference.build(), data)
-    cols = [(data.position_deg, 0), (data.surface_deg, 1)]
-    return float(sum(np.var(c - pred[:, j]) for c, j in cols if c is not None))
 
 
 def window(data: MeasuredData, start_s: float, end_s: float) -> MeasuredData:
