@@ -4,8 +4,9 @@ Clean hour: five channels in lockstep run LOADA for an hour through a flight-lik
 3° peak) under a spring-like hinge moment, behind the AIL test environment (config/ail.yaml): the command path's
 26 ms delay, 50 Hz lag, 5 mV quantum and 3 mV noise between the recorded FMU command and the actuator, and the
 feedback's 3 mV noise and 5 mV quantum on the LVDT reading. ``ema monitor`` watches each channel against the
-second order it learns on the first 30 s (the environment's delay and lag are learned with it) at its default
-0.1 false alarms per hour; the figure is the alarms counted over the five channel-hours.
+reference it learns on the first 30 s (:func:`ema_sim.monitor.learn`: the fitted second order learns the
+environment's delay and lag with the actuator) at its default 0.1 false alarms per hour; the figure is the
+alarms counted over the five channel-hours.
 
 CPU: :class:`~ema_sim.monitor.online.OnlineMonitor` (the node's per-frame path) stepped frame by frame at 200 Hz
 on 120 s of one channel with an LVDT bias detected, isolated and re-estimated in it; the figure is its process

@@ -1,7 +1,9 @@
 """The ema_monitor lifecycle node: configured and activated, fed frames in process, it detects an injected LVDT
-bias, publishes the detection and says so on /diagnostics (ERROR) after calibrating (WARN) and watching (OK)."""
+bias, publishes the detection and says so on /diagnostics (ERROR) after calibrating (WARN) and watching (OK); it
+re-baselines on the bias and detects a delay that follows."""
 
 import argparse
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -39,7 +41,8 @@ class TakePorts:
 
 def test_the_node_detects_and_reports_on_diagnostics():
     _, rec, _ = simulate("loada", parse_maneuver("sine:amp_deg=3,freq_hz=0.5,cycles=20"), parse_load("const:inlb=500"),
-                         duration_s=10.0, sample_hz=200.0, faults=[parse_fault("lvdt_bias:at_s=6,size=0.1")])
+                         duration_s=11.5, sample_hz=200.0,
+                         faults=[parse_fault("lvdt_bias:at_s=6,size=0.1"), parse_fault("delay:at_s=8.5,size=0.005")])
     sc = scaling_of(load_channel("left_wing"))
     rng = np.random.default_rng(0)
     with ros_context(97) as ctx:
@@ -62,7 +65,8 @@ def test_the_node_detects_and_reports_on_diagnostics():
                 if k in (100, 1000, rec.time_s.size - 1):
                     levels.append(node.diagnostics().status[0].level)
             assert levels == [DiagnosticStatus.WARN, DiagnosticStatus.OK, DiagnosticStatus.ERROR]
-            assert len(sent) == 1
-            assert '"kind": "lvdt_bias"' in sent[0].data
+            assert [json.loads(m.data)["kind"] for m in sent] == ["lvdt_bias", "delay"]
+            assert json.loads(sent[1].data)["time_s"] >= 8.5
+            assert node.diagnostics().status[0].values[-1].value == "2"
         finally:
             node.destroy_node()

@@ -52,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     plots = plot_campaign(table, args.out)
     print(json.dumps({k: summary[k] for k in ("cases", "detected", "faulty_cases", "false_alarms",
-                                             "false_alarms_per_hour", "isolation_top1", "cpu_share_per_channel")}))
+                                             "false_alarms_per_hour", "isolation_top1", "isolation_top1_fits_only",
+                                             "cpu_share_per_channel")}))
     print(f"wrote {args.out / 'cases.parquet'}, {args.out / 'summary.json'}, {', '.join(map(str, plots))}")
     return 0
 

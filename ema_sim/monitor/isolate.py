@@ -6,8 +6,15 @@ fitted over the window by bounded least squares; the sensor faults are solved in
 prediction; a jam and a reversed load have no parameter and are run as they are. The candidate that leaves
 the least normalized residual, two per fitted parameter added (Akaike), is the isolated fault. The parameter's
 one-sigma uncertainty is identification's coloured-residual covariance
-(:func:`ema_sim.identify.fit.block_covariance`). The signature (which outputs depart, moving or at rest, with
-the direction of motion, with the load) is computed alongside and reported.
+(:func:`ema_sim.identify.fit.block_covariance`).
+
+The signature (which outputs depart, moving or at rest, with the direction of motion, with the load, whether
+the rod still moves) votes where it discriminates: a candidate it contradicts ranks after every candidate it
+does not, whatever their scores (:func:`contradiction`). An LVDT fault is in the reading only, so it cannot
+make the surface or the current depart; a fault of the actuator moves the rod, so the surface follows it and
+it cannot leave the surface and the current as predicted while the reading departs; a jam stops the rod, so
+it cannot be the fault while the rod goes on moving. The fits decide among the candidates the signature
+leaves; when it contradicts them all, the fits alone decide.
 """
 
 from __future__ import annotations
@@ -29,6 +36,12 @@ from ema_sim.monitor.reference import continue_run, snapshot
 from ema_sim.parameters import metas
 
 OUTPUT_KINDS = ("lvdt_bias", "lvdt_drift", "lvdt_scale")
+DEPARTS = 3.0
+"""An output departs when its residual's rms over the window exceeds this many healthy spreads."""
+QUIET = 1.5
+"""An output is as predicted when its residual's rms stays under this many healthy spreads."""
+STILL = 0.5
+"""The rod goes on moving when its measured travel over the window is above this share of the predicted."""
 MAX_SAMPLES = 1500
 """Samples of the window each output contributes to a fit (decimated evenly beyond that: the cost stays bounded)."""
 
@@ -70,6 +83,8 @@ class Estimate:
     uncertainty: float
     cost: float
     score: float
+    veto: str = ""
+    """What in the signature contradicts this candidate (empty: nothing)."""
 
 
 @dataclass
@@ -151,7 +166,8 @@ def _run(win: Window, values: dict[str, float] | None, *, flip: bool = False) ->
     return continue_run(model, win.data, win.onset_s, win.end_s, flip_load=flip)
 
 
-def _jam_values(win: Window) -> dict[str, float]:
+def jam_values(win: Window) -> dict[str, float]:
+    """The reference's parameters seized where the window starts (a jam has no size to fit)."""
     family = model_family(win.model)
     held = float(win.nominal[0, 0]) if win.nominal.size else 0.0
     nominal: dict[str, float] = {}
@@ -178,7 +194,7 @@ def fit_candidate(win: Window, cand: Candidate) -> Estimate:
         Its estimate, one-sigma uncertainty, cost and score.
     """
     if cand.kind == "jam":
-        r = win.residual(_run(win, _jam_values(win)))
+        r = win.residual(_run(win, jam_values(win)))
         return _estimate(cand, 1.0, math.nan, r)
     if cand.kind == "hm_sign":
         r = win.residual(_run(win, None, flip=True))
@@ -252,9 +268,53 @@ def _estimate(cand: Candidate, p: float, sigma: float, residual: FloatArray) -> 
     return Estimate(cand.kind, cand.parameter, cand.nominal, p, sigma, cost, cost + 2.0 * cand.free)
 
 
-def isolate(win: Window, cands: list[Candidate]) -> list[Estimate]:
-    """Every candidate fitted on the window, best (lowest score) first."""
-    return sorted((fit_candidate(win, c) for c in cands), key=lambda e: e.score)
+def isolate(win: Window, cands: list[Candidate], sig: dict[str, object] | None = None) -> list[Estimate]:
+    """Every candidate fitted on the window, best first.
+
+    Without ``sig`` by score; with it, the candidates it does not contradict by score, then the others by score
+    (the signature votes only where it discriminates: :func:`contradiction`).
+    """
+    fitted = [fit_candidate(win, c) for c in cands]
+    if sig is not None:
+        for e in fitted:
+            e.veto = contradiction(e.kind, sig)
+        if all(e.veto for e in fitted):
+            for e in fitted:
+                e.veto = ""
+    return sorted(fitted, key=lambda e: (bool(e.veto), e.score))
+
+
+def contradiction(kind: str, sig: dict[str, object]) -> str:
+    """What in a window's signature rules a fault kind out (module docstring); empty when nothing does.
+
+    Parameters
+    ----------
+    kind : str
+        The fault kind.
+    sig : dict
+        :func:`signature`'s.
+
+    Returns
+    -------
+    str
+        The reason, or "".
+    """
+    rms = sig.get("outputs")
+    if not isinstance(rms, dict):
+        return ""
+    pos = rms.get("position_deg")
+    others = {k: v for k, v in rms.items() if k != "position_deg"}
+    if kind in OUTPUT_KINDS:
+        loud = [k for k, v in others.items() if v > DEPARTS]
+        return f"{' and '.join(loud)} depart too: not the reading alone" if loud else ""
+    if kind == "jam":
+        travel = sig.get("travel_share")
+        if isinstance(travel, float) and travel > STILL:
+            return f"the rod travels {travel:.0%} of the predicted: it has not stopped"
+    if kind not in ("linkage",) and pos is not None and pos > DEPARTS and others \
+            and all(v < QUIET for v in others.values()):
+        return "only the position reading departs: the surface and current follow the prediction"
+    return ""
 
 
 def signature(win: Window, hinge_moment_inlb: FloatArray | None) -> dict[str, object]:
@@ -271,7 +331,8 @@ def signature(win: Window, hinge_moment_inlb: FloatArray | None) -> dict[str, ob
     -------
     dict
         ``outputs`` (the normalized rms of each), ``moving_share`` (of the squared residual, while the
-        predicted rate exceeds 1 deg/s), ``direction_correlation`` and ``load_correlation``.
+        predicted rate exceeds 1 deg/s), ``direction_correlation``, ``load_correlation`` and
+        ``travel_share`` (:func:`travel`).
     """
     r = (win.measured - win.nominal) / np.array(win.sigma)
     names = ("position_deg", "surface_deg", "current_a")
@@ -290,4 +351,13 @@ def signature(win: Window, hinge_moment_inlb: FloatArray | None) -> dict[str, ob
 
     load = np.zeros(win.times.size) if hinge_moment_inlb is None else hinge_moment_inlb
     return {"outputs": rms, "moving_share": share, "direction_correlation": corr(r[:, j], np.sign(rate)),
-            "load_correlation": corr(r[:, j], load)}
+            "load_correlation": corr(r[:, j], load), "travel_share": travel(win.measured[:, j], win.nominal[:, j])}
+
+
+def travel(measured: FloatArray, predicted: FloatArray) -> float:
+    """The measured travel over a window as a share of the predicted (5th to 95th percentile: noise-proof)."""
+    if measured.size < 3:
+        return 1.0
+    want = float(np.percentile(predicted, 95) - np.percentile(predicted, 5))
+    got = float(np.percentile(measured, 95) - np.percentile(measured, 5))
+    return got / want if want > 0.0 else 1.0

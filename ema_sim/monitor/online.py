@@ -6,13 +6,18 @@ centre and spread on the first ``healthy_s`` seconds, then runs a :class:`~ema_s
 output. It keeps the last seconds of inputs and outputs and a copy of the reference every block, so that
 ``window_s`` after an alarm it isolates and re-estimates on them exactly as :func:`ema_sim.monitor.watch`
 does (:mod:`ema_sim.monitor.isolate`).
+
+After a detection it re-baselines and goes on watching: the reference adopts the re-estimated parameter
+(run on from the onset with it, so its state is the faulty actuator's), an LVDT fault becomes a correction
+of the reading, a reversed load a flip of the load the reference is given, and the CUSUMs restart at zero
+(the healthy window's centre and spread kept). A second fault is then a departure from the first one's model.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,8 +25,8 @@ from ema_sim.io.measured import MeasuredData
 from ema_sim.models import ActuatorModel
 from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.monitor.detect import Cusum, spread, threshold
-from ema_sim.monitor.isolate import Window, candidates, isolate, signature
-from ema_sim.monitor.reference import Reference, snapshot
+from ema_sim.monitor.isolate import OUTPUT_KINDS, Candidate, Window, candidates, isolate, jam_values, signature
+from ema_sim.monitor.reference import Reference, continue_run, snapshot
 from ema_sim.monitor.watch import MIN_SAMPLE_SPREAD_DEG, MIN_SPREAD_DEG, OUTPUTS, Detection, Options, fault_size
 
 
@@ -71,9 +76,21 @@ class OnlineMonitor:
         self.sample_sigma = [MIN_SAMPLE_SPREAD_DEG] * n
         self.cusums = [Cusum(self.h, opt.k) for _ in OUTPUTS]
         self.alarm: tuple[float, str, float, float] | None = None
-        """(time, output, statistic, onset) of the first alarm."""
-        self.detection: Detection | None = None
+        """(time, output, statistic, onset) of the alarm being isolated."""
+        self.detections: list[Detection] = []
+        """Every detection, in order (each re-baselined on)."""
+        self.since_s = opt.healthy_s
+        """Where watching (re)started: no onset is placed before it."""
+        self.readings: list[tuple[str, float, float]] = []
+        """LVDT faults adopted: (kind, estimate, onset), undone from each reading in order."""
+        self.flip_load = False
+        """A reversed load adopted: the reference is given the opposite load."""
         self.started = False
+
+    @property
+    def detection(self) -> Detection | None:
+        """The last detection (None before the first)."""
+        return self.detections[-1] if self.detections else None
 
     @property
     def calibrated(self) -> bool:
@@ -97,7 +114,10 @@ class OnlineMonitor:
         if not self.started:
             self.model.trim(command_deg, hinge_moment_inlb)
             self.started = True
-        if self._n == 0 and self.detection is None:
+        if self.flip_load:
+            hinge_moment_inlb = -hinge_moment_inlb
+        position_deg = self._corrected(position_deg, self.t + self.frame_s)
+        if self._n == 0:
             self.snapshots.append((self.t, snapshot(self.model)))
         v = self.model.step_values(command_deg, hinge_moment_inlb, self.frame_s)
         self.t += self.frame_s
@@ -115,10 +135,44 @@ class OnlineMonitor:
         self._n += 1
         if self._n >= self.per_block:
             self._block()
-        if self.alarm is not None and self.detection is None and self.t >= self.alarm[0] + self.options.window_s:
-            self.detection = self._diagnose()
-            return self.detection
+        if self.alarm is not None and self.t >= self.alarm[0] + self.options.window_s:
+            detection, win, cands = self._diagnose()
+            self.detections.append(detection)
+            self._rebaseline(detection, win, cands)
+            return detection
         return None
+
+    def _corrected(self, position_deg: float, t: float) -> float:
+        """A reading with the adopted LVDT faults undone (bias, drift, scale as fitted, in order)."""
+        for kind, p, onset in self.readings:
+            if kind == "lvdt_bias":
+                position_deg -= p
+            elif kind == "lvdt_drift":
+                position_deg -= p * (t - onset)
+            elif 1.0 + p != 0.0:
+                position_deg /= 1.0 + p
+        return position_deg
+
+    def _rebaseline(self, d: Detection, win: Window, cands: list[Candidate]) -> None:
+        """Adopt the detection's fault into the reference and watch on from here (module docstring)."""
+        if d.kind in OUTPUT_KINDS:
+            self.readings.append((d.kind, d.estimate, win.onset_s))  # the drift's fit is from there
+        else:
+            cand = next(c for c in cands if c.kind == d.kind)
+            values = jam_values(win) if d.kind == "jam" else {} if d.kind == "hm_sign" else cand.values(d.estimate)
+            model = snapshot(win.model)
+            if values:
+                model.retune(**values)
+            continue_run(model, win.data, win.onset_s, self.t, flip_load=d.kind == "hm_sign")
+            self.model = model
+            if d.kind == "hm_sign":
+                self.flip_load = not self.flip_load
+            self.reference = replace(self.reference, overrides={**self.reference.overrides, **values},
+                                     origin=f"{self.reference.origin}; {d.kind} adopted at {self.t:.3f} s")
+        self.alarm = None
+        self.since_s = self.t
+        self.snapshots.clear()
+        self.cusums = [Cusum(self.h, self.options.k, history=[0.0]) for _ in OUTPUTS]
 
     def _block(self) -> None:
         means = self._sum / self._n
@@ -142,10 +196,10 @@ class OnlineMonitor:
                 continue
             cs = self.cusums[j]
             if cs.update(float((means[j] - self.centre[j]) / self.spread[j])) and self.alarm is None:
-                onset = max(self.options.healthy_s, self.t - (cs.onset_blocks + 1) * self.options.block_s)
+                onset = max(self.since_s, self.t - (cs.onset_blocks + 1) * self.options.block_s)
                 self.alarm = (self.t, OUTPUTS[j], cs.statistic, onset)
 
-    def _diagnose(self) -> Detection:
+    def _diagnose(self) -> tuple[Detection, Window, list[Candidate]]:
         if self.alarm is None:
             raise RuntimeError("a diagnosis needs an alarm")
         t_det, output, stat, onset = self.alarm
@@ -169,9 +223,10 @@ class OnlineMonitor:
         win = Window(data, snapshot(snap), snap_t, max(snap_t, onset), now[-1].t + 0.5 * self.frame_s, nominal,
                      tuple(self.sample_sigma),
                      (data.position_deg is not None, data.surface_deg is not None, data.current_a is not None))
-        ranking = isolate(win, candidates(win.model, data))
-        best = ranking[0]
+        cands = candidates(win.model, data)
         sig = signature(win, hm[1:])
+        ranking = isolate(win, cands, sig)
+        best = ranking[0]
         return Detection(t_det, output, best.kind, best.parameter, best.estimate, best.uncertainty, stat, onset,
                          best.nominal, fault_size(best.kind, best.parameter, best.nominal, best.estimate), ranking,
-                         sig)
+                         sig), win, cands

@@ -2,8 +2,7 @@
 
 Three ways to name it: a fidelity (``loada``, ``hoad2``: the channel's nominal parameters), an ``ema
 identify`` report (its final model), or nothing, and then the nominal model is learned from a first
-window the user states is healthy: the channel's second-order pipeline (figure 26) with its ωn, ζ, delay and
-command bias fitted by identification's output-error least squares (:func:`ema_sim.identify.fit.fit`).
+window the user states is healthy (:func:`ema_sim.monitor.learning.learn`).
 """
 
 from __future__ import annotations
@@ -19,18 +18,17 @@ from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError, EmaError
 from ema_sim.faults.kinds import FloatArray
 from ema_sim.identify.consistency import read_report
-from ema_sim.identify.fit import fit
-from ema_sim.identify.problem import Problem
 from ema_sim.io.measured import MeasuredData
 from ema_sim.models import ActuatorModel, create, model_names
 from ema_sim.models.base import O_CUR, O_POS, O_SURF
 from ema_sim.models.registry import model_class
-from ema_sim.models.second_order import SecondOrderParams
 
 COLUMNS = [O_POS, O_SURF, O_CUR]
 """The model outputs a monitor watches: position, surface, current (:data:`ema_sim.monitor.watch.OUTPUTS`)."""
 LEARNED_FIELDS = ("wn_rad_s", "zeta", "delay_s", "offset_deg")
 """What a learned nominal model fits on the healthy window (the rest stays at the channel's values)."""
+DITHER_SEED = 0x5EED
+"""The seed of a high-order reference's own command noise (any: only its statistics must be the actuator's)."""
 
 
 @dataclass(frozen=True)
@@ -55,10 +53,16 @@ class Reference:
     origin: str = ""
 
     def build(self) -> ActuatorModel:
-        """A fresh instance (no noise: the reference is the expected response)."""
+        """A fresh instance; a high-order one keeps its command noise in the loop, not its LVDT noise.
+
+        The command noise dithers the drive's dead band and the friction, as it does the actuator's: a
+        noise-free reference sticks where the actuator slips, so its Coulomb friction would have to be
+        smaller to match (fitted +30 % for a +50 % fault). Identification runs its physics the same way
+        (:func:`ema_sim.identify.physical.run_model`). The LVDT's noise is measurement noise only.
+        """
         kwargs: dict[str, object] = dict(self.overrides)
         if self.model in ("hoad2", "hoad3"):
-            kwargs["noise"] = False
+            kwargs.update(noise=True, seed=DITHER_SEED, feedback_noise_v=0.0)
         return create(self.model, self.channel, **kwargs)
 
 
@@ -139,28 +143,6 @@ def from_report(path: str | Path, channel: ChannelConfig) -> Reference:
     values = {k: float(v) for k, v in rep.values.items()
               if isinstance(getattr(defaults, k, None), float) and math.isfinite(v)}
     return Reference(model, channel, values, f"{model} of the identify report {path}")
-
-
-def learn(data: MeasuredData, channel: ChannelConfig, healthy_s: float) -> Reference:
-    """The basic second order fitted on the first ``healthy_s`` seconds, stated healthy.
-
-    Raises
-    ------
-    DataError
-        The record is shorter than twice the healthy window (nothing would be left to watch).
-    """
-    t = data.time_s - data.time_s[0]
-    if t[-1] < 1.5 * healthy_s:
-        raise DataError(f"{data.source or 'data'}: {t[-1]:.1f} s of data leaves too little to watch after a "
-                        f"{healthy_s:g} s healthy window (give --model, or a shorter --healthy-s)")
-    first = window(data, 0.0, healthy_s)
-    base = SecondOrderParams.from_channel(channel)
-    problem = Problem(first, channel)
-    result = fit(problem, base, LEARNED_FIELDS, max_nfev=60)
-    values = {k: float(v) for k, v in result.params.as_dict().items()}
-    text = ", ".join(f"{k}={values[k]:.4g}" for k in LEARNED_FIELDS)
-    return Reference("second_order", channel, values,
-                     f"the channel's second order with {text} learned on the first {healthy_s:g} s")
 
 
 def window(data: MeasuredData, start_s: float, end_s: float) -> MeasuredData:

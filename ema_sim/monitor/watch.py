@@ -3,9 +3,9 @@
 :func:`watch` runs the reference on the record's command and load, forms each output's residual, calibrates
 its centre and spread on the first ``healthy_s`` seconds (stated healthy), runs a CUSUM per output on 20 ms
 block means from there on, and at the first alarm isolates the fault on the window that follows
-(:mod:`ema_sim.monitor.isolate`) and re-estimates its parameter on a window sliding to the record's end. The
-verdict latches: one detection per record, the first departure from the reference (a second fault would be a
-departure from the first one's re-estimated model, which this offline pass does not track).
+(:mod:`ema_sim.monitor.isolate`: the fits, and the signature's vote) and re-estimates its parameter on a window
+sliding to the record's end. The verdict latches: one detection per record, the first departure from the
+reference (the node's frame-by-frame monitor re-baselines and watches on: :mod:`ema_sim.monitor.online`).
 """
 
 from __future__ import annotations
@@ -88,7 +88,8 @@ class Detection:
             "onset_s": num(self.onset_s), "nominal": num(self.nominal), "size": num(self.size),
             "signature": self.signature,
             "ranking": [{"kind": e.kind, "parameter": e.parameter, "estimate": num(e.estimate),
-                         "uncertainty": num(e.uncertainty), "score": num(e.score)} for e in self.ranking],
+                         "uncertainty": num(e.uncertainty), "score": num(e.score), "veto": e.veto}
+                        for e in self.ranking],
         }
 
 
@@ -236,11 +237,11 @@ def _diagnose(data: MeasuredData, reference: Reference, pred: FloatArray, presen
     end = min(t_det + opt.window_s, t_end)
     win = _window(data, reference, pred, present, sigma, onset, onset, end)
     cands = candidates(win.model, data)
-    ranking = isolate(win, cands)
-    best = ranking[0]
     hm = None if data.hinge_moment_inlb is None else data.hinge_moment_inlb[
         ((data.time_s - data.time_s[0]) >= onset) & ((data.time_s - data.time_s[0]) < end)]
     sig = signature(win, hm)
+    ranking = isolate(win, cands, sig)
+    best = ranking[0]
     chosen: Candidate = next(c for c in cands if c.kind == best.kind)
     est = best
     if chosen.free:

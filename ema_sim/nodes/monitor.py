@@ -4,11 +4,12 @@ A thin adapter over :class:`ema_sim.monitor.online.OnlineMonitor`. It reads the 
 (``/ema/emac/command``, V), the hinge moment (``/ema/load/hinge_moment``) and the LVDT feedback and motor current
 (``/ema/emac/feedback``, V and A), converts them with each channel's scaling, and steps one monitor per channel at
 each feedback frame. It publishes ``/diagnostics`` once a second (OK while watching, WARN while the healthy window
-calibrates, ERROR after a detection, with the statistic, threshold and the detection's key values) and each
-detection as JSON on ``/ema/monitor/detections``. Constructed unconfigured: ``configure`` makes its topics,
-``activate`` starts watching, ``deactivate`` stops, ``cleanup`` removes them. The reference is a fidelity or an
-``ema identify`` report (``model``); a model learned on the healthy window is the offline command's (``ema
-monitor``), not the node's.
+calibrates, ERROR after a detection, with the statistic, threshold and the last detection's key values) and each
+detection as JSON on ``/ema/monitor/detections``. After a detection a channel's monitor re-baselines (its
+reference adopts the re-estimated fault) and watches on, so a second fault is detected and published too.
+Constructed unconfigured: ``configure`` makes its topics, ``activate`` starts watching, ``deactivate`` stops,
+``cleanup`` removes them. The reference is a fidelity or an ``ema identify`` report (``model``); a model learned on
+the healthy window is the offline command's (``ema monitor``), not the node's.
 """
 
 from __future__ import annotations
@@ -202,14 +203,15 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
             d = mon.detection
             level = DiagnosticStatus.ERROR if d is not None else (
                 DiagnosticStatus.OK if mon.calibrated else DiagnosticStatus.WARN)
-            text = (f"{d.kind}: {d.parameter} = {d.estimate:.4g}" if d is not None else
-                    "alarm: isolating" if mon.alarm is not None else
+            text = ("alarm: isolating" if mon.alarm is not None and d is None else
+                    f"{d.kind}: {d.parameter} = {d.estimate:.4g}" if d is not None else
                     "watching" if mon.calibrated else "calibrating on the healthy window")
             values = {"reference": mon.reference.origin, "statistic": f"{mon.statistic:.3f}",
                       "threshold": f"{mon.h:.3f}", "time_s": f"{mon.t:.3f}",
                       "cpu_share": f"{self.cpu_s / max(self.frames * self.frame_s, 1e-9) / len(self.monitors):.4f}"}
             if d is not None:
                 values.update({k: str(v) for k, v in d.as_dict().items() if k not in ("ranking", "signature")})
+                values["detections"] = str(len(mon.detections))
             msg.status.append(DiagnosticStatus(level=level, name=f"{self.get_fully_qualified_name()}: {ch}",
                                                message=text, hardware_id=mon.reference.model,
                                                values=[KeyValue(key=k, value=v) for k, v in values.items()]))
@@ -217,7 +219,8 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
         return {"frames": self.frames, "cpu_s": self.cpu_s,
-                "detections": {ch: m.detection.as_dict() for ch, m in self.monitors.items() if m.detection}}
+                "detections": {ch: [d.as_dict() for d in m.detections] for ch, m in self.monitors.items()
+                               if m.detections}}
 
 
 def parser() -> argparse.ArgumentParser:

@@ -392,13 +392,14 @@ class FrequencyResult:
         """Why the response is not causal: its coherent points whose phase leads beyond their uncertainty ("": none)."""
         r = self.response
         coherent = r.coherence >= COHERENCE_GOOD
-        sigma = np.degrees(r.random_error)
-        ahead = [i for i in np.flatnonzero(coherent) if causal.phase_leads(float(r.phase_deg[i]), float(sigma[i]))]
+        phase = [float(v) for v in r.phase_deg]
+        sigma = [float(v) for v in np.degrees(r.random_error)]
+        ahead = [int(i) for i in np.flatnonzero(coherent) if causal.phase_leads(phase[i], sigma[i])]
         if not ahead:
             return ""
-        worst_i = max(ahead, key=lambda i: float(r.phase_deg[i] / max(sigma[i], 1e-12)))
+        worst_i = max(ahead, key=lambda i: phase[i] / max(sigma[i], 1e-12))
         return (f"{len(ahead)} of {int(coherent.sum())} coherent points lead the command; the largest, "
-                + causal.phase_note(float(r.phase_deg[worst_i]), float(sigma[worst_i]), float(r.freq_hz[worst_i])))
+                + causal.phase_note(phase[worst_i], sigma[worst_i], float(r.freq_hz[worst_i])))
 
     @property
     def quality(self) -> Quality:
