@@ -260,8 +260,12 @@ def _scaled(value: Any, log_scale: float) -> Any:
     return tuple(float(q) * k for q in value) if isinstance(value, tuple) else float(value) * k
 
 
-def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEEDS[0]) -> FloatArray:
-    """Least squares over the ``free`` coordinates of ``x`` (the others held)."""
+def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEEDS[0],
+         end: dict[str, FloatArray] | None = None) -> FloatArray:
+    """Least squares over the ``free`` coordinates of ``x`` (the others held).
+
+    ``end`` takes the residual (``fun``) and the free coordinates' Jacobian (``jac``) where it ended.
+    """
     if not free:
         return x
     last: dict[str, FloatArray] = {}
@@ -285,6 +289,8 @@ def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEE
     start = np.clip(x[free], lower + 1e-9, upper - 1e-9)
     out = least_squares(res, start, jac=jac, bounds=(lower, upper), x_scale=runs.scale[free], method="trf",
                         max_nfev=nfev)
+    if end is not None:
+        end["fun"], end["jac"] = np.asarray(out.fun, dtype=float), np.asarray(out.jac, dtype=float)
     return put(np.asarray(out.x, dtype=float))
 
 
@@ -299,21 +305,24 @@ def _scan(runs: _Runs, x: FloatArray, i: int, grid: FloatArray) -> FloatArray:
     return points[int(np.argmin(costs))]
 
 
-def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None
-                   ) -> FloatArray:
+def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None,
+                   why: list[str] | None = None) -> FloatArray:
     """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`).
 
     With ``beat`` (an escalation's error to get under), the fit runs in rounds of :data:`SCREEN_NFEV`
     evaluations and stops once even :data:`SCREEN_OPTIMISM` times the last round's drop, in every round
-    left, could not bring it under ``beat``. A shifted start on a coarse copy of the record (an escalation's,
-    :func:`_screened`) is not restarted: what it is for is where it ends, beside the others.
+    left, could not bring it under ``beat``, or once the Gauss-Newton prediction from where the round ended
+    (its own Jacobian there, no run more), taken that many times over, could not (:func:`_screen`); ``why``
+    takes the reason. A shifted start on a coarse copy of the record (an escalation's, :func:`_screened`) is
+    not restarted: what it is for is where it ends, beside the others.
     """
     cost = runs.cost(x, seed)
     nfev, rounds = (MAX_NFEV, POLISH_ROUNDS) if beat is None else (SCREEN_NFEV, POLISH_ROUNDS * MAX_NFEV // SCREEN_NFEV)
     if beat is None and runs.options:  # a shifted start on a coarse copy: one fit, its end's spread is its use
         rounds = 1
     for k in range(rounds):
-        y = _fit(runs, x, free, nfev, seed)
+        end: dict[str, FloatArray] = {}
+        y = _fit(runs, x, free, nfev, seed, end)
         c = runs.cost(y, seed)
         if c >= cost:
             break
@@ -322,7 +331,19 @@ def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEED
         x, cost = y, c
         if gain < POLISH_SHARE:
             break
-        if beat is not None and cost - SCREEN_OPTIMISM * drop * (rounds - k - 1) >= beat:
+        if beat is None:
+            continue
+        if cost - SCREEN_OPTIMISM * drop * (rounds - k - 1) >= beat:
+            if why is not None:
+                why.append(f"after round {k + 1} of the first fit ({nfev} evaluations each) at weighted error "
+                           f"{cost:.6g}: {SCREEN_OPTIMISM:g} times its last drop ({drop:.6g}) in each of the "
+                           f"{rounds - k - 1} rounds left still leaves it above the {beat:.6g} it must get under")
+            break
+        predicted = _screen(end["fun"], end["jac"], beat) if "jac" in end and end["jac"].shape[1] else ""
+        if predicted:
+            if why is not None:
+                why.append(f"after round {k + 1} of the first fit: " + predicted.removeprefix(
+                    "screened after the delay scan: "))
             break
     return x
 
@@ -527,13 +548,16 @@ def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, 
     why = _screen(r_start, jac, beat_c)
     if why:
         return stop(why)
-    x = _fit_restarted(cruns, x, free, beat=beat_c)
+    bound: list[str] = []
+    x = _fit_restarted(cruns, x, free, beat=beat_c, why=bound)
     c, f = cruns.cost(x), fine.cost(x)
     say(f"  {runs.model}: delays scanned, {len(free)} parameters fitted on {copy}: weighted error {c:.6g} "
         f"({f:.6g} with the model at its own rate)")
     if min(c, f) >= beat_c:
-        return stop(f"the first fit ended at weighted error {c:.6g} ({f:.6g} with the model at its own rate), above "
-                    f"the {beat_c:.6g} it must get under to pay: the whole record and the uncertainty were not run")
+        early = f"{bound[0]}; " if bound else ""
+        return stop(f"{early}the first fit ended at weighted error {c:.6g} ({f:.6g} with the model at its own rate), "
+                    f"above the {beat_c:.6g} it must get under to pay: the whole record and the uncertainty were "
+                    "not run")
     ends = [x, *_other_starts(cruns, x, free, pool)]
     runs.count += cruns.count + fine.count
     text = (f"screened on {copy}: it got under the {beat_c:.6g} it must ({c:.6g}; {spent()}), then fitted on the "
