@@ -435,8 +435,7 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
         screened = _screened(runs, coarse, x, current, beat, pool, t0, say)
         if isinstance(screened, PhysicalFit):
             return screened
-        x, held, free, others, screen = screened
-        x = _fit_restarted(runs, x, free, beat=beat)
+        x, held, free, others, screen = _from_coarse(runs, screened, beat)
     else:
         x, held, free, r_start, jac = _start(runs, x)
         if beat is not None:
@@ -492,23 +491,50 @@ def _start(runs: _Runs, x: FloatArray) -> tuple[FloatArray, list[str], list[int]
         the free coordinates other than the delays there.
     """
     names = runs.names
+    wide = np.arange(0.0, DELAY_SPAN_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
+    for i in [names.index(n) for n in DELAYS if n in names]:
+        x = _scan(runs, x, i, wide)
+    held, free, r_start, jac = _movable(runs, x)
+    return x, held, free, r_start, jac
+
+
+def _movable(runs: _Runs, x: FloatArray) -> tuple[list[str], list[int], FloatArray, FloatArray]:
+    """What the record cannot move at ``x`` (a Jacobian column below :data:`MOVE_SHARE` of the largest).
+
+    Returns
+    -------
+    tuple
+        The held parameters, the free coordinates, the residual at ``x`` and the Jacobian of the free
+        coordinates other than the delays there.
+    """
+    names = runs.names
     delays = [names.index(n) for n in DELAYS if n in names]
     rest = [i for i in range(len(names)) if i not in delays]
-    wide = np.arange(0.0, DELAY_SPAN_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
-    for i in delays:
-        x = _scan(runs, x, i, wide)
-    r_start = runs.residual(x)
-    jac = runs.jacobian(x, rest, r_start)
+    r = runs.residual(x)
+    jac = runs.jacobian(x, rest, r)
     size = np.linalg.norm(jac, axis=0)
     top = float(np.max(size, initial=0.0))
     held = [names[i] for i, s in zip(rest, size, strict=True) if s <= MOVE_SHARE * top]
     free = delays + [i for i in rest if names[i] not in held]
-    return x, held, free, r_start, jac[:, [k for k, i in enumerate(rest) if names[i] not in held]]
+    return held, free, r, jac[:, [k for k, i in enumerate(rest) if names[i] not in held]]
+
+
+def _from_coarse(runs: _Runs, screened: tuple[FloatArray, list[FloatArray], str], beat: float
+                 ) -> tuple[FloatArray, list[str], list[int], list[FloatArray], str]:
+    """The fine fit on the whole record from the coarse end (:func:`_screened`'s), with what the record moves there.
+
+    An element the whole record cannot move at the coarse end is held at its declared value, as the full fit
+    holds what it cannot move at its start.
+    """
+    x, others, screen = screened
+    held, free, _, _ = _movable(runs, x)
+    x = x.copy()
+    x[[runs.names.index(n) for n in held]] = 0.0  # log coordinate 0: the declared value
+    return _fit_restarted(runs, x, free, beat=beat), held, free, others, screen
 
 
 def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, beat: float, pool: Pool,
-              t0: float, say: Callable[[str], None]
-              ) -> PhysicalFit | tuple[FloatArray, list[str], list[int], list[FloatArray], str]:
+              t0: float, say: Callable[[str], None]) -> PhysicalFit | tuple[FloatArray, list[FloatArray], str]:
     """An escalation screened and fitted first on the record's coarse copy (:mod:`ema_sim.identify.coarse`).
 
     On the copy the physics must get under the same share of the current model's error above the noise floor
@@ -521,8 +547,8 @@ def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, 
     Returns
     -------
     PhysicalFit or tuple
-        The fit stopped (with why), or the coarse end, the held parameters, the free coordinates, the ends of
-        the coarse fits from the three starts and what the screen did.
+        The fit stopped (with why), or the coarse end, the coarse fits' ends from the three starts and what the
+        screen did.
     """
     problem = runs.problem
     cruns = _Runs(coarse, runs.model, runs.names, runs.declared, {"rate_hz": COARSE_RATE_HZ})
@@ -536,11 +562,8 @@ def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, 
     copy = f"the coarse copy (every {every} samples, the model at {COARSE_RATE_HZ / 1000:g} kHz)"
     say(f"  {runs.model}: screened on {copy}: must get under {beat_c:.6g} (the current model leaves {cur_c:.6g})")
 
-    def spent() -> str:
-        return f"{cruns.count + fine.count} coarse runs, {time.perf_counter() - t0:.1f} s"
-
     def stop(why: str) -> PhysicalFit:
-        text = f"screened on {copy}: {why} ({spent()})"
+        text = f"screened on {copy}: {why} ({cruns.count + fine.count} coarse runs, {time.perf_counter() - t0:.1f} s)"
         runs.count += cruns.count + fine.count
         return _stopped(runs, x, held, text, t0, say, text)
 
@@ -560,9 +583,8 @@ def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, 
                     "not run")
     ends = [x, *_other_starts(cruns, x, free, pool)]
     runs.count += cruns.count + fine.count
-    text = (f"screened on {copy}: it got under the {beat_c:.6g} it must ({c:.6g}; {spent()}), then fitted on the "
-            "whole record from there")
-    return x, held, free, ends, text
+    return x, ends, (f"screened on {copy}: it got under the {beat_c:.6g} it must ({c:.6g}; {cruns.count + fine.count} "
+                     f"coarse runs, {time.perf_counter() - t0:.1f} s), then fitted on the whole record from there")
 
 
 def _other_starts(runs: _Runs, x: FloatArray, free: list[int], pool: Pool) -> list[FloatArray]:
