@@ -28,8 +28,7 @@ fits those elements of HOAD2/HOAD3 (figure 30's drive with figure 32's or 33's g
   the record's coarse copy (:mod:`ema_sim.identify.coarse`: the outputs decimated to 250 Hz, the model at
   5 kHz), against the same share of that model's error above the floor there; the fine model is run once
   at the coarse fit's end before the verdict. Only a physics that gets under goes on to the whole record,
-  from the coarse end (fewer fine runs), and its shifted starts are the coarse copy's (one fit each: their
-  spread joins the uncertainty, computed on the whole record).
+  from the coarse end (fewer fine runs), then to its shifted starts and uncertainty there as above.
 
 The declared model's noise levels and quantization are not fitted; its command noise is run (4.3: noise
 inside the loop dithers the drive's dead band and friction, which a noise-free model would absorb into
@@ -313,13 +312,10 @@ def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEED
     evaluations and stops once even :data:`SCREEN_OPTIMISM` times the last round's drop, in every round
     left, could not bring it under ``beat``, or once the Gauss-Newton prediction from where the round ended
     (its own Jacobian there, no run more), taken that many times over, could not (:func:`_screen`); ``why``
-    takes the reason. A shifted start on a coarse copy of the record (an escalation's, :func:`_screened`) is
-    not restarted: what it is for is where it ends, beside the others.
+    takes the reason.
     """
     cost = runs.cost(x, seed)
     nfev, rounds = (MAX_NFEV, POLISH_ROUNDS) if beat is None else (SCREEN_NFEV, POLISH_ROUNDS * MAX_NFEV // SCREEN_NFEV)
-    if beat is None and runs.options:  # a shifted start on a coarse copy: one fit, its end's spread is its use
-        rounds = 1
     for k in range(rounds):
         end: dict[str, FloatArray] = {}
         y = _fit(runs, x, free, nfev, seed, end)
@@ -432,10 +428,10 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     coarse = coarse_problem(problem) if beat is not None and current is not None else None
     screen = ""
     if coarse is not None and beat is not None and current is not None:
-        screened = _screened(runs, coarse, x, current, beat, pool, t0, say)
+        screened = _screened(runs, coarse, x, current, beat, t0, say)
         if isinstance(screened, PhysicalFit):
             return screened
-        x, held, free, others, screen = _from_coarse(runs, screened, beat)
+        x, held, free, screen = _from_coarse(runs, screened, beat)
     else:
         x, held, free, r_start, jac = _start(runs, x)
         if beat is not None:
@@ -443,23 +439,17 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
             if why:
                 return _stopped(runs, x, held, why, t0, say)
         x = _fit_restarted(runs, x, free, beat=beat)
-        others = []
     say(f"  {model}: delays scanned, {len(free)} parameters fitted: weighted error {runs.cost(x):.6g}")
     if beat is not None and runs.cost(x) >= beat:
         why = (f"the first fit ended at weighted error {runs.cost(x):.6g}, above the {beat:.6g} it must get under "
                "to pay: the shifted starts and the uncertainty were not run")
         return _stopped(runs, x, held, why, t0, say, screen)
-    if others:  # the coarse copy's three ends: their spread is the optimizer's own, the fine end is the fit
-        ends = others
-        start_sigma = np.std(np.array(others)[:, free], axis=0, ddof=1) if free else np.zeros(0)
-        say(f"{model} physical fit: {runs.count} runs; the shifted starts on the coarse copy")
-    else:
-        ends = [x, *_other_starts(runs, x, free, pool)]
-        mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
-        x = ends[int(np.argmin(mean_cost))]
-        start_sigma = np.std(np.array(ends)[:, free], axis=0, ddof=1) if free else np.zeros(0)
-        say(f"{model} physical fit: {runs.count} runs; mean cost over the noise seeds from {len(ends)} starts: "
-            + ", ".join(f"{c:.6g}" for c in mean_cost))
+    ends = [x, *_other_starts(runs, x, free, pool)]
+    mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
+    x = ends[int(np.argmin(mean_cost))]
+    start_sigma = np.std(np.array(ends)[:, free], axis=0, ddof=1) if free else np.zeros(0)
+    say(f"{model} physical fit: {runs.count} runs; mean cost over the noise seeds from {len(ends)} starts: "
+        + ", ".join(f"{c:.6g}" for c in mean_cost))
     residual = runs.residual(x)
     sim = runs.sim(x)
     sigma, corr, vague = _uncertainty(runs, x, free, residual, start_sigma)
@@ -519,36 +509,34 @@ def _movable(runs: _Runs, x: FloatArray) -> tuple[list[str], list[int], FloatArr
     return held, free, r, jac[:, [k for k, i in enumerate(rest) if names[i] not in held]]
 
 
-def _from_coarse(runs: _Runs, screened: tuple[FloatArray, list[FloatArray], str], beat: float
-                 ) -> tuple[FloatArray, list[str], list[int], list[FloatArray], str]:
+def _from_coarse(runs: _Runs, screened: tuple[FloatArray, str], beat: float
+                 ) -> tuple[FloatArray, list[str], list[int], str]:
     """The fine fit on the whole record from the coarse end (:func:`_screened`'s), with what the record moves there.
 
     An element the whole record cannot move at the coarse end is held at its declared value, as the full fit
     holds what it cannot move at its start.
     """
-    x, others, screen = screened
+    x, screen = screened
     held, free, _, _ = _movable(runs, x)
     x = x.copy()
     x[[runs.names.index(n) for n in held]] = 0.0  # log coordinate 0: the declared value
-    return _fit_restarted(runs, x, free, beat=beat), held, free, others, screen
+    return _fit_restarted(runs, x, free, beat=beat), held, free, screen
 
 
-def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, beat: float, pool: Pool,
-              t0: float, say: Callable[[str], None]) -> PhysicalFit | tuple[FloatArray, list[FloatArray], str]:
+def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, beat: float, t0: float,
+              say: Callable[[str], None]) -> PhysicalFit | tuple[FloatArray, str]:
     """An escalation screened and fitted first on the record's coarse copy (:mod:`ema_sim.identify.coarse`).
 
     On the copy the physics must get under the same share of the current model's error above the noise floor
     as on the record (``beat``). It is screened as the record was (:func:`_screen` after the delay scan, then
     the first fit in rounds, :func:`_fit_restarted`) and stops as soon as it cannot get there; at the coarse
     fit's end the fine model is run once on the copy's samples, and the fit stops when neither it nor the
-    coarse one got under. Otherwise the shifted starts run on the copy too, and the fine fit on the whole
-    record starts from the coarse end.
+    coarse one got under. Otherwise the fine fit on the whole record starts from the coarse end.
 
     Returns
     -------
     PhysicalFit or tuple
-        The fit stopped (with why), or the coarse end, the coarse fits' ends from the three starts and what the
-        screen did.
+        The fit stopped (with why), or the coarse end and what the screen did.
     """
     problem = runs.problem
     cruns = _Runs(coarse, runs.model, runs.names, runs.declared, {"rate_hz": COARSE_RATE_HZ})
@@ -581,9 +569,8 @@ def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, 
         return stop(f"{early}the first fit ended at weighted error {c:.6g} ({f:.6g} with the model at its own rate), "
                     f"above the {beat_c:.6g} it must get under to pay: the whole record and the uncertainty were "
                     "not run")
-    ends = [x, *_other_starts(cruns, x, free, pool)]
     runs.count += cruns.count + fine.count
-    return x, ends, (f"screened on {copy}: it got under the {beat_c:.6g} it must ({c:.6g}; {cruns.count + fine.count} "
+    return x, (f"screened on {copy}: it got under the {beat_c:.6g} it must ({c:.6g}; {cruns.count + fine.count} "
                      f"coarse runs, {time.perf_counter() - t0:.1f} s), then fitted on the whole record from there")
 
 
