@@ -9,6 +9,7 @@ import pytest
 from identgen import hoad3_record
 
 from ema_sim.config import load_channel
+from ema_sim.identify.coarse import coarse_problem, decimation, on_coarse
 from ema_sim.identify.physical import fit_physical
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare
@@ -77,3 +78,42 @@ def test_an_escalation_that_cannot_beat_the_model_before_it_stops_early_and_says
     assert stopped.starts == 1
     assert stopped.sigma == {}
     assert stopped.simulations < 0.6 * full.simulations
+
+
+def test_the_coarse_copy_compares_every_fourth_sample_driven_by_the_records_own_inputs():
+    """The coarse copy of a 1 kHz record keeps every fourth sample, the record's breakpoints and noise floors, and
+    the record's residual read on its samples is the copy's own."""
+    problem = _problem(hoad3_record(seed=5, duration_s=3.0))
+    coarse = coarse_problem(problem)
+    assert coarse is not None
+    assert decimation(problem) == 4
+    assert coarse.time_s.size == (problem.time_s.size + 3) // 4
+    for mine, theirs in zip(coarse.breakpoints, problem.breakpoints, strict=True):
+        np.testing.assert_array_equal(mine, theirs)
+    assert coarse.sigma_deg == problem.sigma_deg
+    assert coarse.settle_s == problem.settle_s
+    whole = problem.weighted_residual(np.zeros((problem.time_s.size, 3)))
+    np.testing.assert_array_equal(on_coarse(problem, coarse, whole),
+                                  coarse.weighted_residual(np.zeros((coarse.time_s.size, 3))))
+
+
+def test_an_escalation_screened_on_the_coarse_copy_stops_there_or_ends_as_the_full_fit_would():
+    """Against a model already at a third of the noise floor the physics stops on the coarse copy (no run of the
+    whole record's fit, no shifted start on it, no uncertainty) and says so; against one it can beat it is
+    fitted on the whole record from the coarse end and ends within 1.5× the floor, as the full fit does."""
+    problem = _problem(hoad3_record(seed=5, duration_s=3.0, **OFF_DECLARED))
+    good = np.random.default_rng(0).normal(0.0, 0.3, problem.n_fit)
+    stopped = fit_physical(problem, "hoad3", beat=float(good @ good), current=good)
+    assert stopped.stopped.startswith("screened on the coarse copy")
+    assert stopped.screen == stopped.stopped
+    assert stopped.starts == 1
+    assert stopped.sigma == {}
+    bad = np.full(problem.n_fit, 30.0)
+    paid = fit_physical(problem, "hoad3", beat=0.9 * float(bad @ bad), current=bad)
+    assert paid.stopped == ""
+    assert "then fitted on the whole record" in paid.screen
+    assert paid.starts == 3
+    assert stopped.simulations < 0.5 * paid.simulations
+    for o, rms in paid.rms_deg.items():
+        assert rms <= 1.5 * problem.sigma_deg[o], (o, rms, problem.sigma_deg[o])
+    assert all(np.isfinite(v) and v > 0 for k, v in paid.sigma.items() if k in paid.fitted)

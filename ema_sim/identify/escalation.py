@@ -112,6 +112,8 @@ def adopt_physical(problem: Problem, result: Identification, pf: PhysicalFit, li
     text = ", ".join(f"{o} {v:.4g}°" for o, v in pf.rms_deg.items())
     share = f"{100 * min(gain, 1.0):.1f} %" if gain >= 0.0 else "none"
     head = f"{pf.model} with its physical parameters fitted ({pf.simulations} runs, {pf.elapsed_s:.1f} s): rms {text}"
+    if pf.screen and not pf.stopped:
+        head += f" ({pf.screen})"
     if pf.stopped:
         why = f"{head}; not kept, stopped early: {pf.stopped}"
         result.notes.append(why)

@@ -335,7 +335,8 @@ def _effects(chain: _Chain, base: Any, searched: int) -> tuple[str, str]:
 def _escalate(chain: _Chain) -> tuple[str, str]:
     cur = chain.result.final
     excess = max(cur.rss - chain.problem.n_fit, TINY)
-    pf = fit_physical(chain.problem, ESCALATE_TO, chain.say, chain.pool, beat=cur.rss - MIN_EXCESS_SHARE * excess)
+    pf = fit_physical(chain.problem, ESCALATE_TO, chain.say, chain.pool, beat=cur.rss - MIN_EXCESS_SHARE * excess,
+                      current=cur.residual)
     return adopt_physical(chain.problem, chain.result, pf, chain.limit())
 
 

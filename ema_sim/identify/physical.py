@@ -24,6 +24,11 @@ fits those elements of HOAD2/HOAD3 (figure 30's drive with figure 32's or 33's g
   The first fit itself runs in short rounds and stops once even that many times its last round's progress,
   in every round left, could not get it there. Either way the fit stops, says why and how long it ran, and the
   shifted starts and the uncertainty are not run.
+* **Screened on a coarse copy first.** Given the current model's residual, an escalation takes those steps on
+  the record's coarse copy (:mod:`ema_sim.identify.coarse`: the outputs decimated to 250 Hz, the model at
+  5 kHz), against the same share of that model's error above the floor there; the fine model is run once
+  at the coarse fit's end before the verdict. Only a physics that gets under goes on to the whole record,
+  from the coarse end (fewer fine runs), then to its shifted starts and uncertainty there as above.
 
 The declared model's noise levels and quantization are not fitted; its command noise is run (4.3: noise
 inside the loop dithers the drive's dead band and friction, which a noise-free model would absorb into
@@ -46,6 +51,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from ema_sim.identify.coarse import COARSE_RATE_HZ, coarse_problem, decimation, on_coarse
 from ema_sim.identify.declared import run_declared
 from ema_sim.identify.fit import block_covariance, correlation, finite
 from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread, result
@@ -138,6 +144,8 @@ class PhysicalFit:
     """Fits from different starts whose ends the uncertainty includes."""
     stopped: str = ""
     """Why the fit stopped before its end (empty: it ran to the end): it could not beat the model it must."""
+    screen: str = ""
+    """How an escalation was screened on the record's coarse copy, and how long that took (empty: it was not)."""
 
     @property
     def rss(self) -> float:
@@ -176,8 +184,11 @@ def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -
 class _Runs:
     """The model on the record at a parameter vector: delays absolute, the rest log-scaled from declared."""
 
-    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, Any]) -> None:
+    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, Any],
+                 options: dict[str, Any] | None = None) -> None:
         self.problem = problem
+        self.options = options or {}
+        """Model options every run takes beside the parameters (a coarse copy's integration rate)."""
         self.model = model
         self.names = names
         self.declared = declared
@@ -203,7 +214,7 @@ class _Runs:
         """The model's outputs at ``x`` with its noise from ``seed``."""
         with self._lock:
             self.count += 1
-        return run_model(self.problem, self.model, self.values(x), seed)
+        return run_model(self.problem, self.model, {**self.values(x), **self.options}, seed)
 
     def residual(self, x: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
         """Weighted residual at ``x`` (a run that diverged counts as a very bad one, not an error)."""
@@ -248,8 +259,12 @@ def _scaled(value: Any, log_scale: float) -> Any:
     return tuple(float(q) * k for q in value) if isinstance(value, tuple) else float(value) * k
 
 
-def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEEDS[0]) -> FloatArray:
-    """Least squares over the ``free`` coordinates of ``x`` (the others held)."""
+def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEEDS[0],
+         end: dict[str, FloatArray] | None = None) -> FloatArray:
+    """Least squares over the ``free`` coordinates of ``x`` (the others held).
+
+    ``end`` takes the residual (``fun``) and the free coordinates' Jacobian (``jac``) where it ended.
+    """
     if not free:
         return x
     last: dict[str, FloatArray] = {}
@@ -273,6 +288,8 @@ def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEE
     start = np.clip(x[free], lower + 1e-9, upper - 1e-9)
     out = least_squares(res, start, jac=jac, bounds=(lower, upper), x_scale=runs.scale[free], method="trf",
                         max_nfev=nfev)
+    if end is not None:
+        end["fun"], end["jac"] = np.asarray(out.fun, dtype=float), np.asarray(out.jac, dtype=float)
     return put(np.asarray(out.x, dtype=float))
 
 
@@ -287,18 +304,21 @@ def _scan(runs: _Runs, x: FloatArray, i: int, grid: FloatArray) -> FloatArray:
     return points[int(np.argmin(costs))]
 
 
-def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None
-                   ) -> FloatArray:
+def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None,
+                   why: list[str] | None = None) -> FloatArray:
     """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`).
 
     With ``beat`` (an escalation's error to get under), the fit runs in rounds of :data:`SCREEN_NFEV`
     evaluations and stops once even :data:`SCREEN_OPTIMISM` times the last round's drop, in every round
-    left, could not bring it under ``beat``.
+    left, could not bring it under ``beat``, or once the Gauss-Newton prediction from where the round ended
+    (its own Jacobian there, no run more), taken that many times over, could not (:func:`_screen`); ``why``
+    takes the reason.
     """
     cost = runs.cost(x, seed)
     nfev, rounds = (MAX_NFEV, POLISH_ROUNDS) if beat is None else (SCREEN_NFEV, POLISH_ROUNDS * MAX_NFEV // SCREEN_NFEV)
     for k in range(rounds):
-        y = _fit(runs, x, free, nfev, seed)
+        end: dict[str, FloatArray] = {}
+        y = _fit(runs, x, free, nfev, seed, end)
         c = runs.cost(y, seed)
         if c >= cost:
             break
@@ -307,7 +327,19 @@ def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEED
         x, cost = y, c
         if gain < POLISH_SHARE:
             break
-        if beat is not None and cost - SCREEN_OPTIMISM * drop * (rounds - k - 1) >= beat:
+        if beat is None:
+            continue
+        if cost - SCREEN_OPTIMISM * drop * (rounds - k - 1) >= beat:
+            if why is not None:
+                why.append(f"after round {k + 1} of the first fit ({nfev} evaluations each) at weighted error "
+                           f"{cost:.6g}: {SCREEN_OPTIMISM:g} times its last drop ({drop:.6g}) in each of the "
+                           f"{rounds - k - 1} rounds left still leaves it above the {beat:.6g} it must get under")
+            break
+        predicted = _screen(end["fun"], end["jac"], beat) if "jac" in end and end["jac"].shape[1] else ""
+        if predicted:
+            if why is not None:
+                why.append(f"after round {k + 1} of the first fit: " + predicted.removeprefix(
+                    "screened after the delay scan: "))
             break
     return x
 
@@ -325,7 +357,7 @@ def _shifted(runs: _Runs, x: FloatArray, free: list[int], sign: float) -> FloatA
 
 
 def remote_start(problem: Problem, model: str, names: list[str], declared: dict[str, Any], x: FloatArray,
-                 free: list[int], seed: int) -> tuple[FloatArray, int]:
+                 free: list[int], seed: int, options: dict[str, Any] | None = None) -> tuple[FloatArray, int]:
     """:func:`_fit_restarted` from ``x`` under the noise ``seed`` on a worker, and the runs it took.
 
     Parameters
@@ -344,19 +376,21 @@ def remote_start(problem: Problem, model: str, names: list[str], declared: dict[
         The coordinates fitted.
     seed : int
         The model's noise seed.
+    options : dict, optional
+        Model options every run takes (a coarse copy's integration rate).
 
     Returns
     -------
     tuple
         Where the fit ended, and the model runs it took.
     """
-    runs = _Runs(problem, model, names, declared)
+    runs = _Runs(problem, model, names, declared, options)
     with one_blas_thread():
         return _fit_restarted(runs, x, free, seed), runs.count
 
 
 def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL,
-                 beat: float | None = None) -> PhysicalFit:
+                 beat: float | None = None, current: FloatArray | None = None) -> PhysicalFit:
     """Fit ``model``'s physical parameters (module docstring) to the problem's record.
 
     Parameters
@@ -373,6 +407,9 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     beat : float, optional
         The weighted error the physics must get under to be kept (an escalation's): the fit stops as soon as
         it cannot (module docstring). None: fitted to its end (a declared HOAD2/HOAD3).
+    current : numpy.ndarray, optional
+        With ``beat``, the weighted residual of the model the physics must beat: the fit is then screened and
+        started on the record's coarse copy (:func:`_screened`).
 
     Returns
     -------
@@ -388,28 +425,25 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
              and (n in DELAYS or _positive(info[n].default))]
     runs = _Runs(problem, model, names, declared)
     x = np.array([float(declared[n]) if n in DELAYS else 0.0 for n in names])
-    delays = [names.index(n) for n in DELAYS if n in names]
-    rest = [i for i in range(len(names)) if i not in delays]
-    wide = np.arange(0.0, DELAY_SPAN_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
-    for i in delays:
-        x = _scan(runs, x, i, wide)
-    # what the record cannot move, from the Jacobian at the scanned start
-    r_start = runs.residual(x)
-    jac = runs.jacobian(x, rest, r_start)
-    size = np.linalg.norm(jac, axis=0)
-    top = float(np.max(size, initial=0.0))
-    held = [names[i] for i, s in zip(rest, size, strict=True) if s <= MOVE_SHARE * top]
-    free = delays + [i for i in rest if names[i] not in held]
-    if beat is not None:
-        why = _screen(r_start, jac[:, [k for k, i in enumerate(rest) if names[i] not in held]], beat)
-        if why:
-            return _stopped(runs, x, names, declared, held, why, t0, say)
-    x = _fit_restarted(runs, x, free, beat=beat)
+    coarse = coarse_problem(problem) if beat is not None and current is not None else None
+    screen = ""
+    if coarse is not None and beat is not None and current is not None:
+        screened = _screened(runs, coarse, x, current, beat, t0, say)
+        if isinstance(screened, PhysicalFit):
+            return screened
+        x, held, free, screen = _from_coarse(runs, screened, beat)
+    else:
+        x, held, free, r_start, jac = _start(runs, x)
+        if beat is not None:
+            why = _screen(r_start, jac, beat)
+            if why:
+                return _stopped(runs, x, held, why, t0, say)
+        x = _fit_restarted(runs, x, free, beat=beat)
     say(f"  {model}: delays scanned, {len(free)} parameters fitted: weighted error {runs.cost(x):.6g}")
     if beat is not None and runs.cost(x) >= beat:
         why = (f"the first fit ended at weighted error {runs.cost(x):.6g}, above the {beat:.6g} it must get under "
                "to pay: the shifted starts and the uncertainty were not run")
-        return _stopped(runs, x, names, declared, held, why, t0, say)
+        return _stopped(runs, x, held, why, t0, say, screen)
     ends = [x, *_other_starts(runs, x, free, pool)]
     mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
     x = ends[int(np.argmin(mean_cost))]
@@ -433,7 +467,111 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     fitted = tuple(n for n in names if n not in held)
     return PhysicalFit(model, values, {n: declared[n] for n in names}, out_sigma, fitted, tuple(held), sim,
                        residual, rms, runs.count, time.perf_counter() - t0,
-                       {names[a]: {names[b]: v for b, v in row.items()} for a, row in corr.items()}, len(ends))
+                       {names[a]: {names[b]: v for b, v in row.items()} for a, row in corr.items()}, len(ends),
+                       screen=screen)
+
+
+def _start(runs: _Runs, x: FloatArray) -> tuple[FloatArray, list[str], list[int], FloatArray, FloatArray]:
+    """The delays scanned from ``x``, and what the record cannot move, from the Jacobian at the scanned start.
+
+    Returns
+    -------
+    tuple
+        The scanned start, the held parameters, the free coordinates, the residual there and the Jacobian of
+        the free coordinates other than the delays there.
+    """
+    names = runs.names
+    wide = np.arange(0.0, DELAY_SPAN_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
+    for i in [names.index(n) for n in DELAYS if n in names]:
+        x = _scan(runs, x, i, wide)
+    held, free, r_start, jac = _movable(runs, x)
+    return x, held, free, r_start, jac
+
+
+def _movable(runs: _Runs, x: FloatArray) -> tuple[list[str], list[int], FloatArray, FloatArray]:
+    """What the record cannot move at ``x`` (a Jacobian column below :data:`MOVE_SHARE` of the largest).
+
+    Returns
+    -------
+    tuple
+        The held parameters, the free coordinates, the residual at ``x`` and the Jacobian of the free
+        coordinates other than the delays there.
+    """
+    names = runs.names
+    delays = [names.index(n) for n in DELAYS if n in names]
+    rest = [i for i in range(len(names)) if i not in delays]
+    r = runs.residual(x)
+    jac = runs.jacobian(x, rest, r)
+    size = np.linalg.norm(jac, axis=0)
+    top = float(np.max(size, initial=0.0))
+    held = [names[i] for i, s in zip(rest, size, strict=True) if s <= MOVE_SHARE * top]
+    free = delays + [i for i in rest if names[i] not in held]
+    return held, free, r, jac[:, [k for k, i in enumerate(rest) if names[i] not in held]]
+
+
+def _from_coarse(runs: _Runs, screened: tuple[FloatArray, str], beat: float
+                 ) -> tuple[FloatArray, list[str], list[int], str]:
+    """The fine fit on the whole record from the coarse end (:func:`_screened`'s), with what the record moves there.
+
+    An element the whole record cannot move at the coarse end is held at its declared value, as the full fit
+    holds what it cannot move at its start.
+    """
+    x, screen = screened
+    held, free, _, _ = _movable(runs, x)
+    x = x.copy()
+    x[[runs.names.index(n) for n in held]] = 0.0  # log coordinate 0: the declared value
+    return _fit_restarted(runs, x, free, beat=beat), held, free, screen
+
+
+def _screened(runs: _Runs, coarse: Problem, x: FloatArray, current: FloatArray, beat: float, t0: float,
+              say: Callable[[str], None]) -> PhysicalFit | tuple[FloatArray, str]:
+    """An escalation screened and fitted first on the record's coarse copy (:mod:`ema_sim.identify.coarse`).
+
+    On the copy the physics must get under the same share of the current model's error above the noise floor
+    as on the record (``beat``). It is screened as the record was (:func:`_screen` after the delay scan, then
+    the first fit in rounds, :func:`_fit_restarted`) and stops as soon as it cannot get there; at the coarse
+    fit's end the fine model is run once on the copy's samples, and the fit stops when neither it nor the
+    coarse one got under. Otherwise the fine fit on the whole record starts from the coarse end.
+
+    Returns
+    -------
+    PhysicalFit or tuple
+        The fit stopped (with why), or the coarse end and what the screen did.
+    """
+    problem = runs.problem
+    cruns = _Runs(coarse, runs.model, runs.names, runs.declared, {"rate_hz": COARSE_RATE_HZ})
+    fine = _Runs(coarse, runs.model, runs.names, runs.declared)
+    cur_rss = float(np.dot(current, current))
+    share = (cur_rss - beat) / max(cur_rss - problem.n_fit, TINY)
+    own = on_coarse(problem, coarse, current)
+    cur_c = float(np.dot(own, own))
+    beat_c = cur_c - share * max(cur_c - coarse.n_fit, TINY)
+    every = decimation(problem)
+    copy = f"the coarse copy (every {every} samples, the model at {COARSE_RATE_HZ / 1000:g} kHz)"
+    say(f"  {runs.model}: screened on {copy}: must get under {beat_c:.6g} (the current model leaves {cur_c:.6g})")
+
+    def stop(why: str) -> PhysicalFit:
+        text = f"screened on {copy}: {why} ({cruns.count + fine.count} coarse runs, {time.perf_counter() - t0:.1f} s)"
+        runs.count += cruns.count + fine.count
+        return _stopped(runs, x, held, text, t0, say, text)
+
+    x, held, free, r_start, jac = _start(cruns, x)
+    why = _screen(r_start, jac, beat_c)
+    if why:
+        return stop(why)
+    bound: list[str] = []
+    x = _fit_restarted(cruns, x, free, beat=beat_c, why=bound)
+    c, f = cruns.cost(x), fine.cost(x)
+    say(f"  {runs.model}: delays scanned, {len(free)} parameters fitted on {copy}: weighted error {c:.6g} "
+        f"({f:.6g} with the model at its own rate)")
+    if min(c, f) >= beat_c:
+        early = f"{bound[0]}; " if bound else ""
+        return stop(f"{early}the first fit ended at weighted error {c:.6g} ({f:.6g} with the model at its own rate), "
+                    f"above the {beat_c:.6g} it must get under to pay: the whole record and the uncertainty were "
+                    "not run")
+    runs.count += cruns.count + fine.count
+    return x, (f"screened on {copy}: it got under the {beat_c:.6g} it must ({c:.6g}; {cruns.count + fine.count} "
+                     f"coarse runs, {time.perf_counter() - t0:.1f} s), then fitted on the whole record from there")
 
 
 def _other_starts(runs: _Runs, x: FloatArray, free: list[int], pool: Pool) -> list[FloatArray]:
@@ -444,7 +582,7 @@ def _other_starts(runs: _Runs, x: FloatArray, free: list[int], pool: Pool) -> li
         return [_fit_restarted(runs, start, free, seed) for start, seed in starts]
     shared = client.scatter(runs.problem, broadcast=True)
     futures = [client.submit(remote_start, shared, runs.model, runs.names, runs.declared, start, free, seed,
-                             pure=False) for start, seed in starts]
+                             runs.options, pure=False) for start, seed in starts]
     ends = []
     for future in futures:
         end, count = result(future)
@@ -467,16 +605,16 @@ def _screen(r: FloatArray, jac: FloatArray, beat: float) -> str:
             f"{SCREEN_OPTIMISM:g} times that still leaves it above the {beat:.6g} it must get under to pay")
 
 
-def _stopped(runs: _Runs, x: FloatArray, names: list[str], declared: dict[str, Any], held: list[str], why: str,
-             t0: float, say: Callable[[str], None]) -> PhysicalFit:
-    """The physics where it stopped, with why (no uncertainty: it was not worth computing)."""
+def _stopped(runs: _Runs, x: FloatArray, held: list[str], why: str, t0: float, say: Callable[[str], None],
+             screen: str = "") -> PhysicalFit:
+    """The physics where it stopped, on the whole record, with why (no uncertainty: it was not worth computing)."""
     say(f"{runs.model} physical fit stopped after {runs.count} runs: {why}")
     sim = runs.sim(x)
     residual = runs.residual(x)
     rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in runs.problem.errors_deg(sim).items()}
-    return PhysicalFit(runs.model, runs.values(x), {n: declared[n] for n in names}, {},
-                       tuple(n for n in names if n not in held), tuple(held), sim, residual, rms, runs.count,
-                       time.perf_counter() - t0, stopped=why)
+    return PhysicalFit(runs.model, runs.values(x), {n: runs.declared[n] for n in runs.names}, {},
+                       tuple(n for n in runs.names if n not in held), tuple(held), sim, residual, rms, runs.count,
+                       time.perf_counter() - t0, stopped=why, screen=screen)
 
 
 def _positive(v: Any) -> bool:

@@ -221,6 +221,19 @@ class Problem:
         self.dense = dense
         self.set_command_sampled(self.command_sampled)
 
+    def drive_like(self, other: Problem) -> None:
+        """Drive the model with another problem's inputs (a decimated copy of a record keeps the record's own).
+
+        Parameters
+        ----------
+        other : Problem
+            The problem whose breakpoints this one's runs take.
+        """
+        with self._lock:
+            self._kept.clear()
+            self._inputs += 1
+        self._bp_t, self._bp_u, self._bp_h = other.breakpoints
+
     def on_breakpoints(self, signal: FloatArray) -> FloatArray:
         """A signal given at the record's samples, at the model's input breakpoints (held or interpolated).
 
