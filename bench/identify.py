@@ -22,7 +22,7 @@ import numpy as np
 from ema_sim.benchmark import Benchmark, Result, jsbsim_seconds
 from ema_sim.config import load_channel
 from ema_sim.identify.identification import identify
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from identgen import command_sequence, hoad3_record, load_sequence, make_record

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ema_sim.identify.problem import Problem
-from ema_sim.io.csv import MeasuredData
+from ema_sim.io.measured import MeasuredData
 from ema_sim.models.arrays import FloatArray
 
 DECIMATED_HZ = 250.0
