@@ -21,7 +21,8 @@ import numpy as np
 
 from ema_sim.benchmark import Benchmark, Result, jsbsim_seconds
 from ema_sim.config import load_channel
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
+from ema_sim.identify.record import prepare
 from ema_sim.io.measured import MeasuredData
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
@@ -32,9 +33,9 @@ def identify_90s() -> Result:
     """Delay, compliance and free play hidden in 90 s of position and surface at 1 kHz."""
     effects = {"time_delay": 0.008, "compliance": 0.3, "free_play": 0.2}
     data = make_record(effects, seed=7, duration_s=90.0)
-    identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"))  # compile outside the clock
+    identify(prepare(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing")))  # compile outside the clock
     t0 = time.perf_counter()
-    result = identify(data, load_channel("left_wing"))
+    result = identify(prepare(data, load_channel("left_wing")))
     wall = time.perf_counter() - t0
     runs = wall / jsbsim_seconds(90.0, 10_000.0)
     found = sorted(s.effect for s in result.steps)
@@ -46,9 +47,10 @@ def identify_90s() -> Result:
 def identify_90s_hoad3_declared() -> Result:
     """HOAD3 data, 90 s at 1 kHz, ``hoad3`` declared: error as declared, after the fit, and the time."""
     data = hoad3_record(seed=9, duration_s=90.0)
-    identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"), "hoad3")  # compile outside the clock
+    warm = prepare(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"))
+    identify(warm, "hoad3")  # compile outside the clock
     t0 = time.perf_counter()
-    result = identify(data, load_channel("left_wing"), "hoad3")
+    result = identify(prepare(data, load_channel("left_wing")), "hoad3")
     wall = time.perf_counter() - t0
     assert result.as_declared is not None
     final = {o: float((e**2).mean() ** 0.5) for o, e in result.problem.errors_deg(result.final.sim).items()}
@@ -64,9 +66,10 @@ def identify_90s_hoad3_declared() -> Result:
 def _escalated_30s(workers: int) -> Result:
     """HOAD3 data, 30 s at 1 kHz (seed 9), ``loada`` declared, escalated to HOAD3's physics."""
     data = hoad3_record(seed=9, duration_s=30.0)
-    identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"), "loada")  # compile outside the clock
+    warm = prepare(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"))
+    identify(warm, "loada")  # compile outside the clock
     t0 = time.perf_counter()
-    result = identify(data, load_channel("left_wing"), "loada", workers=workers)
+    result = identify(prepare(data, load_channel("left_wing")), "loada", search=Search(workers=workers))
     wall = time.perf_counter() - t0
     final = {o: float((e**2).mean() ** 0.5) for o, e in result.problem.errors_deg(result.final.sim).items()}
     text = "; ".join(f"{o} {v:.6g}°" for o, v in final.items())
@@ -115,9 +118,9 @@ def out_of_vocabulary_record(duration_s: float = 92.0) -> MeasuredData:
 def identify_92s_out_of_vocabulary() -> Result:
     """92 s of :func:`out_of_vocabulary_record`, the second order declared: the escalation screened and stopped."""
     data = out_of_vocabulary_record(92.0)
-    identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"))  # compile outside the clock
+    identify(prepare(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing")))  # compile outside the clock
     t0 = time.perf_counter()
-    result = identify(data, load_channel("left_wing"))
+    result = identify(prepare(data, load_channel("left_wing")))
     wall = time.perf_counter() - t0
     final = {o: float((e**2).mean() ** 0.5) / result.problem.sigma_deg[o]
              for o, e in result.problem.errors_deg(result.final.sim).items()}
@@ -139,12 +142,12 @@ def identify_cost_growth() -> Result:
     1 is a cost in proportion to the record, under 1 a cost that grows slower than it.
     """
     effects = {"time_delay": 0.008, "compliance": 0.3, "free_play": 0.2}
-    identify(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing"))  # compile outside the clock
+    identify(prepare(make_record({}, seed=1, duration_s=5.0), load_channel("left_wing")))  # compile outside the clock
     walls, notes = [], []
     for span in GROWTH_SPANS_S:
         data = make_record(effects, seed=7, duration_s=span)
         t0 = time.perf_counter()
-        result = identify(data, load_channel("left_wing"))
+        result = identify(prepare(data, load_channel("left_wing")))
         wall = time.perf_counter() - t0
         walls.append(wall)
         found = ",".join(sorted(s.effect for s in result.steps)) or "nothing"

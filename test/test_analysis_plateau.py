@@ -7,7 +7,8 @@ from scipy.signal import lsim
 from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.config import load_channel
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
+from ema_sim.identify.record import prepare
 from ema_sim.io.measured import MeasuredData
 
 FINE_S = 2e-4
@@ -85,7 +86,8 @@ def test_both_tools_find_the_rate_limit_at_the_plateau():
     assert all(s.rate_limited for s in steps if abs(s.command_to_deg - s.command_from_deg) > 4.0)
     assert ra.slew is not None
     assert ra.slew.rate == pytest.approx(75.0, rel=0.05)
-    result = identify(data, load_channel("left_wing"), "second_order", escalate=False, discover_terms=False)
+    result = identify(prepare(data, load_channel("left_wing")), "second_order",
+                      search=Search(escalate=False, discover_terms=False))
     added = {s.effect: s.params for s in result.steps}
     assert "rate_limit" in added
     assert added["rate_limit"]["rate_dps"] == pytest.approx(75.0, rel=0.10)

@@ -18,7 +18,8 @@ from ema_sim.analysis.estimation.noise import input_independence, noise_floor, w
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import diagnose
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
+from ema_sim.identify.record import prepare
 from ema_sim.io.bag import write_bag
 from ema_sim.io.csv import write_csv
 
@@ -35,7 +36,7 @@ WING = load_channel("left_wing")
 
 def run_case(effects, seed, *, declared=None, noise=NOISE, duration_s=DURATION_S, **kw):
     data = make_record(effects, seed=seed, duration_s=duration_s, noise_deg=noise, **kw)
-    return identify(data, WING, "second_order", declared or {})
+    return identify(prepare(data, WING), "second_order", declared or {})
 
 
 def check(result, effects, expected_names, noise=NOISE):
@@ -207,7 +208,7 @@ def test_the_diagnosis_tells_an_error_inside_the_servo_loop_from_one_outside(tru
     for both servo cases. A linkage mode is the surface's own: measured share 0.0. The warnings say which, and
     that parameters fitted under such a residual are equivalents."""
     data = make_record(truth, seed=3, duration_s=20.0)
-    result = identify(data, WING, max_effects=0)
+    result = identify(prepare(data, WING), search=Search(max_effects=0))
     assert result.physical is None  # nothing replaces a model declared with no effects
     assert not result.escalated
     diagnosis = diagnose(result)
@@ -228,7 +229,7 @@ def test_across_fidelities_hoad3_data_declared_loada():
     """HOAD3 plays the real actuator; LOADA is declared. What LOADA lacks: the linkage compliance
     outside the servo loop and the LVDT filter. Both are found and the error drops on both outputs."""
     data = hoad3_record(seed=71, duration_s=HOAD3_S)
-    result = identify(data, WING, "loada", escalate=False)
+    result = identify(prepare(data, WING), "loada", search=Search(escalate=False))
     found = {(s.effect, s.where) for s in result.steps}
     assert ("compliance", "surface") in found
     assert found & {("lag_filter", "feedback"), ("feedback_filter", "feedback")}
@@ -263,7 +264,8 @@ def test_hoad3_data_three_maneuvers_ends_with_the_drives_physics(declared_model)
 
     docs = []
     for seed, duration_s, amp in ((91, 15.0, 600.0), (92, 20.0, 1000.0), (93, 30.0, 400.0)):
-        result = identify(hoad3_record(seed=seed, duration_s=duration_s, load_amp_inlb=amp), WING, declared_model)
+        record = prepare(hoad3_record(seed=seed, duration_s=duration_s, load_amp_inlb=amp), WING)
+        result = identify(record, declared_model)
         doc = json.loads(json.dumps(to_json(result, f"m{seed}.csv")))
         assert doc["final"]["model"] == "hoad3 (physical parameters fitted)"
         assert all(v <= 2.0 for v in doc["final"]["rms_over_noise"].values()), doc["final"]["rms_over_noise"]

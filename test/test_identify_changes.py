@@ -136,7 +136,7 @@ def test_jitter_only_adds_nothing_and_names_the_jitter():
     data = record(DURATION_S, seed=7, stamp_error_s=0.002)
     ch, note = resolve_channel(data, None)
     rec = prepare(data, ch, channel_note=note)
-    result = identify(rec.data, rec.channel, record=rec)
+    result = identify(rec)
     assert not result.steps
     assert not result.discovered
     assert result.problem.timing_s == pytest.approx(rec.stamps.scatter_s)
@@ -150,7 +150,7 @@ def test_identify_reports_the_trend_in_console_json_and_report(tmp_path):
     data = _falling()
     ch, note = resolve_channel(data, None)
     rec = prepare(data, ch, channel_note=note)
-    result = identify(rec.data, rec.channel, record=rec)
+    result = identify(rec)
     report = json.loads(json.dumps(to_json(result, "drift"), allow_nan=False))
     assert report["changes"]["changed"]
     wn = next(p for p in report["changes"]["parameters"] if p["parameter"] == "wn_rad_s")

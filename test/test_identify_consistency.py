@@ -374,11 +374,12 @@ def test_identify_lists_the_parameters_it_found_on_a_grid():
     from identgen import make_record  # noqa: PLC0415
 
     from ema_sim.config import load_channel  # noqa: PLC0415
-    from ema_sim.identify.identification import identify  # noqa: PLC0415
+    from ema_sim.identify.identification import Search, identify  # noqa: PLC0415
+    from ema_sim.identify.record import prepare  # noqa: PLC0415
     from ema_sim.identify.report import to_json  # noqa: PLC0415
 
     data = make_record({"quantization": 0.02, "command_gain": 0.01}, seed=4, duration_s=10.0)
-    doc = to_json(identify(data, load_channel("left_wing"), "loada", max_effects=0), "q.csv")
+    doc = to_json(identify(prepare(data, load_channel("left_wing")), "loada", search=Search(max_effects=0)), "q.csv")
     assert sorted(doc["final"]["grid_searched"]) == ["kb", "offset_deg"]
     assert "wn_rad_s" not in doc["final"]["grid_searched"]
     fields = by_field(compare(parsed([doc, json.loads(json.dumps(doc))])))

@@ -10,8 +10,9 @@ from identgen import make_record
 
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import Correlate, OutputDiagnosis
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.library import library, locked, tones
+from ema_sim.identify.record import prepare
 from ema_sim.identify.regression import stepwise
 
 WING = load_channel("left_wing")
@@ -74,7 +75,7 @@ def test_a_drag_on_the_reading_no_effect_names_is_discovered_and_closes_the_loop
     v = np.gradient(data.position_deg, data.time_s)
     moving = np.abs(v) > 0.02 * np.percentile(np.abs(v), 99)
     data = replace(data, position_deg=data.position_deg + 0.05 * np.where(moving, np.sign(v), 0.0))
-    result = identify(data, WING, "second_order", max_effects=3, escalate=False)
+    result = identify(prepare(data, WING), "second_order", search=Search(max_effects=3, escalate=False))
     assert result.discovery is not None
     terms = [s.term.name for s in result.discovery.found["position_deg"].regression.selected]
     assert any("sign(rate)" in n for n in terms), terms

@@ -18,6 +18,7 @@ from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.effects import FREE
 from ema_sim.identify.identification import identify
+from ema_sim.identify.record import prepare
 from ema_sim.io.csv import write_csv
 
 WING = load_channel("left_wing")
@@ -43,7 +44,7 @@ CASES = [
                          ids=[c[0] for c in CASES])
 def test_an_installed_actuator_effect_is_named_fitted_and_leaves_noise(truth, named, fields, options, seed):
     data = make_record({}, seed=seed, duration_s=DURATION_S, load_amp_inlb=800.0, **options, **truth)
-    result = identify(data, WING, "second_order")
+    result = identify(prepare(data, WING), "second_order")
     assert {s.effect for s in result.steps} == named, [s.effect for s in result.steps]
     for f in fields:
         assert getattr(result.final.params, f) == pytest.approx(truth[f], rel=0.2), f
@@ -55,7 +56,7 @@ def test_an_installed_actuator_effect_is_named_fitted_and_leaves_noise(truth, na
 
 def test_a_null_under_heavy_load_adds_nothing():
     data = make_record({}, seed=105, duration_s=DURATION_S, load_amp_inlb=3000.0)
-    result = identify(data, WING, "second_order")
+    result = identify(prepare(data, WING), "second_order")
     assert result.steps == []
 
 
@@ -112,7 +113,7 @@ def test_the_reports_loop_hoac1_declared_on_hoad3_data_finds_the_compliance_curv
     from identgen import hoad3_record  # noqa: PLC0415
 
     data = hoad3_record(seed=81, duration_s=30.0)
-    result = identify(data, WING, "hoac1")
+    result = identify(prepare(data, WING), "hoac1")
     assert "nonlinear_compliance" in {s.effect for s in result.steps}
     assert result.equivalent is not None
     p = result.equivalent.params

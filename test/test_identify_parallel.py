@@ -23,8 +23,9 @@ from identgen import make_record
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify import identification
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.parallel import Pool, one_blas_thread
+from ema_sim.identify.record import prepare
 from ema_sim.io.csv import write_csv
 
 WING = load_channel("left_wing")
@@ -35,16 +36,17 @@ WING = load_channel("left_wing")
 def test_candidate_fits_on_workers_give_the_serial_result(monkeypatch: pytest.MonkeyPatch, where: str) -> None:
     data = make_record({"time_delay": 0.006, "compliance": 0.3, "lag_filter/feedback": 25.0}, seed=21,
                        duration_s=6.0)
-    serial = identify(data, WING, max_effects=2, discover_terms=False)
+    serial = identify(prepare(data, WING), search=Search(max_effects=2, discover_terms=False))
     monkeypatch.setattr(identification, "MIN_SAMPLES", 0)  # a short record on the cluster all the same
     if where == "threads":
-        spread = identify(data, WING, max_effects=2, discover_terms=False, workers=2)
+        spread = identify(prepare(data, WING), search=Search(max_effects=2, discover_terms=False, workers=2))
     else:
         with dask.config.set({"distributed.nanny.pre-spawn-environ": {
                 **dask.config.get("distributed.nanny.pre-spawn-environ"), "OPENBLAS_NUM_THREADS": "2"}}):
             cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
         with cluster:
-            spread = identify(data, WING, max_effects=2, discover_terms=False, scheduler=cluster.scheduler_address)
+            spread = identify(prepare(data, WING), search=Search(max_effects=2, discover_terms=False,
+                                                                    scheduler=cluster.scheduler_address))
     assert [v.reason for v in serial.verdicts] == [v.reason for v in spread.verdicts]
     assert len(serial.verdicts) >= 4  # rounds of several candidates: fits that ran at once
     assert [(s.effect, s.where) for s in serial.steps] == [(s.effect, s.where) for s in spread.steps]

@@ -23,7 +23,7 @@ from ema_sim.config import GENERIC, load_channel
 from ema_sim.identify.discovery import Closure, Discovery, named_stands
 from ema_sim.identify.effects import BY_KEY, FREE, ramps
 from ema_sim.identify.fit import block_covariance, correlation
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.library import library
 from ema_sim.identify.record import prepare
 from ema_sim.identify.regression import stepwise
@@ -56,7 +56,7 @@ def drag_run(tmp_path_factory):
                    metadata={"generator": "test"})
     channel, note = resolve_channel(data, None)
     record = prepare(data, channel, channel_note=note)
-    result = identify(record.data, record.channel, "second_order", max_effects=3, escalate=False, record=record)
+    result = identify(record, "second_order", search=Search(max_effects=3, escalate=False))
     report = to_json(result, "drag.csv")
     out = tmp_path_factory.mktemp("drag")
     write_json(report, out / "report.json")
@@ -118,37 +118,23 @@ def test_a_threshold_wider_than_the_settled_error_is_not_added():
                               data=SimpleNamespace(unit="mm"))
     check = BY_KEY["static_threshold/feedback"].check
     ctx = SimpleNamespace(problem=problem)
-    # the median settled error, half a count and 3 standard errors of that median over the holds
-    assert settled.limit == pytest.approx(settled.median_abs + 0.0005 + 3 * settled.median_se)
-    assert settled.limit < 0.005
-    assert check({"threshold_deg": 0.0045}, ctx) is None
-    assert check({"threshold_deg": 0.006}, ctx) is not None
+    # the largest settled error, half a count and 3x the noise beyond the count's own share
+    assert settled.limit(0.001) == pytest.approx(0.004 + 0.0005 + 3 * 0.001 * np.sqrt(11 / 12))
+    assert check({"threshold_deg": 0.0065}, ctx) is None
+    assert check({"threshold_deg": 0.0085}, ctx) is not None
     why = check({"threshold_deg": 0.764}, ctx)
     assert why is not None
     assert "settles to" in why
 
 
 def test_an_output_in_counts_that_settles_on_its_command_leaves_room_for_half_a_count_and_no_more():
-    """Holds that agree to the count read the settled error exactly: the half count is the only margin."""
+    """The floor of an output that sits on its counts is the count's own q/√12: the half count covers it, once."""
     t = np.arange(4000) / 100.0
     cmd = np.repeat(np.tile([0.0, 1.0], 20), 100)
     settled = settled_error(t, cmd, cmd.copy(), 0.01)
     assert settled is not None
     assert settled.median_abs == 0.0
-    assert settled.limit == pytest.approx(0.005)
-
-
-def test_one_hold_that_stopped_far_off_is_no_band_the_others_show():
-    """The threshold stops the output at its band's edge on every hold: the typical hold bounds it, not one outlier."""
-    t = np.arange(4000) / 100.0
-    cmd = np.repeat(np.tile([0.0, 1.0], 20), 100)
-    pos = cmd + 0.002 * np.sign(np.sin(t))
-    pos[1850:1900] += 0.05  # one hold stalls 0.05 off
-    settled = settled_error(t, cmd, pos, None)
-    assert settled is not None
-    assert settled.max_abs > 0.045
-    assert settled.median_abs == pytest.approx(0.002)
-    assert settled.limit < 0.02
+    assert settled.limit(0.01 / np.sqrt(12)) == pytest.approx(0.005)
 
 
 def test_a_fitted_dead_band_is_bounded_by_what_the_records_holds_allow():
@@ -175,7 +161,7 @@ def test_a_named_effect_that_explains_the_record_stands_and_a_matching_term_is_i
 @pytest.mark.slow
 def test_a_command_gain_on_a_clean_second_order_record_is_found_and_kept():
     data = make_record({"command_gain": -0.035}, seed=17, duration_s=15.0, noise_deg=(0.003, 0.002))
-    result = identify(data, WING, "second_order", {})
+    result = identify(prepare(data, WING), "second_order", {})
     assert [s.effect for s in result.steps] == ["command_gain"]
     assert result.final.params.kb == pytest.approx(-0.035, rel=0.05)
     assert not result.removed

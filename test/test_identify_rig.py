@@ -25,7 +25,7 @@ from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.effects import EFFECTS, FREE, Context
 from ema_sim.identify.fit import evaluate
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.outcome import REFERENCE, Step
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare, sensor_range, travel_limits
@@ -257,7 +257,7 @@ def test_a_sensor_that_saturates_is_clipped_in_the_model_not_fitted_as_a_stop():
     held = np.searchsorted(frames, t + 1e-9, side="right") - 1
     pos = np.clip(rec.position_deg[0] + rng.normal(0, 0.004, t.size), -15.0, 15.0)
     data = MeasuredData(time_s=t, command_deg=cmd[held], position_deg=pos, metadata={"channel": "left_wing"})
-    report = to_json(identify(data, WING), "clipped")
+    report = to_json(identify(prepare(data, WING)), "clipped")
     assert report["noise_deg"]["position_deg"] == pytest.approx(0.004, rel=0.1)
     assert any("reads exactly -15° " in n and "saturation" in n for n in report["notes"])
     assert report["added"] == []
@@ -279,7 +279,7 @@ def test_sampling_jitter_is_named_as_the_logger_s_timing_not_structure():
     pos[order] = rec.position_deg[0]
     data = MeasuredData(time_s=frames[5:] - frames[5], command_deg=cmd[5:],
                         position_deg=pos + rng.normal(0, 0.003, inst.size), metadata={"channel": "left_wing"})
-    report = to_json(identify(data, WING), "jitter")
+    report = to_json(identify(prepare(data, WING)), "jitter")
     d = report["diagnosis"]["outputs"]["position_deg"]
     assert not d["structured"]
     jitter = [w for w in report["warnings"] if "sampling instants jittering by" in w]
@@ -291,7 +291,7 @@ def test_sampling_jitter_is_named_as_the_logger_s_timing_not_structure():
 
 def test_an_effect_that_collapsed_to_off_is_taken_out_again():
     data = make_record({}, seed=55, duration_s=10.0)
-    result = identify(data, WING, max_effects=0)
+    result = identify(prepare(data, WING), search=Search(max_effects=0))
     p = result.problem
     collapsed = evaluate(p, result.final.params.replace(delay_s=2e-5), (*result.final.free, "delay_s"))
     result.steps.append(Step("time_delay", "command", {"delay_s": 2e-5}, {}, {}, {}, "test"))
@@ -442,7 +442,7 @@ def test_a_delay_under_one_sample_is_kept_and_said_to_be_indistinguishable_from_
     """A 3 ms transport delay logged at 200 Hz (5 ms samples): kept (it was thrown away as a sampling shift),
     with the warning that a skew between the logging of the command and of the output looks the same."""
     data = make_record({"time_delay": 0.003}, seed=8, duration_s=20.0, sample_hz=200.0, outputs=("position_deg",))
-    result = identify(data, WING)
+    result = identify(prepare(data, WING))
     assert "delay_s" in result.final.free
     assert result.final.params.delay_s == pytest.approx(0.003, abs=0.0006)
     report = to_json(result, "delay")
@@ -477,7 +477,7 @@ def test_a_short_record_at_rest_is_fitted_from_before_its_first_step_and_a_movin
     late = Problem(_step_at(0.5, 0.8), WING)  # a first change after 0.3 s: the usual 0.3 s left out, nothing lost
     assert late.settle_s == pytest.approx(0.3)
     assert late.unfitted_start is None
-    report = to_json(identify(_step_at(0.1, 0.75), WING), "short")
+    report = to_json(identify(prepare(_step_at(0.1, 0.75), WING)), "short")
     assert report["final"]["rms_deg"]["position_deg"] < 0.0045  # the step fitted to the noise...
     assert report["reference"]["rms_deg"]["position_deg"] > 0.1  # ...which the command alone does not explain
 
@@ -499,7 +499,7 @@ def test_no_step_clears_one_output_by_spoiling_another():
     surface = pos - 0.3 * (pos / 20.0) ** 3
     data = MeasuredData(time_s=t, command_deg=cmd[held], position_deg=pos + rng.normal(0, 0.003, t.size),
                         surface_deg=surface + rng.normal(0, 0.003, t.size), metadata={"channel": "left_wing"})
-    report = to_json(identify(data, WING), "cubic")
+    report = to_json(identify(prepare(data, WING)), "cubic")
     for step in report["added"]:
         for output, after in step["rms_deg_after"].items():
             before = step["rms_deg_before"][output]

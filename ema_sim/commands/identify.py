@@ -12,7 +12,7 @@ from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.commands.common import Subparsers, add_data_args, check_channel, parse_overrides, rig_format
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.identify.declared import DECLARED
-from ema_sim.identify.identification import identify
+from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_json, write_report, write_residuals
 
@@ -64,8 +64,9 @@ def run(args: argparse.Namespace) -> int:
     channel, note = resolve_channel(data, args.channel)
     record = prepare(data, channel, channel_note=note, command=args.command_hold)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
-    result = identify(record.data, record.channel, args.model, overrides, max_effects=args.max_effects, log=say,
-                      record=record, escalate=not args.no_escalate, workers=args.workers, scheduler=args.scheduler)
+    search = Search(max_effects=args.max_effects, escalate=not args.no_escalate, workers=args.workers,
+                    scheduler=args.scheduler)
+    result = identify(record, args.model, overrides, search=search, log=say)
     report = to_json(result, str(args.data))
     print(summary(report))
     if args.json:

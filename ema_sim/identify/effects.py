@@ -382,13 +382,14 @@ def _dead_band(name: str, value: float, what: str, half: float = 1.0) -> Check:
             return low
         p = ctx.problem
         settled = p.settled
-        if settled is None or half * v[name] <= settled.limit * (1.0 + 1e-9):
+        noise = p.sigma_deg["position_deg" if "position_deg" in p.outputs else "surface_deg"]
+        if settled is None or half * v[name] <= settled.limit(noise) * (1.0 + 1e-9):
             return None
         unit = p.data.unit
-        return (f"{what} {v[name]:.4g} {unit} is larger than the error the output settles to at the end of the "
-                f"command's holds (median {settled.median_abs:.3g} ± {settled.median_se:.2g}, largest "
-                f"{settled.max_abs:.3g} {unit} over {settled.holds} holds; + half a count and {NOISE_MARGIN:g} "
-                f"standard errors: {settled.limit:.3g}): it explains no settled error, it stands in for something else")
+        return (f"{what} {v[name]:.4g} {unit} is larger than any error the output settles to at the end of the "
+                f"command's holds (median {settled.median_abs:.3g}, largest {settled.max_abs:.3g} {unit} over "
+                f"{settled.holds} holds; + half a count and {NOISE_MARGIN:g}× the noise beyond it: "
+                f"{settled.limit(noise):.3g}): it explains no settled error, it stands in for something else")
     return check
 
 

@@ -22,12 +22,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ema_sim.analysis.records.command_hold import HoldMode
-from ema_sim.config import ChannelConfig
 from ema_sim.identify import artefacts, changes, timing
 from ema_sim.identify.criteria import MAX_DELTA_BIC, MIN_EXCESS_SHARE, simulator_error
 from ema_sim.identify.declared import HIGH_ORDER, declared
@@ -38,10 +37,9 @@ from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Remo
 from ema_sim.identify.parallel import MIN_SAMPLES, SERIAL, Pool, one_blas_thread
 from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
-from ema_sim.identify.record import Record, prepare
+from ema_sim.identify.record import Record
 from ema_sim.identify.stages import Clock, Outcome, allow, ceiling, guarded, trade, worse
 from ema_sim.identify.stepwise import MAX_EFFECTS, as_declared, choose_hold, fit_model, prune, reference_fit, search
-from ema_sim.io.measured import MeasuredData
 
 BALANCE_WEIGHTS = (4.0, 16.0, 64.0)
 """Weights tried on an output the baseline leaves worse than the reference, until it no longer does."""
@@ -107,45 +105,14 @@ def _restore(r: Identification, saved: dict[str, Any]) -> None:
         setattr(r, k, v)
 
 
-def identify(
-    data: MeasuredData,
-    channel: ChannelConfig,
-    model: str = "second_order",
-    overrides: dict[str, float] | None = None,
-    *,
-    max_effects: int = MAX_EFFECTS,
-    log: Callable[[str], None] | None = None,
-    record: Record | None = None,
-    command: HoldMode = "detect",
-    escalate: bool = True,
-    discover_terms: bool = True,
-    workers: int = 0,
-    scheduler: str | None = None,
-) -> Identification:
-    """Fit ``model`` to ``data``, add the effects it lacks, discover what no effect names (module docstring).
-
-    ``record`` is ``data`` already prepared (:func:`ema_sim.identify.record.prepare`, with the
-    channel's stand-in note); without it the record is prepared here with ``channel`` as declared
-    and ``command`` (detect, held or sampled) for how its command was logged.
+@dataclass(frozen=True)
+class Search:
+    """How far identification searches, and where its fits run.
 
     Parameters
     ----------
-    data : MeasuredData
-        The measured record.
-    channel : ChannelConfig
-        The channel (travel, moment arm, configured values).
-    model : str
-        The declared model (:data:`ema_sim.identify.declared.DECLARED`).
-    overrides : dict, optional
-        Stages declared on top (model parameter → value).
     max_effects : int
         Most effects to add.
-    log : callable, optional
-        Called with each progress line.
-    record : Record, optional
-        ``data`` already prepared (:func:`ema_sim.identify.record.prepare`).
-    command : str
-        How the command was logged: ``detect``, ``held`` or ``sampled``.
     escalate : bool
         Whether a declared model that runs out of vocabulary may be replaced by :data:`ESCALATE_TO` with
         its physical parameters fitted (never with ``max_effects`` 0).
@@ -157,6 +124,32 @@ def identify(
         threads (0 or 1: one after another here); the same result either way (:mod:`.parallel`).
     scheduler : str, optional
         A running Dask scheduler's address to send those fits to instead of a local cluster.
+    """
+
+    max_effects: int = MAX_EFFECTS
+    escalate: bool = True
+    discover_terms: bool = True
+    workers: int = 0
+    scheduler: str | None = None
+
+
+def identify(record: Record, model: str = "second_order", overrides: dict[str, float] | None = None, *,
+             search: Search | None = None, log: Callable[[str], None] | None = None) -> Identification:
+    """Fit ``model`` to a prepared record, add the effects it lacks, discover what no effect names (module docstring).
+
+    Parameters
+    ----------
+    record : Record
+        The record prepared once (:func:`ema_sim.identify.record.prepare`): its data, channel, noise floors,
+        command timing, stamps and units, which every stage reads from it.
+    model : str
+        The declared model (:data:`ema_sim.identify.declared.DECLARED`).
+    overrides : dict, optional
+        Stages declared on top (model parameter → value).
+    search : Search, optional
+        How far to search and where the fits run (the defaults: every stage, in this process).
+    log : callable, optional
+        Called with each progress line.
 
     Returns
     -------
@@ -164,10 +157,11 @@ def identify(
         The outcome: baseline, effects, final model, every stage and verdict.
     """
     t0 = time.perf_counter()
+    search = search or Search()
     say = log or (lambda _msg: None)
-    record = record or prepare(data, channel, command=command)
     problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled,
                       output_range=record.sensor_range)
+    workers, scheduler = search.workers, search.scheduler
     pool = Pool(scheduler, workers) if scheduler or (workers >= 2 and problem.n_fit >= MIN_SAMPLES) else SERIAL
     pool.start()  # the cluster starts while the baseline is fitted
     if scheduler:
@@ -175,7 +169,8 @@ def identify(
     try:
         with one_blas_thread():
             result = _identify(problem, record, model, overrides, t0=t0, say=say, pool=pool,
-                               max_effects=max_effects, escalate=escalate, discover_terms=discover_terms)
+                               max_effects=search.max_effects, escalate=search.escalate,
+                               discover_terms=search.discover_terms)
         if pool.failed:
             result.warnings.append(pool.failed)
         return result

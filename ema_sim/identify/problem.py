@@ -353,7 +353,10 @@ class Problem:
         a threshold the holds support is fitted within that.
         """
         settled = self.settled
-        return {} if settled is None else {"threshold_deg": settled.limit}
+        if settled is None:
+            return {}
+        output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
+        return {"threshold_deg": settled.limit(self.sigma_deg[output])}
 
     @cached_property
     def settled(self) -> Settled | None:

@@ -6,14 +6,12 @@ threshold larger than the settled error it would explain is a proxy for somethin
 a slow tail), and identification does not add it (:mod:`ema_sim.identify.effects`).
 
 The settled error of one hold is the median of output − command over the last :data:`TAIL` of it.
-A static threshold (a dead band on the servo's error) stops the output at the edge of its band: on
-every hold the servo reaches without overshooting, the settled error is the band's half width, and
-an overshoot leaves it inside. So the typical (median) hold's settled error bounds the half width:
-a wider band contradicts most holds. The bound adds half the output's count (an output in counts
-cannot settle closer than that) and :data:`NOISE_MARGIN` standard errors of that median over the
-holds, from their robust scatter (holds that agree to the count read it exactly; noisy ones less
-so). The largest settled error is reported beside it (one hold that stopped far off, on a load or a
-stall, is no band the others show). A threshold the record pays for is fitted within this bound
+A static threshold (a dead band on the servo's error) stops driving the output once the error enters
+its band; the output coasts inward from the edge, so every settled error lies within the band's half
+width and the largest of them is the closest look at it. A band may be as wide as the largest settled
+error, plus half the output's count (an output in counts cannot settle closer than that) and
+:data:`NOISE_MARGIN` times the noise floor beyond the count's own share (q/√12, which the half count
+already covers). A threshold the record pays for is fitted within this bound
 (:attr:`ema_sim.identify.problem.Problem.caps`) and said to be held there when the fit asked for more.
 """
 
@@ -33,11 +31,7 @@ TAIL = 0.3
 MIN_HOLDS = 3
 """Fewer holds than this say nothing about where the output settles."""
 NOISE_MARGIN = 3.0
-"""Standard errors of the median settled error it may be read short by."""
-MAD_TO_SIGMA = 1.4826
-"""A normal scatter's standard deviation over its median absolute deviation."""
-MEDIAN_EFFICIENCY = 1.2533
-"""A median's standard error over the mean's, for Gaussian noise (√(π/2))."""
+"""Noise floors (beyond the count's share) a settled error may be read short by."""
 
 
 @dataclass(frozen=True)
@@ -52,13 +46,17 @@ class Settled:
     """How many holds it was read on."""
     count: float
     """The output's count (0: continuous), in the record's unit."""
-    median_se: float = 0.0
-    """Standard error of :attr:`median_abs` from the holds' scatter, in the record's unit."""
 
-    @property
-    def limit(self) -> float:
-        """The widest dead band (half width) the settled errors can explain (module docstring)."""
-        return self.median_abs + 0.5 * self.count + NOISE_MARGIN * self.median_se
+    def limit(self, noise: float) -> float:
+        """The widest dead band (half width) the settled errors can explain (module docstring).
+
+        Parameters
+        ----------
+        noise : float
+            The output's noise floor, in the record's unit.
+        """
+        beyond_count = math.sqrt(max(noise * noise - self.count * self.count / 12.0, 0.0))
+        return self.max_abs + 0.5 * self.count + NOISE_MARGIN * beyond_count
 
 
 def _holds(time_s: FloatArray, command: FloatArray) -> list[tuple[int, int]]:
@@ -97,6 +95,4 @@ def settled_error(time_s: FloatArray, command: FloatArray, output: FloatArray, c
     for a, b in spans:
         k = a + int((1.0 - TAIL) * (b - a))
         errs.append(abs(float(np.median(output[k:b] - command[k:b]))))
-    spread = MAD_TO_SIGMA * float(np.median(np.abs(np.asarray(errs) - np.median(errs))))  # one odd hold sways it not
-    se = MEDIAN_EFFICIENCY * spread / math.sqrt(len(errs))
-    return Settled(float(np.median(errs)), float(np.max(errs)), len(errs), float(count or 0.0), se)
+    return Settled(float(np.median(errs)), float(np.max(errs)), len(errs), float(count or 0.0))
