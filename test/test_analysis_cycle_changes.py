@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.signal import chirp
 
-from ema_sim.analysis.estimation.cycle_changes import CycleChanges, bandwidth_hz
+from ema_sim.analysis.estimation.cycle_changes import CycleChanges, _on_bound, bandwidth_hz
 from ema_sim.analysis.estimation.trend import trend
 from ema_sim.analysis.pipeline import Options, analyze_record
 from ema_sim.io.measured import MeasuredData
@@ -104,3 +104,10 @@ def test_a_servo_that_does_not_change_is_not_said_to(span: np.ndarray) -> None:
     assert ch.delay is not None
     assert not ch.changed, ch.statements
     assert all("holds" in s for s in ch.statements)
+
+
+def test_a_delay_held_at_its_bound_leaves_the_cycles_bandwidth_measured() -> None:
+    """Only the parameters the fit's note puts on a bound are no measurement."""
+    assert _on_bound("delay on its lower bound 0 (the response starts at the command's sample)") == {"delay"}
+    assert _on_bound("ωn on its upper bound 314.2; delay on its lower bound -0.01") == {"ωn", "delay"}
+    assert _on_bound("") == set()

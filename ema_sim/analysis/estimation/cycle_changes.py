@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation.frf import FrequencyResponse, zoh_factor
 from ema_sim.analysis.estimation.harmonics import Harmonic, cycle_spectra
-from ema_sim.analysis.estimation.second_order_fit import fit_frequency_response
+from ema_sim.analysis.estimation.second_order_fit import NAMES, fit_frequency_response
 from ema_sim.analysis.estimation.trend import Trend, trend
 from ema_sim.analysis.records.periodic import Periodicity
 
@@ -36,7 +36,15 @@ MIN_POINTS = 8
 
 
 def bandwidth_hz(wn_rad_s: float, zeta: float) -> float:
-    """The −3 dB frequency of the unit-gain second order, Hz (a delay does not change the gain)."""
+    """The −3 dB frequency of the unit-gain second order, Hz (a delay does not change the gain).
+
+    Parameters
+    ----------
+    wn_rad_s : float
+        Natural frequency, rad/s.
+    zeta : float
+        Damping ratio.
+    """
     a = 1.0 - 2.0 * zeta * zeta
     return wn_rad_s * math.sqrt(a + math.sqrt(a * a + 1.0)) / (2.0 * math.pi)
 
@@ -47,6 +55,14 @@ def _bandwidth_sigma(wn: float, zeta: float, s_wn: float, s_zeta: float) -> floa
     h = 1e-6 * max(zeta, 1e-3)
     d_z = (bandwidth_hz(wn, zeta + h) - bandwidth_hz(wn, max(zeta - h, 0.0))) / (zeta + h - max(zeta - h, 0.0))
     return math.hypot(d_wn * s_wn, d_z * s_zeta)
+
+
+def _on_bound(note: str) -> set[str]:
+    """The parameters a fit's quality note says sit on a bound of the search.
+
+    A value on a bound is no measurement; the others are (a delay held at 0 leaves ωn and ζ measured).
+    """
+    return {name for name in NAMES if f"{name} on its" in note}
 
 
 @dataclass(frozen=True)
@@ -161,12 +177,12 @@ def cycle_changes(tb: FloatArray, t: FloatArray, u: FloatArray, y: FloatArray, p
         if fit is None or fit.quality == "not_determined":
             continue
         wn, z = fit.wn_rad_s, fit.zeta
-        on_bound = fit.quality == "on_bound"
+        bound = _on_bound(fit.quality_note) if fit.quality == "on_bound" else set()
         mids.append(0.5 * (float(t[a]) + float(t[b])))
         bw.append(bandwidth_hz(wn.value, z.value))
-        bw_s.append(math.inf if on_bound else _bandwidth_sigma(wn.value, z.value, wn.sigma, z.sigma))
+        bw_s.append(math.inf if bound & {"ωn", "ζ"} else _bandwidth_sigma(wn.value, z.value, wn.sigma, z.sigma))
         dl.append(fit.delay_s.value)
-        dl_s.append(math.inf if on_bound else fit.delay_s.sigma)
+        dl_s.append(math.inf if "delay" in bound else fit.delay_s.sigma)
     if len(mids) < MIN_CYCLES:
         return CycleChanges(skipped=f"{len(mids)} cycles fitted: a change over the test needs {MIN_CYCLES}")
     x = np.array(mids)
