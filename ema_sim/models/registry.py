@@ -57,6 +57,7 @@ def model_class(name: str) -> type[ActuatorModel]:
     return found
 
 
+# Any: each family's constructor takes keywords of its own, known only once ``name`` is looked up.
 def create(name: str, channel: str | ChannelConfig = "left_wing", **kwargs: Any) -> ActuatorModel:
     """Build model ``name`` for ``channel``.
 
