@@ -24,6 +24,9 @@ SURFACE_LOADS = ("aerodynamic", "bungee")
 """What loads the real surfaces: the hinge-moment model (flight) or a bungee / nothing (AIL, on the ground)."""
 WINGS = ("left_wing", "right_wing")
 
+# Any in the mappings below: the vehicle file's sections as YAML (or ROS parameters) gave them; every value is
+# checked where it is read (a wrong one is one ConfigError naming it).
+
 
 def _numbers(cls: type, values: Mapping[str, Any], origin: str) -> dict[str, float]:
     """Every field of a dataclass of floats from ``values``: present, finite, nothing unknown."""
