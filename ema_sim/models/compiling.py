@@ -18,14 +18,16 @@ import numba as nb
 from llvmlite import ir as llvm_ir  # type: ignore[import-untyped]
 from numba.core import cgutils, ir, ir_utils, types
 from numba.core.analysis import compute_cfg_from_blocks
-from numba.core.compiler import CompilerBase, DefaultPassBuilder
+from numba.core.base import BaseContext
+from numba.core.compiler import CompilerBase, DefaultPassBuilder, StateDict
 from numba.core.compiler_machinery import FunctionPass, PassManager, register_pass
 from numba.core.typed_passes import NopythonRewrites
+from numba.core.typing.context import BaseContext as TypingContext
+from numba.core.typing.templates import Signature
 from numba.extending import intrinsic
 
 _F = TypeVar("_F", bound=Callable[..., Any])
-# Any below: a kernel of any signature; and Numba's compiler state, typing context and LLVM builder, which Numba
-# and llvmlite leave untyped (its IR blocks, variables and types are named where they are used).
+# Any below: a kernel of any signature; and llvmlite's IR builder and values, which llvmlite leaves untyped.
 
 
 @overload
@@ -176,7 +178,7 @@ class ForwardArrayCopies(FunctionPass):
     def __init__(self) -> None:
         FunctionPass.__init__(self)  # type: ignore[no-untyped-call]
 
-    def run_pass(self, state: Any) -> bool:
+    def run_pass(self, state: StateDict) -> bool:
         """Forward the function's array copies.
 
         Parameters
@@ -212,7 +214,8 @@ class ForwardCopiesCompiler(CompilerBase):
         return [pm]
 
 
-def _expect_false(_typingctx: Any, condition: Any) -> Any:
+def _expect_false(_typingctx: TypingContext, condition: types.Type
+                  ) -> tuple[Signature, Callable[[BaseContext, Any, Signature, list[Any]], Any]] | None:
     """Typing and code of :data:`unlikely`: the condition unchanged, with LLVM told it is almost always false.
 
     Parameters
@@ -230,7 +233,7 @@ def _expect_false(_typingctx: Any, condition: Any) -> Any:
     if not isinstance(condition, types.Boolean):
         return None
 
-    def codegen(_context: Any, builder: Any, _signature: Any, args: Any) -> Any:
+    def codegen(_context: BaseContext, builder: Any, _signature: Signature, args: list[Any]) -> Any:
         i1 = llvm_ir.IntType(1)
         expect = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
             builder.module, llvm_ir.FunctionType(i1, [i1, i1]), "llvm.expect.i1")

@@ -44,15 +44,14 @@ NONNEG = {"min": 0.0}
 ILLUSTRATIVE = "illustrative: chosen inside the report's specifications (config)"
 
 
-# Any: these return a dataclass field that stands as the attribute's default (as ``dataclasses.field`` does), and
-# pass on the keywords of :class:`~ema_sim.parameters.Meta`, each of its own type.
-def _curve(description: str, size: int, **meta: Any) -> Any:
+# Any: these return a dataclass field that stands as the attribute's default (as ``dataclasses.field`` does).
+def _curve(description: str, size: int, **meta: object) -> Any:
     """A figure-33 curve field (in the ``hoad3`` subsection)."""
     return pm.param("lbf" if "breakpoints" in description else "lbf/in", description, size=size, section="hoad3",
                     **POS, **meta)
 
 
-def _environment(unit: str, description: str, **meta: Any) -> Any:
+def _environment(unit: str, description: str, **meta: object) -> Any:
     """A flight/test element of HOAD2/HOAD3 (in the variant's subsection; 0 for HOAC1)."""
     return pm.param(unit, description, default=0.0, variants=ENVIRONMENT, **NONNEG, **meta)
 
