@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import cache
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Literal, Protocol, overload
 
 import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
@@ -137,7 +137,17 @@ def serialize(msg: Message) -> bytes:
     return bytes(typestore().serialize_cdr(msg, msg.__msgtype__))
 
 
-# Any: the class is the one ``msgtype`` names at run time.
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: Literal["sensor_msgs/msg/JointState"]
+                ) -> sensor_msgs__msg__JointState: ...
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: Literal["std_msgs/msg/String"]) -> std_msgs__msg__String: ...
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: Literal["rosgraph_msgs/msg/Clock"]) -> rosgraph_msgs__msg__Clock: ...
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: str) -> Any: ...  # Any: another type, named at run time
+
+
 def deserialize(raw: bytes | memoryview, msgtype: str) -> Any:
     """A typestore message from CDR bytes.
 
@@ -150,8 +160,9 @@ def deserialize(raw: bytes | memoryview, msgtype: str) -> Any:
 
     Returns
     -------
-    Any
-        The typestore message.
+    object
+        The typestore message: the contract's types (:data:`~ema_msgs_py.contract.JOINT_STATE`, ``STRING``,
+        ``CLOCK``) typed as their classes.
     """
     return typestore().deserialize_cdr(raw, msgtype)
 
