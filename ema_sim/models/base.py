@@ -711,8 +711,7 @@ class Tolerances:
     default_rtol: ClassVar[float] = 1e-9
     default_atol: ClassVar[float] = 1e-11
 
-    # Any: a mixin passes the family's own arguments on to the next class of the MRO, which mypy cannot name here.
-    def __init__(self, *args: Any, rtol: float | None = None, atol: float | None = None, **kwargs: Any) -> None:
+    def __init__(self, *args: object, rtol: float | None = None, atol: float | None = None, **kwargs: object) -> None:
         self.rtol = self.default_rtol if rtol is None else float(rtol)
         self.atol = self.default_atol if atol is None else float(atol)
         super().__init__(*args, **kwargs)
