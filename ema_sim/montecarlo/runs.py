@@ -14,9 +14,9 @@ import functools
 import json
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import numba as nb
 import numpy as np
@@ -239,13 +239,12 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
     ch = load_channel(c.channel)
     n_rows = len(row_runs)
     own = [n for n in rows if n in {p.name for p in cls.parameters()}]
-    kwargs: dict[str, Any] = dict(c.options)  # Any: the keywords of the model class picked by name
+    kwargs: dict[str, object] = dict(c.options)
+    make: Callable[..., ActuatorModel] = cls  # a class picked by name: its keywords are its own
     if cls.one_system:
         if own or "bound" in rows:
             raise ConfigError(f"{c.model} is one linear system for every instance: disperse a time-domain model")
-        linear: Any = cls  # each linear model has its own keywords
-        model: ActuatorModel = linear(ch, n=n_rows * repeat, **kwargs, **c.fixed)
-        return model
+        return make(ch, n=n_rows * repeat, **kwargs, **c.fixed)
     base = cls.default_params(ch, **c.fixed)
     params = [base if not own else base.replace(**{n: float(rows[n][i]) for n in own}) for i in range(n_rows)]
     kwargs["params"] = [p for p in params for _ in range(repeat)]
@@ -253,7 +252,7 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
         kwargs["bound"] = [float(b) for b in rows["bound"] for _ in range(repeat)]
     if issubclass(cls, HighOrderModel):
         kwargs["seed"] = [run_seed(seed, r) for r in row_runs for _ in range(repeat)]
-    return cls(ch, n=n_rows * repeat, **kwargs)
+    return make(ch, n=n_rows * repeat, **kwargs)
 
 
 def _spec_rows(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int) -> tuple[list[Maneuver], list[Load]]:
