@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Final, Protocol
 
 CHANNELS: tuple[str, ...] = ("left_wing", "right_wing", "left_rudder", "right_rudder", "cowl_door")
 """The five EMAC channels (section 1.4), in this order: the ``name`` entries of the per-frame JointStates
@@ -27,9 +27,9 @@ FRAME_HZ = 200.0
 FULL_SCALE_V = 10.0
 """Every command and feedback is scaled to ±10 V (section 1.4)."""
 
-JOINT_STATE = "sensor_msgs/msg/JointState"
-CLOCK = "rosgraph_msgs/msg/Clock"
-STRING = "std_msgs/msg/String"
+JOINT_STATE: Final = "sensor_msgs/msg/JointState"
+CLOCK: Final = "rosgraph_msgs/msg/Clock"
+STRING: Final = "std_msgs/msg/String"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 
 

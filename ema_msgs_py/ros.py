@@ -52,6 +52,7 @@ def message_class(msgtype: str) -> type:
     return cls
 
 
+# Any below: rclpy's message classes (std_msgs, sensor_msgs ...) are generated without type information.
 def set_stamp(msg: Any, ns: int) -> None:
     """Set ``msg.header.stamp`` from nanoseconds.
 

@@ -8,14 +8,33 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import cache
-from typing import Any
+from typing import Any, ClassVar, Literal, Protocol, overload
 
 import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
+from rosbags.typesys.stores.ros2_jazzy import (
+    builtin_interfaces__msg__Time,
+    rosgraph_msgs__msg__Clock,
+    sensor_msgs__msg__JointState,
+    std_msgs__msg__Header,
+    std_msgs__msg__String,
+)
 
-from ema_msgs_py.contract import CLOCK, JOINT_STATE, STRING, QosSpec
+from ema_msgs_py.contract import QosSpec
+
+
+class Message(Protocol):
+    """A typestore message: rosbags' dataclass of its type, which names the type."""
+
+    __msgtype__: ClassVar[str]
+
+
+class Stamped(Message, Protocol):
+    """A typestore message with a header."""
+
+    header: std_msgs__msg__Header
 
 
 @cache
@@ -24,12 +43,11 @@ def typestore() -> Typestore:
     return get_typestore(Stores.ROS2_JAZZY)
 
 
-def _time(ns: int) -> Any:
-    t = typestore().types["builtin_interfaces/msg/Time"]
-    return t(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+def _time(ns: int) -> builtin_interfaces__msg__Time:
+    return builtin_interfaces__msg__Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
 
-def header(stamp_ns: int, frame_id: str = "") -> Any:
+def header(stamp_ns: int, frame_id: str = "") -> std_msgs__msg__Header:
     """A ``std_msgs/Header``.
 
     Parameters
@@ -41,14 +59,14 @@ def header(stamp_ns: int, frame_id: str = "") -> Any:
 
     Returns
     -------
-    Any
+    std_msgs__msg__Header
         The typestore message.
     """
-    return typestore().types["std_msgs/msg/Header"](stamp=_time(stamp_ns), frame_id=frame_id)
+    return std_msgs__msg__Header(stamp=_time(stamp_ns), frame_id=frame_id)
 
 
 def joint_state(stamp_ns: int, names: Sequence[str], position: Sequence[float] = (),
-                velocity: Sequence[float] = (), effort: Sequence[float] = ()) -> Any:
+                velocity: Sequence[float] = (), effort: Sequence[float] = ()) -> sensor_msgs__msg__JointState:
     """A ``sensor_msgs/JointState`` (empty arrays: not measured).
 
     Parameters
@@ -62,15 +80,16 @@ def joint_state(stamp_ns: int, names: Sequence[str], position: Sequence[float] =
 
     Returns
     -------
-    Any
+    sensor_msgs__msg__JointState
         The typestore message.
     """
-    cls = typestore().types[JOINT_STATE]
-    return cls(header=header(stamp_ns), name=list(names), position=np.asarray(position, dtype=np.float64),
-               velocity=np.asarray(velocity, dtype=np.float64), effort=np.asarray(effort, dtype=np.float64))
+    return sensor_msgs__msg__JointState(header=header(stamp_ns), name=list(names),
+                                        position=np.asarray(position, dtype=np.float64),
+                                        velocity=np.asarray(velocity, dtype=np.float64),
+                                        effort=np.asarray(effort, dtype=np.float64))
 
 
-def clock(stamp_ns: int) -> Any:
+def clock(stamp_ns: int) -> rosgraph_msgs__msg__Clock:
     """A ``rosgraph_msgs/Clock``.
 
     Parameters
@@ -80,13 +99,13 @@ def clock(stamp_ns: int) -> Any:
 
     Returns
     -------
-    Any
+    rosgraph_msgs__msg__Clock
         The typestore message.
     """
-    return typestore().types[CLOCK](clock=_time(stamp_ns))
+    return rosgraph_msgs__msg__Clock(clock=_time(stamp_ns))
 
 
-def string(text: str) -> Any:
+def string(text: str) -> std_msgs__msg__String:
     """A ``std_msgs/String``.
 
     Parameters
@@ -96,18 +115,18 @@ def string(text: str) -> Any:
 
     Returns
     -------
-    Any
+    std_msgs__msg__String
         The typestore message.
     """
-    return typestore().types[STRING](data=text)
+    return std_msgs__msg__String(data=text)
 
 
-def serialize(msg: Any) -> bytes:
+def serialize(msg: Message) -> bytes:
     """CDR bytes of a typestore message, as rclpy would publish them.
 
     Parameters
     ----------
-    msg : Any
+    msg : Message
         A message built by this module (or read from a bag).
 
     Returns
@@ -116,6 +135,17 @@ def serialize(msg: Any) -> bytes:
         Little-endian CDR with its encapsulation header.
     """
     return bytes(typestore().serialize_cdr(msg, msg.__msgtype__))
+
+
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: Literal["sensor_msgs/msg/JointState"]
+                ) -> sensor_msgs__msg__JointState: ...
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: Literal["std_msgs/msg/String"]) -> std_msgs__msg__String: ...
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: Literal["rosgraph_msgs/msg/Clock"]) -> rosgraph_msgs__msg__Clock: ...
+@overload
+def deserialize(raw: bytes | memoryview, msgtype: str) -> Any: ...  # Any: another type, named at run time
 
 
 def deserialize(raw: bytes | memoryview, msgtype: str) -> Any:
@@ -130,18 +160,19 @@ def deserialize(raw: bytes | memoryview, msgtype: str) -> Any:
 
     Returns
     -------
-    Any
-        The typestore message.
+    object
+        The typestore message: the contract's types (:data:`~ema_msgs_py.contract.JOINT_STATE`, ``STRING``,
+        ``CLOCK``) typed as their classes.
     """
     return typestore().deserialize_cdr(raw, msgtype)
 
 
-def stamp_ns(msg: Any) -> int:
+def stamp_ns(msg: Stamped) -> int:
     """Header stamp of a message in nanoseconds.
 
     Parameters
     ----------
-    msg : Any
+    msg : Stamped
         A typestore message with a ``header``.
 
     Returns

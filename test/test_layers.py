@@ -5,7 +5,8 @@ Read from the source, imports inside functions and under ``TYPE_CHECKING`` inclu
 cannot hide an upward edge or a loop from the check. Layers, lowest first (a package may import its own
 modules and any package of a lower layer, never a sibling of its own layer):
 
-0  errors, ema_msgs_py                            the one exception tree; the topic contract (stands on its own)
+0  errors, jsontypes, ema_msgs_py                 the one exception tree; the JSON document type; the topic contract
+                                                   (stands on its own)
 1  ema_sim (its version), calibration, progress,  the data every layer reads
    benchmark
 2  parameters                                     one declaration of every parameter
@@ -34,7 +35,7 @@ import ema_sim
 
 ROOT = Path(ema_sim.__file__).resolve().parent.parent
 LAYERS: list[tuple[str, ...]] = [
-    ("ema_sim.errors", "ema_msgs_py"),
+    ("ema_sim.errors", "ema_sim.jsontypes", "ema_msgs_py"),
     ("ema_sim", "ema_sim.calibration", "ema_sim.progress", "ema_sim.benchmark"),
     ("ema_sim.parameters",),
     ("ema_sim.config",),

@@ -23,7 +23,6 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -89,7 +88,7 @@ class AilOptions:
     environment: Profile | None = None
     """An explicit test environment instead of the named profile's (a Monte Carlo run's dispersed elements;
     ``disable`` still applies to it)."""
-    model_overrides: Mapping[str, Any] = field(default_factory=dict)
+    model_overrides: Mapping[str, float] = field(default_factory=dict)
     """Model keywords (parameters, ``seed``) on top of the elements switched off."""
 
 
@@ -170,7 +169,7 @@ def _profile(options: AilOptions) -> Profile:
 class _Loop:
     """The EMACs and the test environment of one run, stepped frame by frame (the module docstring's order)."""
 
-    def __init__(self, options: AilOptions, cfg: AilConfig, profile: Profile, overrides: dict[str, Any]) -> None:
+    def __init__(self, options: AilOptions, cfg: AilConfig, profile: Profile, overrides: dict[str, float]) -> None:
         self.frame_s = 1.0 / cfg.frame_hz
         settings, crosstalk = emac_settings()
         if abs(settings.frame_hz - cfg.frame_hz) > 1e-9:

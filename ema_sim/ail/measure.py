@@ -17,7 +17,7 @@ Every figure is reported either way, so the verdict can be checked against the n
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -30,6 +30,18 @@ DITHER_MIN_PP_DEG = 0.05
 """Smallest synchronous peak to peak called a dither (see the module docstring)."""
 FOLD_PERIODS = 10
 """Periods per synchronous-average window."""
+
+
+class DitherReport(TypedDict):
+    """:meth:`SurfaceDither.as_dict`: one surface's verdict and the thresholds it was reached with."""
+
+    channel: str
+    dither: bool
+    freq_hz: float | None
+    peak_to_peak_deg: float
+    peak_db_above_floor: float
+    detection_db: float
+    dither_min_pp_deg: float
 
 
 @dataclass(frozen=True)
@@ -75,7 +87,7 @@ class SurfaceDither:
                 f"{self.peak_db:.0f} dB above the floor")
         return f"dither: {core}" if self.dither else f"none (largest peak: {core})"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> DitherReport:
         """Plain values for JSON and CSV metadata."""
         return {"channel": self.channel, "dither": self.dither, "freq_hz": self.freq_hz,
                 "peak_to_peak_deg": self.peak_to_peak_deg, "peak_db_above_floor": self.peak_db,

@@ -24,8 +24,11 @@ SURFACE_LOADS = ("aerodynamic", "bungee")
 """What loads the real surfaces: the hinge-moment model (flight) or a bungee / nothing (AIL, on the ground)."""
 WINGS = ("left_wing", "right_wing")
 
+# The mappings below are the vehicle file's sections as YAML (or ROS parameters) gave them (Any where a value goes
+# to float() before its check); every value is checked where it is read (a wrong one is one ConfigError naming it).
 
-def _numbers(cls: type, values: Mapping[str, Any], origin: str) -> dict[str, float]:
+
+def _numbers(cls: type, values: Mapping[str, object], origin: str) -> dict[str, float]:
     """Every field of a dataclass of floats from ``values``: present, finite, nothing unknown."""
     names = [f.name for f in fields(cls)]
     unknown = sorted(set(values) - set(names))
@@ -50,12 +53,12 @@ class VehicleParams:
     l_aileron_per_s2: float = pm.param("1/s²", "roll: the differential wings' control power Lδa (positive)")
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], origin: str = "vehicle") -> VehicleParams:
+    def from_mapping(cls, values: Mapping[str, object], origin: str = "vehicle") -> VehicleParams:
         """Validated: the sign conventions the autopilot relies on hold.
 
         Parameters
         ----------
-        values : Mapping[str, Any]
+        values : Mapping[str, object]
             The ``vehicle`` section: every field, finite, nothing else.
         origin : str, optional
             Where the values come from, for the error message.
@@ -94,12 +97,12 @@ class AutopilotParams:
     aileron_limit_deg: float = pm.param("deg", "aileron authority")
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], origin: str = "autopilot") -> AutopilotParams:
+    def from_mapping(cls, values: Mapping[str, object], origin: str = "autopilot") -> AutopilotParams:
         """Validated: gains and limits are not negative.
 
         Parameters
         ----------
-        values : Mapping[str, Any]
+        values : Mapping[str, object]
             The ``autopilot`` section: every field, finite, nothing else.
         origin : str, optional
             Where the values come from, for the error message.
@@ -130,12 +133,12 @@ class HingeMomentParams:
     h_delta_inlb_per_deg: float = pm.param("in·lb/deg", "hinge moment per degree of the surface's deflection")
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], origin: str) -> HingeMomentParams:
+    def from_mapping(cls, values: Mapping[str, object], origin: str) -> HingeMomentParams:
         """Validated: the three coefficients, finite, nothing else.
 
         Parameters
         ----------
-        values : Mapping[str, Any]
+        values : Mapping[str, object]
             One ``hinge_moment.<kind>`` section.
         origin : str
             Where the values come from, for the error message.
@@ -415,14 +418,14 @@ def config_path(path: str | Path | None = None) -> Path:
     return Path(path) if path is not None else config_dir() / CONFIG_NAME
 
 
-def load_ail_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> AilConfig:
+def load_ail_config(path: str | Path | None = None, overrides: Mapping[str, object] | None = None) -> AilConfig:
     """Read (and validate) the vehicle and flight-computer parameters.
 
     Parameters
     ----------
     path : str or Path, optional
         The parameter file (default ``config/ail_vehicle.yaml``).
-    overrides : Mapping[str, Any], optional
+    overrides : Mapping[str, object], optional
         Nested values merged over the file's (:func:`deep_merged`).
 
     Returns
@@ -442,19 +445,19 @@ def load_ail_config(path: str | Path | None = None, overrides: Mapping[str, Any]
     return AilConfig.from_parameters(params, str(p))
 
 
-def deep_merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+def deep_merged(base: Mapping[str, object], override: Mapping[str, object]) -> dict[str, object]:
     """Nested mappings merged, ``override`` winning (as the nodes merge ROS parameters over a file).
 
     Parameters
     ----------
-    base : Mapping[str, Any]
+    base : Mapping[str, object]
         The file's mapping.
-    override : Mapping[str, Any]
+    override : Mapping[str, object]
         Values that replace ``base``'s, key by key, nested mappings merged in turn.
 
     Returns
     -------
-    dict[str, Any]
+    dict[str, object]
         A new mapping (neither argument changes).
     """
     out = dict(base)

@@ -20,7 +20,7 @@ from ema_sim.analysis.section2.dither import BAND_HZ, DETECT_DB
 COLORS = ("tab:red", "tab:blue", "tab:green", "tab:purple", "tab:orange", "0.4")
 
 
-def _plt() -> Any:
+def _plt() -> Any:  # Any: the pyplot module, imported here (a module has no type to name)
     import matplotlib  # noqa: PLC0415 - plotting only for the study's figure (pyplot: 0.4 s of import)
 
     matplotlib.use("Agg", force=True)

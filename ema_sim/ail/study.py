@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -67,6 +67,21 @@ CASES: tuple[Case, ...] = (
 CASE_NAMES = tuple(c.name for c in CASES)
 
 
+class CaseReport(TypedDict):
+    """:meth:`CaseResult.as_dict`: one case's verdict over its seeds."""
+
+    case: str
+    what: str
+    model: str
+    dither: bool
+    wing_runs_dithering: int
+    wing_runs: int
+    freq_hz: float | None
+    pp_median_deg: float
+    pp_max_deg: float
+    wall_s: float
+
+
 @dataclass
 class CaseResult:
     """One case over its seeds."""
@@ -97,7 +112,7 @@ class CaseResult:
         f = [w.freq_hz for w in self.wings if w.dither and w.freq_hz is not None]
         return float(np.median(f)) if f else float("nan")
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> CaseReport:
         """Plain values for JSON."""
         med, top = self.pp_deg()
         return {"case": self.case.name, "what": self.case.what, "model": self.model, "dither": self.dithers,

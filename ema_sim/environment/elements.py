@@ -12,14 +12,14 @@ import math
 from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ema_sim.errors import ConfigError
 from ema_sim.models.stages import lag_gain, quantize, quantize_array
 
-Signal = Any
+Signal = float | NDArray[np.float64]
 """A float, or a numpy array with one value per channel."""
 
 

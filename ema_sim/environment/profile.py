@@ -43,7 +43,7 @@ class PathSpec:
                                   off=0.0, element="noise", default=0.0)
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], origin: str) -> PathSpec:
+    def from_mapping(cls, values: Mapping[str, object], origin: str) -> PathSpec:
         """Validate a ``command:`` or ``feedback:`` mapping.
 
         Parameters
@@ -106,6 +106,7 @@ class Profile:
         """Pass-through in both directions: the FMU talks to the EMACs directly."""
         return cls()
 
+    # Any: ROS parameters as a parameter file or rclpy gave them, checked here.
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> Profile:
         """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``).

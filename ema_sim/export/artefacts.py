@@ -244,7 +244,8 @@ def open_artefact(path: Path) -> Artefact:
         doc = jsbsim_system.read_manifest(path)
         frames = doc.get("delay_frames", 0)
         art = JsbsimArtefact(path, from_manifest(doc), int(frames) if isinstance(frames, int | float) else 0)
-        art.not_expressed = [str(s) for s in doc.get("not_expressed", [])]
+        dropped = doc.get("not_expressed", [])
+        art.not_expressed = [str(s) for s in dropped] if isinstance(dropped, list) else []
         return art
     raise ExportError(f"{path}: not an artefact ema verify runs (.fmu, a JSBSim .xml system, or a C directory; "
                       "a host's own record is a .csv or a bag)")

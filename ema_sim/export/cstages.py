@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 from ema_sim.models import stages as st
 from ema_sim.models.second_order import figure21 as f21
@@ -42,7 +41,7 @@ class CStage:
     """
 
     name: str
-    twin: Callable[..., Any]
+    twin: Callable[..., object]
     code: str
 
 

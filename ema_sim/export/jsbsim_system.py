@@ -27,12 +27,12 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 from xml.sax.saxutils import escape
 
 import numpy as np
 
 from ema_sim.export.target import LINEAR_NO_JSBSIM, ExportError, ExportTarget
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order.figure26 import (
     HISTORY_SIZE,
@@ -46,7 +46,7 @@ from ema_sim.models.second_order.figure29 import free_play_accel
 from ema_sim.models.second_order.params import N_STATE, SecondOrderParams, X
 from ema_sim.models.stages import TIME_EPS_S, TWO_PI, lag_gain
 
-Expr = str | float | tuple[Any, ...]
+Expr = str | float | tuple["Expr", ...]
 """A JSBSim function: a property name, a number, or ``(operation, *arguments)``."""
 
 INPUT_COMMAND = "ema/command-deg"
@@ -383,7 +383,7 @@ def system_xml(target: ExportTarget) -> str:  # noqa: PLR0912, PLR0915 - figure 
     surface = [actuator] + ([fp] if free_play_subsystem(p) else []) + ([compliance] if compliance else [])
     s.summer(OUTPUTS["surface_deg"], surface, "output: the surface (free play and compliance included)")
     s.summer(OUTPUTS["rate_dps"], [rate], "output: the actuator rate")
-    manifest = target.manifest("jsbsim", {"not_expressed": dropped, "delay_frames": frames})
+    manifest = target.manifest("jsbsim", {"not_expressed": [*dropped], "delay_frames": frames})
     text = json.dumps(manifest, ensure_ascii=True).replace("--", "-\\u002d")
     missing = [f"{k}: {NOT_EXPRESSED[k]}" for k in dropped] + list(ALWAYS_MISSING)
     notes = "".join(f"       - {escape(m)}\n" for m in missing)
@@ -401,7 +401,7 @@ def system_xml(target: ExportTarget) -> str:  # noqa: PLR0912, PLR0915 - figure 
     )
 
 
-def read_manifest(path: Path) -> dict[str, Any]:
+def read_manifest(path: Path) -> JsonObject:
     """The manifest a system file carries.
 
     Parameters
@@ -417,7 +417,7 @@ def read_manifest(path: Path) -> dict[str, Any]:
     found = re.search(rf"<!-- {MANIFEST_TAG} (.*?) -->", path.read_text(encoding="utf-8"), re.DOTALL)
     if found is None:
         raise ExportError(f"{path} carries no ema_sim manifest (not written by `ema export --jsbsim`)")
-    doc: dict[str, Any] = json.loads(found.group(1))
+    doc: JsonObject = json.loads(found.group(1))
     return doc
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,7 @@ from ema_sim import __version__
 from ema_sim.config import GENERIC, STAND_IN, load_channel
 from ema_sim.errors import EmaError
 from ema_sim.export.csource import ModelValues
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models import ActuatorModel, create
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.high_order.params import OPTIONS as HIGH_ORDER_OPTIONS
@@ -165,7 +167,8 @@ class ExportTarget:
             Parameter name → delay (s).
         """
         names = ("command_delay_s", "feedback_delay_s") if self.high_order else ("delay_s", "feedback_delay_s")
-        source: Any = self.high_order_params if self.high_order_params is not None else self.params
+        source: HighOrderParams | SecondOrderParams = (self.high_order_params if self.high_order_params is not None
+                                                       else self.params)
         values = {n: float(getattr(source, n)) for n in names} if not self.linear else {}
         return {n: v for n, v in values.items() if v > 0.0}
 
@@ -214,7 +217,7 @@ class ExportTarget:
             return create(self.truth, self.channel, params=self.params)
         return create(self.truth, self.channel, params=self.params, rate_hz=self.rate_hz)
 
-    def manifest(self, artefact: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    def manifest(self, artefact: str, extra: Mapping[str, JsonValue] | None = None) -> JsonObject:
         """The provenance an artefact carries (what ``ema verify`` reads back).
 
         Parameters
@@ -229,13 +232,13 @@ class ExportTarget:
         dict
             JSON-ready (infinite values as strings).
         """
-        high: dict[str, Any] = {}
+        high: JsonObject = {}
         if self.high_order_params is not None:
             high = {"high_order_params": {k: [_json_float(x) for x in v] if isinstance(v, tuple) else _json_float(v)
                                           for k, v in self.high_order_params.as_dict().items()}}
         return {
             "artefact": artefact, "model": self.model, "truth": self.truth, "channel": self.channel,
-            "rate_hz": self.rate_hz, "backward": self.backward, "source": self.source, "notes": self.notes,
+            "rate_hz": self.rate_hz, "backward": self.backward, "source": self.source, "notes": [*self.notes],
             **high,
             "params": {k: _json_float(v) for k, v in self.params.as_dict().items()},
             "options": {k: _json_float(v) for k, v in self.options.items()},
@@ -251,7 +254,8 @@ def _from_json_float(x: float | str) -> float:
     return float(x)
 
 
-def from_manifest(doc: dict[str, Any]) -> ExportTarget:
+# Any: an artefact's JSON as read, its shape checked here (a wrong one is the ExportError below).
+def from_manifest(doc: Mapping[str, Any]) -> ExportTarget:
     """The target an artefact's manifest describes.
 
     Parameters
@@ -269,6 +273,7 @@ def from_manifest(doc: dict[str, Any]) -> ExportTarget:
         params.validate()
         high = None
         if "high_order_params" in doc:
+            # Any: each value takes its own field's type (a float, or a tuple of them)
             values: dict[str, Any] = {k: tuple(_from_json_float(x) for x in v) if isinstance(v, list)
                                       else _from_json_float(v) for k, v in doc["high_order_params"].items()}
             high = HighOrderParams(**values)

@@ -25,17 +25,19 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import ConfigError, DataError, EmaError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import stages
 from ema_sim.parameters import ParameterInfo, Slots, describe, elements, switched_off
 
 FloatArray = NDArray[np.float64]
+_Params = TypeVar("_Params")
 log = logging.getLogger(__name__)
 
 OUTPUT_FIELDS: tuple[str, ...] = ("position_deg", "surface_deg", "rate_dps", "current_a", "bus_v", "flags")
@@ -237,7 +239,7 @@ class ActuatorModel(ABC):
 
     @classmethod
     @abstractmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> Any:
+    def default_params(cls, channel: ChannelConfig, **overrides: float) -> Any:  # Any: the family's own set
         """The parameters a model of this class takes from ``channel``, then ``overrides`` (validated).
 
         Parameters
@@ -607,7 +609,7 @@ class ActuatorModel(ABC):
         """
         return t_stop
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JsonObject:
         """Name, title, rate and channel, for logs and bag metadata."""
         return {
             "model": self.name,
@@ -709,7 +711,7 @@ class Tolerances:
     default_rtol: ClassVar[float] = 1e-9
     default_atol: ClassVar[float] = 1e-11
 
-    def __init__(self, *args: Any, rtol: float | None = None, atol: float | None = None, **kwargs: Any) -> None:
+    def __init__(self, *args: object, rtol: float | None = None, atol: float | None = None, **kwargs: object) -> None:
         self.rtol = self.default_rtol if rtol is None else float(rtol)
         self.atol = self.default_atol if atol is None else float(atol)
         super().__init__(*args, **kwargs)
@@ -722,7 +724,7 @@ def _check_finite(arr: FloatArray, what: str) -> None:
         raise EmaError(f"{what}: non-finite value at index {tuple(int(i) for i in idx)}")
 
 
-def batch_params(params: object | Sequence[object] | None, n: int, default: Callable[[], object]) -> list[Any]:
+def batch_params(params: _Params | Sequence[_Params] | None, n: int, default: Callable[[], _Params]) -> list[_Params]:
     """Normalise a family's ``params`` argument: None, one set for all, or one per instance.
 
     Parameters

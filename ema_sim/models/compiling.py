@@ -18,12 +18,16 @@ import numba as nb
 from llvmlite import ir as llvm_ir  # type: ignore[import-untyped]
 from numba.core import cgutils, ir, ir_utils, types
 from numba.core.analysis import compute_cfg_from_blocks
-from numba.core.compiler import CompilerBase, DefaultPassBuilder
-from numba.core.compiler_machinery import FunctionPass, register_pass
+from numba.core.base import BaseContext
+from numba.core.compiler import CompilerBase, DefaultPassBuilder, StateDict
+from numba.core.compiler_machinery import FunctionPass, PassManager, register_pass
 from numba.core.typed_passes import NopythonRewrites
+from numba.core.typing.context import BaseContext as TypingContext
+from numba.core.typing.templates import Signature
 from numba.extending import intrinsic
 
 _F = TypeVar("_F", bound=Callable[..., Any])
+# Any below: a kernel of any signature; and llvmlite's IR builder and values, which llvmlite leaves untyped.
 
 
 @overload
@@ -70,7 +74,7 @@ def borrowing(fn: _F | None = None, /, *, nogil: bool = False, error_model: Lite
     return compile_ if fn is None else compile_(fn)
 
 
-def forward_array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> int:
+def forward_array_copies(blocks: dict[int, ir.Block], typemap: dict[str, types.Type]) -> int:
     """Replace every array variable that only copies another by that one, in a typed function's Numba IR.
 
     An element inlined into a kernel binds its array arguments to variables of its own (``p = params_i``).
@@ -109,7 +113,7 @@ def forward_array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> int
         return at[0] in dominators[label] and (at[0] != label or at[1] < k)
 
     unsafe: set[str] = set()
-    found: dict[str, Any] = {}
+    found: dict[str, ir.Var] = {}
     for label, block in blocks.items():
         for k, stmt in enumerate(block.body):
             defined = stmt.target.name if isinstance(stmt, ir.Assign) else None
@@ -120,7 +124,7 @@ def forward_array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> int
                     unsafe.add(name)
     for name in unsafe:
         del copies[name]
-    root: dict[str, Any] = {}
+    root: dict[str, ir.Var] = {}
     for t, v in copies.items():
         source = v
         while source in copies:
@@ -132,7 +136,8 @@ def forward_array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> int
     return len(root)
 
 
-def _array_copies(blocks: dict[int, Any], typemap: dict[str, Any]) -> tuple[dict[str, str], dict[str, tuple[int, int]]]:
+def _array_copies(blocks: dict[int, ir.Block],
+                  typemap: dict[str, types.Type]) -> tuple[dict[str, str], dict[str, tuple[int, int]]]:
     """The candidates of :func:`forward_array_copies`: array copies between variables assigned once.
 
     Parameters
@@ -173,7 +178,7 @@ class ForwardArrayCopies(FunctionPass):
     def __init__(self) -> None:
         FunctionPass.__init__(self)  # type: ignore[no-untyped-call]
 
-    def run_pass(self, state: Any) -> bool:
+    def run_pass(self, state: StateDict) -> bool:
         """Forward the function's array copies.
 
         Parameters
@@ -195,7 +200,7 @@ class ForwardArrayCopies(FunctionPass):
 class ForwardCopiesCompiler(CompilerBase):
     """Numba's nopython pipeline with :class:`ForwardArrayCopies` after its rewrites."""
 
-    def define_pipelines(self) -> list[Any]:
+    def define_pipelines(self) -> list[PassManager]:
         """The one pipeline.
 
         Returns
@@ -209,7 +214,8 @@ class ForwardCopiesCompiler(CompilerBase):
         return [pm]
 
 
-def _expect_false(_typingctx: Any, condition: Any) -> Any:
+def _expect_false(_typingctx: TypingContext, condition: types.Type
+                  ) -> tuple[Signature, Callable[[BaseContext, Any, Signature, list[Any]], Any]] | None:
     """Typing and code of :data:`unlikely`: the condition unchanged, with LLVM told it is almost always false.
 
     Parameters
@@ -227,7 +233,7 @@ def _expect_false(_typingctx: Any, condition: Any) -> Any:
     if not isinstance(condition, types.Boolean):
         return None
 
-    def codegen(_context: Any, builder: Any, _signature: Any, args: Any) -> Any:
+    def codegen(_context: BaseContext, builder: Any, _signature: Signature, args: list[Any]) -> Any:
         i1 = llvm_ir.IntType(1)
         expect = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
             builder.module, llvm_ir.FunctionType(i1, [i1, i1]), "llvm.expect.i1")

@@ -16,7 +16,7 @@ system and the delays exactly.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numba as nb
 import numpy as np
@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike
 from ema_sim import parameters as pm
 from ema_sim.config import ChannelConfig, load_channel
 from ema_sim.errors import ConfigError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import stages as st
 from ema_sim.models.arrays import FloatArray, IntArray
 from ema_sim.models.base import N_OUT, O_BUS, O_CUR, O_FLAGS, O_POS, O_RATE, O_SURF, ActuatorModel
@@ -32,6 +33,7 @@ from ema_sim.models.high_order.linear import linearize
 from ema_sim.models.high_order.models import bound_value
 from ema_sim.models.high_order.params import HighOrderParams
 from ema_sim.models.second_order.params import SecondOrderParams
+from ema_sim.parameters import Value
 
 if TYPE_CHECKING:  # the annotations' type; python-control itself is imported where a system is built
     import control as ct
@@ -278,7 +280,7 @@ class LinearModel(ActuatorModel):
         response: np.ndarray = np.asarray(resp.complex).reshape(-1) * np.exp(-1j * w * delay)
         return response
 
-    def describe(self) -> dict[str, Any]:  # noqa: D102
+    def describe(self) -> JsonObject:  # noqa: D102
         info = super().describe()
         info["delay_s"] = self.delay_s
         if self.position_delay_s:
@@ -351,7 +353,7 @@ class Sloac(LinearModel):
         )
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:  # noqa: D102
+    def default_params(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:  # noqa: D102
         # LOAC's parameters (SLOAC keeps ωn, ζ and the delay).
         return SecondOrderParams.from_channel(channel, **overrides)
 
@@ -407,11 +409,11 @@ class Hoalm(LinearModel):
         super().__init__(system, lin.command_delay_s, ch, n=n, rate_hz=rate_hz, position_delay_s=lin.feedback_delay_s)
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:  # noqa: D102
+    def default_params(cls, channel: ChannelConfig, **overrides: Value) -> HighOrderParams:  # noqa: D102
         # HOAD3's parameters, the model it linearizes.
         return HighOrderParams.from_channel(channel, "hoad3", **overrides)
 
-    def describe(self) -> dict[str, Any]:  # noqa: D102
+    def describe(self) -> JsonObject:  # noqa: D102
         info = super().describe()
         info.update(load_inlb=self.load_inlb, bound=self.bound)
         return info
@@ -505,6 +507,6 @@ class Loes(LinearModel):
                          self.params.delay_s, ch, n=n, rate_hz=rate_hz)
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> LoesParams:  # noqa: D102
+    def default_params(cls, channel: ChannelConfig, **overrides: Value) -> LoesParams:  # noqa: D102
         return pm.load(LoesParams, channel.section("loes"), origin=channel.channel, family="LOES", section="loes",
                        overrides=overrides)

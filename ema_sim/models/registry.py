@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from importlib import import_module
-from typing import Any
 
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import UnknownNameError
@@ -57,7 +57,7 @@ def model_class(name: str) -> type[ActuatorModel]:
     return found
 
 
-def create(name: str, channel: str | ChannelConfig = "left_wing", **kwargs: Any) -> ActuatorModel:
+def create(name: str, channel: str | ChannelConfig = "left_wing", **kwargs: object) -> ActuatorModel:
     """Build model ``name`` for ``channel``.
 
     Parameters
@@ -74,7 +74,8 @@ def create(name: str, channel: str | ChannelConfig = "left_wing", **kwargs: Any)
     ActuatorModel
         The model, trimmed at zero.
     """
-    return model_class(name)(channel, **kwargs)
+    make: Callable[..., ActuatorModel] = model_class(name)  # each family's constructor has keywords of its own
+    return make(channel, **kwargs)
 
 
 def model_parameters(name: str, channel: str | ChannelConfig | None = None) -> list[ParameterInfo]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import numba as nb
 import numpy as np
@@ -36,11 +36,13 @@ FLAG_PWM_DEAD_BAND = 32
 FLAG_BRAKE = 64
 FLAG_STALL = 128
 
+_F = TypeVar("_F", bound=Callable[..., Any])  # Any: a kernel of any signature (the compiled one keeps it)
+
 jit = nb.njit(cache=True, inline="always")
 """Compile an element for inlining into the kernels (it takes the caller's floating-point flags)."""
 
-def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False, forward_copies: bool = False,
-                    borrow: bool = False) -> Any:
+def compile_closure(fn: _F, of: Callable[..., object] | str, *, parallel: bool = False, forward_copies: bool = False,
+                    borrow: bool = False) -> _F:
     """Compile a kernel a factory made, cached under a name of its own (``qualname_of``).
 
     Numba names a cache file after the function's qualified name, which every closure of one factory
@@ -51,7 +53,7 @@ def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False, 
     ----------
     fn : callable
         The closure, as its factory defined it.
-    of : object
+    of : callable or str
         What tells it from its siblings: the compiled function it closes over, or a name.
     parallel : bool
         Compile its ``prange`` loops as parallel threads.
@@ -67,7 +69,7 @@ def compile_closure(fn: Callable[..., Any], of: Any, *, parallel: bool = False, 
     numba dispatcher
         ``fn`` compiled and cached.
     """
-    func = getattr(of, "py_func", of)
+    func: Callable[..., object] | str = getattr(of, "py_func", of)
     tag = f"{func.__module__.rsplit('.', 1)[-1]}_{func.__name__}" if callable(func) else str(of)
     fn.__qualname__ = f"{fn.__qualname__}_{tag}"
     if borrow:

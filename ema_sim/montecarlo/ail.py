@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
@@ -28,7 +27,7 @@ WING_COLUMNS = ("dither", "freq_hz", "pp_deg", "peak_db")
 """The columns of each wing (``left_wing.dither``...): verdict (1/0), frequency, peak to peak, level above the floor."""
 
 
-def ail_options(c: Campaign, seed: int, run: int, values: Mapping[str, float]) -> Any:
+def ail_options(c: Campaign, seed: int, run: int, values: Mapping[str, float]) -> AilOptions:
     """The loop options of one run: the campaign's profile and model with this run's values and seeds.
 
     Parameters
@@ -63,7 +62,7 @@ def ail_options(c: Campaign, seed: int, run: int, values: Mapping[str, float]) -
     bungee = values.get("setup.bungee_inlb")
     setup = cfg.setup(c.profile, bungee_inlb=None if bungee is None else float(bungee))
     own = {p.name for p in model_class(c.model).parameters()}
-    overrides: dict[str, Any] = {**c.fixed, **{k: float(v) for k, v in values.items() if k in own}}
+    overrides: dict[str, float] = {**c.fixed, **{k: float(v) for k, v in values.items() if k in own}}
     if issubclass(model_class(c.model), HighOrderModel):
         overrides["seed"] = s
     return AilOptions(profile=c.profile, model=c.model, duration_s=c.duration_s, seed=None, setup=setup,

@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -31,6 +30,7 @@ from ema_sim.analysis.studies.loes import fit_band, fit_loes
 from ema_sim.calibration import CommandError, four_corner_bounds
 from ema_sim.config import load_channel
 from ema_sim.errors import UnknownNameError
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models.high_order.params import HighOrderParams
 from ema_sim.montecarlo import output
 from ema_sim.montecarlo.campaign import Campaign
@@ -41,11 +41,11 @@ FOUR_SURFACES = ("left_wing", "right_wing", "left_rudder", "right_rudder")
 """The four control surfaces whose calibrations set section 3.1.2.2's Kb/offset bounds (not the cowl door)."""
 
 
-def _bounds(key: str, analysis: Mapping[str, tuple[float, float]] | None) -> Any:
+def _bounds(key: str, analysis: Mapping[str, tuple[float, float]] | None) -> str:
     return "analysis" if analysis and key in analysis else "report"
 
 
-def second_order_bounds(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> dict[str, Any]:
+def second_order_bounds(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> JsonObject:
     """The ``second-order-bounds`` campaign mapping.
 
     Parameters
@@ -74,7 +74,7 @@ def second_order_bounds(channel: str, analysis: Mapping[str, tuple[float, float]
         "dispersions": [{"parameter": k, "uniform": _bounds(k, analysis)} for k in ("wn_rad_s", "zeta", "delay_s")],
         "metrics": [{"metric": "bandwidth_3db", "experiment": "response"},
                     {"metric": "phase_90", "experiment": "response"},
-                    {"metric": "gain_phase", "experiment": "response", "at_hz": list(BANDWIDTH_AT_HZ)},
+                    {"metric": "gain_phase", "experiment": "response", "at_hz": [*BANDWIDTH_AT_HZ]},
                     {"metric": "step", "experiment": "step"},
                     {"metric": "error", "experiment": "step"}],
         "batch": 100,
@@ -93,7 +93,7 @@ def command_error_corners() -> tuple[float, float]:
     return max(abs(float(s["kb"])) for s in sections), max(abs(float(s["offset_deg"])) for s in sections)
 
 
-def command_error(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> dict[str, Any]:
+def command_error(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> JsonObject:
     """The ``command-error`` campaign mapping.
 
     Parameters
@@ -109,7 +109,7 @@ def command_error(channel: str, analysis: Mapping[str, tuple[float, float]] | No
         The campaign's YAML form.
     """
     if analysis and "kb" in analysis and "offset_deg" in analysis:
-        box = [list(analysis["kb"]), list(analysis["offset_deg"])]
+        box: list[JsonValue] = [[*analysis["kb"]], [*analysis["offset_deg"]]]
     else:
         kb, off = command_error_corners()
         box = [[-kb, kb], [-off, off]]
@@ -141,7 +141,7 @@ def test_load_inlb(channel: str) -> float:
     return float(HighOrderParams.from_channel(load_channel(channel)).hysteresis_reference_load_inlb)
 
 
-def compliance_bounds(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> dict[str, Any]:
+def compliance_bounds(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> JsonObject:
     """The ``compliance-bounds`` campaign mapping.
 
     Parameters
@@ -171,7 +171,7 @@ def compliance_bounds(channel: str, analysis: Mapping[str, tuple[float, float]] 
     }
 
 
-def ail_dither(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> dict[str, Any]:
+def ail_dither(channel: str, analysis: Mapping[str, tuple[float, float]] | None) -> JsonObject:
     """The ``ail-dither`` campaign mapping.
 
     Parameters
@@ -205,7 +205,7 @@ def ail_dither(channel: str, analysis: Mapping[str, tuple[float, float]] | None)
     }
 
 
-BUILTIN: dict[str, Callable[[str, Mapping[str, tuple[float, float]] | None], dict[str, Any]]] = {
+BUILTIN: dict[str, Callable[[str, Mapping[str, tuple[float, float]] | None], JsonObject]] = {
     "second-order-bounds": second_order_bounds, "command-error": command_error,
     "compliance-bounds": compliance_bounds, "ail-dither": ail_dither,
 }
@@ -213,7 +213,7 @@ BUILTIN: dict[str, Callable[[str, Mapping[str, tuple[float, float]] | None], dic
 
 
 def builtin_campaign(name: str, channel: str = "left_wing",
-                     analysis: Mapping[str, tuple[float, float]] | None = None) -> dict[str, Any]:
+                     analysis: Mapping[str, tuple[float, float]] | None = None) -> JsonObject:
     """A built-in campaign's mapping by name (an unknown name lists the known ones).
 
     Parameters
@@ -287,7 +287,7 @@ def _box(c: Campaign) -> dict[str, tuple[float, float]]:
             for n, lo, hi in zip(d.names, d.low, d.high, strict=True)}
 
 
-def findings_second_order(c: Campaign, out: Path) -> dict[str, Any]:
+def findings_second_order(c: Campaign, out: Path) -> JsonObject:
     """The spread of bandwidth and −90° frequency against the analytic second order at the box's corners.
 
     Parameters
@@ -318,7 +318,7 @@ def findings_second_order(c: Campaign, out: Path) -> dict[str, Any]:
     }
 
 
-def findings_command_error(c: Campaign, out: Path) -> dict[str, Any]:
+def findings_command_error(c: Campaign, out: Path) -> JsonObject:
     """The settled error's range at each angle against section 3.1.2.2's four-corner lines.
 
     Parameters
@@ -348,7 +348,7 @@ def findings_command_error(c: Campaign, out: Path) -> dict[str, Any]:
             "max_difference_deg": float(max(np.max(np.abs(lo - blo)), np.max(np.abs(hi - bhi))))}
 
 
-def findings_compliance(c: Campaign, out: Path) -> dict[str, Any]:
+def findings_compliance(c: Campaign, out: Path) -> JsonObject:
     """The LOES parameters' spread, and the nominal (mean curve, unloaded) LOES against ``ema loes``.
 
     Parameters
@@ -368,9 +368,14 @@ def findings_compliance(c: Campaign, out: Path) -> dict[str, Any]:
     pairs = {"loes_wn_rad_s": "wn_rad_s", "loes_zeta": "zeta", "loes_delay_s": "delay_s", "loes_gain": "dc_gain_ratio"}
     nom = {k: nominal.get(k, math.nan) for k in pairs}
     diff = max(abs(nom[k] - ref[v]) for k, v in pairs.items())
-    return {"nominal_loes": nom, "ema_loes": {k: ref[v] for k, v in pairs.items()}, "max_abs_difference": diff,
+    return {"nominal_loes": _json(nom), "ema_loes": {k: ref[v] for k, v in pairs.items()}, "max_abs_difference": diff,
             "loes_ranges": {k: [float(np.nanmin(v)), float(np.nanmax(v))] for k in pairs
                             for v in [output.read_column(out, k)]}}
+
+
+def _json(values: Mapping[str, float | None]) -> JsonObject:
+    """Named numbers as a JSON object (a dict of floats is one, but ``dict`` is invariant in its values)."""
+    return dict(values)
 
 
 def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -387,7 +392,7 @@ LARGE_OSCILLATION_DEG = 0.5
 """Peak to peak above which a limit cycle is not the AIL dither (≈ 0.1°, 4.3) but the loop near instability."""
 
 
-def findings_ail(c: Campaign, out: Path) -> dict[str, Any]:
+def findings_ail(c: Campaign, out: Path) -> JsonObject:
     """Probability of dither over wing-runs, its size, and each dispersed element's effect.
 
     A wing-run is one of three: **dither** (the :mod:`ema_sim.ail.measure` verdict with a peak to peak of at
@@ -415,35 +420,36 @@ def findings_ail(c: Campaign, out: Path) -> dict[str, Any]:
     cats = {"dither": verdict & ~large, "large_oscillation": large, "none": ~verdict}
     n = int(pp.size)
     box = _box(c)
-    effect: dict[str, Any] = {}
+    effect: JsonObject = {}
     for p in c.parameters:
         x = np.tile(output.read_column(out, p), len(WINGS))
         lo, hi = box[p]
         thirds = {"lower_third": x <= lo + (hi - lo) / 3.0, "upper_third": x >= hi - (hi - lo) / 3.0}
-        effect[p] = {f"p_{cat}_{where}": float(np.mean(mask[sel])) if sel.any() else None
-                     for cat, mask in cats.items() for where, sel in thirds.items()}
-        effect[p].update({f"pp_median_dither_{where}_deg": float(np.median(pp[sel & cats["dither"]]))
-                          if (sel & cats["dither"]).any() else None for where, sel in thirds.items()})
-    doc: dict[str, Any] = {"wing_runs": n, "large_oscillation_above_deg": LARGE_OSCILLATION_DEG}
+        row: JsonObject = {f"p_{cat}_{where}": float(np.mean(mask[sel])) if sel.any() else None
+                           for cat, mask in cats.items() for where, sel in thirds.items()}
+        row.update({f"pp_median_dither_{where}_deg": float(np.median(pp[sel & cats["dither"]]))
+                    if (sel & cats["dither"]).any() else None for where, sel in thirds.items()})
+        effect[p] = row
+    doc: JsonObject = {"wing_runs": n, "large_oscillation_above_deg": LARGE_OSCILLATION_DEG}
     for cat, mask in cats.items():
         k = int(mask.sum())
         doc[cat] = {"count": k, "probability": k / n if n else None, "probability_95": list(_wilson(k, n))}
-    doc["pp_deg_dither"] = output.statistics(pp[cats["dither"]])
-    doc["freq_hz_dither"] = output.statistics(freq[cats["dither"]])
-    doc["pp_deg_large_oscillation"] = output.statistics(pp[large])
-    doc["freq_hz_large_oscillation"] = output.statistics(freq[large])
+    doc["pp_deg_dither"] = _json(output.statistics(pp[cats["dither"]]))
+    doc["freq_hz_dither"] = _json(output.statistics(freq[cats["dither"]]))
+    doc["pp_deg_large_oscillation"] = _json(output.statistics(pp[large]))
+    doc["freq_hz_large_oscillation"] = _json(output.statistics(freq[large]))
     doc["by_parameter"] = effect
     return doc
 
 
-FINDINGS: dict[str, Callable[[Campaign, Path], dict[str, Any]]] = {
+FINDINGS: dict[str, Callable[[Campaign, Path], JsonObject]] = {
     "second-order-bounds": findings_second_order, "command-error": findings_command_error,
     "compliance-bounds": findings_compliance, "ail-dither": findings_ail,
 }
 """Built-in campaign → what it concludes and cross-checks after the runs."""
 
 
-def findings(c: Campaign, out: Path, names: Sequence[str] | None = None) -> dict[str, Any]:
+def findings(c: Campaign, out: Path, names: Sequence[str] | None = None) -> JsonObject:
     """The conclusions of a built-in campaign (empty for a YAML one).
 
     Parameters
@@ -460,7 +466,7 @@ def findings(c: Campaign, out: Path, names: Sequence[str] | None = None) -> dict
     dict
         The findings.
     """
-    out_: dict[str, Any] = {}
+    out_: JsonObject = {}
     for name in names or [c.name]:
         if name in FINDINGS:
             out_.update(FINDINGS[name](c, out))

@@ -49,12 +49,14 @@ from ema_sim.ail.params import load_ail_config
 from ema_sim.config import CHANNELS
 from ema_sim.environment import PathSpec, load_profile
 from ema_sim.errors import ConfigError, EmaError, UnknownNameError
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models import model_class, model_names, model_parameters
 from ema_sim.montecarlo.dispersions import Dispersion, Target, parse_dispersion
 from ema_sim.montecarlo.metrics import MetricSpec, parse_metric
 from ema_sim.parameters import metas
 from ema_sim.signals import parse_load, parse_maneuver
 from ema_sim.signals.maneuvers import Schroeder
+from ema_sim.signals.spec import Spec
 
 KINDS = ("model", "ail")
 EXPERIMENT_KINDS = ("record", "multisine", "dwell")
@@ -117,13 +119,13 @@ class Experiment:
         """What its metrics read: ``record`` or ``response``."""
         return "record" if self.kind == "record" else "response"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values (the YAML form)."""
         if self.kind == "dwell":
-            return {"dwell": list(self.freq_hz), "amp_deg": self.amp_deg, "load_inlb": self.load_inlb,
+            return {"dwell": [*self.freq_hz], "amp_deg": self.amp_deg, "load_inlb": self.load_inlb,
                     "output": self.output}
-        out: dict[str, Any] = {self.kind if self.kind == "multisine" else "maneuver": self.maneuver,
-                               "load": self.load, "frame_hz": self.frame_hz, "output": self.output}
+        out: JsonObject = {self.kind if self.kind == "multisine" else "maneuver": self.maneuver,
+                           "load": self.load, "frame_hz": self.frame_hz, "output": self.output}
         if self.kind == "record":
             out["sample_hz"] = self.sample_hz
         if self.duration_s is not None:
@@ -172,7 +174,7 @@ class Campaign:
     kind: str
     model: str
     channel: str
-    options: Mapping[str, Any]
+    options: Mapping[str, JsonValue]
     fixed: Mapping[str, float]
     experiments: tuple[Experiment, ...]
     dispersions: tuple[Dispersion, ...]
@@ -180,7 +182,7 @@ class Campaign:
     batch: int
     profile: str = "ail"
     duration_s: float = 24.0
-    raw: Mapping[str, Any] = field(default_factory=dict)
+    raw: Mapping[str, JsonValue] = field(default_factory=dict)
 
     @cached_property
     def parameters(self) -> tuple[str, ...]:
@@ -211,7 +213,7 @@ class Campaign:
 
 
 # ----------------------------------------------------------------------------------------------- targets
-def _spec_targets(prefix: str, spec: Any) -> dict[str, Target]:
+def _spec_targets(prefix: str, spec: Spec) -> dict[str, Target]:
     """The numeric fields of a maneuver or load spec, with the spec's declared bounds."""
     out = {}
     for f in fields(spec):
@@ -291,6 +293,8 @@ def ail_targets(profile: str) -> dict[str, Target]:
 
 
 # ----------------------------------------------------------------------------------------------- parsing
+# The parsers below take a campaign file's values as YAML gave them (object; Any where a value goes to float() or a
+# loop before its check), each checked where it is read (a wrong one is one ConfigError naming its place).
 def _number(values: Mapping[str, Any], key: str, where: str, default: float | None = None,
             positive: bool = True) -> float:
     if key not in values:
@@ -306,7 +310,7 @@ def _number(values: Mapping[str, Any], key: str, where: str, default: float | No
     return v
 
 
-def _frequencies(value: Any, where: str) -> tuple[float, ...]:
+def _frequencies(value: object, where: str) -> tuple[float, ...]:
     if isinstance(value, Mapping):
         lo = _number(value, "min_hz", where)
         hi = _number(value, "max_hz", where)
@@ -320,7 +324,7 @@ def _frequencies(value: Any, where: str) -> tuple[float, ...]:
     return tuple(float(f) for f in freqs)
 
 
-def parse_experiment(name: str, values: Any, where: str) -> Experiment:
+def parse_experiment(name: str, values: object, where: str) -> Experiment:
     """One ``experiments`` entry.
 
     Parameters
@@ -394,7 +398,7 @@ CAMPAIGN_KEYS = ("campaign", "description", "kind", "model", "channel", "options
 """The keys of a campaign YAML."""
 
 
-def _head(values: Any, origin: str) -> tuple[str, str, str, dict[str, Any], dict[str, float]]:
+def _head(values: object, origin: str) -> tuple[str, str, str, dict[str, JsonValue], dict[str, float]]:
     """Kind, model, channel, options and fixed values of a campaign mapping, checked."""
     if not isinstance(values, Mapping):
         raise ConfigError(f"{origin}: a campaign is a YAML mapping")
@@ -421,7 +425,7 @@ def _head(values: Any, origin: str) -> tuple[str, str, str, dict[str, Any], dict
     return kind, model, channel, options, fixed
 
 
-def _dispersions(raw: Any, targets: Mapping[str, Target], fixed: Mapping[str, float], origin: str,
+def _dispersions(raw: object, targets: Mapping[str, Target], fixed: Mapping[str, float], origin: str,
                  analysis: Mapping[str, tuple[float, float]] | None) -> tuple[Dispersion, ...]:
     """The ``dispersions`` list, each parameter dispersed once and never also set."""
     if not isinstance(raw, Sequence) or isinstance(raw, str):
@@ -493,7 +497,7 @@ def parse_campaign(values: Mapping[str, Any], origin: str = "<campaign>",
                     resolved)
 
 
-def _resolved(d: Dispersion, raw: Mapping[str, Any]) -> dict[str, Any]:
+def _resolved(d: Dispersion, raw: Mapping[str, JsonValue]) -> JsonObject:
     """A dispersion entry with ``report``/``analysis`` bounds replaced by the numbers they stood for."""
     out = dict(raw)
     if d.kind in ("uniform", "corners") and isinstance(raw.get(d.kind), str):

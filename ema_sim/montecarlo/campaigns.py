@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
 
 from ema_sim.errors import ConfigError
 from ema_sim.montecarlo import output, plots
 from ema_sim.montecarlo.builtin import BUILTIN, builtin_campaign, findings
 from ema_sim.montecarlo.campaign import Campaign, analysis_spread, parse_campaign, read_campaign
 from ema_sim.montecarlo.engine import run_tasks
-from ema_sim.montecarlo.summary import merged_envelopes, summarize
+from ema_sim.montecarlo.summary import Summary, merged_envelopes, summarize
 
 
 def load_campaign(name_or_path: str, *, channel: str | None = None, analysis: Sequence[str | Path] = ()) -> Campaign:
@@ -49,7 +48,7 @@ def load_campaign(name_or_path: str, *, channel: str | None = None, analysis: Se
 
 def run_campaign(c: Campaign, out: str | Path, *, runs: int, seed: int, scheduler: str | None = None,
                  workers: int | None = None, resume: bool = False, plot: bool = True,
-                 progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+                 progress: Callable[[float], None] | None = None) -> Summary:
     """Run a campaign into ``out``: rows, summary, plots and (built-in campaigns) findings.
 
     Parameters

@@ -27,12 +27,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.errors import ConfigError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 KINDS = ("uniform", "normal", "corners", "discrete")
@@ -155,9 +155,9 @@ class Dispersion:
         raise ConfigError(f"normal dispersion of {', '.join(self.names)}: {MAX_REDRAWS} draws fell outside the "
                           "declared ranges; the mean and std do not fit them")
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JsonObject:
         """Plain values for ``summary.json``."""
-        out: dict[str, Any] = {"parameters": list(self.names), "distribution": self.kind,
+        out: JsonObject = {"parameters": [*self.names], "distribution": self.kind,
                                "units": [t.unit for t in self.targets]}
         if self.kind in ("uniform", "corners"):
             out["bounds"] = [[float(a), float(b)] for a, b in zip(self.low, self.high, strict=True)]
@@ -233,7 +233,9 @@ def sample(dispersions: Sequence[Dispersion], seed: int, runs: Sequence[int]) ->
 
 
 # ------------------------------------------------------------------------------------------- parsing
-def _pairs(value: Any, k: int, what: str) -> tuple[FloatArray, FloatArray]:
+# The parsers below take a dispersion entry's values as YAML gave them (object), each checked where it is read (a
+# wrong one is one ConfigError naming its place).
+def _pairs(value: object, k: int, what: str) -> tuple[FloatArray, FloatArray]:
     arr = np.asarray(value, dtype=float)
     if k == 1 and arr.shape == (2,):
         arr = arr[None, :]
@@ -244,7 +246,7 @@ def _pairs(value: Any, k: int, what: str) -> tuple[FloatArray, FloatArray]:
     return arr[:, 0].copy(), arr[:, 1].copy()
 
 
-def _bounds(value: Any, targets: Sequence[Target], what: str,
+def _bounds(value: object, targets: Sequence[Target], what: str,
             analysis: Mapping[str, tuple[float, float]] | None) -> tuple[FloatArray, FloatArray]:
     """``[low, high]`` pairs, or ``report`` (declared uncertainty) or ``analysis`` (ema analyze spread)."""
     if isinstance(value, str):
@@ -265,14 +267,14 @@ def _bounds(value: Any, targets: Sequence[Target], what: str,
     return _pairs(value, len(targets), what)
 
 
-def _vector(value: Any, k: int, what: str) -> FloatArray:
+def _vector(value: object, k: int, what: str) -> FloatArray:
     arr = np.atleast_1d(np.asarray(value, dtype=float))
     if arr.shape != (k,) or not np.all(np.isfinite(arr)):
         raise ConfigError(f"{what}: expected {k} finite number{'s' if k > 1 else ''}, got {value!r}")
     return arr
 
 
-def _entry(entry: Any, resolve: Mapping[str, Target], where: str) -> tuple[str, list[Target]]:
+def _entry(entry: object, resolve: Mapping[str, Target], where: str) -> tuple[str, list[Target]]:
     """The distribution named and the targets of a ``dispersions`` entry."""
     if not isinstance(entry, Mapping):
         raise ConfigError(f"{where}: expected a mapping, got {entry!r}")
@@ -295,7 +297,7 @@ def _entry(entry: Any, resolve: Mapping[str, Target], where: str) -> tuple[str, 
     return kinds[0], targets
 
 
-def _normal(spec: Any, targets: Sequence[Target], what: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _normal(spec: object, targets: Sequence[Target], what: str) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Mean, std and the correlation's Cholesky factor of a ``normal`` entry."""
     k = len(targets)
     if not isinstance(spec, Mapping) or not {"mean", "std"} <= set(spec):
@@ -316,7 +318,7 @@ def _normal(spec: Any, targets: Sequence[Target], what: str) -> tuple[FloatArray
         raise ConfigError(f"{what}: correlation matrix is not positive definite") from None
 
 
-def _discrete(spec: Any, weights_raw: Any, target: Target, what: str) -> tuple[FloatArray, FloatArray]:
+def _discrete(spec: object, weights_raw: object, target: Target, what: str) -> tuple[FloatArray, FloatArray]:
     """Values and weights of a ``discrete`` entry."""
     values = np.asarray(spec, dtype=float).ravel()
     if values.size == 0:
@@ -329,7 +331,7 @@ def _discrete(spec: Any, weights_raw: Any, target: Target, what: str) -> tuple[F
     return values, weights
 
 
-def parse_dispersion(entry: Mapping[str, Any], resolve: Mapping[str, Target], where: str,
+def parse_dispersion(entry: Mapping[str, object], resolve: Mapping[str, Target], where: str,
                      analysis: Mapping[str, tuple[float, float]] | None = None) -> Dispersion:
     """One ``dispersions`` entry of a campaign YAML, checked against the targets' declarations.
 

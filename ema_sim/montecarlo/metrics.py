@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation.tf_fit import fit_transfer_function, second_order_coefficients
 from ema_sim.errors import ConfigError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -119,11 +120,11 @@ class MetricSpec:
 
     name: str
     experiment: str
-    options: Mapping[str, Any] = field(default_factory=dict)
+    options: Mapping[str, list[float]] = field(default_factory=dict)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values (the campaign's YAML form)."""
-        return {"metric": self.name, "experiment": self.experiment, **dict(self.options)}
+        return {"metric": self.name, "experiment": self.experiment, **{k: [*v] for k, v in self.options.items()}}
 
 
 # ---------------------------------------------------------------------------------- compiled row loops
@@ -457,6 +458,7 @@ OPTIONS: dict[str, tuple[str, ...]] = {"gain_phase": ("at_hz",)}
 """The options each metric takes."""
 
 
+# Any: a campaign file's entry as YAML gave it, checked here.
 def parse_metric(entry: Any, experiments: Mapping[str, str], where: str) -> MetricSpec:
     """One ``metrics`` entry: a name, or ``{metric: NAME, experiment: E, <options>}``.
 

@@ -23,12 +23,13 @@ import math
 import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
 from ema_sim import __version__
 from ema_sim.errors import EmaError
+from ema_sim.jsontypes import JsonValue
 from ema_sim.montecarlo.campaign import Campaign
 from ema_sim.montecarlo.runs import Block, Envelope
 
@@ -37,6 +38,29 @@ RUNS = "runs.parquet"
 PARTS = "parts"
 SUMMARY = "summary.json"
 QUANTILES = (0.01, 0.05, 0.5, 0.95, 0.99)
+Statistics = dict[str, int | float | None]
+"""One column's figures (:func:`statistics`): ``count``, ``nan``, ``mean``, ``std``, ``min``, ``max``, ``p01`` …"""
+
+
+class EnvelopeMeta(TypedDict):
+    """What a task's file keeps of one envelope beside its arrays."""
+
+    count: int
+    x_label: str
+    y_label: str
+
+
+class PartMeta(TypedDict):
+    """A finished task's metadata (the ``meta`` entry of its ``parts/*.npz``)."""
+
+    start: int
+    stop: int
+    worker: str
+    seconds: float
+    peak_rss_mb: NotRequired[float]
+    """Absent from the files of campaigns written before it was measured."""
+    nominal: dict[str, float]
+    envelopes: dict[str, EnvelopeMeta]
 
 
 def _part(start: int) -> str:
@@ -116,10 +140,10 @@ def write_block(out: Path, block: Block) -> None:
             arrays[f"{name}|{key}"] = getattr(e, key)
         if e.nominal is not None:
             arrays[f"{name}|nominal"] = e.nominal
-    meta = {"start": block.start, "stop": block.stop, "worker": block.worker, "seconds": block.seconds,
-            "peak_rss_mb": block.peak_rss_mb, "nominal": block.nominal,
-            "envelopes": {n: {"count": e.count, "x_label": e.x_label, "y_label": e.y_label}
-                          for n, e in block.envelopes.items()}}
+    meta: PartMeta = {"start": block.start, "stop": block.stop, "worker": block.worker, "seconds": block.seconds,
+                      "peak_rss_mb": block.peak_rss_mb, "nominal": block.nominal,
+                      "envelopes": {n: {"count": e.count, "x_label": e.x_label, "y_label": e.y_label}
+                                    for n, e in block.envelopes.items()}}
     arrays["meta"] = np.array(json.dumps(meta))
     tmp = out / PARTS / f".{_part(block.start)}.tmp.npz"
     np.savez(tmp, **arrays)  # type: ignore[arg-type]
@@ -130,7 +154,7 @@ def write_block(out: Path, block: Block) -> None:
     os.replace(tmp, out / RUNS / f"{_part(block.start)}.parquet")
 
 
-def part_meta(out: Path) -> Iterator[tuple[dict[str, Any], dict[str, Envelope]]]:
+def part_meta(out: Path) -> Iterator[tuple[PartMeta, dict[str, Envelope]]]:
     """Each finished task's metadata and envelopes, one at a time (memory stays one task's).
 
     Parameters
@@ -145,7 +169,7 @@ def part_meta(out: Path) -> Iterator[tuple[dict[str, Any], dict[str, Envelope]]]
     """
     for start in sorted(finished(out)):
         with np.load(out / PARTS / f"{start:09d}.npz") as z:
-            meta = json.loads(str(z["meta"]))
+            meta: PartMeta = json.loads(str(z["meta"]))  # what write_block wrote
             envs = {}
             for name, info in meta["envelopes"].items():
                 key = f"{name}|nominal"
@@ -218,7 +242,7 @@ def column_names(out: Path) -> list[str]:
     return list(pq.read_schema(parts[0]).names)
 
 
-def statistics(values: np.ndarray) -> dict[str, Any]:
+def statistics(values: np.ndarray) -> Statistics:
     """Count, NaNs, mean, std, extremes and quantiles of one column (NaNs left out of the figures).
 
     Parameters
@@ -232,7 +256,7 @@ def statistics(values: np.ndarray) -> dict[str, Any]:
         ``count``, ``nan``, ``mean``, ``std``, ``min``, ``max``, ``p01`` … ``p99``.
     """
     ok = values[np.isfinite(values)]
-    out: dict[str, Any] = {"count": int(values.size), "nan": int(values.size - ok.size)}
+    out: Statistics = {"count": int(values.size), "nan": int(values.size - ok.size)}
     if ok.size:
         out.update(mean=float(ok.mean()), std=float(ok.std(ddof=1)) if ok.size > 1 else None,
                    min=float(ok.min()), max=float(ok.max()))
@@ -280,7 +304,7 @@ def spearman(x: np.ndarray, y: np.ndarray) -> float | None:
     return float(np.mean((rx - rx.mean()) * (ry - ry.mean())) / (sx * sy))
 
 
-def clean(value: Any) -> Any:
+def clean(value: object) -> JsonValue:
     """Plain JSON values: NaN and ±inf as null, numpy scalars as Python numbers.
 
     Parameters
@@ -301,16 +325,18 @@ def clean(value: Any) -> Any:
         value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
         return None
-    return value
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")  # json.dumps' own error
 
 
-def _write_json(path: Path, doc: Mapping[str, Any]) -> None:
+def _write_json(path: Path, doc: Mapping[str, object]) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(json.dumps(clean(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     os.replace(tmp, path)
 
 
-def write_summary(out: Path, doc: Mapping[str, Any]) -> Path:
+def write_summary(out: Path, doc: Mapping[str, object]) -> Path:
     """Write ``summary.json`` (strict JSON).
 
     Parameters

@@ -14,22 +14,24 @@ import functools
 import json
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypeVar
 
 import numba as nb
 import numpy as np
 
 from ema_sim.config import load_channel
 from ema_sim.errors import ConfigError
-from ema_sim.models import model_class
+from ema_sim.models import ActuatorModel, model_class
 from ema_sim.models.high_order.models import HighOrderModel
 from ema_sim.montecarlo.campaign import Campaign, Experiment, nominal_values, parse_campaign
 from ema_sim.montecarlo.dispersions import FloatArray, run_seed, sample
 from ema_sim.montecarlo.metrics import RecordData, ResponseData, compute, fourier_coefficients
 from ema_sim.signals import parse_load, parse_maneuver
-from ema_sim.signals.maneuvers import Staircase
+from ema_sim.signals.loads import Load
+from ema_sim.signals.maneuvers import Maneuver, Schroeder, Staircase
+from ema_sim.signals.spec import Spec
 from ema_sim.simulation import dau_times, frame_inputs
 
 
@@ -204,6 +206,7 @@ def peak_rss_mb() -> float:
 
 
 # ------------------------------------------------------------------------------------------ model runs
+_S = TypeVar("_S", bound=Spec)
 def _with_nominal(c: Campaign, values: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
     """Each parameter's values with the nominal first (row 0 of every batch)."""
     nom = nominal_values(c)
@@ -211,7 +214,7 @@ def _with_nominal(c: Campaign, values: Mapping[str, FloatArray]) -> dict[str, Fl
 
 
 def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[str, FloatArray],
-                repeat: int = 1) -> Any:
+                repeat: int = 1) -> ActuatorModel:
     """The batch model: one row per run (``-1``: the nominal run), each row repeated ``repeat`` times.
 
     Parameters
@@ -236,12 +239,12 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
     ch = load_channel(c.channel)
     n_rows = len(row_runs)
     own = [n for n in rows if n in {p.name for p in cls.parameters()}]
-    kwargs: dict[str, Any] = dict(c.options)
+    kwargs: dict[str, object] = dict(c.options)
+    make: Callable[..., ActuatorModel] = cls  # a class picked by name: its keywords are its own
     if cls.one_system:
         if own or "bound" in rows:
             raise ConfigError(f"{c.model} is one linear system for every instance: disperse a time-domain model")
-        linear: Any = cls  # each linear model has its own keywords
-        return linear(ch, n=n_rows * repeat, **kwargs, **c.fixed)
+        return make(ch, n=n_rows * repeat, **kwargs, **c.fixed)
     base = cls.default_params(ch, **c.fixed)
     params = [base if not own else base.replace(**{n: float(rows[n][i]) for n in own}) for i in range(n_rows)]
     kwargs["params"] = [p for p in params for _ in range(repeat)]
@@ -249,16 +252,16 @@ def build_model(c: Campaign, seed: int, row_runs: Sequence[int], rows: Mapping[s
         kwargs["bound"] = [float(b) for b in rows["bound"] for _ in range(repeat)]
     if issubclass(cls, HighOrderModel):
         kwargs["seed"] = [run_seed(seed, r) for r in row_runs for _ in range(repeat)]
-    return cls(ch, n=n_rows * repeat, **kwargs)
+    return make(ch, n=n_rows * repeat, **kwargs)
 
 
-def _spec_rows(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int) -> tuple[list[Any], list[Any]]:
+def _spec_rows(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int) -> tuple[list[Maneuver], list[Load]]:
     """The maneuver and load of every row (the experiment's, with its dispersed fields replaced)."""
     man, load = parse_maneuver(exp.maneuver), parse_load(exp.load)
     mk = {k.rsplit(".", 1)[1]: v for k, v in rows.items() if k.startswith(f"{exp.name}.maneuver.")}
     lk = {k.rsplit(".", 1)[1]: v for k, v in rows.items() if k.startswith(f"{exp.name}.load.")}
 
-    def row(spec: Any, changed: Mapping[str, FloatArray], i: int) -> Any:
+    def row(spec: _S, changed: Mapping[str, FloatArray], i: int) -> _S:
         if not changed:
             return spec
         kinds = {f.name: type(getattr(spec, f.name)) for f in dataclasses.fields(spec)}
@@ -268,7 +271,7 @@ def _spec_rows(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int) -> 
 
 
 def _inputs(exp: Experiment, rows: Mapping[str, FloatArray], n_rows: int
-            ) -> tuple[FloatArray, FloatArray, FloatArray, float, Any]:
+            ) -> tuple[FloatArray, FloatArray, FloatArray, float, Maneuver]:
     """Frame times, command and load of every row (shared rows when nothing of them is dispersed)."""
     mans, loads = _spec_rows(exp, rows, n_rows)
     duration = exp.duration_s if exp.duration_s is not None else max(max(m.duration_s, ld.duration_s)
@@ -286,16 +289,16 @@ def _first(a: FloatArray) -> FloatArray:
 
 
 def _record(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray]
-            ) -> tuple[RecordData, Any]:
+            ) -> tuple[RecordData, ActuatorModel]:
     """A record experiment of every row."""
     model = build_model(c, seed, [-1, *runs], rows)
     t, cmd, hm, duration, man = _inputs(exp, rows, model.n)
     model.trim(_first(cmd), _first(hm))
     rec = model.run(t, cmd, hm, sample_times=dau_times(duration, exp.sample_hz), end_s=duration)
-    stair = isinstance(man, Staircase)
+    stair = man if isinstance(man, Staircase) else None
     return RecordData(rec.time_s, rec.command_deg, getattr(rec, exp.output), rec.rate_dps,
-                      np.asarray(man.levels_deg, dtype=float) if stair else None,
-                      float(man.hold_s) if stair else 0.0), model
+                      np.asarray(stair.levels_deg, dtype=float) if stair else None,
+                      float(stair.hold_s) if stair else 0.0), model
 
 
 def _multisine(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], rows: Mapping[str, FloatArray]
@@ -304,6 +307,8 @@ def _multisine(c: Campaign, exp: Experiment, seed: int, runs: Sequence[int], row
     from ema_sim.analysis.estimation.frf import zoh_factor  # noqa: PLC0415 - scipy.signal only for responses
     model = build_model(c, seed, [-1, *runs], rows)
     t, cmd, hm, duration, man = _inputs(exp, rows, model.n)
+    if not isinstance(man, Schroeder):  # parse_experiment admits no other
+        raise ConfigError(f"{exp.name}: a multisine experiment takes a schroeder maneuver, not {man.kind!r}")
     model.trim(_first(cmd), _first(hm))
     start = man.lead_s + (man.periods - 1) * man.period_s
     keep = (t >= start - 1e-9) & (t < start + man.period_s - 1e-9)

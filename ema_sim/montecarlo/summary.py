@@ -9,14 +9,50 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.montecarlo import output
 from ema_sim.montecarlo.campaign import Campaign
 from ema_sim.montecarlo.engine import EngineResult
+from ema_sim.montecarlo.output import Statistics
 from ema_sim.montecarlo.runs import Envelope, peak_rss_mb
+
+
+class CampaignHead(TypedDict):
+    """The campaign a summary is of: its name, description and specification."""
+
+    name: str
+    description: str
+    spec: JsonValue
+
+
+class Summary(TypedDict):
+    """The ``summary.json`` document (:func:`summarize`)."""
+
+    runs: int
+    runs_asked: int
+    complete: bool
+    seed: int
+    campaign: CampaignHead
+    workers: list[str]
+    workers_this_session: list[str]
+    scheduler: str
+    wall_s: float
+    compute_s: float
+    task_s: float
+    memory: dict[str, float]
+    tasks: dict[str, int]
+    dispersions: list[JsonObject]
+    parameters: dict[str, Statistics]
+    metrics: dict[str, Statistics]
+    nominal: dict[str, float]
+    sensitivity_spearman: dict[str, dict[str, float | None]]
+    findings: JsonObject
+    plots: list[str]
+    rows: str
 
 
 def merged_envelopes(out: Path) -> tuple[dict[str, Envelope], dict[str, float], list[str], float, float]:
@@ -59,7 +95,7 @@ def merged_envelopes(out: Path) -> tuple[dict[str, Envelope], dict[str, float], 
 
 
 def summarize(out: Path, c: Campaign, *, seed: int, runs: int, engine: EngineResult,
-              findings: Mapping[str, Any] | None = None, plots: list[str] | None = None) -> dict[str, Any]:
+              findings: Mapping[str, JsonValue] | None = None, plots: list[str] | None = None) -> Summary:
     """The ``summary.json`` document of a finished (or partly finished) campaign.
 
     Parameters
@@ -90,7 +126,7 @@ def summarize(out: Path, c: Campaign, *, seed: int, runs: int, engine: EngineRes
     metrics = [n for n in names if n != "run" and n not in c.parameters]
     finished_runs = int(output.read_column(out, "run").size) if names else 0
     param_values = {p: output.read_column(out, p) for p in params}
-    stats: dict[str, Any] = {}
+    stats: dict[str, Statistics] = {}
     sensitivity: dict[str, dict[str, float | None]] = {}
     for m in metrics:
         values = output.read_column(out, m)
@@ -121,7 +157,7 @@ def summarize(out: Path, c: Campaign, *, seed: int, runs: int, engine: EngineRes
     }
 
 
-def column_statistics(out: Path, name: str) -> dict[str, Any]:
+def column_statistics(out: Path, name: str) -> Statistics:
     """The statistics of one column (for findings).
 
     Parameters

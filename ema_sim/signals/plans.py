@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -293,7 +292,7 @@ def test_help() -> str:
     return "\n".join(lines)
 
 
-def as_json(plan: TestPlan) -> dict[str, Any]:
+def as_json(plan: TestPlan) -> dict[str, str]:
     """The plan's metadata as plain JSON.
 
     Parameters

@@ -13,9 +13,12 @@ from typing import Any, ClassVar, TypeVar, get_type_hints
 from ema_sim.errors import SpecError, UnknownNameError
 
 T = TypeVar("T")
+FieldValue = bool | int | float | str
+"""What a spec field holds (:func:`_convert` makes it from the spec's text)."""
 
 
-def param(default: Any, *, low: float | None = None, high: float | None = None, strict: bool = False,
+# Any: returns the dataclass field that stands as the attribute's default (as ``dataclasses.field`` does).
+def param(default: FieldValue, *, low: float | None = None, high: float | None = None, strict: bool = False,
           doc: str = "") -> Any:
     """A spec field with bounds: ``low`` ≤ value (``<`` when ``strict``), value ≤ ``high``.
 
@@ -52,7 +55,7 @@ class Spec:
         parts = [f"{f.name}={_fmt(getattr(self, f.name))}" for f in fields(self)]
         return f"{self.kind}:{','.join(parts)}" if parts else self.kind
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, FieldValue]:
         """Kind and fields, for bag metadata and JSON reports."""
         return {"kind": self.kind, **{f.name: getattr(self, f.name) for f in fields(self)}}
 
@@ -76,13 +79,13 @@ class Spec:
         """Cross-field checks of a concrete spec (raise SpecError)."""
 
 
-def _fmt(value: Any) -> str:
+def _fmt(value: object) -> str:
     if isinstance(value, float):
         return f"{value:g}"
     return str(value)
 
 
-def _convert(family: str, kind: str, f: Field[Any], hint: Any, raw: str) -> Any:
+def _convert(family: str, kind: str, f: Field[FieldValue], hint: type, raw: str) -> FieldValue:
     try:
         if hint is float:
             return float(raw)
@@ -161,7 +164,7 @@ def parse(text: str, registry: dict[str, type[T]], family: str) -> T:
     cls = registry[kind]
     hints = get_type_hints(cls)
     known = {f.name: f for f in fields(cls)}  # type: ignore[arg-type]
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, FieldValue] = {}
     for key, value in raw.items():
         if key not in known:
             raise SpecError(f"{family} {kind!r}: unknown field {key!r} (fields: {', '.join(known) or 'none'})")

@@ -10,10 +10,9 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -40,8 +39,8 @@ class _Source:
     counts: dict[str, int]
     metadata: dict[str, str]
     complete: bool
-    messages: Any = field(repr=False)
-    """callable(topics) -> iterator of (topic, log_time_ns, raw)"""
+    messages: Callable[[set[str]], Iterator[tuple[str, int, bytes]]] = field(repr=False)
+    """topics → iterator of (topic, log_time_ns, raw)"""
 
 
 def resolve(path: str | Path) -> tuple[Path, Path | None, Path | None]:

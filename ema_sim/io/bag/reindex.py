@@ -8,10 +8,10 @@ import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from mcap.records import Chunk
 from mcap.stream_reader import get_chunk_data_stream
+from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.metadata import parse_qos
 
@@ -197,7 +197,7 @@ def reindex_bag(path: str | Path, *, keep_original: bool = True) -> ReindexRepor
     shutil.rmtree(tmp, ignore_errors=True)
     writer = Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP)
     writer.open()
-    conns: dict[int, Any] = {}
+    conns: dict[int, Connection] = {}
     store = ts.typestore()
     for cid, (topic, sid, encoding, meta) in sorted(found.channels.items()):
         msgtype, _, schema = found.schemas.get(sid, ("", "", b""))

@@ -14,7 +14,12 @@ import threading
 from collections import defaultdict
 from io import BytesIO
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, BinaryIO
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
+    from rosbags.rosbag2.enums import CompressionMode
+    from rosbags.rosbag2.storage_mcap import McapWriter
 
 CHUNK_BYTES = 256 * 1024
 """Messages per MCAP chunk, in bytes: small enough that closing one takes well under a frame."""
@@ -22,7 +27,7 @@ _MESSAGE = struct.Struct("<BQHIQQ")
 """MCAP Message record header: opcode, record length, channel, sequence, log time, publish time."""
 
 
-def fast_storage() -> type:
+def fast_storage() -> type[McapWriter]:
     """Rosbags' MCAP storage writer with a lean message path (same file layout, same records).
 
     rosbags writes each message through small ``BytesIO`` records and builds each chunk's message
@@ -38,13 +43,13 @@ def fast_storage() -> type:
     from rosbags.rosbag2.storage_mcap import write_uint64 as u64  # noqa: PLC0415
 
     class FastMcapWriter(McapWriter):
-        def __init__(self, path: Path, compression: Any) -> None:
+        def __init__(self, path: Path, compression: CompressionMode) -> None:
             super().__init__(path, compression)
             self.bio = _BackgroundFile(self.bio)  # type: ignore[assignment]  # duck-typed file
             self._index: dict[int, array.array[int]] = {}
             self._times: list[int] = []
 
-        def write(self, connection: Any, timestamp: int, data: bytes | memoryview) -> None:
+        def write(self, connection: Connection, timestamp: int, data: bytes | memoryview) -> None:
             bio = self.chunk.bio
             cid = connection.id
             index = self._index.get(cid)
@@ -113,7 +118,7 @@ class _BackgroundFile:
     SIGINT or SIGTERM has every message written before it.
     """
 
-    def __init__(self, fh: Any) -> None:
+    def __init__(self, fh: BinaryIO) -> None:
         self._fh = fh
         self._pos = int(fh.tell())
         self._queue: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()

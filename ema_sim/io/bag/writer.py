@@ -5,9 +5,11 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
+from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
 from ema_msgs_py import contract as ct
@@ -15,6 +17,9 @@ from ema_msgs_py import typestore as ts
 from ema_sim.config import scaling
 from ema_sim.errors import DataError
 from ema_sim.io.bag.storage import fast_storage
+
+if TYPE_CHECKING:
+    from rosbags.rosbag2.writer import StorageWriter
 
 
 class BagWriter:
@@ -28,9 +33,9 @@ class BagWriter:
         Test parameters for the bag's ``custom_data`` (strings, or values written as JSON).
     """
 
-    def __init__(self, path: str | Path, metadata: Mapping[str, Any] | None = None) -> None:
+    def __init__(self, path: str | Path, metadata: Mapping[str, object] | None = None) -> None:
         class _Writer(Writer):
-            STORAGE_PLUGINS: Mapping[StoragePlugin, type[Any]] = {
+            STORAGE_PLUGINS: Mapping[StoragePlugin, type[StorageWriter]] = {
                 **Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: fast_storage()}
 
         self.path = Path(path)
@@ -43,7 +48,7 @@ class BagWriter:
         if storage is None:  # open() always sets it; narrows the type
             raise DataError(f"{self.path}: the bag writer opened no storage")
         self._storage = storage
-        self._connections: dict[str, Any] = {}
+        self._connections: dict[str, Connection] = {}
         self.counts: dict[str, int] = {}
         self._first_ns = 2**63 - 1
         self._last_ns = 0
@@ -52,14 +57,14 @@ class BagWriter:
             self.set_metadata(key, value)
         self.closed = False
 
-    def set_metadata(self, key: str, value: Any) -> None:
+    def set_metadata(self, key: str, value: object) -> None:
         """A test parameter for the bag's ``custom_data`` (written at close).
 
         Parameters
         ----------
         key : str
             The parameter's name.
-        value : Any
+        value : object
             A string, kept as is, or any value, kept as its JSON text.
         """
         text = value if isinstance(value, str) else json.dumps(value)
@@ -109,7 +114,7 @@ class BagWriter:
         self._first_ns = min(self._first_ns, ns)
         self._last_ns = max(self._last_ns, ns)
 
-    def write_message(self, topic: str, log_time_ns: int, msg: Any) -> None:
+    def write_message(self, topic: str, log_time_ns: int, msg: ts.Message) -> None:
         """One typestore message.
 
         Parameters
@@ -118,7 +123,7 @@ class BagWriter:
             The topic (registered on first use).
         log_time_ns : int
             The record's log time, ns.
-        msg : Any
+        msg : Message
             A rosbags typestore message (its ``__msgtype__`` names the type).
         """
         self.write(topic, msg.__msgtype__, log_time_ns, ts.serialize(msg))
@@ -140,7 +145,7 @@ class BagWriter:
         self.close()
 
 
-def write_bag(path: str | Path, columns: Mapping[str, Any], metadata: Mapping[str, Any], *,
+def write_bag(path: str | Path, columns: Mapping[str, ArrayLike], metadata: Mapping[str, object], *,
               channel: str, frame_hz: float | None = None) -> Path:
     """Write data-contract columns as a suite bag of one channel (both sides identical, no environment).
 

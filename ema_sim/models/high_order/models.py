@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import ConfigError, EmaError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import noise as nz
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import N_OUT, ActuatorModel, Tolerances, batch_params
@@ -28,8 +29,8 @@ from ema_sim.models.high_order.figure30 import MOTOR_STUCK
 from ema_sim.models.high_order.hoac1 import N_U, U, run_continuous
 from ema_sim.models.high_order.hoad import DELAY_STEP_EPS, command_in, run_discrete
 from ema_sim.models.high_order.params import BOUNDS, N_CONTINUOUS, N_STATE, SECTION, HighOrderParams, P, X
-from ema_sim.models.high_order.trim import equilibrium
-from ema_sim.parameters import Slots, metas
+from ema_sim.models.high_order.trim import Equilibrium, TrimKey, equilibrium
+from ema_sim.parameters import Slots, Value, metas
 
 ENVIRONMENT_FIELDS = tuple(n for n, m in metas(HighOrderParams).items() if m.variants and n != "noise_bandwidth_hz")
 """The flight/test elements HOAC1 does not have (a noise bandwidth alone adds nothing)."""
@@ -101,7 +102,7 @@ class HighOrderModel(ActuatorModel):
         hysteresis: bool | float = False,
         noise: bool | float = True,
         seed: int | float | Sequence[int] = 0,
-        **overrides: Any,
+        **overrides: Value,
     ) -> None:
         super().__init__(channel, n=n, rate_hz=rate_hz)
         if params is not None and overrides:
@@ -155,7 +156,7 @@ class HighOrderModel(ActuatorModel):
         self._max_delay_s = max(self._max_delay_s, float(self._P[:, P.command_delay_s].max()) + step)
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> HighOrderParams:  # noqa: D102
+    def default_params(cls, channel: ChannelConfig, **overrides: Value) -> HighOrderParams:  # noqa: D102
         return HighOrderParams.from_channel(channel, cls.variant or "hoad3", **overrides)
 
     # ------------------------------------------------------------------ power and brake
@@ -234,20 +235,21 @@ class HighOrderModel(ActuatorModel):
             return [(int(s) * 1_000_003) % 2**63 for s in self.seed]
         return [(self.seed * 1_000_003 + i) % 2**63 for i in range(self.n)]
 
-    def _equilibria(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> list[dict[str, Any]]:
+    def _equilibria(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> list[Equilibrium]:
         x_in, _ = self._command_in(command_deg[:, None])
         return [equilibrium(self._P[i], float(x_in[i, 0]), float(hinge_moment_inlb[i]), self._power[i] > 0.5)
                 for i in range(self.n)]
 
-    def describe(self) -> dict[str, Any]:  # noqa: D102
+    def describe(self) -> JsonObject:  # noqa: D102
         info = super().describe()
-        info.update(bounds=self.bounds, hysteresis=self.hysteresis, noise=self.noise, seed=self.seed)
+        info.update(bounds=[*self.bounds], hysteresis=self.hysteresis, noise=self.noise,
+                    seed=self.seed if isinstance(self.seed, int) else [*self.seed])
         return info
 
 
 TRIMMED = (X.x_motor_in, X.x_surface_in, X.current_a, X.lvdt_filtered_in, X.bus_v, X.integral_in_s)
 """The state columns trim sets (the rest start at zero)."""
-TRIM_KEYS = ("xm", "xs", "cur", "lf", "vbus", "xi")
+TRIM_KEYS: tuple[TrimKey, ...] = ("xm", "xs", "cur", "lf", "vbus", "xi")
 
 
 class Hoac1(Tolerances, HighOrderModel):

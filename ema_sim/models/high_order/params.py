@@ -44,13 +44,14 @@ NONNEG = {"min": 0.0}
 ILLUSTRATIVE = "illustrative: chosen inside the report's specifications (config)"
 
 
-def _curve(description: str, size: int, **meta: Any) -> Any:
+# Any: these return a dataclass field that stands as the attribute's default (as ``dataclasses.field`` does).
+def _curve(description: str, size: int, **meta: object) -> Any:
     """A figure-33 curve field (in the ``hoad3`` subsection)."""
     return pm.param("lbf" if "breakpoints" in description else "lbf/in", description, size=size, section="hoad3",
                     **POS, **meta)
 
 
-def _environment(unit: str, description: str, **meta: Any) -> Any:
+def _environment(unit: str, description: str, **meta: object) -> Any:
     """A flight/test element of HOAD2/HOAD3 (in the variant's subsection; 0 for HOAC1)."""
     return pm.param(unit, description, default=0.0, variants=ENVIRONMENT, **NONNEG, **meta)
 
@@ -179,7 +180,7 @@ class HighOrderParams:
     RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("coulomb_friction_lbf", "<=", "stiction_lbf"),)
 
     @classmethod
-    def from_channel(cls, channel: ChannelConfig, variant: str = "hoad3", **overrides: Any) -> HighOrderParams:
+    def from_channel(cls, channel: ChannelConfig, variant: str = "hoad3", **overrides: pm.Value) -> HighOrderParams:
         """A channel's ``high_order`` section (and its ``hoad2``/``hoad3`` part for ``variant``), then overrides.
 
         HOAC1 has no flight/test environment: its delays, quantization and noise are zero.
@@ -210,7 +211,7 @@ class HighOrderParams:
         """Reject values no actuator can have (one message naming the parameter)."""
         pm.validate(self, FAMILY)
 
-    def replace(self, **changes: Any) -> HighOrderParams:
+    def replace(self, **changes: pm.Value) -> HighOrderParams:
         """A copy with some parameters changed (validated).
 
         Parameters
@@ -224,12 +225,13 @@ class HighOrderParams:
             The validated copy.
         """
         info = pm.metas(self)
+        # Any: each value is coerced to its own field's type, which mypy cannot tie to the key.
         coerced: dict[str, Any] = {k: pm.coerce(k, info[k], v, "replace", FAMILY) for k, v in changes.items()}
         out = replace(self, **coerced)
         out.validate()
         return out
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, float | tuple[float, ...]]:
         """Name → value.
 
         Returns

@@ -7,7 +7,7 @@ that holds a wanted LVDT reading under a load.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Literal, TypedDict
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.high_order import gear_train as gt
@@ -22,8 +22,26 @@ from ema_sim.models.high_order.figure30 import (
 from ema_sim.models.high_order.params import P
 from ema_sim.models.stages import FLAG_BRAKE, FLAG_FREE_PLAY, FLAG_POSITION, FLAG_PWM_DEAD_BAND
 
+TrimKey = Literal["xm", "xs", "cur", "lf", "vbus", "xi"]
+"""The trimmed states of :class:`Equilibrium` (the models write them into their state columns by these names)."""
 
-def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, powered: bool) -> dict[str, Any]:
+
+class Equilibrium(TypedDict):
+    """The trim :func:`equilibrium` finds: positions (in), current (A), LVDT (in), bus (V), integral (in/s)."""
+
+    xm: float
+    xs: float
+    cur: float
+    lf: float
+    vbus: float
+    xi: float
+    motor: int
+    """The motor's regime (``MOTOR_*`` of :mod:`~ema_sim.models.high_order.figure30`)."""
+    flags: int
+    """The limit flags the trim holds (``FLAG_*`` of :mod:`~ema_sim.models.stages`)."""
+
+
+def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, powered: bool) -> Equilibrium:
     """The state in which a held command and load leave every stage at rest (trim).
 
     The gear train carries the load (``F = −hm/r``) and the motor current holds it with friction
@@ -46,7 +64,7 @@ def equilibrium(p: FloatArray, x_command_in: float, hinge_moment_inlb: float, po
 
     Returns
     -------
-    dict
+    Equilibrium
         ``xm``, ``xs`` (in), ``cur`` (A), ``lf`` (in), ``vbus`` (V), ``xi`` (in/s), ``motor`` (regime)
         and ``flags``.
     """

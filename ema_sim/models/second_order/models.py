@@ -12,7 +12,7 @@ The implementations differ only in how they integrate figure 26 (:mod:`.figure26
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -81,7 +81,7 @@ class SecondOrderModel(ActuatorModel):
         self.trim()
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:  # noqa: D102
+    def default_params(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:  # noqa: D102
         return SecondOrderParams.from_channel(channel, **overrides)
 
     @property
@@ -245,7 +245,7 @@ class SecondOrder(SecondOrderModel):
         super().__init__(channel, n=n, rate_hz=rate_hz, params=params, **overrides)
 
     @classmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: Any) -> SecondOrderParams:  # noqa: D102
+    def default_params(cls, channel: ChannelConfig, **overrides: float) -> SecondOrderParams:  # noqa: D102
         return SecondOrderParams.basic(channel, **overrides)
 
     def _integrate(self, bp_t: FloatArray, bp_u: FloatArray, bp_h: FloatArray, t_end: float,
