@@ -4,6 +4,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -20,6 +21,12 @@ def test_a_second_node_of_a_running_nodes_name_refuses_with_one_error_naming_it(
     with first_log.open("w") as out:
         first = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, text=True)
     try:
+        # the second starts once the first has claimed its name (its claim is made before it logs its setup):
+        # started together on a busy machine, either may claim first, and the younger claim is the one refused
+        deadline = time.monotonic() + 60.0
+        while "on right_rudder" not in first_log.read_text() and first.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert "on right_rudder" in first_log.read_text(), first_log.read_text()
         second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=45, check=False)
         assert second.returncode == 2
         (line,) = [x for x in second.stderr.splitlines() if x.startswith("emac: error:")]
