@@ -56,12 +56,43 @@ STANDBY_AFTER_S = 5.0
 STANDBY = "ema_sim.nodes.standby"
 SuiteConfig = RunDescription
 """One run of the suite (the name the tests and benchmarks use)."""
-__all__ = ["DEFAULT_EMAC", "DEFAULT_LAYOUT", "EMAC_HOSTING", "LAYOUTS", "Suite", "SuiteConfig", "free_domain_id",
-           "run_suite"]
+__all__ = ["DEFAULT_EMAC", "DEFAULT_LAYOUT", "DOMAIN_RANGE_ENV", "EMAC_HOSTING", "LAYOUTS", "Suite", "SuiteConfig",
+           "domain_range", "free_domain_id", "run_suite"]
+
+
+DOMAIN_RANGE_ENV = "EMA_DOMAIN_RANGE"
+"""``lo-hi``: the ROS domain ids :func:`free_domain_id` may pick (default 1-101). Processes sharing a machine give
+each other disjoint ranges (the test suite gives each pytest-xdist worker its own), so their runs never meet."""
+
+
+def domain_range() -> tuple[int, int]:
+    """The domain ids :func:`free_domain_id` picks from: :data:`DOMAIN_RANGE_ENV`, or 1-101.
+
+    Returns
+    -------
+    tuple of int
+        The lowest and highest id.
+
+    Raises
+    ------
+    EmaError
+        The variable is not ``lo-hi`` with 0 ≤ lo ≤ hi ≤ 232.
+    """
+    text = os.environ.get(DOMAIN_RANGE_ENV, "").strip()
+    if not text:
+        return 1, 101
+    lo_s, _, hi_s = text.partition("-")
+    try:
+        lo, hi = int(lo_s), int(hi_s)
+    except ValueError:
+        lo, hi = -1, -1
+    if not 0 <= lo <= hi <= 232:
+        raise EmaError(f"{DOMAIN_RANGE_ENV}={text!r}: give lo-hi with 0 <= lo <= hi <= 232")
+    return lo, hi
 
 
 def free_domain_id(seed: int | None = None) -> int:
-    """A ROS domain id in 1–101 derived from the pid (so parallel runs on one machine do not meet).
+    """A ROS domain id in :func:`domain_range` derived from the pid (so parallel runs on one machine do not meet).
 
     Parameters
     ----------
@@ -73,7 +104,8 @@ def free_domain_id(seed: int | None = None) -> int:
     int
         The domain id.
     """
-    return 1 + ((os.getpid() if seed is None else seed) % 101)
+    lo, hi = domain_range()
+    return lo + ((os.getpid() if seed is None else seed) % (hi - lo + 1))
 
 
 class Suite:

@@ -8,10 +8,17 @@ import numpy as np
 import pytest
 
 from ema_sim.io.contract import STRICT_ENV
+from ema_sim.suite import DOMAIN_RANGE_ENV
 
 FRAME_S = 0.005
 
 os.environ[STRICT_ENV] = "1"
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    _worker = int(os.environ["PYTEST_XDIST_WORKER"].removeprefix("gw"))
+    _span = 100 // max(int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")), 1)
+    os.environ[DOMAIN_RANGE_ENV] = f"{1 + _worker * _span}-{(_worker + 1) * _span}"
+    """Each pytest-xdist worker picks its ROS domains from a range of its own: two workers' nodes never meet."""
 """Every report a test builds (in this process or in a command it starts) is checked against its published
 schema, and a mismatch fails the test (``ema_sim.io.contract.check``)."""
 

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from ema_sim.config import load_channel
+from ema_sim.suite import free_domain_id
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,7 +46,7 @@ STATUS = "/emac_left_wing: left_wing"
 
 
 def domain(offset):
-    return 1 + (os.getpid() + 53 * offset) % 101
+    return free_domain_id(os.getpid() + 53 * offset)
 
 
 class Client:
@@ -81,7 +83,7 @@ class Client:
 
 @pytest.fixture
 def client(request):
-    did = domain(hash(request.node.name) % 97)
+    did = domain(zlib.crc32(request.node.name.encode()) % 97)  # stable across processes, unlike hash()
     c = Client(did)
     c.did = did
     yield c
