@@ -175,7 +175,7 @@ def test_wn_and_zeta_that_trade_while_the_bandwidth_holds_are_no_change_of_the_r
                                                             np.zeros(1), np.zeros((1, 2)), {}) for p in params], 2)
 
     def moving(name, a, b):
-        return changes.Track(name, (a, b), (0.01, 0.01), (3.0, 9.0), 1e4, 1, 0.0, (b - a) / 6.0, 0.01, "wanders")
+        return changes.Track((a, b), (0.01, 0.01), (3.0, 9.0), 1e4, 1, 0.0, (b - a) / 6.0, 0.01, "wanders", name=name)
 
     tracks = [moving("wn_rad_s", first.wn_rad_s, second.wn_rad_s), moving("zeta", 2.35, 2.0)]
     kept, why = changes._on_the_ridge(tracks, fits(first, second))

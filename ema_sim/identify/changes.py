@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis.estimation.trend import MIN_CHANGE, trend
+from ema_sim.analysis.estimation.trend import MIN_CHANGE, Trend, trend
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
 from ema_sim.identify.fit import TINY, Fit
@@ -99,26 +99,10 @@ class WindowFit:
 
 
 @dataclass(frozen=True)
-class Track:
-    """One parameter across the windows, and what its values say."""
+class Track(Trend):
+    """One parameter across the windows (its values, one per window), and what they say."""
 
     name: str
-    values: tuple[float, ...]
-    sigma: tuple[float, ...]
-    times_s: tuple[float, ...]
-    """Each window's middle, s from the record's start."""
-    chi2: float
-    dof: int
-    p_value: float
-    slope_per_s: float
-    slope_sigma: float
-    kind: str
-    """``steady``, ``falls``, ``grows``, ``wanders`` or ``not determined``."""
-
-    @property
-    def changed(self) -> bool:
-        """The parameter changes over the record beyond its uncertainty."""
-        return self.kind in ("falls", "grows", "wanders")
 
     def statement(self, bandwidths: tuple[float, ...] = ()) -> str:
         """The track in words: per-window values with ±1σ, the fitted slope or the range.
@@ -386,8 +370,7 @@ def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
     bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)
                                               or v >= free.high - 1e-6 * (free.high - free.low)) for v in values])
     tr = trend(values, sigma, times, usable=~bounded)
-    return Track(name, tr.values, tr.sigma, tr.times_s, tr.chi2, tr.dof, tr.p_value, tr.slope_per_s, tr.slope_sigma,
-                 tr.kind)
+    return Track(**{f.name: getattr(tr, f.name) for f in fields(tr)}, name=name)
 
 
 # ------------------------------------------------------------------------------------------ the stage
