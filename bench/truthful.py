@@ -13,8 +13,10 @@ of the fine-step simulation and against what a few lines of numpy on the raw rec
 - ``phase``      harmonic phases of a profiled square within max(0.5°, 3σ) of the truth;
 - ``rate``       where the speed plateaus, a rate limit within 10 % of the plateau; where the plant has no speed
                  limit and no current saturation, no rate limit that would bind on the record;
-- ``settle``     no threshold / dead band / free play (half width) larger than the median settled error
-                 measured on the raw record (plus half a count);
+- ``settle``     no threshold / dead band / free play (half width) larger than the largest settled error
+                 measured on the raw record (plus half a count): a band of half width d leaves each hold
+                 somewhere inside ±d (the output coasts into it), so the median understates the band and the
+                 true threshold of a plant would fail a median bound;
 - ``model``      report.md and the JSON (and the console) name the same final model, term by term;
 - ``halves``     no discovered term said to hold whose two halves disagree beyond their uncertainty;
 - ``undecid``    no effect kept that the tool's own warning says the record cannot decide against another;
@@ -115,7 +117,7 @@ def rests(t: np.ndarray, cmd: np.ndarray, min_s: float = 0.4) -> list[tuple[int,
 
 
 def settled_error(r: dict[str, Any]) -> dict[str, Any] | None:
-    """The error left at the end of each hold (last 30 % of it): median over holds of its |median|."""
+    """The error left at the end of each hold (last 30 % of it): its |median| per hold, their median and largest."""
     seg = rests(r["t"], r["cmd"])
     if len(seg) < 3:
         return None
@@ -123,7 +125,8 @@ def settled_error(r: dict[str, Any]) -> dict[str, Any] | None:
     for a, b in seg:
         k = a + int(0.7 * (b - a))
         errs.append(float(np.median(r["pos"][k:b] - r["cmd"][k:b])))
-    return {"median_abs": float(np.median(np.abs(errs))), "holds": len(errs), "each": errs[:12]}
+    return {"median_abs": float(np.median(np.abs(errs))), "max_abs": float(np.max(np.abs(errs))),
+            "holds": len(errs), "each": errs[:12]}
 
 
 def speed_plateau(r: dict[str, Any]) -> dict[str, Any]:
@@ -375,7 +378,7 @@ def check_settle(tool: str, doc: dict[str, Any], truth: dict[str, Any], raw: dic
     if se is None:
         return res(NA, "no holds to measure a settled error on")
     q = truth.get("position_count") or 0.0
-    limit = se["median_abs"] + 0.5 * q
+    limit = se["max_abs"] + 0.5 * q
     found = []
     if tool == "analyze":
         rec = (doc.get("records") or [{}])[0]
@@ -393,7 +396,8 @@ def check_settle(tool: str, doc: dict[str, Any], truth: dict[str, Any], raw: dic
             if THRESH_KEYS.search(k) and num(v) is not None:
                 found.append((f"final {k}" + ("/2" if "width" in k else ""), num(v) / (2 if "width" in k else 1)))
     bad = [f"{k} = {v:.4g}" for k, v in found if abs(v) > limit * (1.0 + 1e-6)]  # at the bound is within it
-    why = (f"median settled error on the raw record {se['median_abs']:.4g} over {se['holds']} holds "
+    why = (f"largest settled error on the raw record {se['max_abs']:.4g} (median {se['median_abs']:.4g}) "
+           f"over {se['holds']} holds "
            f"(+½ count → {limit:.4g})")
     if bad:
         return res(FAIL, "; ".join(bad) + " > " + why)
@@ -821,6 +825,13 @@ def main() -> int:  # noqa: PLR0915 - the script, top to bottom
     print(f"generated {len(items)} records in {time.monotonic() - t_start:.1f} s", flush=True)
     jobs = [(it, tool) for it in items for tool in tools]
     jobs.sort(key=lambda j: j[1] != "identify")  # the long ones first
+    if args.rejudge:  # judge the runs that were made; a partial --out is not an error
+        made = [j for j in jobs if (out / "runs" / f"{j[0][0]}_s{j[0][1]}" / f"{j[1]}.run.json").is_file()]
+        if not made:
+            ap.error(f"--rejudge: no runs in {out / 'runs'} for these cases, seeds and tools")
+        if len(made) < len(jobs):
+            print(f"rejudging the {len(made)} of {len(jobs)} runs that were made", flush=True)
+        jobs = made
 
     def work(job: tuple[Any, str]) -> dict[str, Any]:
         (name, seed, csv, truth, raw), tool = job
