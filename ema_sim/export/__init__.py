@@ -1,4 +1,4 @@
-"""The actuator in other simulators: export a model and verify the artefact against the truth (issue 28).
+"""The actuator in other simulators: export a model and verify the artefact against the truth.
 
 * :mod:`.target`       what is exported: the model, its values, rate and method, the truth, the manifest
 * :mod:`.cstages`      figure 26's stages in C, each beside the numba function it transcribes
