@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ema_sim.analysis.formatting.units import in_unit
 from ema_sim.commands.common import Subparsers, add_data_args, check_channel, rig_format
 from ema_sim.errors import SpecError
 from ema_sim.models import model_class
@@ -83,7 +84,6 @@ def run(args: argparse.Namespace) -> int:
     int
         The exit status: 0 on success.
     """
-    from ema_sim.analysis.formatting.units import in_unit  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.pipeline import Options, analyze_records  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.records.loading import load_record  # noqa: PLC0415 - keep `ema --help` fast
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start

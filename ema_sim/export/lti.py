@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.export.csource import HEADER, PARAM_INDEX, c_double, c_string
+from ema_sim.export.csource import API, HEADER, PARAM_INDEX, c_double, c_string
 from ema_sim.export.target import LINEAR, ExportError, ExportTarget
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.base import OUTPUT_FIELDS
@@ -111,8 +111,6 @@ def header() -> str:
     str
         C source text.
     """
-    from ema_sim.export.csource import API  # noqa: PLC0415 - the shared API text
-
     lines = [
         "/* An X-43A EMA linear model (NASA/TM-2008-214637 sections 3.4, 4.2.7) as exported by ema_sim: its",
         " * zero-order-hold state space and delay lines. Generated. Do not edit. */",

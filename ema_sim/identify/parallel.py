@@ -29,9 +29,11 @@ from concurrent.futures import Future
 from contextlib import contextmanager
 from typing import Any
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ema_sim.errors import EmaError
+from ema_sim.models.second_order import SecondOrder
 
 DEFAULT_WORKERS = 2
 """Worker threads of the local cluster."""
@@ -63,10 +65,6 @@ def one_blas_thread() -> Iterator[None]:
 
 def _warm() -> None:
     """Load the identification simulator's kernels from numba's cache in a worker process (one tiny batch)."""
-    import numpy as np  # noqa: PLC0415 - runs in a worker
-
-    from ema_sim.models.second_order import SecondOrder  # noqa: PLC0415 - runs in a worker
-
     model = SecondOrder("left_wing", n=2)
     t = np.arange(0.0, 0.1, 0.001)
     model.run(t, np.where(t < 0.02, 0.0, 1.0), np.zeros_like(t))

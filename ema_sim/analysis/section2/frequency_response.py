@@ -69,6 +69,7 @@ from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import MovingStretch, Reading, Segment
 from ema_sim.analysis.section2.steps import TEST as STEPS
 from ema_sim.analysis.section2.steps import slew_rates
+from ema_sim.models import create
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -532,7 +533,6 @@ def _overlay(ra: RecordAnalysis, sl: slice) -> FloatArray | None:
     """
     if not ra.options.model:
         return None
-    from ema_sim.models import create  # noqa: PLC0415 - the models only when an overlay is asked for
 
     data = ra.data
     model = create(ra.options.model, ra.channel.channel)
