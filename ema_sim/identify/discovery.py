@@ -288,7 +288,7 @@ def _on_reading(problem: Problem, cur: Fit, disc: Discovery, refit: Callable[[Pr
     terms: dict[str, list[tuple[str, tuple[float, ...], tuple[float, ...], str]]] = {}
     for o, a in design.items():
         col = OUTPUT_COLUMN[o]
-        e = problem.data.column(o)[problem.mask] - sim[problem.mask, col]
+        e = problem.observed[o][problem.mask] - sim[problem.mask, col]
         coef = np.linalg.lstsq(a[problem.mask], e, rcond=None)[0]
         r = e - a[problem.mask] @ coef
         sig = np.sqrt(np.clip(np.diag(block_covariance([r], [a[problem.mask]])), 0.0, None))

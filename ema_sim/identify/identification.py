@@ -159,8 +159,8 @@ def identify(record: Record, model: str = "second_order", overrides: dict[str, f
     t0 = time.perf_counter()
     search = search or Search()
     say = log or (lambda _msg: None)
-    problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled,
-                      output_range=record.sensor_range)
+    problem = Problem(record.data, record.channel, command_sampled=record.command_sampled,
+                      output_range=record.sensor_range, prepared=record.prepared)
     workers, scheduler = search.workers, search.scheduler
     pool = Pool(scheduler, workers) if scheduler or (workers >= 2 and problem.n_fit >= MIN_SAMPLES) else SERIAL
     pool.start()  # the cluster starts while the baseline is fitted

@@ -95,7 +95,7 @@ def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
     return {
         "rms_deg": {o: _round(v) for o, v in rms.items()},
         "max_abs_deg": {o: _round(float(np.max(np.abs(e)))) for o, e in errors.items()},
-        "nrmse": {o: _round(rms[o] / float(np.std(problem.data.column(o)[problem.mask]))) for o in errors},
+        "nrmse": {o: _round(rms[o] / float(np.std(problem.observed[o][problem.mask]))) for o in errors},
         "rms_over_noise": {o: _round(rms[o] / problem.sigma_deg[o], 4) for o in errors},
         "whiteness": {o: whiteness(e, lags=50).as_dict() for o, e in errors.items()},
         "independence": {
@@ -403,7 +403,7 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
     p = result.problem
     cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
     for o in p.outputs:
-        meas = p.data.column(o)
+        meas = p.observed[o]
         col = OUTPUT_COLUMN[o]
         cols[f"{o}_measured"] = meas
         cols[f"{o}_baseline"] = result.baseline.sim[:, col]
@@ -516,7 +516,7 @@ def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.4 * rows), sharex=True)
     for k, o in enumerate(p.outputs):
         col = OUTPUT_COLUMN[o]
-        meas = p.data.column(o)[p.mask]
+        meas = p.observed[o][p.mask]
         s = p.sigma_deg[o]
         for ax, fit, label in ((axes[2 * k], result.baseline, f"before ({report['baseline']['model']})"),
                                (axes[2 * k + 1], result.final, "after")):
@@ -542,7 +542,7 @@ def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
     fig, axes = plt.subplots(len(p.outputs), 1, figsize=(11, 3.2 * len(p.outputs)), sharex=True, squeeze=False)
     for ax, o in zip(axes[:, 0], p.outputs, strict=True):
         col = OUTPUT_COLUMN[o]
-        ax.plot(p.time_s, p.data.column(o), lw=0.6, label="measured")
+        ax.plot(p.time_s, p.observed[o], lw=0.6, label="measured")
         ax.plot(p.time_s, result.final.sim[:, col], lw=0.6, ls="--", label="identified model")
         ax.set_ylabel(f"{o}")
         ax.legend(loc="upper right", fontsize=8)
