@@ -45,6 +45,7 @@ from ema_sim.errors import DataError, SpecError
 from ema_sim.identify.effects import KEYS
 from ema_sim.identify.physical import ESCALATE_TO
 from ema_sim.identify.problem import EQUIVALENT_EXCESS
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import model_parameters
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
@@ -200,7 +201,7 @@ class FieldConsistency:
     verdict: str
     reason: str
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The comparison as plain data (non-finite numbers left for :func:`~ema_sim.identify.report.strict`).
 
         Returns
@@ -284,7 +285,7 @@ class Consistency:
         """
         return {v: sum(f.verdict == v for f in self.fields) for v in VERDICTS}
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The whole comparison as plain data; write it with :func:`~ema_sim.identify.report.write_json`.
 
         Returns
@@ -297,14 +298,14 @@ class Consistency:
             "unit": self.reports[0].unit,
             "sigma": self.sigma,
             "reports": [{"name": r.name, "path": r.path, "data": r.data, "model": r.model,
-                         "rms_over_noise": r.rms_over_noise, "structured_residual": bool(r.structured)}
+                         "rms_over_noise": {**r.rms_over_noise}, "structured_residual": bool(r.structured)}
                         for r in self.reports],
             "fields": [f.as_dict() for f in self.fields],
             "effects_in_some": [{"effect": e.effect, "where": e.where, "added_in": list(e.added_in),
                                  "not_in": list(e.not_in)} for e in self.effects],
             "effects_in_all": [{"effect": e, "where": w} for e, w in self.common_effects],
             "notes": list(self.notes),
-            "verdicts": self.counts(),
+            "verdicts": {**self.counts()},
         }
 
 

@@ -40,6 +40,7 @@ from ema_sim.identify.library import describe, library
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.regression import Regression, Selected, Term, stepwise
 from ema_sim.identify.stages import worse
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models.base import O_RATE
 from ema_sim.models.second_order import SecondOrderParams
 
@@ -138,7 +139,7 @@ class Discovery:
         names = [n for ts in c.terms.values() for n, *_ in ts]
         return [(e, n) for e in effects for n in names if n in EQUIVALENT.get(e, ())]
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON (the report's ``discovered``).
 
         Returns

@@ -16,6 +16,7 @@ from ema_sim.identify.physical import PhysicalFit
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import Record
 from ema_sim.identify.stages import Failure, Outcome
+from ema_sim.jsontypes import JsonObject
 
 if TYPE_CHECKING:
     from ema_sim.identify.discovery import Discovery
@@ -39,7 +40,7 @@ class Changes(Protocol):
     def warnings(self) -> list[str]:
         """What the report warns of."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON."""
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.section2.segments import Recognition, Segment
 from ema_sim.config import GENERIC, ChannelConfig
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 
 if TYPE_CHECKING:
     from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
@@ -41,7 +42,7 @@ DEFAULT_AT_HZ: tuple[float, ...] = (1.0, 2.0, 5.0, 7.5, 10.0)
 class Result(Protocol):
     """What every test's result offers: its plain values."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The result as JSON-ready values."""
         ...
 

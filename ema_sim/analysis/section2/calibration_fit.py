@@ -37,6 +37,7 @@ from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, MoveRun, Reading
 from ema_sim.calibration import CommandError, Cubic, command_error, four_corner_bounds
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject, JsonValue
 
 FloatArray = NDArray[np.float64]
 
@@ -95,7 +96,7 @@ class Calibration:
         """The calibration's command error: from the curves when they exist, else the direct fit."""
         return self.curve_error or self.direct
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -103,11 +104,11 @@ class Calibration:
         dict
             Plain values for JSON.
         """
-        def curve(c: Cubic | None) -> list[float] | None:
-            return c.coefficients() if c else None
+        def curve(c: Cubic | None) -> list[JsonValue] | None:
+            return [*c.coefficients()] if c else None
 
         return {
-            "levels": len(self.nominal_levels), "settled": self.levels,
+            "levels": len(self.nominal_levels), "settled": {k: [*v] for k, v in self.levels.items()},
             "command_curve_v_per_deg": curve(self.command_curve), "command_curve_rms_v": self.command_curve_rms_v,
             "feedback_curve_deg_per_v": curve(self.feedback_curve),
             "feedback_curve_rms_deg": self.feedback_curve_rms_deg, "feedback_curve_against": self.feedback_reference,
@@ -119,7 +120,7 @@ class Calibration:
             "kb": self.error.kb, "offset_deg": self.error.offset_deg,
             "four_corner_bounds": {"nominal_deg": self.nominal_deg.tolist(), "lower_deg": self.bounds_deg[0].tolist(),
                                    "upper_deg": self.bounds_deg[1].tolist()},
-            "notes": self.notes,
+            "notes": [*self.notes],
         }
 
     @property

@@ -21,6 +21,7 @@ from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.formatting.markdown import image
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -59,7 +60,7 @@ class RegenerationResult:
         """Limit minus peak (negative: over the limit)."""
         return self.limit_v - self.peak_v
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ema_sim.analysis.section2.sine_dwell import sine_dwell
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import ActuatorModel, Flags, create
 
 FRAME_S = 0.005
@@ -51,7 +52,7 @@ class Figure:
     requirement: str
     passed: bool
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

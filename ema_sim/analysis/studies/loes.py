@@ -20,6 +20,7 @@ from ema_sim.analysis.estimation.tf_fit import TransferFunctionFit, fit_transfer
 from ema_sim.analysis.section2.sine_dwell import FrequencyResponse, sine_dwell
 from ema_sim.config import config_dir, load_channel
 from ema_sim.errors import ConfigError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create
 
 DEFAULT_BAND_HZ = (0.5, 20.0)
@@ -65,7 +66,7 @@ class LoesFit:
         phase += 360.0 * np.round((self.data.phase_deg[0] - phase[0]) / 360.0)
         return 20.0 * np.log10(np.abs(h)), phase
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
