@@ -183,7 +183,7 @@ def named_stands(named_rms: Mapping[str, float], noise: Mapping[str, float]) -> 
     return all(v <= STRUCTURED * noise[o] for o, v in named_rms.items())
 
 
-def _selected(s: Selected) -> dict[str, Any]:
+def _selected(s: Selected) -> JsonObject:
     return {"term": s.term.name, "coefficient": list(s.coef), "uncertainty": list(s.sigma), "unit": s.term.unit,
             "amplitude": s.amplitude, "variance_share": s.share, "p_value": s.p_value,
             "halves": [[v if math.isfinite(v) else None for v in h] for h in s.halves], "holds": s.holds,

@@ -21,7 +21,6 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -502,14 +501,14 @@ class Problem:
         finally:
             self._tally.open = outer
 
-    def __getstate__(self) -> dict[str, Any]:
+    def __getstate__(self) -> dict[str, object]:
         """Pickled (to a Dask worker) without the kept runs: a worker keeps its own."""
         state = dict(self.__dict__)
         state["_kept"] = OrderedDict()
         del state["_lock"], state["_tally"]
         return state
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
+    def __setstate__(self, state: dict[str, object]) -> None:
         """Unpickled on a worker with a lock of its own."""
         self.__dict__.update(state)
         self._lock = threading.Lock()

@@ -28,6 +28,7 @@ from ema_sim.errors import EmaError
 from ema_sim.faults import parse_fault
 from ema_sim.faults.kinds import FloatArray
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create, model_class
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.signals import parse_load, parse_maneuver
@@ -186,7 +187,7 @@ def model_has_current(model: str) -> bool:
     return bool(model_class(model).has_current)
 
 
-def run_case(case: Case) -> dict[str, Any]:
+def run_case(case: Case) -> JsonObject:
     """Simulate, measure and watch one case; one table row.
 
     Parameters
@@ -263,7 +264,7 @@ def _median(values: list[float]) -> float | None:
     return float(np.median(values)) if values else None
 
 
-def summarize(rows: Rows) -> dict[str, Any]:
+def summarize(rows: Rows) -> JsonObject:
     """Detection delay per kind, missed detections, false alarms per hour, confusion matrix, estimate errors.
 
     ``isolation_top1`` is the monitor's (the fits and the signature's vote); ``isolation_top1_fits_only`` what

@@ -33,6 +33,7 @@ from std_msgs.msg import String
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.errors import EmaError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes import lifetime, realtime
 from ema_sim.nodes.names import NameClaim
 from ema_sim.nodes.params import Declared, Spec, cli_overrides, names_list
@@ -191,7 +192,7 @@ class SuiteNode(Node):
     def close(self) -> None:
         """Called once when the node stops (signal, end of test or error)."""
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Printed as one JSON line when the node stops."""
         return {}
 

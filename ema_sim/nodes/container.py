@@ -36,6 +36,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame, decode, encode
 from ema_msgs_py.ros import qos
 from ema_sim.errors import UnknownNameError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes import clock as clock_node
 from ema_sim.nodes import emac as emac_node
 from ema_sim.nodes import fmu as fmu_node
@@ -523,7 +524,7 @@ class HostNode(SuiteNode):
         if unknown:
             raise UnknownNameError("node to compose", unknown[0], ["emac", "emac_<channel>", *CLASSES])
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """The process's CPU, and the thread's time on each composed node (the rest: DDS, executor, bus)."""
         composed = dict(self.meter.seconds) if self.meter is not None else {}
         return {"composed_busy_s": {k: round(v, 3) for k, v in composed.items()}}

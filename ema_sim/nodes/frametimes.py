@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import percentile_ms
 from ema_sim.nodes.realtime import steal_s
 
@@ -115,7 +116,7 @@ class FrameTimes:
         if new and self.one_thread:
             self.thread_back[k] = thread_marks()
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Frames, latency percentiles and missed frames (with their causes where they can be told)."""
         n = self.count
         sent, back = self.sent[:n], self.back[:n]

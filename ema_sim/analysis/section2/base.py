@@ -294,7 +294,7 @@ class Section2Test(ABC, Generic[R]):
             The results, in time order.
         """
 
-    def result_json(self, r: R) -> dict[str, Any]:
+    def result_json(self, r: R) -> JsonObject:
         """One result as plain values: its own ``as_dict()``.
 
         Parameters
@@ -309,7 +309,7 @@ class Section2Test(ABC, Generic[R]):
         """
         return r.as_dict()
 
-    def as_json(self, results: list[R], ra: RecordAnalysis) -> dict[str, Any]:  # noqa: ARG002 - the default
+    def as_json(self, results: list[R], ra: RecordAnalysis) -> JsonObject:  # noqa: ARG002 - the default
         """The test's keys in the JSON record.
 
         Parameters

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -190,7 +189,7 @@ def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
                        curve_err, nominal, bounds, notes)
 
 
-def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> dict[str, Any]:
+def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> JsonObject:
     """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1).
 
     Parameters

@@ -85,7 +85,7 @@ class ThreeSegment:
         """
         return [1.0 / (s * np.pi / 180.0 * crank_arm_in) if s > 0 else None for s in self.slopes_deg_per_lb]
 
-    def as_dict(self, crank_arm_in: float | None = None) -> dict[str, Any]:
+    def as_dict(self, crank_arm_in: float | None = None) -> JsonObject:
         """Plain values for JSON.
 
         Parameters

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -134,7 +133,7 @@ class Regeneration(Section2Test[RegenerationResult]):
 
 
     @override
-    def as_json(self, results: list[RegenerationResult], ra: RecordAnalysis) -> dict[str, Any]:
+    def as_json(self, results: list[RegenerationResult], ra: RecordAnalysis) -> JsonObject:
         return {self.key: results[0].as_dict() if results else None}
 
     @override

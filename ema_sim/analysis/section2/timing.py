@@ -42,7 +42,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -491,7 +490,7 @@ class Timing(Section2Test[TimingResult]):
 
 
     @override
-    def as_json(self, results: list[TimingResult], ra: RecordAnalysis) -> dict[str, Any]:
+    def as_json(self, results: list[TimingResult], ra: RecordAnalysis) -> JsonObject:
         return {self.key: results[0].as_dict() if results else None}
 
     @override
