@@ -85,7 +85,7 @@ def _fmu_options(items: list[str]) -> argparse.Namespace:
 class _PlainDumper(yaml.SafeDumper):
     """Every value written out where it is used (rcl's parser knows no YAML anchors or aliases)."""
 
-    def ignore_aliases(self, data: Any) -> bool:  # noqa: ARG002
+    def ignore_aliases(self, data: object) -> bool:  # noqa: ARG002
         return True
 
 

@@ -121,7 +121,7 @@ def _timing_figures(ra: RecordAnalysis) -> dict[str, tuple[str, float, float | N
         key = f"fit {k}: {f.test} on {f.output}"
         out[key] = ("delay_s", f.actuator_delay_s, f.delay_s.sigma)
 
-    def walk(value: Any, path: str) -> None:
+    def walk(value: object, path: str) -> None:
         if isinstance(value, dict):
             if isinstance(value.get("phase_deg"), int | float) and isinstance(value.get("freq_hz"), int | float):
                 sigma = value.get("phase_sigma_deg")

@@ -31,7 +31,7 @@ from ema_sim.jsontypes import JsonObject
 __all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "slope_json", "slope_statement", "to_json", "to_markdown"]
 
 
-def _clean(value: Any) -> Any:  # noqa: PLR0911 - one return per type
+def _clean(value: object) -> Any:  # noqa: PLR0911 - one return per type
     """JSON-safe: numpy scalars to Python, non-finite floats to None."""
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}

@@ -314,7 +314,7 @@ def _number(x: float) -> float | None:
     return None if math.isnan(x) else x
 
 
-def _float(x: Any) -> float:
+def _float(x: object) -> float:
     """A report's number as float: a word (``"unbounded"``) or null is no finite number."""
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         return math.inf if isinstance(x, str) and x.startswith("unbounded") else math.nan
@@ -341,7 +341,7 @@ def _factor(field: str, key: str, channel: str) -> float:
     return float(KEYS[field].factor(_channel_params(channel)))
 
 
-def parse_report(doc: Any, source: str, name: str | None = None) -> IdentifyReport:
+def parse_report(doc: object, source: str, name: str | None = None) -> IdentifyReport:
     """One ``ema identify`` report (:func:`~ema_sim.identify.report.to_json`'s dict) as a consistency check reads it.
 
     Parameters

@@ -617,7 +617,7 @@ def _stopped(runs: _Runs, x: FloatArray, held: list[str], why: str, t0: float, s
                        time.perf_counter() - t0, stopped=why, screen=screen)
 
 
-def _positive(v: Any) -> bool:
+def _positive(v: object) -> bool:
     """A declared value a log coordinate can scale (every segment of a curve above zero)."""
     vals = v if isinstance(v, tuple) else (v,)
     return all(float(q) > 0.0 for q in vals)

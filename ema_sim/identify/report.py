@@ -157,7 +157,7 @@ def implementation_warning(result: Identification, errors: Mapping[str, float]) 
             f"report's figures are those of the same equations simulated accurately")
 
 
-def strict(value: Any) -> Any:
+def strict(value: object) -> Any:
     """``value`` with every non-finite number made strict JSON: NaN → null, ±inf → "unbounded" in words.
 
     Parameters
@@ -459,7 +459,7 @@ def summary(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _num(v: Any, spec: str = ".4g") -> str:
+def _num(v: object, spec: str = ".4g") -> str:
     """A number in ``spec``, or a word (``unbounded``) or null as it stands."""
     return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 

@@ -68,7 +68,7 @@ def command_line(options: dict[str, Any]) -> list[str]:
     return own if options.get("use_global_arguments") is False else [*_process_argv, *own]
 
 
-def make_executor(context: Any = None) -> Any:
+def make_executor(context: object = None) -> Any:
     """The executor every node uses (see the module docstring for the measurement behind it).
 
     Parameters
@@ -366,14 +366,14 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     stop: dict[str, int | None] = {"signal": None}
     rt = realtime.apply(args.__dict__.pop("rt_priority"))  # before rclpy starts its threads: they inherit it
 
-    def on_signal(signum: int, frame: Any) -> None:  # noqa: ARG001
+    def on_signal(signum: int, frame: object) -> None:  # noqa: ARG001
         stop["signal"] = signum
 
     rclpy.init(args=full, signal_handler_options=SignalHandlerOptions.NO)
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     nodes: list[SuiteNode] = []
-    bus: Any = None
+    bus: object = None
     status = 0
     try:
         nodes, bus = factory(args)
@@ -446,7 +446,7 @@ def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, Any]) -> None:
         spin_once(timeout_sec=MAX_SPIN_S if timeout > MAX_SPIN_S else (timeout if timeout > 0.0 else 0.0))
 
 
-def _finish(nodes: list[SuiteNode], bus: Any, rt: realtime.Setup) -> None:
+def _finish(nodes: list[SuiteNode], bus: object, rt: realtime.Setup) -> None:
     """Each node's last words and its summary line.
 
     ``cpu_s``: the process's CPU; ``cpu_run_s``: since the first frame of the test (start-up left out);

@@ -93,7 +93,7 @@ class BusyMeter:
         seconds, stack = self.seconds, self._stack
         seconds.setdefault(name, 0.0)
 
-        def timed(*args: Any) -> Any:
+        def timed(*args: object) -> Any:
             now = clock()
             if stack:
                 seconds[stack[-1]] += now - self._mark

@@ -32,7 +32,7 @@ class Stream:
         self.waiting_since: float | None = None
         self.gave_up = False
 
-    def push(self, stamp: int, item: Any) -> None:
+    def push(self, stamp: int, item: object) -> None:
         """A message arrived.
 
         Parameters

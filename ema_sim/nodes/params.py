@@ -80,7 +80,7 @@ class Spec:
         return d
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: object) -> Any:
     return list(value) if isinstance(value, tuple) else value
 
 
@@ -154,7 +154,7 @@ def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, An
     return out
 
 
-def declared_spec(name: str, default: Any, info: ParameterInfo, where: str, *, read_only: bool = True) -> Spec:
+def declared_spec(name: str, default: object, info: ParameterInfo, where: str, *, read_only: bool = True) -> Spec:
     """The spec of a declared parameter: description, unit and range from its one declaration.
 
     Parameters
@@ -231,7 +231,7 @@ def names_list(text: str) -> list[str]:
     return [item.strip() for item in text.split(",") if item.strip()]
 
 
-def cli_overrides(args: Any, exclude: Iterable[str] = ()) -> list[Parameter]:
+def cli_overrides(args: object, exclude: Iterable[str] = ()) -> list[Parameter]:
     """The flags given on a node's command line as parameter overrides (they win over parameter files).
 
     A parser whose options default to ``argparse.SUPPRESS`` and whose ``dest`` is the parameter's name
@@ -297,7 +297,7 @@ class Declared:
                 is_empty = given is None and isinstance(spec.default, list | tuple) and not spec.default
             if given is not None:
                 overrides[spec.name] = _coerced(given, d.type)
-            value: Any = _plain(spec.default)
+            value: object = _plain(spec.default)
             if is_empty:  # an empty list tells no type: declare the type, then set the empty value
                 value = Parameter.Type(d.type)
                 empty.append(Parameter(spec.name, Parameter.Type(d.type), []))

@@ -63,7 +63,7 @@ def in_unit(text: str, unit: str) -> str:
     return _WORD.sub(word, _DEGREE.sub(degree, text))
 
 
-def texts_in_unit(value: Any, unit: str) -> Any:
+def texts_in_unit(value: object, unit: str) -> Any:
     """Every string in a nested JSON-ready structure :func:`in_unit` (keys, which name fields, untouched).
 
     Parameters

@@ -265,7 +265,7 @@ class Section2Test(ABC, Generic[R]):
     absent: ClassVar[str] = ""
     """Why it was not computed when no segment of its kinds was recognised."""
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
+    def __init_subclass__(cls, **kwargs: object) -> None:
         """Give each method a test overrides without a docstring the interface's own.
 
         Parameters

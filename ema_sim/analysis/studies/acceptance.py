@@ -64,7 +64,7 @@ class Figure:
                 "passed": self.passed}
 
 
-def _model(name: str, channel: str, **kwargs: Any) -> ActuatorModel:
+def _model(name: str, channel: str, **kwargs: object) -> ActuatorModel:
     """The model as a test stand sees it: the FMU's quantization and noise are not in the test set-up."""
     opts = {"noise": False, "quantization_v": 0.0} if name in ("hoad2", "hoad3") else {}
     return create(name, channel, **opts, **kwargs)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -104,7 +103,7 @@ def fit_band(channel: str) -> tuple[np.ndarray, float]:
 
 
 def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_deg: float | None = None,
-                   *, load_inlb: float = 0.0, **model_kwargs: Any) -> FrequencyResponse:
+                   *, load_inlb: float = 0.0, **model_kwargs: object) -> FrequencyResponse:
     """HOAD3's command-to-position response from sine dwells, one batch instance per frequency.
 
     Parameters
@@ -133,7 +132,7 @@ def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None
 
 
 def fit_loes(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_deg: float | None = None,
-             *, load_inlb: float = 0.0, **model_kwargs: Any) -> LoesFit:
+             *, load_inlb: float = 0.0, **model_kwargs: object) -> LoesFit:
     """Dwell HOAD3 and fit ``K·ωn²/(s² + 2ζωn·s + ωn²)·e^{−sτ}`` to it (section 3.4).
 
     Parameters
