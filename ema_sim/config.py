@@ -92,7 +92,7 @@ class ChannelConfig:
         "V", "command curve, degrees → volts: V = c0 + c1·deg + c2·deg² + c3·deg³ (2.6, 3.1.2.2)", size=4)
     feedback_cal_deg: tuple[float, float, float, float] = pm.param(
         "deg", "feedback curve, volts → degrees: deg = c0 + c1·V + c2·V² + c3·V³ (2.6, 3.1.2.2)", size=4)
-    sections: Mapping[str, Mapping[str, Any]] = pm.carried(
+    sections: Mapping[str, Mapping[str, object]] = pm.carried(
         "the model families' sections (``second_order``, ``high_order``, ``loes``...)", default_factory=dict)
 
     RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("position_min_deg", "<", "position_max_deg"),)
@@ -161,7 +161,7 @@ def finite_parameter(params: Mapping[str, Any], key: str, origin: str) -> float:
     return value
 
 
-def parse_channel(params: Mapping[str, Any], origin: str = "<params>") -> ChannelConfig:
+def parse_channel(params: Mapping[str, object], origin: str = "<params>") -> ChannelConfig:
     """A channel's parameter mapping as a :class:`ChannelConfig`, loaded and validated by its declaration.
 
     Parameters

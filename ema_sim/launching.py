@@ -40,7 +40,7 @@ def generate(layout: str) -> Any:
     return LaunchDescription([*declared, OpaqueFunction(function=_nodes, kwargs={"layout": layout})])
 
 
-def _nodes(context: object, layout: str) -> list[Any]:
+def _nodes(context: object, layout: str) -> list[object]:
     """The run's processes as ``Node`` actions, once the launch arguments are known."""
     from launch.actions import Shutdown  # noqa: PLC0415 - a ROS 2 install's, not in the pip requirements
     from launch.substitutions import LaunchConfiguration  # noqa: PLC0415 - the same

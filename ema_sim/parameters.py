@@ -404,16 +404,16 @@ def coerce(name: str, m: Meta, value: Any, origin: str, family: str) -> Value:
 
 def load(
     cls: type[P],
-    values: Mapping[str, Any],
+    values: Mapping[str, object],
     *,
     origin: str,
     family: str,
     section: str = "",
-    overrides: Mapping[str, Any] | None = None,
+    overrides: Mapping[str, object] | None = None,
     options: Iterable[str] = (),
     variant: str | None = None,
     source: object = None,
-    carry: Mapping[str, Any] | None = None,
+    carry: Mapping[str, object] | None = None,
 ) -> P:
     """The one loader: a parameter set from a YAML mapping (with subsections) and overrides, validated.
 

@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from functools import cache
 from itertools import combinations
 from pathlib import Path
-from typing import Any
 
 from scipy.stats import chi2
 
@@ -321,7 +320,7 @@ def _float(x: object) -> float:
     return float(x)
 
 
-def _mapping(doc: Mapping[str, Any], key: str, where: str, source: str) -> Mapping[str, Any]:
+def _mapping(doc: Mapping[str, object], key: str, where: str, source: str) -> Mapping[str, object]:
     value = doc.get(key)
     if not isinstance(value, Mapping):
         raise DataError(f"{source}: not an `ema identify` report (no {where}{key} object)")
@@ -404,7 +403,7 @@ def parse_report(doc: object, source: str, name: str | None = None) -> IdentifyR
     )
 
 
-def _rms_over_noise(doc: Mapping[str, Any], final: Mapping[str, Any]) -> dict[str, float]:
+def _rms_over_noise(doc: Mapping[str, object], final: Mapping[str, object]) -> dict[str, float]:
     """Output → final rms / noise floor, for the outputs the report gives both of."""
     rms, noise = final.get("rms_deg"), doc.get("noise_deg")
     if not isinstance(rms, Mapping) or not isinstance(noise, Mapping):

@@ -84,7 +84,7 @@ def _plain(value: object) -> Any:
     return list(value) if isinstance(value, tuple) else value
 
 
-def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
+def flatten(mapping: Mapping[str, object], prefix: str = "") -> Iterator[tuple[str, Any]]:
     """``{"a": {"b": 1}}`` → ``("a.b", 1)``: a nested parameter mapping as ROS parameter names.
 
     Parameters
@@ -107,7 +107,7 @@ def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str,
             yield name, value
 
 
-def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
+def nested(flat: Mapping[str, object]) -> dict[str, Any]:
     """``{"a.b": 1}`` → ``{"a": {"b": 1}}``.
 
     Parameters
@@ -186,7 +186,7 @@ def declared_spec(name: str, default: object, info: ParameterInfo, where: str, *
     return Spec(name, default, f"{info.description} ({where})", unit, low, high, read_only=read_only)
 
 
-def config_specs(values: Mapping[str, Any], origin: str, prefix: str = "",
+def config_specs(values: Mapping[str, object], origin: str, prefix: str = "",
                  known: Mapping[str, ParameterInfo] | None = None) -> list[Spec]:
     """Read-only specs of a parameter file's mapping: defaults its values, the rest from the declarations.
 
@@ -511,7 +511,7 @@ def file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
         raise ConfigError(f"parameter file {path}: cannot read ({exc})") from None
     out: list[tuple[str, dict[str, Any]]] = []
 
-    def walk(mapping: Mapping[str, Any], prefix: str) -> None:
+    def walk(mapping: Mapping[str, object], prefix: str) -> None:
         for key, value in mapping.items():
             if not isinstance(value, Mapping):
                 continue

@@ -120,7 +120,7 @@ class Ports:
     def _subscribe(self, topic: str, callback: Callable[[bytes], None], at_frame: bool) -> None:
         """A raw subscription, dispatched by the executor or taken at the frame (when the node can hide it)."""
         sub = self.node.create_subscription(JointState, ct.endpoint(topic), callback, qos(ct.FRAME_QOS), raw=True)
-        hidden: set[Any] | None = getattr(self.node, "at_frame", None)  # a SuiteNode's: what its executor skips
+        hidden: set[object] | None = getattr(self.node, "at_frame", None)  # a SuiteNode's: what its executor skips
         if at_frame and hidden is not None:
             hidden.add(sub)
             self._at_frame.append((sub, callback))
