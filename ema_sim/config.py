@@ -23,6 +23,7 @@ from ema_msgs_py.contract import Scaling, scaling_of
 from ema_sim import parameters as pm
 from ema_sim.calibration import Cubic
 from ema_sim.errors import ConfigError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 
 CHANNELS: tuple[str, ...] = contract.CHANNELS
 GENERIC = "generic"
@@ -55,7 +56,7 @@ def config_dir() -> Path:
 
 SURFACES: tuple[str, ...] = ("wing", "rudder", "cowl")
 """The kinds of surface the channels move."""
-POS: dict[str, Any] = {"min": 0.0, "min_exclusive": True}
+POS: JsonObject = {"min": 0.0, "min_exclusive": True}
 """A positive quantity."""
 
 
@@ -144,7 +145,7 @@ def ros_parameters(path: Path) -> dict[str, Any]:
     (entry,) = doc.values()
     if not isinstance(entry, dict) or not isinstance(entry.get("ros__parameters"), dict):
         raise ConfigError(f"{path}: expected <node>: ros__parameters: {{...}}")
-    params: dict[str, Any] = entry["ros__parameters"]
+    params: JsonObject = entry["ros__parameters"]
     return params
 
 

@@ -31,6 +31,7 @@ from ema_sim.analysis.records.prepared import PreparedRecord, prepare, resolve_c
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 
 RECOGNISED = 0.1
 """Share of a record's analysis reported done once its tests are recognised."""
@@ -141,7 +142,7 @@ def _timing_figures(ra: RecordAnalysis) -> dict[str, tuple[str, float, float | N
     return out
 
 
-def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[dict[str, Any]]:
+def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[JsonObject]:
     """Each phase and delay of a record analysed with its command taken as held and as sampled, side by side.
 
     Parameters

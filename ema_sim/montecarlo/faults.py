@@ -201,7 +201,7 @@ def run_case(case: Case) -> JsonObject:
     ref = from_name(case.model, ch) if case.reference == "nominal" else learn(data, ch, case.healthy_s)
     v = watch(data, ref, Options(healthy_s=case.healthy_s, false_alarms_per_hour=case.false_alarms_per_hour))
     cpu = time.process_time() - t0
-    row: dict[str, Any] = {**case.__dict__, "watched_s": v.watched_s, "detection_cpu_s": v.cpu_s, "cpu_s": cpu,
+    row: JsonObject = {**case.__dict__, "watched_s": v.watched_s, "detection_cpu_s": v.cpu_s, "cpu_s": cpu,
                            "detected": False, "false_alarm": False, "delay_s": math.nan, "isolated": "",
                            "isolated_by_fits": "",
                            "estimate": math.nan, "uncertainty": math.nan, "size_estimate": math.nan}

@@ -428,7 +428,7 @@ def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any])
         executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
 
 
-def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, Any]) -> None:
+def _loop_one(node: SuiteNode, executor: Any, stop: JsonObject) -> None:
     """:func:`_loop` for a node alone in its process (the ``processes`` layout): the same steps, fewer calls.
 
     The loop runs once per message taken (a channel node of the ``processes`` layout: 2 to 7 a frame, its
@@ -460,7 +460,7 @@ def _finish(nodes: list[SuiteNode], bus: object, rt: realtime.Setup) -> None:
             node.close()
             name = node.get_name()
             cpu = time.process_time()
-            usage: dict[str, Any] = {"cpu_s": round(cpu, 3)}
+            usage: JsonObject = {"cpu_s": round(cpu, 3)}
             if marks:
                 usage["cpu_run_s"] = round(cpu - min(marks), 3)
             if name in busy:

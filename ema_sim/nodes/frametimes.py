@@ -19,7 +19,6 @@ import math
 import resource
 import time
 from collections.abc import Iterable, Sequence
-from typing import Any
 
 import numpy as np
 
@@ -125,7 +124,7 @@ class FrameTimes:
         late = np.zeros(n, bool)
         late[answered] = latency > self.period_s
         values = latency.tolist()
-        out: dict[str, Any] = {
+        out: JsonObject = {
             "frames": n, "answered": int(answered.sum()), "missed_frames": int((~answered).sum() + late.sum()),
             "latency_p50_ms": percentile_ms(values, 50), "latency_p99_ms": percentile_ms(values, 99),
             "latency_max_ms": percentile_ms(values, 100),

@@ -209,7 +209,7 @@ class ManeuverNode(DriverNode):
         return {**self.times.summary(), "late_publish": self.late_publish}
 
     def summary(self) -> JsonObject:  # noqa: D102
-        out: dict[str, Any] = {"bag": str(self.bag_path), "test": self.plan.test, "frames_commanded": self.k,
+        out: JsonObject = {"bag": str(self.bag_path), "test": self.plan.test, "frames_commanded": self.k,
                                "completed": self.phase in ("finishing", "draining") or self.done,
                                **self.recorder.summary()}
         if not self.lockstep:

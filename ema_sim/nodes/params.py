@@ -28,6 +28,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ema_sim.errors import ConfigError, EmaError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.parameters import ParameterInfo
 
 ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_INTEGER_ARRAY,
@@ -338,7 +339,7 @@ class Declared:
         value = p.value
         return list(value) if isinstance(value, list | tuple) or hasattr(value, "tolist") else value
 
-    def prefixed(self, prefix: str) -> dict[str, Any]:
+    def prefixed(self, prefix: str) -> JsonObject:
         """The declared values under ``prefix.``, nested, prefix stripped.
 
         Parameters
@@ -509,7 +510,7 @@ def file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise ConfigError(f"parameter file {path}: cannot read ({exc})") from None
-    out: list[tuple[str, dict[str, Any]]] = []
+    out: list[tuple[str, JsonObject]] = []
 
     def walk(mapping: Mapping[str, object], prefix: str) -> None:
         for key, value in mapping.items():

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,7 +86,7 @@ class CycleChanges:
 
     def as_dict(self) -> JsonObject:
         """Plain values for JSON (the delay in s, the bandwidth in Hz)."""
-        def one(t: Trend | None) -> dict[str, Any] | None:
+        def one(t: Trend | None) -> JsonObject | None:
             if t is None:
                 return None
             return {"trend": t.kind, "values": list(t.values), "sigma": [s if math.isfinite(s) else None

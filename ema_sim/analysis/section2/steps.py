@@ -553,7 +553,7 @@ class Steps(Section2Test[StepResponse]):
         return out
 
     @override
-    def as_json(self, results: list[StepResponse], ra: RecordAnalysis) -> dict[str, Any]:
+    def as_json(self, results: list[StepResponse], ra: RecordAnalysis) -> JsonObject:
         return {self.key: [s.as_dict() for s in results],
                 "slew_rates": slew_rates(results, ra.slew).as_dict() if results else None}
 
