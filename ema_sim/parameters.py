@@ -174,7 +174,7 @@ def linked(source: type, name: str, *, description: str | None = None, **meta: A
     return dataclasses.field(default=MISSING, metadata={META_KEY: info})
 
 
-def carried(description: str, *, default_factory: Callable[[], Any]) -> Any:
+def carried(description: str, *, default_factory: Callable[[], object]) -> Any:
     """A field a parameter set carries that is no parameter (not loaded by name, checked or listed).
 
     Parameters

@@ -345,7 +345,7 @@ def parse_report(doc: object, source: str, name: str | None = None) -> IdentifyR
 
     Parameters
     ----------
-    doc : Any
+    doc : object
         The parsed JSON.
     source : str
         Where it came from (named in errors).

@@ -156,7 +156,7 @@ class Pool:
             return None
         return self._client
 
-    def submit(self, fn: Callable[..., Any], *args: object) -> Future[Any] | Any:
+    def submit(self, fn: Callable[..., object], *args: object) -> Future[Any] | Any:
         """``fn(*args)`` on a worker (a Dask future), or its result computed here when fits stay here.
 
         Parameters

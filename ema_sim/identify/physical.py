@@ -253,7 +253,7 @@ class _Runs:
             return np.column_stack(list(pool.map(column, cols))) if cols else np.zeros((r0.size, 0))
 
 
-def _scaled(value: Any, log_scale: float) -> Any:
+def _scaled(value: Any, log_scale: float) -> float | tuple[float, ...]:
     """A declared value (or each segment of a curve) times ``exp(log_scale)``, the scale within :data:`LOG_LIMIT`."""
     k = math.exp(min(max(log_scale, -LOG_LIMIT), LOG_LIMIT))
     return tuple(float(q) * k for q in value) if isinstance(value, tuple) else float(value) * k

@@ -158,17 +158,17 @@ def implementation_warning(result: Identification, errors: Mapping[str, float]) 
             f"report's figures are those of the same equations simulated accurately")
 
 
-def strict(value: object) -> Any:
+def strict(value: object) -> object:
     """``value`` with every non-finite number made strict JSON: NaN → null, ±inf → "unbounded" in words.
 
     Parameters
     ----------
-    value : Any
+    value : object
         Nested dicts, lists, tuples and scalars (numpy's included).
 
     Returns
     -------
-    Any
+    object
         The same structure with plain Python scalars only.
     """
     if isinstance(value, Mapping):

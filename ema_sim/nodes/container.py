@@ -93,7 +93,7 @@ class BusyMeter:
         seconds, stack = self.seconds, self._stack
         seconds.setdefault(name, 0.0)
 
-        def timed(*args: object) -> Any:
+        def timed(*args: object) -> object:
             now = clock()
             if stack:
                 seconds[stack[-1]] += now - self._mark
@@ -382,7 +382,7 @@ class ComposedPorts:
         self.node = node
         self.name = node.get_name()
 
-    def frame_publisher(self, topic: str) -> Any:
+    def frame_publisher(self, topic: str) -> object:
         """In-process delivery and, for the outside, one DDS publisher per topic.
 
         Parameters

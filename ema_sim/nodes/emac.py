@@ -142,7 +142,7 @@ class ManagedEmacNode(LifecycleNodeMixin, EmacNode):
         How per-frame messages travel (:class:`~ema_sim.nodes.ports.Ports`).
     name : str or None
         The node's name (None: from the channels, :func:`~ema_sim.nodes.emac_params.default_name`).
-    **options : Any
+    **options : object
         rclpy node options (``context``, ``cli_args``).
     """
 

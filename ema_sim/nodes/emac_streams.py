@@ -39,7 +39,7 @@ class Stream:
         ----------
         stamp : int
             Its stamp, ns.
-        item : Any
+        item : object
             What the node keeps of it.
         """
         self.queue.append((stamp, item))

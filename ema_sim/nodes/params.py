@@ -81,7 +81,7 @@ class Spec:
         return d
 
 
-def _plain(value: object) -> Any:
+def _plain(value: object) -> object:
     return list(value) if isinstance(value, tuple) else value
 
 
@@ -320,7 +320,7 @@ class Declared:
             raise ConfigError(f"{node.get_name()} parameters ({origin}): {exc}") from None
         return {spec.name: self.value(spec.name) for spec in specs}
 
-    def value(self, name: str) -> Any:
+    def value(self, name: str) -> object:
         """A declared parameter's value (an empty list when a list parameter was never set).
 
         Parameters
@@ -330,7 +330,7 @@ class Declared:
 
         Returns
         -------
-        Any
+        object
             Its value.
         """
         p = self.node.get_parameter_or(name, Parameter(name, value=None))

@@ -260,7 +260,7 @@ class Ports:
         return [self.node]
 
 
-def own_time_source(node: Node) -> Any:
+def own_time_source(node: Node) -> object:
     """Under ``use_sim_time`` rclpy's TimeSource takes ``/clock`` itself; take that over, return the clock.
 
     The suite's nodes already take every ``/clock`` frame (or get it in-process): their ROS clock is

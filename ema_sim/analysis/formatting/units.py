@@ -68,7 +68,7 @@ def texts_in_unit(value: object, unit: str) -> Any:
 
     Parameters
     ----------
-    value : Any
+    value : object
         Dicts, lists and scalars.
     unit : str
         The record's unit.

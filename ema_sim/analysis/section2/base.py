@@ -270,7 +270,7 @@ class Section2Test(ABC, Generic[R]):
 
         Parameters
         ----------
-        **kwargs : Any
+        **kwargs : object
             Passed on to :class:`object`.
         """
         super().__init_subclass__(**kwargs)

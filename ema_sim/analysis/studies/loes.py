@@ -116,7 +116,7 @@ def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None
         Amplitude, deg.
     load_inlb : float
         Hinge moment the dwells run under, in·lb.
-    **model_kwargs : Any
+    **model_kwargs : object
         Passed to the model.
 
     Returns
@@ -145,7 +145,7 @@ def fit_loes(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_
         Amplitude, deg.
     load_inlb : float
         Hinge moment the dwells run under, in·lb.
-    **model_kwargs : Any
+    **model_kwargs : object
         Passed to the model.
 
     Returns
