@@ -449,7 +449,7 @@ def load(
     """
     info = metas(cls)
     where = section or family
-    chosen: dict[str, Any] = {n: getattr(source, m.channel) for n, m in info.items()
+    chosen: dict[str, object] = {n: getattr(source, m.channel) for n, m in info.items()
                               if source is not None and m.channel is not None}
     for key, value in values.items():
         if isinstance(value, Mapping):

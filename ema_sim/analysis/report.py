@@ -64,7 +64,7 @@ def record_json(ra: RecordAnalysis) -> JsonObject:
     """
     d = ra.data
     t = d.time_s
-    doc: dict[str, Any] = {
+    doc: dict[str, object] = {
         "data": d.source, "channel": ra.channel_name, "samples": len(d), "sample_hz": d.sample_hz,
         "duration_s": float(t[-1] - t[0]), "outputs": d.outputs, "unit": d.unit, "metadata": d.metadata,
         "noise_deg": ra.noise_deg, "resolution_deg": ra.resolution_deg,

@@ -157,7 +157,7 @@ class PhysicalFit:
         return {k: float(v[0] if isinstance(v, tuple) else v) for k, v in self.params.items()}
 
 
-def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -> FloatArray:
+def run_model(problem: Problem, model: str, values: dict[str, object], seed: int) -> FloatArray:
     """``model`` at ``values`` on the problem's inputs, its command noise from ``seed``: ``(samples, 3)``.
 
     The command noise (stage 3) is inside the loop: it dithers the drive's dead band and friction, which a
@@ -184,8 +184,8 @@ def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -
 class _Runs:
     """The model on the record at a parameter vector: delays absolute, the rest log-scaled from declared."""
 
-    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, Any],
-                 options: dict[str, Any] | None = None) -> None:
+    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, object],
+                 options: dict[str, object] | None = None) -> None:
         self.problem = problem
         self.options = options or {}
         """Model options every run takes beside the parameters (a coarse copy's integration rate)."""
@@ -200,7 +200,7 @@ class _Runs:
 
     def values(self, x: FloatArray) -> dict[str, Any]:
         """Model overrides at ``x``."""
-        out: dict[str, Any] = {}
+        out: dict[str, object] = {}
         for n, v in zip(self.names, x, strict=True):
             if n in DELAYS:
                 out[n] = max(float(v), 0.0)
@@ -356,8 +356,8 @@ def _shifted(runs: _Runs, x: FloatArray, free: list[int], sign: float) -> FloatA
     return y
 
 
-def remote_start(problem: Problem, model: str, names: list[str], declared: dict[str, Any], x: FloatArray,
-                 free: list[int], seed: int, options: dict[str, Any] | None = None) -> tuple[FloatArray, int]:
+def remote_start(problem: Problem, model: str, names: list[str], declared: dict[str, object], x: FloatArray,
+                 free: list[int], seed: int, options: dict[str, object] | None = None) -> tuple[FloatArray, int]:
     """:func:`_fit_restarted` from ``x`` under the noise ``seed`` on a worker, and the runs it took.
 
     Parameters

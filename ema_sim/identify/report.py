@@ -465,7 +465,7 @@ def _num(v: object, spec: str = ".4g") -> str:
     return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
-def _fmt_params(params: dict[str, Any]) -> str:
+def _fmt_params(params: dict[str, object]) -> str:
     return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
 
 

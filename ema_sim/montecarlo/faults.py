@@ -277,7 +277,7 @@ def summarize(rows: Rows) -> JsonObject:
     """
     faulty = [r for r in rows if r["kind"] != "none"]
     watched_h = sum(r["watched_s"] for r in rows) / 3600.0
-    per_kind: dict[str, Any] = {}
+    per_kind: dict[str, object] = {}
     for kind in sorted({r["kind"] for r in faulty}):
         g = [r for r in faulty if r["kind"] == kind]
         det = [r for r in g if r["detected"]]

@@ -159,7 +159,7 @@ class EmacState(SuiteNode):
         """A model and an EMAC channel for each hosted channel, from the declared channel parameters."""
         units: dict[str, EmacChannel] = {}
         single = len(self.channels) == 1
-        kwargs: dict[str, Any] = {"rate_hz": own["rate_hz"]} if own["rate_hz"] > 0.0 else {}
+        kwargs: dict[str, object] = {"rate_hz": own["rate_hz"]} if own["rate_hz"] > 0.0 else {}
         kwargs.update(model_overrides(self.model_name, element_names(own["disable"])))
         for ch in self.channels:
             values = self.params.declare(channel_specs(ch, "" if single else ch), f"{name}: {ch}")

@@ -45,7 +45,7 @@ class Spec:
     """One parameter: its default and its descriptor's content."""
 
     name: str
-    default: Any
+    default: object
     description: str
     unit: str = ""
     low: float | None = None
@@ -131,7 +131,7 @@ def nested(flat: Mapping[str, object]) -> dict[str, Any]:
     return out
 
 
-def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, object]:
     """Deep merge, ``override`` winning.
 
     Parameters
