@@ -36,7 +36,7 @@ from ema_sim.identify.identification import Search, identify  # noqa: E402
 from ema_sim.identify.record import prepare  # noqa: E402
 
 try:
-    from ema_sim.analysis.records.prepared import resolve_channel
+    from ema_sim.analysis.estimation.prepared import resolve_channel
 except ImportError:  # on a tree from before the record was prepared once for both tools
     from ema_sim.analysis.pipeline import resolve_channel
 

@@ -17,7 +17,7 @@ import pytest
 
 from ema_sim.analysis.estimation import grid, rests
 from ema_sim.analysis.estimation.noise import output_noise, with_rests
-from ema_sim.analysis.records.prepared import output_floors
+from ema_sim.analysis.estimation.prepared import output_floors
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import OutputDiagnosis, _floor_caveat, _hunting_rings

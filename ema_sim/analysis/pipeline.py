@@ -2,7 +2,7 @@
 
 :func:`analyze_record` takes one :class:`~ema_sim.io.measured.MeasuredData` (a rig's CSV or a bag), and
 
-1. prepares the record once (:func:`ema_sim.analysis.records.prepared.prepare`, what ``ema identify`` starts
+1. prepares the record once (:func:`ema_sim.analysis.estimation.prepared.prepare`, what ``ema identify`` starts
    from too): its channel, its slew, each output's noise floor and resolution, read where the output cannot
    move (a limit cycle at rest and a floor that grows with the excitation are said, not taken for noise), and
    whether the command is held or sampled, on the samples as logged;
@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.analysis.estimation.prepared import PreparedRecord, prepare, resolve_channel
 from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
 from ema_sim.analysis.recognize import recognize
 from ema_sim.analysis.records import series, stamps
 from ema_sim.analysis.records.command_hold import CommandHold
-from ema_sim.analysis.records.prepared import PreparedRecord, prepare, resolve_channel
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
 from ema_sim.io.measured import MeasuredData

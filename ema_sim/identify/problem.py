@@ -28,8 +28,8 @@ from scipy.signal import savgol_filter, welch
 
 from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
+from ema_sim.analysis.estimation.prepared import PreparedRecord
 from ema_sim.analysis.estimation.slew import Slew
-from ema_sim.analysis.records.prepared import PreparedRecord
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.identify.settled import Settled, settled_error
@@ -120,9 +120,9 @@ class Problem:
     """The command was sampled from a running demand, not held (see the module docstring)."""
     output_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Output → (lower, upper) saturation of its sensor: every run's output is clipped there as the sensor
-    clips it (:func:`ema_sim.analysis.records.prepared.sensor_range`)."""
+    clips it (:func:`ema_sim.analysis.estimation.prepared.sensor_range`)."""
     prepared: PreparedRecord | None = None
-    """The record prepared once (:mod:`ema_sim.analysis.records.prepared`): its outputs, hinge moment, noise floors
+    """The record prepared once (:mod:`ema_sim.analysis.estimation.prepared`): its outputs, hinge moment, noise floors
     and slew are taken from it, not read or measured again."""
     outputs: list[str] = field(init=False)
     slew: Slew | None = field(init=False, default=None)

@@ -34,11 +34,11 @@ from functools import partial
 
 import numpy as np
 
+from ema_sim.analysis.estimation import prepared as shared
 from ema_sim.analysis.estimation.noise import NoiseFloor
-from ema_sim.analysis.records import prepared as shared
+from ema_sim.analysis.estimation.prepared import FloatArray, PreparedRecord, Travel, sensor_range, travel_limits
 from ema_sim.analysis.records import stamps as stamp_jitter
 from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
-from ema_sim.analysis.records.prepared import FloatArray, PreparedRecord, Travel, sensor_range, travel_limits
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.measured import MeasuredData
@@ -58,7 +58,7 @@ class Record:
     """
 
     prepared: PreparedRecord
-    """The record's columns and the facts measured once on them (:mod:`ema_sim.analysis.records.prepared`)."""
+    """The record's columns and the facts measured once on them (:mod:`ema_sim.analysis.estimation.prepared`)."""
     data: MeasuredData
     channel: ChannelConfig
     """The channel's configuration, its travel replaced when the data required it."""
@@ -166,7 +166,7 @@ def identification_record(p: PreparedRecord) -> Record:
     Parameters
     ----------
     p : PreparedRecord
-        The record prepared once (:func:`ema_sim.analysis.records.prepared.prepare`).
+        The record prepared once (:func:`ema_sim.analysis.estimation.prepared.prepare`).
 
     Returns
     -------
