@@ -139,7 +139,7 @@ def discover(path: Path | None = None) -> list[Benchmark]:
     return found
 
 
-def timed(fn: Callable[[], Any], repeat: int = 3) -> float:
+def timed(fn: Callable[[], object], repeat: int = 3) -> float:
     """Best wall time of ``repeat`` calls (after one warm-up call that pays for compilation)."""
     fn()
     best = float("inf")

@@ -23,6 +23,7 @@ from ema_msgs_py.contract import Scaling, scaling_of
 from ema_sim import parameters as pm
 from ema_sim.calibration import Cubic
 from ema_sim.errors import ConfigError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 
 CHANNELS: tuple[str, ...] = contract.CHANNELS
 GENERIC = "generic"
@@ -55,7 +56,7 @@ def config_dir() -> Path:
 
 SURFACES: tuple[str, ...] = ("wing", "rudder", "cowl")
 """The kinds of surface the channels move."""
-POS: dict[str, Any] = {"min": 0.0, "min_exclusive": True}
+POS: JsonObject = {"min": 0.0, "min_exclusive": True}
 """A positive quantity."""
 
 
@@ -92,7 +93,7 @@ class ChannelConfig:
         "V", "command curve, degrees → volts: V = c0 + c1·deg + c2·deg² + c3·deg³ (2.6, 3.1.2.2)", size=4)
     feedback_cal_deg: tuple[float, float, float, float] = pm.param(
         "deg", "feedback curve, volts → degrees: deg = c0 + c1·V + c2·V² + c3·V³ (2.6, 3.1.2.2)", size=4)
-    sections: Mapping[str, Mapping[str, Any]] = pm.carried(
+    sections: Mapping[str, Mapping[str, object]] = pm.carried(
         "the model families' sections (``second_order``, ``high_order``, ``loes``...)", default_factory=dict)
 
     RELATIONS: ClassVar[tuple[pm.Relation, ...]] = (("position_min_deg", "<", "position_max_deg"),)
@@ -144,7 +145,7 @@ def ros_parameters(path: Path) -> dict[str, Any]:
     (entry,) = doc.values()
     if not isinstance(entry, dict) or not isinstance(entry.get("ros__parameters"), dict):
         raise ConfigError(f"{path}: expected <node>: ros__parameters: {{...}}")
-    params: dict[str, Any] = entry["ros__parameters"]
+    params: JsonObject = entry["ros__parameters"]
     return params
 
 
@@ -161,7 +162,7 @@ def finite_parameter(params: Mapping[str, Any], key: str, origin: str) -> float:
     return value
 
 
-def parse_channel(params: Mapping[str, Any], origin: str = "<params>") -> ChannelConfig:
+def parse_channel(params: Mapping[str, object], origin: str = "<params>") -> ChannelConfig:
     """A channel's parameter mapping as a :class:`ChannelConfig`, loaded and validated by its declaration.
 
     Parameters

@@ -12,14 +12,13 @@ ROS 2 install has.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 from ema_sim.run import LAUNCH_ARGUMENTS, from_launch_arguments
 
 PACKAGE = "ema_sim"
 
 
-def generate(layout: str) -> Any:
+def generate(layout: str) -> object:
     """The launch description of one layout.
 
     Parameters
@@ -29,7 +28,7 @@ def generate(layout: str) -> Any:
 
     Returns
     -------
-    Any
+    object
         A ``launch.LaunchDescription``: the arguments declared, the nodes made once their values are known.
     """
     from launch import LaunchDescription  # noqa: PLC0415 - a ROS 2 install's, not in the pip requirements
@@ -40,7 +39,7 @@ def generate(layout: str) -> Any:
     return LaunchDescription([*declared, OpaqueFunction(function=_nodes, kwargs={"layout": layout})])
 
 
-def _nodes(context: Any, layout: str) -> list[Any]:
+def _nodes(context: object, layout: str) -> list[object]:
     """The run's processes as ``Node`` actions, once the launch arguments are known."""
     from launch.actions import Shutdown  # noqa: PLC0415 - a ROS 2 install's, not in the pip requirements
     from launch.substitutions import LaunchConfiguration  # noqa: PLC0415 - the same

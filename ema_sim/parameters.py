@@ -174,7 +174,7 @@ def linked(source: type, name: str, *, description: str | None = None, **meta: A
     return dataclasses.field(default=MISSING, metadata={META_KEY: info})
 
 
-def carried(description: str, *, default_factory: Callable[[], Any]) -> Any:
+def carried(description: str, *, default_factory: Callable[[], object]) -> Any:
     """A field a parameter set carries that is no parameter (not loaded by name, checked or listed).
 
     Parameters
@@ -211,7 +211,7 @@ def meta_of(field: dataclasses.Field[Any]) -> Meta:
     return info
 
 
-def metas(cls: Any) -> dict[str, Meta]:
+def metas(cls: object) -> dict[str, Meta]:
     """Field name → :class:`Meta` of a parameter dataclass, in declaration order.
 
     Parameters
@@ -232,7 +232,7 @@ def _metas(cls: type) -> dict[str, Meta]:
     return {f.name: meta_of(f) for f in fields(cls) if CARRIED_KEY not in f.metadata}
 
 
-def relations(cls: Any) -> tuple[Relation, ...]:
+def relations(cls: object) -> tuple[Relation, ...]:
     """The declared relations of a set: its own ``RELATIONS``, then its linked sources' between linked fields.
 
     Parameters
@@ -325,7 +325,7 @@ def kernel_layout(cls: type, extra: Sequence[str] = ()) -> Slots:
     return slots(f"{cls.__name__}Kernel", kernel_names(cls, extra))
 
 
-def kernel_vector(params: Any, layout: Slots, extra: Mapping[str, float] | None = None) -> NDArray[np.float64]:
+def kernel_vector(params: object, layout: Slots, extra: Mapping[str, float] | None = None) -> NDArray[np.float64]:
     """The parameters in kernel order and kernel units.
 
     Parameters
@@ -404,16 +404,16 @@ def coerce(name: str, m: Meta, value: Any, origin: str, family: str) -> Value:
 
 def load(
     cls: type[P],
-    values: Mapping[str, Any],
+    values: Mapping[str, object],
     *,
     origin: str,
     family: str,
     section: str = "",
-    overrides: Mapping[str, Any] | None = None,
+    overrides: Mapping[str, object] | None = None,
     options: Iterable[str] = (),
     variant: str | None = None,
-    source: Any = None,
-    carry: Mapping[str, Any] | None = None,
+    source: object = None,
+    carry: Mapping[str, object] | None = None,
 ) -> P:
     """The one loader: a parameter set from a YAML mapping (with subsections) and overrides, validated.
 
@@ -449,7 +449,7 @@ def load(
     """
     info = metas(cls)
     where = section or family
-    chosen: dict[str, Any] = {n: getattr(source, m.channel) for n, m in info.items()
+    chosen: dict[str, object] = {n: getattr(source, m.channel) for n, m in info.items()
                               if source is not None and m.channel is not None}
     for key, value in values.items():
         if isinstance(value, Mapping):
@@ -644,7 +644,7 @@ class ParameterInfo:
     uncertainty_source: str
 
 
-def describe(cls: type, *, defaults: Any = None, layout: Slots | None = None, section: str = "",
+def describe(cls: type, *, defaults: object = None, layout: Slots | None = None, section: str = "",
              variant: str | None = None) -> list[ParameterInfo]:
     """Every parameter of a set with its metadata, the defaults of one channel and its kernel slot.
 

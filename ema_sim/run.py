@@ -24,6 +24,7 @@ from ema_sim.ail.params import load_ail_config
 from ema_sim.config import CHANNELS
 from ema_sim.environment import load_profile
 from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import model_names
 from ema_sim.signals.plans import build_plan, channel_list
 
@@ -85,7 +86,7 @@ def _fmu_options(items: list[str]) -> argparse.Namespace:
 class _PlainDumper(yaml.SafeDumper):
     """Every value written out where it is used (rcl's parser knows no YAML anchors or aliases)."""
 
-    def ignore_aliases(self, data: Any) -> bool:  # noqa: ARG002
+    def ignore_aliases(self, data: object) -> bool:  # noqa: ARG002
         return True
 
 
@@ -284,7 +285,7 @@ class RunDescription:
         return self.processes()[-1].name
 
     # ----------------------------------------------------------------- parameters
-    def parameters(self) -> dict[str, dict[str, Any]]:
+    def parameters(self) -> dict[str, JsonObject]:
         """Node name → its parameters (``ros__parameters``) for this run."""
         from ema_sim.switches import environment_elements  # noqa: PLC0415 - python-control, see __post_init__
 

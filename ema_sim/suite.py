@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ema_sim.errors import EmaError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.lifetime import PARENT_ENV
 from ema_sim.run import DEFAULT_EMAC, DEFAULT_LAYOUT, EMAC_HOSTING, LAYOUTS, RunDescription
 
@@ -307,7 +308,7 @@ class Suite:
 
     def summaries(self) -> dict[str, dict[str, Any]]:
         """The JSON summary each node printed when it stopped, by node name."""
-        out: dict[str, dict[str, Any]] = {}
+        out: dict[str, JsonObject] = {}
         for name in self.procs:
             path = self.log_dir / f"{name}.log"
             if not path.is_file():
@@ -351,7 +352,7 @@ class Suite:
         self.stop()
 
 
-def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dict[str, Any]]:
+def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, JsonObject]:
     """Start, wait for the test, stop.
 
     Parameters
@@ -363,7 +364,7 @@ def run_suite(cfg: SuiteConfig, timeout_s: float | None = None) -> dict[str, dic
 
     Returns
     -------
-    dict[str, dict[str, Any]]
+    dict[str, JsonObject]
         The nodes' summaries, by node name.
     """
     suite = Suite(cfg)

@@ -220,9 +220,9 @@ def test_a_stop_in_the_record_sets_the_travel_there():
     t = np.arange(0.0, 20.0, 0.01)
     cmd = np.where(t < 5, 0.0, np.where(t < 10, 60.0, np.where(t < 15, -80.0, 0.0)))
     pos = np.clip(cmd, -70.0, 70.0) + np.random.default_rng(1).normal(0, 0.002, t.size)
-    data = MeasuredData(time_s=t, command_deg=cmd, position_deg=pos)
     from ema_sim.analysis.estimation.noise import output_noise  # noqa: PLC0415
-    travel = travel_limits(data, WING, {"position_deg": output_noise(pos)}, stand_in=False)
+    noise = {"position_deg": output_noise(pos)}
+    travel = travel_limits(t, cmd, {"position_deg": pos}, "deg", WING, noise, stand_in=False)
     assert travel.outside
     assert travel.source == "data, stop seen"
     assert travel.limits[0] == pytest.approx(-70.0, abs=0.01)
@@ -231,13 +231,11 @@ def test_a_stop_in_the_record_sets_the_travel_there():
     assert "exactly" not in travel.statement  # the stop shows the sensor's noise: a mechanical stop
     clipped = np.clip(pos, -69.5, 69.5)  # the same record read by a sensor that saturates at ±69.5°
     noise = {"position_deg": output_noise(clipped)}
-    read = MeasuredData(time_s=t, command_deg=cmd, position_deg=clipped)
-    assert sensor_range(read, noise) == {"position_deg": (-69.5, math.inf)}
-    assert sensor_range(data, {"position_deg": output_noise(pos)}) == {}
+    assert sensor_range(t, {"position_deg": clipped}, noise) == {"position_deg": (-69.5, math.inf)}
+    assert sensor_range(t, {"position_deg": pos}, {"position_deg": output_noise(pos)}) == {}  # a stop shows noise
     settled = np.clip(cmd, -69.5, 69.5)  # a simulation's output, no sensor: it settles on exactly one value
-    assert sensor_range(MeasuredData(time_s=t, command_deg=cmd, position_deg=settled),
-                        {"position_deg": output_noise(settled)}) == {}
-    said = travel_limits(read, WING, noise, stand_in=False)
+    assert sensor_range(t, {"position_deg": settled}, {"position_deg": output_noise(settled)}) == {}
+    said = travel_limits(t, cmd, {"position_deg": clipped}, "deg", WING, noise, stand_in=False)
     assert said.limits[0] < -80.0  # a sensor's saturation is no stop: the travel opens past the data
     assert "no stop seen" in said.statement
 

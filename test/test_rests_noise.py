@@ -17,7 +17,7 @@ import pytest
 
 from ema_sim.analysis.estimation import grid, rests
 from ema_sim.analysis.estimation.noise import output_noise, with_rests
-from ema_sim.analysis.pipeline import measure_outputs
+from ema_sim.analysis.estimation.prepared import output_floors
 from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import OutputDiagnosis, _floor_caveat, _hunting_rings
@@ -131,7 +131,7 @@ def test_quiet_rests_have_no_line_and_give_the_sensor_floor():
 # ---------------------------------------------------------------------------------------------- the floor
 def test_the_floor_is_read_at_a_quiet_rest_not_in_the_hunting():
     d = hunting_record(5, quiet_start=True)
-    nf = measure_outputs(d)["position_deg"]
+    nf = output_floors(d.time_s, d.command_deg, {"position_deg": d.position_deg}, d.current_a, None)["position_deg"]
     assert nf.record_white is not None
     assert nf.record_white > 0.003  # the whole record's fourth differences hold the cycle
     assert nf.basis == "rests"
@@ -141,7 +141,7 @@ def test_the_floor_is_read_at_a_quiet_rest_not_in_the_hunting():
 
 def test_when_every_rest_hunts_the_floor_is_an_upper_bound_and_identify_never_says_nothing_is_left():
     d = hunting_record(6, quiet_start=False)
-    nf = measure_outputs(d)["position_deg"]
+    nf = output_floors(d.time_s, d.command_deg, {"position_deg": d.position_deg}, d.current_a, None)["position_deg"]
     assert nf.upper_bound
     assert nf.rests is not None
     assert nf.rests.limit_cycle is not None
@@ -193,7 +193,7 @@ def test_analyze_names_the_limit_cycle_and_reads_its_floor_at_rest(tmp_path, cap
 
 def test_a_floor_that_grows_with_the_sweep_is_said_not_noise_and_the_floor_is_the_rests():
     d = sweep_record(9, rolling=True)
-    nf = measure_outputs(d)["position_deg"]
+    nf = output_floors(d.time_s, d.command_deg, {"position_deg": d.position_deg}, d.current_a, None)["position_deg"]
     assert nf.rests is not None
     g = nf.rests.growth
     assert g is not None
@@ -207,7 +207,7 @@ def test_a_floor_that_grows_with_the_sweep_is_said_not_noise_and_the_floor_is_th
 def test_a_clean_sweep_sees_no_growth_and_its_floor_at_rest_is_the_sensor():
     """At 100 Hz a 5 Hz sweep leaks into the fourth differences (0.003 mm); its rests say 0.002, the truth."""
     d = sweep_record(10, rolling=False)
-    nf = measure_outputs(d)["position_deg"]
+    nf = output_floors(d.time_s, d.command_deg, {"position_deg": d.position_deg}, d.current_a, None)["position_deg"]
     assert nf.rests is not None
     assert nf.rests.growth is None
     assert nf.sigma == pytest.approx(0.002, rel=0.3)

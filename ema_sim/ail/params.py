@@ -193,7 +193,7 @@ class Setup:
 
         Parameters
         ----------
-        values : Mapping[str, Any]
+        values : Mapping[str, object]
             One ``setup.<profile>`` section: ``aero_input``, ``surface_load`` and optionally ``bungee_inlb``.
         origin : str
             Where the values come from, for the error message.
@@ -307,7 +307,7 @@ class AilConfig:
 
         Parameters
         ----------
-        params : Mapping[str, Any]
+        params : Mapping[str, object]
             The mapping (the node's ROS overrides merged over the file).
         origin : str, optional
             Where it comes from, for the error messages.

@@ -2,10 +2,10 @@
 
 :func:`analyze_record` takes one :class:`~ema_sim.io.measured.MeasuredData` (a rig's CSV or a bag), and
 
-1. measures each output's noise floor and resolution (:func:`ema_sim.analysis.estimation.noise.output_noise`),
-   read where the output cannot move (:func:`ema_sim.analysis.estimation.noise.with_rests`: a limit cycle at
-   rest and a floor that grows with the excitation are said, not taken for noise), and whether the command
-   is held or sampled (:mod:`ema_sim.analysis.records.command_hold`), on the samples as logged;
+1. prepares the record once (:func:`ema_sim.analysis.estimation.prepared.prepare`, what ``ema identify`` starts
+   from too): its channel, its slew, each output's noise floor and resolution, read where the output cannot
+   move (a limit cycle at rest and a floor that grows with the excitation are said, not taken for noise), and
+   whether the command is held or sampled, on the samples as logged;
 2. puts the record on a uniform grid (:func:`ema_sim.analysis.records.series.uniform_record`);
 3. recognises its segments (:mod:`ema_sim.analysis.recognize`);
 4. runs every test of :data:`ema_sim.analysis.registry.TESTS` in order; a test that finds nothing to
@@ -23,116 +23,21 @@ from typing import Any
 
 import numpy as np
 
-from ema_sim.analysis.estimation import slew
-from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise, with_rests
+from ema_sim.analysis.estimation.prepared import PreparedRecord, prepare, resolve_channel
 from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
-from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.analysis.recognize import recognize
-from ema_sim.analysis.records import causality, series, stamps
-from ema_sim.analysis.records.command_hold import CommandHold, detect_command_hold, given, lag_band
+from ema_sim.analysis.records import series, stamps
+from ema_sim.analysis.records.command_hold import CommandHold
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis
-from ema_sim.config import CHANNELS, STAND_IN, ChannelConfig, load_channel
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 
 RECOGNISED = 0.1
 """Share of a record's analysis reported done once its tests are recognised."""
 
-__all__ = ["Options", "RecordAnalysis", "analyze_record", "analyze_records", "record_slew", "resolve_channel",
-           "spread", "timing_alternatives"]
-
-
-def resolve_channel(data: MeasuredData, requested: str | None) -> tuple[ChannelConfig, str | None]:
-    """The channel configuration to use (crank arm, calibration slopes) and a note on how it was chosen.
-
-    Parameters
-    ----------
-    data : MeasuredData
-        The record (its metadata may name the channel).
-    requested : str or None
-        The channel asked for (``--channel``).
-
-    Returns
-    -------
-    tuple
-        The configuration, and a note when it is a stand-in.
-    """
-    meta = data.metadata.get("channel")
-    if requested:
-        return load_channel(requested), None
-    if meta in CHANNELS:
-        return load_channel(meta), None
-    why = f"metadata channel {meta!r} is not an X-43A channel" if meta else "no X-43A channel in the metadata"
-    return load_channel(STAND_IN), (f"{why} and none given: a generic actuator, its travel measured from the "
-                                    "record, its fits started from nominal second-order values; no X-43A figure "
-                                    "(travel, rated slew, crosstalk threshold) applies, and a logged load would be "
-                                    "converted with a nominal crank arm")
-
-
-def measure_outputs(data: MeasuredData) -> dict[str, NoiseFloor]:
-    """Each output's noise floor and resolution, on the samples as logged, read at the record's rests.
-
-    Parameters
-    ----------
-    data : MeasuredData
-        The record as read.
-
-    Returns
-    -------
-    dict
-        Output name → its :class:`~ema_sim.analysis.estimation.noise.NoiseFloor`.
-    """
-    given_counts = data.metadata.get("resolution_deg")
-    counts = float(given_counts) if given_counts else None
-    return {name: with_rests(output_noise(getattr(data, name), counts), data.time_s, data.command_deg,
-                             getattr(data, name), data.current_a) for name in data.outputs}
-
-
-def command_hold(data: MeasuredData, noise: dict[str, NoiseFloor], options: Options) -> CommandHold:
-    """How the record's command was logged: given by the user, else detected on the samples as logged.
-
-    Parameters
-    ----------
-    data : MeasuredData
-        The record as read.
-    noise : dict
-        Each output's noise floor.
-    options : Options
-        What was asked (``command``: detect, held or sampled).
-
-    Returns
-    -------
-    CommandHold
-        The finding.
-    """
-    dt = float(np.median(np.diff(data.time_s)))
-    name = data.outputs[0]
-    nf = noise[name]
-    y = getattr(data, name)
-    if options.command != "detect":
-        return given(options.command, dt, causality.measure(data.time_s, data.command_deg, y,
-                                                            lag_band(nf.sigma, nf.resolution)))
-    return detect_command_hold(data.time_s, data.command_deg, y, nf.sigma, nf.resolution)
-
-
-def record_slew(data: MeasuredData, noise: dict[str, NoiseFloor]) -> Slew:
-    """The slope of the record's rate-limited moves, on its own stamps: ``ema identify``'s measurement exactly.
-
-    Parameters
-    ----------
-    data : MeasuredData
-        The record as read (its own stamps, nothing straightened or resampled).
-    noise : dict
-        Each output's noise floor.
-
-    Returns
-    -------
-    Slew
-        :func:`ema_sim.analysis.estimation.slew.measure` on the first output (position, else surface).
-    """
-    name = "position_deg" if data.position_deg is not None else "surface_deg"
-    y = getattr(data, name)
-    return slew.measure(data.time_s - data.time_s[0], data.command_deg, y, max(noise[name].sigma, slew.MIN_NOISE))
+__all__ = ["Options", "RecordAnalysis", "analyze_record", "analyze_records", "resolve_channel", "spread",
+           "timing_alternatives"]
 
 
 def analyze_record(data: MeasuredData, options: Options | None = None,
@@ -156,13 +61,12 @@ def analyze_record(data: MeasuredData, options: Options | None = None,
     options = options or Options()
     say = progress or (lambda _share: None)
     say(0.0)
-    noise = measure_outputs(data)
-    hold = command_hold(data, noise, options)
-    ra = _analyze(data, options, noise, hold, say)
-    ra.notes += [line for name, nf in noise.items() for line in nf.findings(name, data.unit)]
-    if hold.sampled is None and hold.source == "detected":
-        other = _analyze(data, replace(options, command="sampled"), noise,
-                         replace(hold, sampled=True), lambda _share: None)
+    channel, note = resolve_channel(data, options.channel)
+    p = prepare(data, channel, channel_note=note, command=options.command)
+    ra = _analyze(p, options, p.hold, say)
+    ra.notes += [line for name, nf in p.noise.items() for line in nf.findings(name, p.unit)]
+    if p.hold.sampled is None and p.hold.source == "detected":
+        other = _analyze(p, replace(options, command="sampled"), replace(p.hold, sampled=True), lambda _share: None)
         ra.other_timing = timing_alternatives(ra, other)
         if ra.other_timing:
             ra.notes.append("the record cannot tell a held command from a sampled one: its figures assume held (the "
@@ -170,22 +74,19 @@ def analyze_record(data: MeasuredData, options: Options | None = None,
     return ra
 
 
-def _analyze(data: MeasuredData, options: Options, noise: dict[str, NoiseFloor], hold: CommandHold,
-             say: Callable[[float], None]) -> RecordAnalysis:
-    """:func:`analyze_record` under one timing assumption (``hold``)."""
-    measured_slew = record_slew(data, noise)
-    raw_stamps = data.time_s
-    data = series.uniform_record(data, command_sampled=hold.assumed_sampled)
-    ch, ch_note = resolve_channel(data, options.channel)
+def _analyze(p: PreparedRecord, options: Options, hold: CommandHold, say: Callable[[float], None]) -> RecordAnalysis:
+    """:func:`analyze_record` under one timing assumption (``hold``), from the record prepared once."""
+    raw_stamps = p.time_s
+    data = series.uniform_record(p.data, command_sampled=hold.assumed_sampled)
     rec = recognize(data)
-    ra = RecordAnalysis(data, ch, rec, noise, hold, options,
-                        stamps=raw_stamps if raw_stamps.size == data.time_s.size else None, slew=measured_slew,
-                        stand_in=ch_note is not None)
-    if ch_note:
-        ra.notes.append(ch_note)
+    ra = RecordAnalysis(data, p.channel, rec, p.noise, hold, options,
+                        stamps=raw_stamps if raw_stamps.size == data.time_s.size else None, slew=p.slew,
+                        stand_in=p.channel_note is not None)
+    if p.channel_note:
+        ra.notes.append(p.channel_note)
     if "resampled" in data.metadata:
         ra.notes.append(data.metadata["resampled"])
-    jitter = stamps.measure(raw_stamps)
+    jitter = p.stamps
     if jitter.jitters and data.outputs:
         ra.notes.append(f"{jitter.statement(stamps.output_rate(jitter, data.column(data.outputs[0])), data.unit)}; no "
                         "effect of the actuator is read into it")
@@ -221,7 +122,7 @@ def _timing_figures(ra: RecordAnalysis) -> dict[str, tuple[str, float, float | N
         key = f"fit {k}: {f.test} on {f.output}"
         out[key] = ("delay_s", f.actuator_delay_s, f.delay_s.sigma)
 
-    def walk(value: Any, path: str) -> None:
+    def walk(value: object, path: str) -> None:
         if isinstance(value, dict):
             if isinstance(value.get("phase_deg"), int | float) and isinstance(value.get("freq_hz"), int | float):
                 sigma = value.get("phase_sigma_deg")
@@ -241,7 +142,7 @@ def _timing_figures(ra: RecordAnalysis) -> dict[str, tuple[str, float, float | N
     return out
 
 
-def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[dict[str, Any]]:
+def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[JsonObject]:
     """Each phase and delay of a record analysed with its command taken as held and as sampled, side by side.
 
     Parameters

@@ -90,7 +90,7 @@ COMPATIBLE = {("broadband", "schroeder"), ("broadband", "sweep"), ("sine", "tria
 """(signal reading, metadata kind) pairs a signal can mistake for each other."""
 
 
-def _read(readers: tuple[Any, ...], stretch: Any) -> Reading:
+def _read(readers: tuple[Any, ...], stretch: object) -> Reading:
     """The first reader's answer (the last reader of a tuple always answers)."""
     for reader in readers:
         reading = reader(stretch)

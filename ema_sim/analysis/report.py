@@ -26,11 +26,12 @@ from ema_sim.analysis.section2.calibration_fit import TEST as CALIBRATION
 from ema_sim.analysis.section2.calibration_fit import pooled_bounds
 from ema_sim.analysis.section2.hysteresis import RW13_AREA_INLB, RW13_PEAK_IN, hysteretic_damping_constant
 from ema_sim.io.contract import check
+from ema_sim.jsontypes import JsonObject
 
 __all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "slope_json", "slope_statement", "to_json", "to_markdown"]
 
 
-def _clean(value: Any) -> Any:  # noqa: PLR0911 - one return per type
+def _clean(value: object) -> Any:  # noqa: PLR0911 - one return per type
     """JSON-safe: numpy scalars to Python, non-finite floats to None."""
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}
@@ -48,7 +49,7 @@ def _clean(value: Any) -> Any:  # noqa: PLR0911 - one return per type
     return value
 
 
-def record_json(ra: RecordAnalysis) -> dict[str, Any]:
+def record_json(ra: RecordAnalysis) -> JsonObject:
     """One record's figures.
 
     Parameters
@@ -63,7 +64,7 @@ def record_json(ra: RecordAnalysis) -> dict[str, Any]:
     """
     d = ra.data
     t = d.time_s
-    doc: dict[str, Any] = {
+    doc: dict[str, object] = {
         "data": d.source, "channel": ra.channel_name, "samples": len(d), "sample_hz": d.sample_hz,
         "duration_s": float(t[-1] - t[0]), "outputs": d.outputs, "unit": d.unit, "metadata": d.metadata,
         "noise_deg": ra.noise_deg, "resolution_deg": ra.resolution_deg,
@@ -108,7 +109,7 @@ def slope_statement(ra: RecordAnalysis) -> str:
     return f"{s.rate:.4g}{sigma} {unit} ({s.moves} of {s.seen} moves rate-limited)"
 
 
-def slope_json(ra: RecordAnalysis) -> dict[str, Any]:
+def slope_json(ra: RecordAnalysis) -> JsonObject:
     """The record's slope of rate-limited moves, its statement and method.
 
     Parameters
@@ -125,7 +126,7 @@ def slope_json(ra: RecordAnalysis) -> dict[str, Any]:
     return {**base, "statement": slope_statement(ra), "method": SLOPE_METHOD}
 
 
-def to_json(records: Sequence[RecordAnalysis]) -> dict[str, Any]:
+def to_json(records: Sequence[RecordAnalysis]) -> JsonObject:
     """The whole ``--json`` document.
 
     Parameters

@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
 
 from ema_sim.commands.common import Subparsers, check_channel, parse_overrides
 
@@ -96,7 +95,7 @@ def run_verify(args: argparse.Namespace) -> int:
 
     check_channel(args.channel)
     path = Path(args.artefact)
-    report: dict[str, Any]
+    report: dict[str, object]
     if path.suffix.lower() == ".csv" or is_bag(path):
         from ema_sim.export.diagnose import TOLERANCE_DEG, diagnose  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
         from ema_sim.io import load_data  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ema_sim import io as ema_io
-from ema_sim.analysis.pipeline import resolve_channel
+from ema_sim.analysis.estimation.prepared import resolve_channel
 from ema_sim.commands.common import Subparsers, add_data_args, check_channel, parse_overrides, rig_format
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.identify.declared import DECLARED

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ema_sim.analysis.pipeline import resolve_channel
+from ema_sim.analysis.estimation.prepared import resolve_channel
 from ema_sim.commands.common import Subparsers, check_channel
 from ema_sim.io import is_bag, load_data
 from ema_sim.io.bag import read_fault_truth

@@ -152,7 +152,7 @@ def find(problem: Problem) -> list[Artefact]:
     t = problem.time_s
     u = problem.data.command_deg
     for o in problem.outputs:
-        y = problem.data.column(o)
+        y = problem.observed[o]
         sigma = problem.sigma_deg[o]
         idx, size = _spikes(t, u, y, sigma)
         if idx:

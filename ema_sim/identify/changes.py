@@ -44,6 +44,7 @@ from ema_sim.identify.problem import SETTLE_S, Problem
 from ema_sim.identify.stepwise import fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models.second_order import SecondOrderParams
 
 FloatArray = NDArray[np.float64]
@@ -137,7 +138,7 @@ class Track(Trend):
                      f"{bandwidths[-1]:.3g} Hz)")
         return text
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON."""
         return {"parameter": self.name, "trend": self.kind, "values": list(self.values), "sigma": list(self.sigma),
                 "window_mid_s": list(self.times_s), "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
@@ -172,13 +173,13 @@ class Changes:
         """The lines a reader must not miss: the trends and the proxies taken out."""
         return [t.statement(self.bandwidth_hz) for t in self.tracks if t.changed] + self.proxies
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON."""
         return {"changed": self.changed, "how": self.how, "skipped": self.skipped or None,
                 "windows_s": [[w.start_s, w.end_s] for w in self.windows],
                 "parameters": [t.as_dict() for t in self.tracks],
-                "bandwidth_hz": list(self.bandwidth_hz), "rms_over_noise_windowed": self.rms_over_noise,
-                "proxies_removed": self.proxies, "statements": self.statements}
+                "bandwidth_hz": list(self.bandwidth_hz), "rms_over_noise_windowed": {**self.rms_over_noise},
+                "proxies_removed": [*self.proxies], "statements": [*self.statements]}
 
 
 # ------------------------------------------------------------------------------------------ windows

@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from functools import cache
 from itertools import combinations
 from pathlib import Path
-from typing import Any
 
 from scipy.stats import chi2
 
@@ -45,6 +44,7 @@ from ema_sim.errors import DataError, SpecError
 from ema_sim.identify.effects import KEYS
 from ema_sim.identify.physical import ESCALATE_TO
 from ema_sim.identify.problem import EQUIVALENT_EXCESS
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import model_parameters
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
@@ -200,7 +200,7 @@ class FieldConsistency:
     verdict: str
     reason: str
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The comparison as plain data (non-finite numbers left for :func:`~ema_sim.identify.report.strict`).
 
         Returns
@@ -284,7 +284,7 @@ class Consistency:
         """
         return {v: sum(f.verdict == v for f in self.fields) for v in VERDICTS}
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The whole comparison as plain data; write it with :func:`~ema_sim.identify.report.write_json`.
 
         Returns
@@ -297,14 +297,14 @@ class Consistency:
             "unit": self.reports[0].unit,
             "sigma": self.sigma,
             "reports": [{"name": r.name, "path": r.path, "data": r.data, "model": r.model,
-                         "rms_over_noise": r.rms_over_noise, "structured_residual": bool(r.structured)}
+                         "rms_over_noise": {**r.rms_over_noise}, "structured_residual": bool(r.structured)}
                         for r in self.reports],
             "fields": [f.as_dict() for f in self.fields],
             "effects_in_some": [{"effect": e.effect, "where": e.where, "added_in": list(e.added_in),
                                  "not_in": list(e.not_in)} for e in self.effects],
             "effects_in_all": [{"effect": e, "where": w} for e, w in self.common_effects],
             "notes": list(self.notes),
-            "verdicts": self.counts(),
+            "verdicts": {**self.counts()},
         }
 
 
@@ -313,14 +313,14 @@ def _number(x: float) -> float | None:
     return None if math.isnan(x) else x
 
 
-def _float(x: Any) -> float:
+def _float(x: object) -> float:
     """A report's number as float: a word (``"unbounded"``) or null is no finite number."""
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         return math.inf if isinstance(x, str) and x.startswith("unbounded") else math.nan
     return float(x)
 
 
-def _mapping(doc: Mapping[str, Any], key: str, where: str, source: str) -> Mapping[str, Any]:
+def _mapping(doc: Mapping[str, object], key: str, where: str, source: str) -> Mapping[str, object]:
     value = doc.get(key)
     if not isinstance(value, Mapping):
         raise DataError(f"{source}: not an `ema identify` report (no {where}{key} object)")
@@ -340,12 +340,12 @@ def _factor(field: str, key: str, channel: str) -> float:
     return float(KEYS[field].factor(_channel_params(channel)))
 
 
-def parse_report(doc: Any, source: str, name: str | None = None) -> IdentifyReport:
+def parse_report(doc: object, source: str, name: str | None = None) -> IdentifyReport:
     """One ``ema identify`` report (:func:`~ema_sim.identify.report.to_json`'s dict) as a consistency check reads it.
 
     Parameters
     ----------
-    doc : Any
+    doc : object
         The parsed JSON.
     source : str
         Where it came from (named in errors).
@@ -403,7 +403,7 @@ def parse_report(doc: Any, source: str, name: str | None = None) -> IdentifyRepo
     )
 
 
-def _rms_over_noise(doc: Mapping[str, Any], final: Mapping[str, Any]) -> dict[str, float]:
+def _rms_over_noise(doc: Mapping[str, object], final: Mapping[str, object]) -> dict[str, float]:
     """Output → final rms / noise floor, for the outputs the report gives both of."""
     rms, noise = final.get("rms_deg"), doc.get("noise_deg")
     if not isinstance(rms, Mapping) or not isinstance(noise, Mapping):

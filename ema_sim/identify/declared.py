@@ -14,7 +14,7 @@ record (:func:`not_determinable`), and the declared model itself is run on the r
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -199,7 +199,7 @@ def not_determinable(model: str, channel: ChannelConfig) -> list[str]:
 
 
 def run_declared(model: str, channel: ChannelConfig, time_s: FloatArray, command_deg: FloatArray,
-                 hinge_moment_inlb: FloatArray, overrides: dict[str, Any] | None = None,
+                 hinge_moment_inlb: FloatArray, overrides: dict[str, object] | None = None,
                  sample_times: FloatArray | None = None) -> FloatArray:
     """The declared model itself (noise off) on the record's inputs: ``(samples, outputs)``, position then surface.
 
@@ -221,7 +221,7 @@ def run_declared(model: str, channel: ChannelConfig, time_s: FloatArray, command
     numpy.ndarray
         The outputs at the record's samples.
     """
-    options: dict[str, Any] = {"noise": False} if model in ("hoad2", "hoad3") else {}
+    options: dict[str, object] = {"noise": False} if model in ("hoad2", "hoad3") else {}
     m = create(model, channel, **{**options, **(overrides or {})})
     m.trim(float(command_deg[0]), float(hinge_moment_inlb[0]))
     samples = time_s if sample_times is None else sample_times

@@ -40,6 +40,7 @@ from ema_sim.identify.library import describe, library
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.regression import Regression, Selected, Term, stepwise
 from ema_sim.identify.stages import worse
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models.base import O_RATE
 from ema_sim.models.second_order import SecondOrderParams
 
@@ -138,7 +139,7 @@ class Discovery:
         names = [n for ts in c.terms.values() for n, *_ in ts]
         return [(e, n) for e in effects for n in names if n in EQUIVALENT.get(e, ())]
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON (the report's ``discovered``).
 
         Returns
@@ -182,7 +183,7 @@ def named_stands(named_rms: Mapping[str, float], noise: Mapping[str, float]) -> 
     return all(v <= STRUCTURED * noise[o] for o, v in named_rms.items())
 
 
-def _selected(s: Selected) -> dict[str, Any]:
+def _selected(s: Selected) -> JsonObject:
     return {"term": s.term.name, "coefficient": list(s.coef), "uncertainty": list(s.sigma), "unit": s.term.unit,
             "amplitude": s.amplitude, "variance_share": s.share, "p_value": s.p_value,
             "halves": [[v if math.isfinite(v) else None for v in h] for h in s.halves], "holds": s.holds,
@@ -288,7 +289,7 @@ def _on_reading(problem: Problem, cur: Fit, disc: Discovery, refit: Callable[[Pr
     terms: dict[str, list[tuple[str, tuple[float, ...], tuple[float, ...], str]]] = {}
     for o, a in design.items():
         col = OUTPUT_COLUMN[o]
-        e = problem.data.column(o)[problem.mask] - sim[problem.mask, col]
+        e = problem.observed[o][problem.mask] - sim[problem.mask, col]
         coef = np.linalg.lstsq(a[problem.mask], e, rcond=None)[0]
         r = e - a[problem.mask] @ coef
         sig = np.sqrt(np.clip(np.diag(block_covariance([r], [a[problem.mask]])), 0.0, None))

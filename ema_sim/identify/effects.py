@@ -146,7 +146,7 @@ FREE: dict[str, Free] = {
 }
 
 
-def _same_unit(_p: Any) -> float:
+def _same_unit(_p: object) -> float:
     """The report's unit is the model's: factor 1."""
     return 1.0
 
@@ -672,7 +672,7 @@ VOCABULARY = tuple(dict.fromkeys(e.name for e in EFFECTS))
 """The effect names identification can report."""
 
 
-def report_values(p: Any, fields: tuple[str, ...] | list[str]) -> dict[str, float]:
+def report_values(p: object, fields: tuple[str, ...] | list[str]) -> dict[str, float]:
     """The report's key → value of some model parameters (each in the report's unit).
 
     Parameters

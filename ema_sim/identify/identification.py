@@ -23,7 +23,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -33,13 +32,14 @@ from ema_sim.identify.declared import HIGH_ORDER, declared
 from ema_sim.identify.discovery import STRUCTURED, Discovery, discover, named_stands
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
 from ema_sim.identify.fit import TINY, Fit, evaluate, rms
-from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal
+from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal, Step
 from ema_sim.identify.parallel import MIN_SAMPLES, SERIAL, Pool, one_blas_thread
 from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
 from ema_sim.identify.record import Record
-from ema_sim.identify.stages import Clock, Outcome, allow, ceiling, guarded, trade, worse
+from ema_sim.identify.stages import Clock, Failure, Outcome, allow, ceiling, guarded, trade, worse
 from ema_sim.identify.stepwise import MAX_EFFECTS, as_declared, choose_hold, fit_model, prune, reference_fit, search
+from ema_sim.models.second_order import SecondOrderParams
 
 BALANCE_WEIGHTS = (4.0, 16.0, 64.0)
 """Weights tried on an output the baseline leaves worse than the reference, until it no longer does."""
@@ -94,15 +94,30 @@ class _Chain:
         self.result.stages.append(Outcome(stage, status, reason, before, after, clock.elapsed_s))
 
 
-def _snapshot(r: Identification) -> dict[str, Any]:
-    return {"final": r.final, "final_model": r.final_model, "steps": list(r.steps), "removed": list(r.removed),
-            "physical": r.physical, "equivalent": r.equivalent, "equivalent_model": r.equivalent_model,
-            "discovery": r.discovery, "discovered": r.discovered}
+@dataclass(frozen=True)
+class _Saved:
+    """What a stage may change in the result, as it stood before the stage (restored when the stage fails)."""
+
+    final: Fit
+    final_model: str
+    steps: list[Step]
+    removed: list[Removal]
+    physical: PhysicalFit | None
+    equivalent: Fit | None
+    equivalent_model: str
+    discovery: Discovery | None
+    discovered: str
 
 
-def _restore(r: Identification, saved: dict[str, Any]) -> None:
-    for k, v in saved.items():
-        setattr(r, k, v)
+def _snapshot(r: Identification) -> _Saved:
+    return _Saved(r.final, r.final_model, list(r.steps), list(r.removed), r.physical, r.equivalent,
+                  r.equivalent_model, r.discovery, r.discovered)
+
+
+def _restore(r: Identification, saved: _Saved) -> None:
+    r.final, r.final_model, r.steps, r.removed = saved.final, saved.final_model, saved.steps, saved.removed
+    r.physical, r.equivalent, r.equivalent_model = saved.physical, saved.equivalent, saved.equivalent_model
+    r.discovery, r.discovered = saved.discovery, saved.discovered
 
 
 @dataclass(frozen=True)
@@ -159,8 +174,8 @@ def identify(record: Record, model: str = "second_order", overrides: dict[str, f
     t0 = time.perf_counter()
     search = search or Search()
     say = log or (lambda _msg: None)
-    problem = Problem(record.data, record.channel, noise=record.noise, command_sampled=record.command_sampled,
-                      output_range=record.sensor_range)
+    problem = Problem(record.data, record.channel, command_sampled=record.command_sampled,
+                      output_range=record.sensor_range, prepared=record.prepared)
     workers, scheduler = search.workers, search.scheduler
     pool = Pool(scheduler, workers) if scheduler or (workers >= 2 and problem.n_fit >= MIN_SAMPLES) else SERIAL
     pool.start()  # the cluster starts while the baseline is fitted
@@ -191,7 +206,7 @@ def _identify(problem: Problem, record: Record, model: str, overrides: dict[str,
     decl = as_declared(problem, key, base, free, notes) if key in HIGH_ORDER else None
     if decl is not None:
         free = list(decl.free)
-    failures: list[Any] = []
+    failures: list[Failure] = []
     fitted = guarded("baseline", failures, lambda: choose_hold(problem, base, free, record, notes))
     if fitted is None:
         trivial = reference_fit(problem, base)
@@ -223,8 +238,8 @@ def _identify(problem: Problem, record: Record, model: str, overrides: dict[str,
     return result
 
 
-def _stages(chain: _Chain, key: str, base: Any, decl: AsDeclared | None, *, failed: bool, max_effects: int,
-            escalate: bool, discover_terms: bool) -> None:
+def _stages(chain: _Chain, key: str, base: SecondOrderParams, decl: AsDeclared | None, *, failed: bool,
+            max_effects: int, escalate: bool, discover_terms: bool) -> None:
     """The stages after the baseline, in order: effects, the declared model as is, physics, discovery."""
     problem, result, say, notes = chain.problem, chain.result, chain.say, chain.result.notes
     record = result.record
@@ -261,7 +276,7 @@ def _stages(chain: _Chain, key: str, base: Any, decl: AsDeclared | None, *, fail
             chain.run("discovery", lambda: _discovery(chain))
 
 
-def _changes(chain: _Chain, base: Any) -> None:
+def _changes(chain: _Chain, base: SecondOrderParams) -> None:
     """The final model refitted on windows of the record (:mod:`.changes`), said as a stage of its own.
 
     An effect that stood in for a change is taken out although the whole record's error rises: that error was the
@@ -308,7 +323,7 @@ def _balance(chain: _Chain, free: list[str]) -> None:
                       f"{trade(before, chain.reference, chain.reference)}")
 
 
-def _effects(chain: _Chain, base: Any, searched: int) -> tuple[str, str]:
+def _effects(chain: _Chain, base: SecondOrderParams, searched: int) -> tuple[str, str]:
     p, r = chain.problem, chain.result
     limit = chain.limit()
     cur = search(p, r, r.final, base, searched, chain.say, limit, chain.pool)

@@ -7,7 +7,7 @@ report (:mod:`ema_sim.identify.report`) reads; they hold no logic beyond naming 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -16,6 +16,7 @@ from ema_sim.identify.physical import PhysicalFit
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import Record
 from ema_sim.identify.stages import Failure, Outcome
+from ema_sim.jsontypes import JsonObject
 
 if TYPE_CHECKING:
     from ema_sim.identify.discovery import Discovery
@@ -39,7 +40,7 @@ class Changes(Protocol):
     def warnings(self) -> list[str]:
         """What the report warns of."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON."""
 
 @dataclass(frozen=True)
@@ -139,7 +140,7 @@ class Identification:
     """What the residual was regressed on beyond the vocabulary, and the loop closed with it."""
     discovered: str = ""
     """The discovered terms the final model carries, in words (empty: none kept)."""
-    artefacts: list[dict[str, Any]] = field(default_factory=list)
+    artefacts: list[dict[str, object]] = field(default_factory=list)
     """Samples the record's sensors or logger corrupted, taken out of the fit (spikes, stale readings)."""
     ambiguities: list[str] = field(default_factory=list)
     """Explanations the record cannot choose between, one line each."""

@@ -154,7 +154,7 @@ class Pool:
             return None
         return self._client
 
-    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any] | Any:
+    def submit(self, fn: Callable[..., object], *args: object) -> Future[Any] | Any:
         """``fn(*args)`` on a worker (a Dask future), or its result computed here when fits stay here.
 
         Parameters
@@ -185,7 +185,7 @@ class Pool:
         self._client = self._cluster = None
 
 
-def result(value: Any) -> Any:
+def result(value: object) -> Any:
     """The value of what :meth:`Pool.submit` returned (a future's result, or the value itself).
 
     Parameters

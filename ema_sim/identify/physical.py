@@ -43,14 +43,14 @@ import math
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from ema_sim.errors import DataError
 from ema_sim.identify.coarse import COARSE_RATE_HZ, coarse_problem, decimation, on_coarse
 from ema_sim.identify.declared import run_declared
 from ema_sim.identify.fit import block_covariance, correlation, finite
@@ -59,6 +59,8 @@ from ema_sim.identify.problem import Problem
 from ema_sim.models import model_parameters
 from ema_sim.models.arrays import FloatArray
 
+ParamValue = float | tuple[float, ...]
+"""A model parameter's value: a number, or a curve's segment values."""
 PHYSICAL_MODELS = ("hoad2", "hoad3")
 """The declared models whose physical parameters are fitted (discrete, so hundreds of runs are seconds;
 HOAC1's continuous solver is ~40 times slower per run and is left as declared)."""
@@ -126,9 +128,9 @@ class PhysicalFit:
     """The fitted physical parameters of a high-order model and what they leave."""
 
     model: str
-    params: dict[str, Any]
+    params: dict[str, ParamValue]
     """Fitted and held values, in the model's names and units (a curve is its tuple of segment values)."""
-    declared: dict[str, Any]
+    declared: dict[str, ParamValue]
     sigma: dict[str, float]
     """One-sigma uncertainty (a curve's is that of its first segment; a delay's never below half a model step)."""
     fitted: tuple[str, ...]
@@ -157,7 +159,7 @@ class PhysicalFit:
         return {k: float(v[0] if isinstance(v, tuple) else v) for k, v in self.params.items()}
 
 
-def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -> FloatArray:
+def run_model(problem: Problem, model: str, values: Mapping[str, object], seed: int) -> FloatArray:
     """``model`` at ``values`` on the problem's inputs, its command noise from ``seed``: ``(samples, 3)``.
 
     The command noise (stage 3) is inside the loop: it dithers the drive's dead band and friction, which a
@@ -184,8 +186,8 @@ def run_model(problem: Problem, model: str, values: dict[str, Any], seed: int) -
 class _Runs:
     """The model on the record at a parameter vector: delays absolute, the rest log-scaled from declared."""
 
-    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, Any],
-                 options: dict[str, Any] | None = None) -> None:
+    def __init__(self, problem: Problem, model: str, names: list[str], declared: dict[str, ParamValue],
+                 options: dict[str, object] | None = None) -> None:
         self.problem = problem
         self.options = options or {}
         """Model options every run takes beside the parameters (a coarse copy's integration rate)."""
@@ -198,9 +200,9 @@ class _Runs:
         self.step = np.where(self.delay, DELAY_DIFF_S, DIFF_STEP)
         self.scale = np.where(self.delay, DELAY_SCALE_S, 1.0)
 
-    def values(self, x: FloatArray) -> dict[str, Any]:
+    def values(self, x: FloatArray) -> dict[str, ParamValue]:
         """Model overrides at ``x``."""
-        out: dict[str, Any] = {}
+        out: dict[str, ParamValue] = {}
         for n, v in zip(self.names, x, strict=True):
             if n in DELAYS:
                 out[n] = max(float(v), 0.0)
@@ -253,7 +255,21 @@ class _Runs:
             return np.column_stack(list(pool.map(column, cols))) if cols else np.zeros((r0.size, 0))
 
 
-def _scaled(value: Any, log_scale: float) -> Any:
+def _first(value: ParamValue) -> float:
+    """A value as one number (a curve by its first segment)."""
+    return value[0] if isinstance(value, tuple) else value
+
+
+def _param_value(name: str, value: object) -> ParamValue:
+    """A declared parameter's value as a number or a curve's tuple (one clear error for anything else)."""
+    if isinstance(value, float) or (isinstance(value, tuple) and all(isinstance(q, float) for q in value)):
+        return value
+    if isinstance(value, int) or (isinstance(value, tuple) and all(isinstance(q, int | float) for q in value)):
+        return float(value) if isinstance(value, int) else tuple(float(q) for q in value)
+    raise DataError(f"{name}: declared value {value!r} is neither a number nor a curve")
+
+
+def _scaled(value: ParamValue, log_scale: float) -> ParamValue:
     """A declared value (or each segment of a curve) times ``exp(log_scale)``, the scale within :data:`LOG_LIMIT`."""
     k = math.exp(min(max(log_scale, -LOG_LIMIT), LOG_LIMIT))
     return tuple(float(q) * k for q in value) if isinstance(value, tuple) else float(value) * k
@@ -356,8 +372,8 @@ def _shifted(runs: _Runs, x: FloatArray, free: list[int], sign: float) -> FloatA
     return y
 
 
-def remote_start(problem: Problem, model: str, names: list[str], declared: dict[str, Any], x: FloatArray,
-                 free: list[int], seed: int, options: dict[str, Any] | None = None) -> tuple[FloatArray, int]:
+def remote_start(problem: Problem, model: str, names: list[str], declared: dict[str, ParamValue], x: FloatArray,
+                 free: list[int], seed: int, options: dict[str, object] | None = None) -> tuple[FloatArray, int]:
     """:func:`_fit_restarted` from ``x`` under the noise ``seed`` on a worker, and the runs it took.
 
     Parameters
@@ -420,11 +436,11 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     say = log or (lambda _msg: None)
     info = {p.name: p for p in model_parameters(model, problem.channel)}
     tied = [m for n in CANDIDATES for m in TIED.get(n, ())]
-    declared: dict[str, Any] = {n: info[n].default for n in (*DELAYS, *CANDIDATES, *tied) if n in info}
+    declared = {n: _param_value(n, info[n].default) for n in (*DELAYS, *CANDIDATES, *tied) if n in info}
     names = [n for n in (*DELAYS, *CANDIDATES) if n in info
              and (n in DELAYS or _positive(info[n].default))]
     runs = _Runs(problem, model, names, declared)
-    x = np.array([float(declared[n]) if n in DELAYS else 0.0 for n in names])
+    x = np.array([_first(declared[n]) if n in DELAYS else 0.0 for n in names])
     coarse = coarse_problem(problem) if beat is not None and current is not None else None
     screen = ""
     if coarse is not None and beat is not None and current is not None:
@@ -617,7 +633,7 @@ def _stopped(runs: _Runs, x: FloatArray, held: list[str], why: str, t0: float, s
                        time.perf_counter() - t0, stopped=why, screen=screen)
 
 
-def _positive(v: Any) -> bool:
+def _positive(v: object) -> bool:
     """A declared value a log coordinate can scale (every segment of a curve above zero)."""
     vals = v if isinstance(v, tuple) else (v,)
     return all(float(q) > 0.0 for q in vals)
@@ -674,7 +690,7 @@ def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArr
         v = values[name]
         if runs.delay[i]:  # absolute, never finer than the model's own step
             sigma[i] = max(float(sx[j]), 0.5 * DELAY_RESOLUTION_S) if math.isfinite(sx[j]) else math.inf
-            if sigma[i] > max(float(v), DELAY_RESOLUTION_S):
+            if sigma[i] > max(_first(v), DELAY_RESOLUTION_S):
                 vague.append(name)
             continue
         scale = float(v[0] if isinstance(v, tuple) else v)

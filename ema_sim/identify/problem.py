@@ -21,7 +21,6 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +28,7 @@ from scipy.signal import savgol_filter, welch
 
 from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.estimation.noise import NoiseFloor, output_noise
+from ema_sim.analysis.estimation.prepared import PreparedRecord
 from ema_sim.analysis.estimation.slew import Slew
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
@@ -120,8 +120,17 @@ class Problem:
     """The command was sampled from a running demand, not held (see the module docstring)."""
     output_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Output → (lower, upper) saturation of its sensor: every run's output is clipped there as the sensor
-    clips it (:func:`ema_sim.identify.record.sensor_range`)."""
+    clips it (:func:`ema_sim.analysis.estimation.prepared.sensor_range`)."""
+    prepared: PreparedRecord | None = None
+    """The record prepared once (:mod:`ema_sim.analysis.estimation.prepared`): its outputs, hinge moment, noise floors
+    and slew are taken from it, not read or measured again."""
     outputs: list[str] = field(init=False)
+    slew: Slew | None = field(init=False, default=None)
+    """The rate-limited moves' slope on the first output, when the record was prepared (measured here when not)."""
+    observed: dict[str, FloatArray] = field(init=False)
+    """Each output as logged, read once from the record."""
+    hinge_moment: FloatArray = field(init=False)
+    """The hinge moment, zeros when the record has none."""
     time_s: FloatArray = field(init=False)
     sigma_deg: dict[str, float] = field(init=False)
     simulations: int = field(init=False, default=0)
@@ -157,16 +166,22 @@ class Problem:
     (:mod:`ema_sim.identify.parallel`)."""
 
     def __post_init__(self) -> None:
-        d = self.data
-        self.outputs = d.outputs
+        d, p = self.data, self.prepared
+        if p is not None:
+            self.observed, self.hinge_moment, self.slew = dict(p.outputs), p.hinge_moment_inlb, p.slew
+            self.noise = p.noise if self.noise is None else self.noise
+        else:
+            self.observed = {o: d.column(o) for o in d.outputs}
+            self.hinge_moment = d.hinge_moment
+        self.outputs = list(self.observed)
         if not self.outputs:
             raise DataError(f"{d.source or 'data'}: needs a position_deg or surface_deg column to identify")
         self.time_s = d.time_s - d.time_s[0]
         if self.noise is None:
-            self.noise = {o: output_noise(d.column(o)) for o in self.outputs}
+            self.noise = {o: output_noise(y) for o, y in self.observed.items()}
         self.sigma_deg = {o: max(self.noise[o].sigma, MIN_NOISE_DEG) for o in self.outputs}
         if self.settle_s == SETTLE_S:
-            self.settle_s = start_left_out_s(self.time_s, d.command_deg, {o: d.column(o) for o in self.outputs},
+            self.settle_s = start_left_out_s(self.time_s, d.command_deg, self.observed,
                                               self.sigma_deg)
         if self.time_s[-1] < 2.0 * self.settle_s:
             raise DataError(f"{d.source or 'data'}: {self.time_s[-1]:.2f} s of data is too short to identify")
@@ -197,7 +212,7 @@ class Problem:
             self._kept.clear()
             self._inputs += 1
         cmd = self.data.command_deg
-        hm = self.data.hinge_moment
+        hm = self.hinge_moment
         if sampled:
             grid = np.arange(0.0, float(self.time_s[-1]), self.step_s)
             mid = np.minimum(grid + 0.5 * self.step_s, self.time_s[-1])
@@ -320,11 +335,6 @@ class Problem:
         """Median sample rate."""
         return float(1.0 / np.median(np.diff(self.time_s)))
 
-    @property
-    def hinge_moment(self) -> FloatArray:
-        """The measured hinge moment (zeros when the record has none)."""
-        return self.data.hinge_moment
-
     @cached_property
     def load_span_inlb(self) -> float:
         """Robust peak-to-peak of the hinge moment (1st to 99th percentile)."""
@@ -342,7 +352,7 @@ class Problem:
         """Fastest the measured output moves (99.9th percentile of a smoothed derivative)."""
         output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
         window = max(round(0.015 * self.sample_hz) | 1, 5)
-        rate = savgol_filter(self.data.column(output), window, 2, deriv=1, delta=1.0 / self.sample_hz)
+        rate = savgol_filter(self.observed[output], window, 2, deriv=1, delta=1.0 / self.sample_hz)
         return float(np.percentile(np.abs(rate), 99.9))
 
     @cached_property
@@ -363,13 +373,15 @@ class Problem:
         """Where the actuator's output settles at the end of the command's holds (:mod:`ema_sim.identify.settled`)."""
         output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
         count = None if self.noise is None else self.noise[output].resolution
-        return settled_error(self.time_s, self.data.command_deg, self.data.column(output), count)
+        return settled_error(self.time_s, self.data.command_deg, self.observed[output], count)
 
     @cached_property
     def measured_slew(self) -> Slew:
         """The record's rate-limited moves' slope (:mod:`ema_sim.analysis.estimation.slew`), on its first output."""
         output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
-        return slew.measure(self.time_s, self.data.command_deg, self.data.column(output), self.sigma_deg[output])
+        if self.slew is not None:
+            return self.slew
+        return slew.measure(self.time_s, self.data.command_deg, self.observed[output], self.sigma_deg[output])
 
     @cached_property
     def load_freq_hz(self) -> float:
@@ -489,14 +501,14 @@ class Problem:
         finally:
             self._tally.open = outer
 
-    def __getstate__(self) -> dict[str, Any]:
+    def __getstate__(self) -> dict[str, object]:
         """Pickled (to a Dask worker) without the kept runs: a worker keeps its own."""
         state = dict(self.__dict__)
         state["_kept"] = OrderedDict()
         del state["_lock"], state["_tally"]
         return state
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
+    def __setstate__(self, state: dict[str, object]) -> None:
         """Unpickled on a worker with a lock of its own."""
         self.__dict__.update(state)
         self._lock = threading.Lock()
@@ -537,7 +549,7 @@ class Problem:
         """
         parts = []
         for o in self.outputs:
-            part = (self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.scale(o)
+            part = (self.observed[o][self.mask] - sim[self.mask, OUTPUT_COLUMN[o]]) / self.scale(o)
             if o in self.weights:
                 part = part * self.weights[o]
             basis = self.projections.get(o)
@@ -554,7 +566,7 @@ class Problem:
         sim : numpy.ndarray
             One simulation's outputs (samples × position, surface, rate).
         """
-        return {o: self.data.column(o)[self.mask] - sim[self.mask, OUTPUT_COLUMN[o]] for o in self.outputs}
+        return {o: self.observed[o][self.mask] - sim[self.mask, OUTPUT_COLUMN[o]] for o in self.outputs}
 
     def max_rate_dps(self, sim: FloatArray) -> float:
         """Largest surface rate the model reaches on this record.

@@ -139,7 +139,7 @@ def step_candidates(problem: Problem, p: SecondOrderParams, current_sim: FloatAr
         Largest step tried (deg).
     """
     output = "position_deg" if "position_deg" in problem.outputs else "surface_deg"
-    residual = problem.data.column(output) - current_sim[:, OUTPUT_COLUMN[output]]
+    residual = problem.observed[output] - current_sim[:, OUTPUT_COLUMN[output]]
     v = _pre_quantizer(problem, p)
     b, a = _linear_response(p, 1.0 / problem.sample_hz, output)
     weight = problem.mask.astype(float)

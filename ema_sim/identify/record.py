@@ -30,46 +30,35 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ema_sim.analysis.estimation import prepared as shared
 from ema_sim.analysis.estimation.noise import NoiseFloor
-from ema_sim.analysis.pipeline import command_hold, measure_outputs
+from ema_sim.analysis.estimation.prepared import FloatArray, PreparedRecord, Travel, sensor_range, travel_limits
 from ema_sim.analysis.records import stamps as stamp_jitter
 from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
-from ema_sim.analysis.section2.base import Options
 from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.measured import MeasuredData
 
+__all__ = ["Record", "Travel", "check_identifiable", "prepare", "rest_warnings", "sensor_range", "travel_limits"]
+
 MAX_ABS = 1e6
 """No command or output in degrees or millimetres is this large: such a column is not what it is named."""
-RADIAN_MATCH = 0.1
-"""How close an output's span must come to π/180 (or 180/π) of the command's to be called a unit slip."""
-NOISELESS_DEG = 1e-6
-"""An output whose white noise is under this is a simulation's, read through no sensor."""
-STOP_S = 0.2
-"""The command must sit beyond the output's extreme this long, the output resting there, to show a stop."""
-
-
-@dataclass(frozen=True)
-class Travel:
-    """The travel limits the model is given, and where they come from."""
-
-    declared: tuple[float, float]
-    limits: tuple[float, float]
-    source: str
-    """``declared``, ``data`` or ``data, stop seen``."""
-    statement: str
-    outside: bool
-    """The record goes beyond the declared travel."""
 
 
 @dataclass
 class Record:
-    """A measured record prepared for identification, with what was found and done on the way."""
+    """A measured record prepared for identification, with what was found and done on the way.
 
+    Its facts are those of :attr:`prepared`, measured once there, held here as plain fields so that every stage
+    reads them without a call back into this module.
+    """
+
+    prepared: PreparedRecord
+    """The record's columns and the facts measured once on them (:mod:`ema_sim.analysis.estimation.prepared`)."""
     data: MeasuredData
     channel: ChannelConfig
     """The channel's configuration, its travel replaced when the data required it."""
@@ -82,171 +71,44 @@ class Record:
     stamp_scatter_s: float = 0.0
     """Rms of the logged stamps about the least-squares line through them (0 for uniform stamps)."""
     sensor_range: dict[str, tuple[float, float]] = field(default_factory=dict)
-    """Output → (lower, upper) saturation its log shows (:func:`sensor_range`); the model's output is clipped there."""
+    """Output → (lower, upper) saturation its log shows; the model's output is clipped there."""
     stamps: stamp_jitter.Stamps | None = None
     """The stamps' scatter about a uniform grid (:mod:`ema_sim.analysis.records.stamps`)."""
     generic: bool = False
     """No X-43A channel given or named by the record: a generic actuator, its travel measured from the record."""
-
-    @property
-    def unit(self) -> str:
-        """Unit of the command and outputs (``deg``, or a linear unit kept as logged)."""
-        return self.data.unit
-
-    @property
-    def command_sampled(self) -> bool:
-        """Whether the fit reconstructs the command between samples (sampled) or holds it."""
-        return self.hold.assumed_sampled
+    unit: str = "deg"
+    """Unit of the command and outputs (``deg``, or a linear unit kept as logged)."""
+    command_sampled: bool = False
+    """Whether the fit reconstructs the command between samples (sampled) or holds it."""
 
 
-def _extent(data: MeasuredData) -> tuple[float, float]:
-    values = [data.command_deg, *(data.column(o) for o in data.outputs)]
-    return float(min(np.min(v) for v in values)), float(max(np.max(v) for v in values))
-
-
-def _stop(data: MeasuredData, noise: dict[str, NoiseFloor], side: int) -> float | None:
-    """The output's extreme on one side (+1 upper, −1 lower) when the record shows a stop there."""
-    name = data.outputs[0]
-    y = side * data.column(name)
-    u = side * data.command_deg
-    nf = noise[name]
-    band = max(4.0 * nf.sigma, 2.0 * (nf.resolution or 0.0))
-    top = float(np.max(y))
-    pinned = (u > top + band) & (y >= top - band)
-    dt = float(np.median(np.diff(data.time_s)))
-    return side * top if pinned.sum() * dt >= STOP_S else None
-
-
-def sensor_range(data: MeasuredData, noise: dict[str, NoiseFloor]) -> dict[str, tuple[float, float]]:
-    """Each output's saturation, where its log shows one (module docstring); ±inf on a side that shows none.
-
-    A side saturates when the output reads exactly its extreme for at least :data:`STOP_S` in all, on most of
-    the samples within the noise of it, and the output is neither logged in counts nor free of noise (a
-    simulated output settles on exactly one value with no sensor in the way).
-
-    Parameters
-    ----------
-    data : MeasuredData
-        The record.
-    noise : dict
-        Each output's noise floor.
-
-    Returns
-    -------
-    dict
-        Output → (lower, upper) saturation; only the outputs that show one.
-    """
-    dt = float(np.median(np.diff(data.time_s)))
-    out: dict[str, tuple[float, float]] = {}
-    for name in data.outputs:
-        y, nf = data.column(name), noise[name]
-        if nf.resolution is not None or nf.white <= NOISELESS_DEG:
-            continue
-        sides = []
-        for extreme in (float(np.min(y)), float(np.max(y))):
-            at = int(np.count_nonzero(y == extreme))
-            near = int(np.count_nonzero(np.abs(y - extreme) <= 4.0 * nf.sigma))
-            sides.append(extreme if at * dt >= STOP_S and at >= 0.5 * near else None)
-        if sides[0] is not None or sides[1] is not None:
-            out[name] = (-np.inf if sides[0] is None else sides[0], np.inf if sides[1] is None else sides[1])
-    return out
-
-
-def _radians(data: MeasuredData) -> list[str]:
-    """A warning for each output whose span is the command's in radians (or the command's in degrees in radians).
-
-    An output whose span (5th to 95th percentile, so an overshoot or a spike does not count) is π/180 (or 180/π)
-    of the command's, within :data:`RADIAN_MATCH`, was logged in the other unit: no actuator's gain is off by
-    that much, and a fit would take it for a gain or a scale error.
-    """
-    if data.unit != "deg":
-        return []
-
-    def span(x: NDArray[np.float64]) -> float:
-        lo, hi = np.percentile(x, [5.0, 95.0])
-        return float(hi - lo)
-
-    span_u = span(data.command_deg)
-    out = []
-    for name in data.outputs:
-        ratio = span(data.column(name)) / span_u if span_u > 0.0 else 0.0
-        for factor, unit in ((math.pi / 180.0, "radians"), (180.0 / math.pi, "degrees, the command in radians")):
-            if abs(ratio / factor - 1.0) <= RADIAN_MATCH:
-                out.append(f"{name} spans {ratio:.4g} of the command's span, {factor:.4g} within {RADIAN_MATCH:.0%}: "
-                           f"it looks logged in {unit}, not as named; fit it in the command's unit")
-    return out
-
-
-def check_identifiable(data: MeasuredData) -> None:
+def check_identifiable(source: str, unit: str, command_deg: FloatArray, outputs: dict[str, FloatArray]) -> None:
     """One clear error for a record nothing can be identified from (its columns are legal but say nothing).
 
     Parameters
     ----------
-    data : MeasuredData
-        The record as read.
+    source : str
+        Where the record was read from (for the message).
+    unit : str
+        The record's unit.
+    command_deg : numpy.ndarray
+        The command.
+    outputs : dict
+        Output name → its samples.
     """
-    source = data.source or "data"
-    for name in ("command_deg", *data.outputs):
-        x = data.column(name)
+    source = source or "data"
+    for name, x in {"command_deg": command_deg, **outputs}.items():
         if float(np.max(np.abs(x))) > MAX_ABS:
-            raise DataError(f"{source}: {name} reaches {float(np.max(np.abs(x))):.3g} {data.unit}: no actuator moves "
+            raise DataError(f"{source}: {name} reaches {float(np.max(np.abs(x))):.3g} {unit}: no actuator moves "
                             f"beyond ±{MAX_ABS:g}; is the column mapped to the right signal and unit?")
-    span = float(np.ptp(data.command_deg))
+    span = float(np.ptp(command_deg))
     if span == 0.0:
-        raise DataError(f"{source}: the command never changes ({data.command_deg[0]:g} {data.unit} throughout): "
+        raise DataError(f"{source}: the command never changes ({command_deg[0]:g} {unit} throughout): "
                         "there is nothing to identify")
-    for name in data.outputs:
-        if float(np.ptp(data.column(name))) == 0.0:
-            raise DataError(f"{source}: {name} never changes while the command spans {span:.4g} {data.unit}: the "
+    for name, y in outputs.items():
+        if float(np.ptp(y)) == 0.0:
+            raise DataError(f"{source}: {name} never changes while the command spans {span:.4g} {unit}: the "
                             "actuator did not move, or the column is not its position")
-
-
-def travel_limits(data: MeasuredData, channel: ChannelConfig, noise: dict[str, NoiseFloor], *,
-                  stand_in: bool, saturation: dict[str, tuple[float, float]] | None = None) -> Travel:
-    """The model's travel on this record (see the module docstring).
-
-    Parameters
-    ----------
-    data : MeasuredData
-        The record.
-    channel : ChannelConfig
-        The declared channel (its ``position_min_deg`` / ``position_max_deg``).
-    noise : dict
-        Each output's noise floor (what "resting at the extreme" means).
-    stand_in : bool
-        The channel is a stand-in (none given or named by the record): its travel says nothing.
-    saturation : dict, optional
-        The outputs' :func:`sensor_range`, when already read (None: read here); a saturated side is no stop.
-
-    Returns
-    -------
-    Travel
-        The limits to simulate with and the sentence that says where they come from.
-    """
-    declared = (channel.position_min_deg, channel.position_max_deg)
-    lo, hi = _extent(data)
-    unit = "°" if data.unit == "deg" else f" {data.unit}"
-    outside = data.unit == "deg" and not stand_in and (lo < declared[0] or hi > declared[1])
-    if data.unit == "deg" and not stand_in and not outside:
-        return Travel(declared, declared, "declared", f"within {channel.channel}'s travel "
-                      f"{declared[0]:g}…{declared[1]:g}°", False)
-    span = hi - lo
-    saturation = sensor_range(data, noise) if saturation is None else saturation
-    clipped = saturation.get(data.outputs[0], (-np.inf, np.inf))
-    stops = tuple(None if math.isfinite(clipped[side > 0]) else _stop(data, noise, side) for side in (-1, +1))
-    limits = (stops[0] if stops[0] is not None else lo - span, stops[1] if stops[1] is not None else hi + span)
-    seen = [f"a stop at {s:.4g}{unit}" for s in stops if s is not None]
-    how = (f"limits at {', '.join(seen)} where the command stays beyond the output"
-           if seen else "no stop seen: limits opened past the data")
-    source = "data, stop seen" if seen else "data"
-    if outside:
-        text = (f"the record spans {lo:.4g}…{hi:.4g}°, outside {channel.channel}'s declared travel "
-                f"{declared[0]:g}…{declared[1]:g}°: travel taken from the data ({how}), not clipped")
-    elif data.unit != "deg":
-        text = f"positions in {data.unit} as logged: travel taken from the data ({how})"
-    else:
-        text = f"no channel named: travel taken from the data spanning {lo:.4g}…{hi:.4g}° ({how})"
-    return Travel(declared, limits, source, text, outside)
 
 
 def rest_warnings(name: str, nf: NoiseFloor, unit: str) -> list[str]:
@@ -294,30 +156,43 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     Record
         The prepared record, its notes and warnings.
     """
-    check_identifiable(data)
-    noise = measure_outputs(data)
-    hold = command_hold(data, noise, Options(command=command))
-    saturation = sensor_range(data, noise)
-    travel = travel_limits(data, channel, noise, stand_in=channel_note is not None, saturation=saturation)
+    check = partial(check_identifiable, data.source, data.unit)
+    return identification_record(shared.prepare(data, channel, channel_note=channel_note, command=command, check=check))
+
+
+def identification_record(p: PreparedRecord) -> Record:
+    """The record as identification takes it: the travel the data requires, and what was found, worded.
+
+    Parameters
+    ----------
+    p : PreparedRecord
+        The record prepared once (:func:`ema_sim.analysis.estimation.prepared.prepare`).
+
+    Returns
+    -------
+    Record
+        Its channel with the travel used, its notes and warnings.
+    """
+    channel, travel, hold, unit = p.channel, p.travel, p.hold, p.unit
     if travel.limits != travel.declared:
         channel = replace(channel, position_min_deg=travel.limits[0], position_max_deg=travel.limits[1])
     notes: list[str] = []
     warnings: list[str] = []
-    if channel_note:
-        notes.append(channel_note)
-    warnings += _radians(data)
-    if data.unit != "deg":
-        line = (f"positions in {data.unit} as logged (no --crank-arm-in): every *_deg figure of this report is "
-                f"in {data.unit}, every rate in {data.unit}/s")
+    if p.channel_note:
+        notes.append(p.channel_note)
+    warnings += p.radians
+    if unit != "deg":
+        line = (f"positions in {unit} as logged (no --crank-arm-in): every *_deg figure of this report is "
+                f"in {unit}, every rate in {unit}/s")
         notes.append(line)
         warnings.append(line)
-    for name, nf in noise.items():
+    for name, nf in p.noise.items():
         if nf.resolution is not None:
             notes.append(f"{name} logged in counts of {nf.resolution:g}: noise floor {nf.sigma:.3g} "
                          f"({'the counts' if nf.limited_by_resolution else 'white noise'} set it)")
-    for name, nf in noise.items():
-        notes += nf.findings(name, data.unit)
-        warnings += rest_warnings(name, nf, data.unit)
+    for name, nf in p.noise.items():
+        notes += nf.findings(name, unit)
+        warnings += rest_warnings(name, nf, unit)
     if hold.sampled is None and hold.source == "detected":
         notes.append(f"command: undecided ({hold.evidence}); ema analyze says the same: held and sampled both "
                      "fitted, each reported, the better taken (below)")
@@ -325,21 +200,20 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         notes.append(f"command {hold.statement}")
     if hold.leads:
         warnings.append(hold.leads)
-    stamps = stamp_jitter.measure(data.time_s)
-    scatter = stamps.scatter_s
+    stamps = p.stamps
     if stamps.jitters:
-        rate = stamp_jitter.output_rate(stamps, data.column(data.outputs[0]))
-        notes.append(f"{stamps.statement(rate, data.unit)}: fitted on the record's own stamps, nothing straightened "
+        rate = stamp_jitter.output_rate(stamps, p.outputs[p.first])
+        notes.append(f"{stamps.statement(rate, unit)}: fitted on the record's own stamps, nothing straightened "
                      "or resampled")
     notes.append(f"travel: {travel.statement}")
     if travel.outside:
         warnings.append(f"data outside the declared travel: {travel.statement}")
-    for name, (lo, hi) in saturation.items():
-        y = data.column(name)
-        sides = [f"{v:.4g}{'°' if data.unit == 'deg' else ' ' + data.unit} ({int(np.count_nonzero(y == v))} samples)"
+    for name, (lo, hi) in p.saturation.items():
+        y = p.outputs[name]
+        sides = [f"{v:.4g}{'°' if unit == 'deg' else ' ' + unit} ({int(np.count_nonzero(y == v))} samples)"
                  for v in (lo, hi) if math.isfinite(v)]
         notes.append(f"{name} reads exactly {' and '.join(sides)} again and again, with no noise on them: a sensor's "
                      "saturation or a clipped log, not a mechanical stop (which shows the noise); the model's "
                      f"{name} is clipped there as the sensor clips it")
-    return Record(data, channel, noise, hold, travel, notes, warnings, scatter, saturation, stamps,
-                  generic=channel_note is not None)
+    return Record(p, p.data, channel, p.noise, hold, travel, notes, warnings, stamps.scatter_s, p.saturation, stamps,
+                  generic=p.channel_note is not None, unit=unit, command_sampled=hold.assumed_sampled)

@@ -32,6 +32,7 @@ from ema_sim.identify.stages import guarded
 from ema_sim.identify.trust import assess, reference
 from ema_sim.io.contract import check
 from ema_sim.io.csv import write_csv
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create
 
 DIVERGED_DEG = 1.0e3
@@ -63,7 +64,7 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
-def _physical_final(result: Identification) -> dict[str, Any]:
+def _physical_final(result: Identification) -> JsonObject:
     """The final block of a high-order model whose physical parameters were fitted (model names and units)."""
     pf = result.physical
     assert pf is not None
@@ -95,7 +96,7 @@ def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
     return {
         "rms_deg": {o: _round(v) for o, v in rms.items()},
         "max_abs_deg": {o: _round(float(np.max(np.abs(e)))) for o, e in errors.items()},
-        "nrmse": {o: _round(rms[o] / float(np.std(problem.data.column(o)[problem.mask]))) for o in errors},
+        "nrmse": {o: _round(rms[o] / float(np.std(problem.observed[o][problem.mask]))) for o in errors},
         "rms_over_noise": {o: _round(rms[o] / problem.sigma_deg[o], 4) for o in errors},
         "whiteness": {o: whiteness(e, lags=50).as_dict() for o, e in errors.items()},
         "independence": {
@@ -157,17 +158,17 @@ def implementation_warning(result: Identification, errors: Mapping[str, float]) 
             f"report's figures are those of the same equations simulated accurately")
 
 
-def strict(value: Any) -> Any:
+def strict(value: object) -> object:
     """``value`` with every non-finite number made strict JSON: NaN → null, ±inf → "unbounded" in words.
 
     Parameters
     ----------
-    value : Any
+    value : object
         Nested dicts, lists, tuples and scalars (numpy's included).
 
     Returns
     -------
-    Any
+    object
         The same structure with plain Python scalars only.
     """
     if isinstance(value, Mapping):
@@ -182,7 +183,7 @@ def strict(value: Any) -> Any:
     return value
 
 
-def _slew(result: Identification) -> tuple[dict[str, Any], str | None]:
+def _slew(result: Identification) -> tuple[JsonObject, str | None]:
     """The slope measured on the record's rate-limited moves, and a warning when the model's rate limit disagrees."""
     measured = result.problem.measured_slew
     final = result.final
@@ -198,7 +199,7 @@ def _slew(result: Identification) -> tuple[dict[str, Any], str | None]:
         f"{100 * (fitted / measured.rate - 1):+.0f} %: the model's limit is not the slope the data show")
 
 
-def to_json(result: Identification, data_name: str) -> dict[str, Any]:
+def to_json(result: Identification, data_name: str) -> JsonObject:
     """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings).
 
     Parameters
@@ -329,7 +330,7 @@ def to_json(result: Identification, data_name: str) -> dict[str, Any]:
         if text:
             warnings.append(text)
     # every text in the record's unit (a stage's words in degrees said in mm on a linear rig)
-    out: dict[str, Any] = texts_in_unit(strict(report), report["unit"])
+    out: JsonObject = texts_in_unit(strict(report), report["unit"])
     check(out, identify_schema(), "ema identify")
     return out
 
@@ -344,7 +345,7 @@ def _determined(sigma: Mapping[str, float]) -> dict[str, float | None]:
     return {k: (None if v == 0.0 else v) for k, v in sigma.items()}
 
 
-def _discovered_terms(result: Identification) -> list[dict[str, Any]]:
+def _discovered_terms(result: Identification) -> list[JsonObject]:
     """The discovered terms the final model carries: each with where it acts, its coefficients and one-sigma."""
     disc = result.discovery
     kept = disc.kept if disc is not None and result.discovered else None
@@ -373,7 +374,7 @@ def _resolution(p: Problem, output: str) -> float | None:
     return None if q is None else _round(q)
 
 
-def write_json(report: dict[str, Any], path: str | Path) -> None:
+def write_json(report: JsonObject, path: str | Path) -> None:
     """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`).
 
     Parameters
@@ -403,7 +404,7 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
     p = result.problem
     cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
     for o in p.outputs:
-        meas = p.data.column(o)
+        meas = p.observed[o]
         col = OUTPUT_COLUMN[o]
         cols[f"{o}_measured"] = meas
         cols[f"{o}_baseline"] = result.baseline.sim[:, col]
@@ -459,16 +460,16 @@ def summary(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _num(v: Any, spec: str = ".4g") -> str:
+def _num(v: object, spec: str = ".4g") -> str:
     """A number in ``spec``, or a word (``unbounded``) or null as it stands."""
     return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
-def _fmt_params(params: dict[str, Any]) -> str:
+def _fmt_params(params: dict[str, object]) -> str:
     return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
 
 
-def _fmt_sigma(sigma: dict[str, Any]) -> str:
+def _fmt_sigma(sigma: JsonObject) -> str:
     """One-sigma values, a null one (an exact 0: :data:`ZERO_SIGMA`) said as not determined."""
     return ", ".join(f"{k} {'not determined' if v is None else _num(v)}" for k, v in sigma.items()) or "(none)"
 
@@ -485,7 +486,7 @@ def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
     return ", ".join(f"{k.split('_')[0]} {v:.4g}{u}" for k, v in rms.items())
 
 
-def write_report(result: Identification, report: dict[str, Any], directory: str | Path) -> Path:
+def write_report(result: Identification, report: JsonObject, directory: str | Path) -> Path:
     """Markdown report with plots of the residual before and after, under ``directory``.
 
     Parameters
@@ -516,7 +517,7 @@ def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.4 * rows), sharex=True)
     for k, o in enumerate(p.outputs):
         col = OUTPUT_COLUMN[o]
-        meas = p.data.column(o)[p.mask]
+        meas = p.observed[o][p.mask]
         s = p.sigma_deg[o]
         for ax, fit, label in ((axes[2 * k], result.baseline, f"before ({report['baseline']['model']})"),
                                (axes[2 * k + 1], result.final, "after")):
@@ -542,7 +543,7 @@ def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
     fig, axes = plt.subplots(len(p.outputs), 1, figsize=(11, 3.2 * len(p.outputs)), sharex=True, squeeze=False)
     for ax, o in zip(axes[:, 0], p.outputs, strict=True):
         col = OUTPUT_COLUMN[o]
-        ax.plot(p.time_s, p.data.column(o), lw=0.6, label="measured")
+        ax.plot(p.time_s, p.observed[o], lw=0.6, label="measured")
         ax.plot(p.time_s, result.final.sim[:, col], lw=0.6, ls="--", label="identified model")
         ax.set_ylabel(f"{o}")
         ax.legend(loc="upper right", fontsize=8)

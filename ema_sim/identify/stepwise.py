@@ -537,7 +537,7 @@ class _Round:
         now = allow(cur, self.problem.sigma_deg)
         return {o: min(v, max(now.get(o, v), (1.0 + STEP_RISE) * cur.get(o, v))) for o, v in self.limit.items()}
 
-    def attempt(self, cand: Candidate, pending: Any = None) -> None:
+    def attempt(self, cand: Candidate, pending: object = None) -> None:
         """Fit ``cand`` (or take its fit from ``pending``, a fit already submitted to the pool) and judge it."""
         if pending is None:
             new = _fit_candidate(self.problem, self.cur, cand, self.ctx)

@@ -52,7 +52,7 @@ def weigh(problem: Problem, stamps: Stamps, fit: Fit, unit: str = "deg") -> tupl
     """
     if not stamps.jitters:
         return False, ""
-    rates = {o: output_rate(stamps, problem.data.column(o)) for o in problem.outputs}
+    rates = {o: output_rate(stamps, problem.observed[o]) for o in problem.outputs}
     o = problem.outputs[0]
     sigma = problem.sigma_deg[o]
     rate = rates[o][problem.mask]

@@ -66,7 +66,7 @@ def reference(problem: Problem) -> dict[str, dict[str, float]]:
         ``rms_deg`` and ``max_abs_deg``, each output → value.
     """
     u = problem.data.command_deg[problem.mask]
-    err = {o: problem.data.column(o)[problem.mask] - u for o in problem.outputs}
+    err = {o: problem.observed[o][problem.mask] - u for o in problem.outputs}
     return {"rms_deg": {o: float(np.sqrt(np.mean(e**2))) for o, e in err.items()},
             "max_abs_deg": {o: float(np.max(np.abs(e))) for o, e in err.items()}}
 

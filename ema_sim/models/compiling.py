@@ -26,7 +26,7 @@ from numba.core.typing.context import BaseContext as TypingContext
 from numba.core.typing.templates import Signature
 from numba.extending import intrinsic
 
-_F = TypeVar("_F", bound=Callable[..., Any])
+_F = TypeVar("_F", bound=Callable[..., object])
 # Any below: a kernel of any signature; and llvmlite's IR builder and values, which llvmlite leaves untyped.
 
 
@@ -215,7 +215,7 @@ class ForwardCopiesCompiler(CompilerBase):
 
 
 def _expect_false(_typingctx: TypingContext, condition: types.Type
-                  ) -> tuple[Signature, Callable[[BaseContext, Any, Signature, list[Any]], Any]] | None:
+                  ) -> tuple[Signature, Callable[[BaseContext, Any, Signature, list[object]], Any]] | None:
     """Typing and code of :data:`unlikely`: the condition unchanged, with LLVM told it is almost always false.
 
     Parameters
@@ -233,7 +233,7 @@ def _expect_false(_typingctx: TypingContext, condition: types.Type
     if not isinstance(condition, types.Boolean):
         return None
 
-    def codegen(_context: BaseContext, builder: Any, _signature: Signature, args: list[Any]) -> Any:
+    def codegen(_context: BaseContext, builder: Any, _signature: Signature, args: list[object]) -> object:
         i1 = llvm_ir.IntType(1)
         expect = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
             builder.module, llvm_ir.FunctionType(i1, [i1, i1]), "llvm.expect.i1")

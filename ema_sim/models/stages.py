@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import numba as nb
 import numpy as np
@@ -36,7 +36,7 @@ FLAG_PWM_DEAD_BAND = 32
 FLAG_BRAKE = 64
 FLAG_STALL = 128
 
-_F = TypeVar("_F", bound=Callable[..., Any])  # Any: a kernel of any signature (the compiled one keeps it)
+_F = TypeVar("_F", bound=Callable[..., object])  # Any: a kernel of any signature (the compiled one keeps it)
 
 jit = nb.njit(cache=True, inline="always")
 """Compile an element for inlining into the kernels (it takes the caller's floating-point flags)."""

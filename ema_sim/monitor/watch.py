@@ -20,6 +20,7 @@ import numpy as np
 from ema_sim.errors import DataError
 from ema_sim.faults.kinds import FAULTS, FloatArray
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 from ema_sim.monitor.detect import Cusum, block_means, spread, threshold
 from ema_sim.monitor.isolate import Candidate, Estimate, Window, candidates, fit_candidate, isolate, signature
 from ema_sim.monitor.reference import Reference, predict
@@ -77,7 +78,7 @@ class Detection:
     ranking: list[Estimate] = field(default_factory=list)
     signature: dict[str, Any] = field(default_factory=dict)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Strict-JSON fields (no NaN or infinity: null)."""
         def num(x: float) -> float | None:
             return float(x) if math.isfinite(x) else None
@@ -118,7 +119,7 @@ class Verdict:
     cpu_s: float
     """Process time the detection pass took (reference run and CUSUM; isolation excluded)."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The ``--json`` document."""
         return {
             "reference": {"model": self.reference.model, "origin": self.reference.origin,

@@ -28,6 +28,7 @@ from ema_sim.errors import EmaError
 from ema_sim.faults import parse_fault
 from ema_sim.faults.kinds import FloatArray
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create, model_class
 from ema_sim.monitor import Options, from_name, learn, watch
 from ema_sim.signals import parse_load, parse_maneuver
@@ -186,7 +187,7 @@ def model_has_current(model: str) -> bool:
     return bool(model_class(model).has_current)
 
 
-def run_case(case: Case) -> dict[str, Any]:
+def run_case(case: Case) -> JsonObject:
     """Simulate, measure and watch one case; one table row.
 
     Parameters
@@ -200,7 +201,7 @@ def run_case(case: Case) -> dict[str, Any]:
     ref = from_name(case.model, ch) if case.reference == "nominal" else learn(data, ch, case.healthy_s)
     v = watch(data, ref, Options(healthy_s=case.healthy_s, false_alarms_per_hour=case.false_alarms_per_hour))
     cpu = time.process_time() - t0
-    row: dict[str, Any] = {**case.__dict__, "watched_s": v.watched_s, "detection_cpu_s": v.cpu_s, "cpu_s": cpu,
+    row: JsonObject = {**case.__dict__, "watched_s": v.watched_s, "detection_cpu_s": v.cpu_s, "cpu_s": cpu,
                            "detected": False, "false_alarm": False, "delay_s": math.nan, "isolated": "",
                            "isolated_by_fits": "",
                            "estimate": math.nan, "uncertainty": math.nan, "size_estimate": math.nan}
@@ -263,7 +264,7 @@ def _median(values: list[float]) -> float | None:
     return float(np.median(values)) if values else None
 
 
-def summarize(rows: Rows) -> dict[str, Any]:
+def summarize(rows: Rows) -> JsonObject:
     """Detection delay per kind, missed detections, false alarms per hour, confusion matrix, estimate errors.
 
     ``isolation_top1`` is the monitor's (the fits and the signature's vote); ``isolation_top1_fits_only`` what
@@ -276,7 +277,7 @@ def summarize(rows: Rows) -> dict[str, Any]:
     """
     faulty = [r for r in rows if r["kind"] != "none"]
     watched_h = sum(r["watched_s"] for r in rows) / 3600.0
-    per_kind: dict[str, Any] = {}
+    per_kind: dict[str, object] = {}
     for kind in sorted({r["kind"] for r in faulty}):
         g = [r for r in faulty if r["kind"] == kind]
         det = [r for r in g if r["detected"]]

@@ -30,6 +30,7 @@ from sensor_msgs.msg import JointState
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos, set_stamp, stamp_ns
 from ema_sim.config import scaling
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list
 from ema_sim.signals.plans import channel_list
@@ -153,7 +154,7 @@ class BridgeNode(SuiteNode):
                 self.next_stamp += skipped * self.frame_ns
         return self.next_wall - now
 
-    def summary(self) -> dict[str, Any]:  # noqa: D102
+    def summary(self) -> JsonObject:  # noqa: D102
         return {"frames": self.frames, "rejected": self.rejected}
 
 

@@ -33,6 +33,7 @@ from std_msgs.msg import String
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.errors import EmaError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes import lifetime, realtime
 from ema_sim.nodes.names import NameClaim
 from ema_sim.nodes.params import Declared, Spec, cli_overrides, names_list
@@ -67,7 +68,7 @@ def command_line(options: dict[str, Any]) -> list[str]:
     return own if options.get("use_global_arguments") is False else [*_process_argv, *own]
 
 
-def make_executor(context: Any = None) -> Any:
+def make_executor(context: object = None) -> Any:
     """The executor every node uses (see the module docstring for the measurement behind it).
 
     Parameters
@@ -191,7 +192,7 @@ class SuiteNode(Node):
     def close(self) -> None:
         """Called once when the node stops (signal, end of test or error)."""
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Printed as one JSON line when the node stops."""
         return {}
 
@@ -365,14 +366,14 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     stop: dict[str, int | None] = {"signal": None}
     rt = realtime.apply(args.__dict__.pop("rt_priority"))  # before rclpy starts its threads: they inherit it
 
-    def on_signal(signum: int, frame: Any) -> None:  # noqa: ARG001
+    def on_signal(signum: int, frame: object) -> None:  # noqa: ARG001
         stop["signal"] = signum
 
     rclpy.init(args=full, signal_handler_options=SignalHandlerOptions.NO)
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     nodes: list[SuiteNode] = []
-    bus: Any = None
+    bus: object = None
     status = 0
     try:
         nodes, bus = factory(args)
@@ -427,7 +428,7 @@ def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any])
         executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
 
 
-def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, Any]) -> None:
+def _loop_one(node: SuiteNode, executor: Any, stop: JsonObject) -> None:
     """:func:`_loop` for a node alone in its process (the ``processes`` layout): the same steps, fewer calls.
 
     The loop runs once per message taken (a channel node of the ``processes`` layout: 2 to 7 a frame, its
@@ -445,7 +446,7 @@ def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, Any]) -> None:
         spin_once(timeout_sec=MAX_SPIN_S if timeout > MAX_SPIN_S else (timeout if timeout > 0.0 else 0.0))
 
 
-def _finish(nodes: list[SuiteNode], bus: Any, rt: realtime.Setup) -> None:
+def _finish(nodes: list[SuiteNode], bus: object, rt: realtime.Setup) -> None:
     """Each node's last words and its summary line.
 
     ``cpu_s``: the process's CPU; ``cpu_run_s``: since the first frame of the test (start-up left out);
@@ -459,7 +460,7 @@ def _finish(nodes: list[SuiteNode], bus: Any, rt: realtime.Setup) -> None:
             node.close()
             name = node.get_name()
             cpu = time.process_time()
-            usage: dict[str, Any] = {"cpu_s": round(cpu, 3)}
+            usage: JsonObject = {"cpu_s": round(cpu, 3)}
             if marks:
                 usage["cpu_run_s"] = round(cpu - min(marks), 3)
             if name in busy:

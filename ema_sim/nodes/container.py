@@ -36,6 +36,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame, decode, encode
 from ema_msgs_py.ros import qos
 from ema_sim.errors import UnknownNameError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes import clock as clock_node
 from ema_sim.nodes import emac as emac_node
 from ema_sim.nodes import fmu as fmu_node
@@ -92,7 +93,7 @@ class BusyMeter:
         seconds, stack = self.seconds, self._stack
         seconds.setdefault(name, 0.0)
 
-        def timed(*args: Any) -> Any:
+        def timed(*args: object) -> object:
             now = clock()
             if stack:
                 seconds[stack[-1]] += now - self._mark
@@ -381,7 +382,7 @@ class ComposedPorts:
         self.node = node
         self.name = node.get_name()
 
-    def frame_publisher(self, topic: str) -> Any:
+    def frame_publisher(self, topic: str) -> object:
         """In-process delivery and, for the outside, one DDS publisher per topic.
 
         Parameters
@@ -523,7 +524,7 @@ class HostNode(SuiteNode):
         if unknown:
             raise UnknownNameError("node to compose", unknown[0], ["emac", "emac_<channel>", *CLASSES])
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """The process's CPU, and the thread's time on each composed node (the rest: DDS, executor, bus)."""
         composed = dict(self.meter.seconds) if self.meter is not None else {}
         return {"composed_busy_s": {k: round(v, 3) for k, v in composed.items()}}

@@ -86,7 +86,7 @@ class EmacNode(EmacFrames):
         A configuration error (logged at FATAL through the node's logger, and the node destroyed, first).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None,
+    def __init__(self, args: argparse.Namespace | None = None, ports: object = Ports, name: str | None = None,
                  **options: Any) -> None:
         """The node, built from its parameters (see the class docstring for the arguments)."""
         flag = channel_list(getattr(args, "channels", None) or []) or None
@@ -103,7 +103,7 @@ class EmacNode(EmacFrames):
             self.destroy_node()
             raise
 
-    def _build(self, flag: list[str] | None, argv: list[str], ports: Any) -> None:
+    def _build(self, flag: list[str] | None, argv: list[str], ports: object) -> None:
         """The node's state (:meth:`_build_state`), then its topics and run-time parameters."""
         self._build_state(flag, argv, ports)
         if self.configured:
@@ -142,14 +142,14 @@ class ManagedEmacNode(LifecycleNodeMixin, EmacNode):
         How per-frame messages travel (:class:`~ema_sim.nodes.ports.Ports`).
     name : str or None
         The node's name (None: from the channels, :func:`~ema_sim.nodes.emac_params.default_name`).
-    **options : Any
+    **options : object
         rclpy node options (``context``, ``cli_args``).
     """
 
     managed = True
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str | None = None,
-                 **options: Any) -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: object = Ports, name: str | None = None,
+                 **options: object) -> None:
         EmacNode.__init__(self, args, ports, name, **options)
         LifecycleNodeMixin.__init__(self)
         self._lifecycle_entities: list[Any] = []

@@ -159,7 +159,7 @@ class EmacState(SuiteNode):
         """A model and an EMAC channel for each hosted channel, from the declared channel parameters."""
         units: dict[str, EmacChannel] = {}
         single = len(self.channels) == 1
-        kwargs: dict[str, Any] = {"rate_hz": own["rate_hz"]} if own["rate_hz"] > 0.0 else {}
+        kwargs: dict[str, object] = {"rate_hz": own["rate_hz"]} if own["rate_hz"] > 0.0 else {}
         kwargs.update(model_overrides(self.model_name, element_names(own["disable"])))
         for ch in self.channels:
             values = self.params.declare(channel_specs(ch, "" if single else ch), f"{name}: {ch}")
@@ -175,13 +175,13 @@ class EmacState(SuiteNode):
     def _on_changes(self) -> None:
         """The parameters a running EMAC applies at its next frame (every other one is read-only)."""
         def on(name: str, apply: Callable[[Any], str]) -> None:
-            def applied(value: Any) -> str:
+            def applied(value: object) -> str:
                 self._diagnose_now = True  # the next frame's diagnostics show the change
                 return apply(value)
             self.params.on_change(name, applied)
 
         def setting(key: str, unit: str) -> None:
-            def apply(value: Any) -> str:
+            def apply(value: object) -> str:
                 old = getattr(self.settings, key)
                 self.settings = EmacSettings.from_parameters({**vars(self.settings), key: value}, "emac")
                 for u in self.units.values():
@@ -189,13 +189,13 @@ class EmacState(SuiteNode):
                 return f"emac.{key}: {old:g} → {value:g} {unit} (from the next frame)"
             on(f"emac.{key}", apply)
 
-        def failure(value: Any) -> str:
+        def failure(value: object) -> str:
             failure = parse_failure(str(value))
             for u in self.units.values():
                 u.set_failure(failure)
             return f"emac.failure: {failure.spec()} on {', '.join(self.channels)} (from the next frame)"
 
-        def power(value: Any) -> str:
+        def power(value: object) -> str:
             for u in self.units.values():
                 u.motor_power_on = bool(value)
             return f"emac.motor_power_on: {bool(value)} (brake {'released' if value else 'engaged'} at the next frame)"
@@ -204,7 +204,7 @@ class EmacState(SuiteNode):
             old, self.wait_s = self.wait_s, float(value)
             return f"emac.lockstep_wait_s: {old:g} → {self.wait_s:g} s"
 
-        def faults(value: Any) -> str:
+        def faults(value: object) -> str:
             specs = [u.set_faults(str(value)) for u in self.units.values()]
             text = "; ".join(f.spec() for f in specs[0]) if specs and specs[0] else "none"
             return f"emac.faults: {text} on {', '.join(self.channels)} (times from each channel's start)"

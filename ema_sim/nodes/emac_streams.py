@@ -32,14 +32,14 @@ class Stream:
         self.waiting_since: float | None = None
         self.gave_up = False
 
-    def push(self, stamp: int, item: Any) -> None:
+    def push(self, stamp: int, item: object) -> None:
         """A message arrived.
 
         Parameters
         ----------
         stamp : int
             Its stamp, ns.
-        item : Any
+        item : object
             What the node keeps of it.
         """
         self.queue.append((stamp, item))

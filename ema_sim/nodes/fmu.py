@@ -44,6 +44,7 @@ from ema_sim.ail.params import (
 from ema_sim.ail.vehicle import STATES
 from ema_sim.config import CHANNELS, ros_parameters
 from ema_sim.errors import EmaError, UnknownNameError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.params import Spec, config_specs, names_list, nested
@@ -287,7 +288,7 @@ class FmuNode(DriverNode):
         return not self.lockstep or max(self.inputs[FEEDBACK], default=-1) >= self.frames * self.frame_ns
 
     # ----------------------------------------------------------------- results
-    def summary(self) -> dict[str, Any]:  # noqa: D102
+    def summary(self) -> JsonObject:  # noqa: D102
         return {"bag": str(self.bag_path), "test": "ail", "frames_commanded": self.k, "frames": self.frames,
                 "completed": self.k >= self.frames, "waits_given_up": self.waits_given_up,
                 "late_publish": self.late_publish, **self.recorder.summary()}

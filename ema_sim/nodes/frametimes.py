@@ -19,10 +19,10 @@ import math
 import resource
 import time
 from collections.abc import Iterable, Sequence
-from typing import Any
 
 import numpy as np
 
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import percentile_ms
 from ema_sim.nodes.realtime import steal_s
 
@@ -115,7 +115,7 @@ class FrameTimes:
         if new and self.one_thread:
             self.thread_back[k] = thread_marks()
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Frames, latency percentiles and missed frames (with their causes where they can be told)."""
         n = self.count
         sent, back = self.sent[:n], self.back[:n]
@@ -124,7 +124,7 @@ class FrameTimes:
         late = np.zeros(n, bool)
         late[answered] = latency > self.period_s
         values = latency.tolist()
-        out: dict[str, Any] = {
+        out: JsonObject = {
             "frames": n, "answered": int(answered.sum()), "missed_frames": int((~answered).sum() + late.sum()),
             "latency_p50_ms": percentile_ms(values, 50), "latency_p99_ms": percentile_ms(values, 99),
             "latency_max_ms": percentile_ms(values, 100),

@@ -25,6 +25,7 @@ from ema_msgs_py import cdr
 from ema_msgs_py import contract as ct
 from ema_sim import __version__
 from ema_sim.config import load_channel
+from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.frametimes import FrameTimes
@@ -203,12 +204,12 @@ class ManeuverNode(DriverNode):
         return 0.01
 
     # ----------------------------------------------------------------- results
-    def latency(self) -> dict[str, Any]:
+    def latency(self) -> JsonObject:
         """Command-to-feedback latency per frame (all expected channels back), real time only."""
         return {**self.times.summary(), "late_publish": self.late_publish}
 
-    def summary(self) -> dict[str, Any]:  # noqa: D102
-        out: dict[str, Any] = {"bag": str(self.bag_path), "test": self.plan.test, "frames_commanded": self.k,
+    def summary(self) -> JsonObject:  # noqa: D102
+        out: JsonObject = {"bag": str(self.bag_path), "test": self.plan.test, "frames_commanded": self.k,
                                "completed": self.phase in ("finishing", "draining") or self.done,
                                **self.recorder.summary()}
         if not self.lockstep:

@@ -31,6 +31,7 @@ from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.contract import scaling_of
 from ema_msgs_py.ros import qos
 from ema_sim.config import load_channel
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import model_names
 from ema_sim.monitor import Options, from_name, from_report
 from ema_sim.monitor.online import OnlineMonitor
@@ -217,7 +218,7 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
                                                values=[KeyValue(key=k, value=v) for k, v in values.items()]))
         return msg
 
-    def summary(self) -> dict[str, Any]:  # noqa: D102
+    def summary(self) -> JsonObject:  # noqa: D102
         return {"frames": self.frames, "cpu_s": self.cpu_s,
                 "detections": {ch: [d.as_dict() for d in m.detections] for ch, m in self.monitors.items()
                                if m.detections}}

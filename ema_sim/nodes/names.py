@@ -29,6 +29,7 @@ from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
+from ema_sim.jsontypes import JsonObject
 
 
 class NameClaim:
@@ -42,9 +43,9 @@ class NameClaim:
 
     def __init__(self, node: Node) -> None:
         self.node = node
-        self.mine: dict[str, Any] = {"node": node.get_fully_qualified_name(), "pid": os.getpid(),
+        self.mine: JsonObject = {"node": node.get_fully_qualified_name(), "pid": os.getpid(),
                                      "host": socket.gethostname(), "since_ns": time.time_ns()}
-        self.taken_by: dict[str, Any] | None = None
+        self.taken_by: JsonObject | None = None
         """The older node of this name, once its claim came: this node must not run."""
         self.pub = node.create_publisher(String, ct.endpoint(ct.NODES), qos(ct.LATCHED_QOS))
         self.sub = node.create_subscription(String, ct.endpoint(ct.NODES), self._on_claim, qos(ct.LATCHED_QOS))

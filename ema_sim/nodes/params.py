@@ -28,6 +28,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ema_sim.errors import ConfigError, EmaError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.parameters import ParameterInfo
 
 ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_INTEGER_ARRAY,
@@ -44,7 +45,7 @@ class Spec:
     """One parameter: its default and its descriptor's content."""
 
     name: str
-    default: Any
+    default: object
     description: str
     unit: str = ""
     low: float | None = None
@@ -80,11 +81,11 @@ class Spec:
         return d
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: object) -> object:
     return list(value) if isinstance(value, tuple) else value
 
 
-def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
+def flatten(mapping: Mapping[str, object], prefix: str = "") -> Iterator[tuple[str, Any]]:
     """``{"a": {"b": 1}}`` → ``("a.b", 1)``: a nested parameter mapping as ROS parameter names.
 
     Parameters
@@ -107,7 +108,7 @@ def flatten(mapping: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str,
             yield name, value
 
 
-def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
+def nested(flat: Mapping[str, object]) -> dict[str, Any]:
     """``{"a.b": 1}`` → ``{"a": {"b": 1}}``.
 
     Parameters
@@ -130,7 +131,7 @@ def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, object]:
     """Deep merge, ``override`` winning.
 
     Parameters
@@ -154,7 +155,7 @@ def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, An
     return out
 
 
-def declared_spec(name: str, default: Any, info: ParameterInfo, where: str, *, read_only: bool = True) -> Spec:
+def declared_spec(name: str, default: object, info: ParameterInfo, where: str, *, read_only: bool = True) -> Spec:
     """The spec of a declared parameter: description, unit and range from its one declaration.
 
     Parameters
@@ -186,7 +187,7 @@ def declared_spec(name: str, default: Any, info: ParameterInfo, where: str, *, r
     return Spec(name, default, f"{info.description} ({where})", unit, low, high, read_only=read_only)
 
 
-def config_specs(values: Mapping[str, Any], origin: str, prefix: str = "",
+def config_specs(values: Mapping[str, object], origin: str, prefix: str = "",
                  known: Mapping[str, ParameterInfo] | None = None) -> list[Spec]:
     """Read-only specs of a parameter file's mapping: defaults its values, the rest from the declarations.
 
@@ -231,7 +232,7 @@ def names_list(text: str) -> list[str]:
     return [item.strip() for item in text.split(",") if item.strip()]
 
 
-def cli_overrides(args: Any, exclude: Iterable[str] = ()) -> list[Parameter]:
+def cli_overrides(args: object, exclude: Iterable[str] = ()) -> list[Parameter]:
     """The flags given on a node's command line as parameter overrides (they win over parameter files).
 
     A parser whose options default to ``argparse.SUPPRESS`` and whose ``dest`` is the parameter's name
@@ -297,7 +298,7 @@ class Declared:
                 is_empty = given is None and isinstance(spec.default, list | tuple) and not spec.default
             if given is not None:
                 overrides[spec.name] = _coerced(given, d.type)
-            value: Any = _plain(spec.default)
+            value: object = _plain(spec.default)
             if is_empty:  # an empty list tells no type: declare the type, then set the empty value
                 value = Parameter.Type(d.type)
                 empty.append(Parameter(spec.name, Parameter.Type(d.type), []))
@@ -319,7 +320,7 @@ class Declared:
             raise ConfigError(f"{node.get_name()} parameters ({origin}): {exc}") from None
         return {spec.name: self.value(spec.name) for spec in specs}
 
-    def value(self, name: str) -> Any:
+    def value(self, name: str) -> object:
         """A declared parameter's value (an empty list when a list parameter was never set).
 
         Parameters
@@ -329,7 +330,7 @@ class Declared:
 
         Returns
         -------
-        Any
+        object
             Its value.
         """
         p = self.node.get_parameter_or(name, Parameter(name, value=None))
@@ -338,7 +339,7 @@ class Declared:
         value = p.value
         return list(value) if isinstance(value, list | tuple) or hasattr(value, "tolist") else value
 
-    def prefixed(self, prefix: str) -> dict[str, Any]:
+    def prefixed(self, prefix: str) -> JsonObject:
         """The declared values under ``prefix.``, nested, prefix stripped.
 
         Parameters
@@ -509,9 +510,9 @@ def file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise ConfigError(f"parameter file {path}: cannot read ({exc})") from None
-    out: list[tuple[str, dict[str, Any]]] = []
+    out: list[tuple[str, JsonObject]] = []
 
-    def walk(mapping: Mapping[str, Any], prefix: str) -> None:
+    def walk(mapping: Mapping[str, object], prefix: str) -> None:
         for key, value in mapping.items():
             if not isinstance(value, Mapping):
                 continue

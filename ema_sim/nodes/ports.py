@@ -120,7 +120,7 @@ class Ports:
     def _subscribe(self, topic: str, callback: Callable[[bytes], None], at_frame: bool) -> None:
         """A raw subscription, dispatched by the executor or taken at the frame (when the node can hide it)."""
         sub = self.node.create_subscription(JointState, ct.endpoint(topic), callback, qos(ct.FRAME_QOS), raw=True)
-        hidden: set[Any] | None = getattr(self.node, "at_frame", None)  # a SuiteNode's: what its executor skips
+        hidden: set[object] | None = getattr(self.node, "at_frame", None)  # a SuiteNode's: what its executor skips
         if at_frame and hidden is not None:
             hidden.add(sub)
             self._at_frame.append((sub, callback))
@@ -260,7 +260,7 @@ class Ports:
         return [self.node]
 
 
-def own_time_source(node: Node) -> Any:
+def own_time_source(node: Node) -> object:
     """Under ``use_sim_time`` rclpy's TimeSource takes ``/clock`` itself; take that over, return the clock.
 
     The suite's nodes already take every ``/clock`` frame (or get it in-process): their ROS clock is

@@ -26,6 +26,8 @@ import struct
 from dataclasses import dataclass, field
 from typing import Any
 
+from ema_sim.jsontypes import JsonObject
+
 MCL_CURRENT = 1
 MCL_FUTURE = 2
 CPU_LATENCY = "/dev/cpu_dma_latency"
@@ -42,7 +44,7 @@ class Setup:
     """The held PM QoS CPU latency request (None: none held)."""
     notes: list[str] = field(default_factory=list)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """For the node's summary line."""
         out: dict[str, Any] = {"sched_fifo": self.priority, "memory_locked": self.memory_locked,
                                "cpu_latency_us": self.cpu_latency_us}

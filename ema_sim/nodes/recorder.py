@@ -30,6 +30,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py import typestore as ts
 from ema_msgs_py.ros import message_class, qos
 from ema_sim.io.bag import BagWriter
+from ema_sim.jsontypes import JsonObject
 
 NS = 1_000_000_000
 
@@ -216,6 +217,6 @@ class Recorder:
                 profile.reliability = ReliabilityPolicy.BEST_EFFORT
             self._subscribe(topic, types[0], profile, resolved)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Messages recorded per topic."""
         return {"messages": dict(self.writer.counts), "errors": self.errors}

@@ -209,7 +209,7 @@ class TestEnvNode(SuiteNode):
                     f"{now}")
         return apply
 
-    def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> Any:
+    def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> object:
         path = table.get(channel)
         if path is None:
             stream = ct.CHANNELS.index(channel) if channel in ct.CHANNELS else len(table) + len(ct.CHANNELS)

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +26,7 @@ from ema_sim.analysis.estimation.harmonics import Harmonic, cycle_spectra
 from ema_sim.analysis.estimation.second_order_fit import NAMES, fit_frequency_response
 from ema_sim.analysis.estimation.trend import Trend, trend
 from ema_sim.analysis.records.periodic import Periodicity
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 MIN_CYCLES = 4
@@ -84,9 +84,9 @@ class CycleChanges:
         """Bandwidth or delay changes over the test beyond its uncertainty."""
         return any(t is not None and t.changed for t in (self.bandwidth, self.delay))
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON (the delay in s, the bandwidth in Hz)."""
-        def one(t: Trend | None) -> dict[str, Any] | None:
+        def one(t: Trend | None) -> JsonObject | None:
             if t is None:
                 return None
             return {"trend": t.kind, "values": list(t.values), "sigma": [s if math.isfinite(s) else None
@@ -96,7 +96,7 @@ class CycleChanges:
                     "slope_per_s": t.slope_per_s if math.isfinite(t.slope_per_s) else None,
                     "slope_sigma_per_s": t.slope_sigma if math.isfinite(t.slope_sigma) else None}
         return {"changed": self.changed, "cycle_mid_s": list(self.times_s), "bandwidth_hz": one(self.bandwidth),
-                "delay_s": one(self.delay), "skipped": self.skipped or None, "statements": self.statements}
+                "delay_s": one(self.delay), "skipped": self.skipped or None, "statements": [*self.statements]}
 
 
 def _statement(what: str, t: Trend, scale: float, unit: str, digits: str) -> str:

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation import causal, spectra
 from ema_sim.analysis.estimation.noise import noise_floor
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -372,7 +373,7 @@ def at_frequencies(fr: FrequencyResponse, freqs_hz: list[float]) -> list[dict[st
         One row per frequency: gain, phase, coherence, quality (``not_determined`` where the coherence is under
         :data:`COHERENCE_GOOD`) and note.
     """
-    out: list[dict[str, Any]] = []
+    out: list[JsonObject] = []
     f = fr.freq_hz
     gain, phase = fr.gain_db, fr.phase_deg
     for at in freqs_hz:

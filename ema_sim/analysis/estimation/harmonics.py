@@ -25,7 +25,6 @@ period none at 5, 15, ... This module reads the response there and nowhere else:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +33,7 @@ from ema_sim.analysis.estimation import causal
 from ema_sim.analysis.estimation.frf import COHERENCE_GOOD, zoh_factor
 from ema_sim.analysis.estimation.quality import Measurement, Quality
 from ema_sim.analysis.records.periodic import EXCITED, Periodicity
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -82,7 +82,7 @@ class Harmonic:
     quality: Quality
     note: str = ""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

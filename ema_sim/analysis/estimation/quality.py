@@ -16,7 +16,9 @@ was not measured.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
+
+from ema_sim.jsontypes import JsonObject
 
 Quality = Literal["ok", "on_bound", "not_determined", "saturated", "non_causal"]
 QUALITY_WORDS: dict[str, str] = {"ok": "ok", "on_bound": "on a bound", "not_determined": "not determined",
@@ -61,7 +63,7 @@ class Measurement:
     quality: Quality
     statement: str
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

@@ -41,6 +41,7 @@ from ema_sim.analysis.estimation.frf import COHERENCE_FIT, FrequencyResponse
 from ema_sim.analysis.estimation.noise import WhitenessTest, whiteness
 from ema_sim.analysis.estimation.quality import Quality
 from ema_sim.analysis.estimation.uncertainty import coloured_covariance
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -189,7 +190,7 @@ class SecondOrderFit:
         """The actuator's own delay: the fitted one, plus half a sample when the command was sampled."""
         return self.delay_s.value + (0.5 * self.sample_s if self.command_sampled else 0.0)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

@@ -22,12 +22,12 @@ the mean of each figure with its uncertainty, and "unsettled" when any of them d
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.analysis.estimation.quality import Measurement
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -103,7 +103,7 @@ class Settling:
         return (f"unsettled: {own} {self.error_left:+.3g} from the command at the next edge "
                 f"({1e3 * self.hold_s:.0f} ms after the command arrived; band ±{self.band:.3g})")
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -277,7 +277,7 @@ class Transitions:
                        f"not measured: unsettled at {n - len(times)} of {n} changes: {own}{err:+.3g}{se} from the "
                        f"command at the next change (band ±{band:.3g})")
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

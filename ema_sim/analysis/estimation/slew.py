@@ -52,10 +52,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 MOVING = 0.1
@@ -166,7 +167,7 @@ class Slew:
     source: str = "moves"
     """``moves`` (straight rest-to-rest moves the command outran) or ``plateau`` (the speed plateau alone)."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -176,7 +177,7 @@ class Slew:
         """
         return {"rate": self.rate, "positive": self.up, "negative": self.down, "sigma": self.sigma,
                 "rate_limited_moves": self.moves, "moves": self.seen, "source": self.source,
-                "plateau": None if self.plateau is None else self.plateau.as_dict()}
+                "plateau": None if self.plateau is None else {**self.plateau.as_dict()}}
 
 
 def _runs(moving: NDArray[np.bool_], sign: FloatArray) -> list[tuple[int, int]]:

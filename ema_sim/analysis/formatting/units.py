@@ -63,12 +63,12 @@ def in_unit(text: str, unit: str) -> str:
     return _WORD.sub(word, _DEGREE.sub(degree, text))
 
 
-def texts_in_unit(value: Any, unit: str) -> Any:
+def texts_in_unit(value: object, unit: str) -> Any:
     """Every string in a nested JSON-ready structure :func:`in_unit` (keys, which name fields, untouched).
 
     Parameters
     ----------
-    value : Any
+    value : object
         Dicts, lists and scalars.
     unit : str
         The record's unit.

@@ -31,12 +31,12 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.analysis.records.series import hold_tolerance, holds
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -115,7 +115,7 @@ class Causality:
         return (f"the output lags the command by {1e3 * self.lag_held_s:+.2f} ± {se:.2g} ms taken as held, "
                 f"{1e3 * self.lag_sampled_s:+.2f} ± {se:.2g} ms taken as sampled ({self.count} {what})")
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

@@ -44,7 +44,7 @@ delay is that figure plus half a sample, ± a sample/√12.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from ema_sim.analysis.records import causality
 from ema_sim.analysis.records.causality import Causality
 from ema_sim.analysis.records.series import hold_tolerance
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -135,7 +136,7 @@ class CommandHold:
         word = "sampled (not held)" if self.sampled else "held"
         return f"{word}: {self.evidence}"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

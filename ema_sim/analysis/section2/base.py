@@ -31,6 +31,7 @@ from ema_sim.analysis.records.command_hold import CommandHold, HoldMode
 from ema_sim.analysis.section2.segments import Recognition, Segment
 from ema_sim.config import GENERIC, ChannelConfig
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject
 
 if TYPE_CHECKING:
     from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
@@ -41,7 +42,7 @@ DEFAULT_AT_HZ: tuple[float, ...] = (1.0, 2.0, 5.0, 7.5, 10.0)
 class Result(Protocol):
     """What every test's result offers: its plain values."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The result as JSON-ready values."""
         ...
 
@@ -264,12 +265,12 @@ class Section2Test(ABC, Generic[R]):
     absent: ClassVar[str] = ""
     """Why it was not computed when no segment of its kinds was recognised."""
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
+    def __init_subclass__(cls, **kwargs: object) -> None:
         """Give each method a test overrides without a docstring the interface's own.
 
         Parameters
         ----------
-        **kwargs : Any
+        **kwargs : object
             Passed on to :class:`object`.
         """
         super().__init_subclass__(**kwargs)
@@ -293,7 +294,7 @@ class Section2Test(ABC, Generic[R]):
             The results, in time order.
         """
 
-    def result_json(self, r: R) -> dict[str, Any]:
+    def result_json(self, r: R) -> JsonObject:
         """One result as plain values: its own ``as_dict()``.
 
         Parameters
@@ -308,7 +309,7 @@ class Section2Test(ABC, Generic[R]):
         """
         return r.as_dict()
 
-    def as_json(self, results: list[R], ra: RecordAnalysis) -> dict[str, Any]:  # noqa: ARG002 - the default
+    def as_json(self, results: list[R], ra: RecordAnalysis) -> JsonObject:  # noqa: ARG002 - the default
         """The test's keys in the JSON record.
 
         Parameters

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,6 +36,7 @@ from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, MoveRun, Reading
 from ema_sim.calibration import CommandError, Cubic, command_error, four_corner_bounds
 from ema_sim.io.measured import MeasuredData
+from ema_sim.jsontypes import JsonObject, JsonValue
 
 FloatArray = NDArray[np.float64]
 
@@ -95,7 +95,7 @@ class Calibration:
         """The calibration's command error: from the curves when they exist, else the direct fit."""
         return self.curve_error or self.direct
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -103,11 +103,11 @@ class Calibration:
         dict
             Plain values for JSON.
         """
-        def curve(c: Cubic | None) -> list[float] | None:
-            return c.coefficients() if c else None
+        def curve(c: Cubic | None) -> list[JsonValue] | None:
+            return [*c.coefficients()] if c else None
 
         return {
-            "levels": len(self.nominal_levels), "settled": self.levels,
+            "levels": len(self.nominal_levels), "settled": {k: [*v] for k, v in self.levels.items()},
             "command_curve_v_per_deg": curve(self.command_curve), "command_curve_rms_v": self.command_curve_rms_v,
             "feedback_curve_deg_per_v": curve(self.feedback_curve),
             "feedback_curve_rms_deg": self.feedback_curve_rms_deg, "feedback_curve_against": self.feedback_reference,
@@ -119,7 +119,7 @@ class Calibration:
             "kb": self.error.kb, "offset_deg": self.error.offset_deg,
             "four_corner_bounds": {"nominal_deg": self.nominal_deg.tolist(), "lower_deg": self.bounds_deg[0].tolist(),
                                    "upper_deg": self.bounds_deg[1].tolist()},
-            "notes": self.notes,
+            "notes": [*self.notes],
         }
 
     @property
@@ -189,7 +189,7 @@ def fit_calibration(data: MeasuredData, holds: list[Hold]) -> Calibration:
                        curve_err, nominal, bounds, notes)
 
 
-def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> dict[str, Any]:
+def pooled_bounds(errors: list[CommandError], lo_deg: float, hi_deg: float) -> JsonObject:
     """Four-corner bounds over several calibrations (figure 27: three calibrations of vehicle 1).
 
     Parameters

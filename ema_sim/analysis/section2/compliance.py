@@ -34,6 +34,7 @@ from ema_sim.analysis.formatting.markdown import bullets, image, num, table
 from ema_sim.analysis.records.series import Hold, settled
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import HeldStretch, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -84,7 +85,7 @@ class ThreeSegment:
         """
         return [1.0 / (s * np.pi / 180.0 * crank_arm_in) if s > 0 else None for s in self.slopes_deg_per_lb]
 
-    def as_dict(self, crank_arm_in: float | None = None) -> dict[str, Any]:
+    def as_dict(self, crank_arm_in: float | None = None) -> JsonObject:
         """Plain values for JSON.
 
         Parameters
@@ -199,7 +200,7 @@ class ComplianceCurve:
     lower: ThreeSegment | None
     crank_arm_in: float
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -307,7 +308,7 @@ class ComplianceResult:
             return None
         return 1.0 - self.lvdt.span_deg / self.total.span_deg
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -319,7 +320,7 @@ class ComplianceResult:
             "command_deg": self.command_deg, "crank_arm_in": self.crank_arm_in,
             "lvdt": self.lvdt.as_dict() if self.lvdt else None, "total": self.total.as_dict() if self.total else None,
             "share_outside_servo_loop": self.share_outside, "share_outside_servo_loop_span": self.share_outside_span,
-            "free_play_deg": self.total.gap_deg if self.total else None, "notes": self.notes,
+            "free_play_deg": self.total.gap_deg if self.total else None, "notes": [*self.notes],
         }
 
 

@@ -40,7 +40,6 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,6 +55,7 @@ from ema_sim.analysis.section2.hysteresis import MIN_LOAD_SWING_INLB
 from ema_sim.analysis.section2.segments import SINE_R2, HeldStretch, MovingStretch, Reading
 from ema_sim.analysis.section2.threshold import STATIC
 from ema_sim.config import ChannelConfig
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -176,7 +176,7 @@ class CrosstalkResult:
             return "not judged"
         return "below" if self.below_threshold else "ABOVE"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -187,12 +187,12 @@ class CrosstalkResult:
         v = self.volts_per_deg
         return {
             "quality": self.quality, "quality_note": self.quality_note, "verdict": self.verdict,
-            "input_independence": self.independence.as_dict() if self.independence else None,
+            "input_independence": {**self.independence.as_dict()} if self.independence else None,
             "output": self.output, "test": self.kind, "peak_to_peak_deg": self.peak_to_peak_deg,
             "peak_to_peak_v": self.peak_to_peak_deg * v, "rms_deg": self.rms_deg, "rms_v": self.rms_deg * v,
             "excess_rms_over_sensor_noise_deg": self.excess_rms_deg, "sensor_noise_deg": self.sensor_noise_deg,
             "dominant_hz": self.dominant_hz, "threshold_deg": self.threshold_deg,
-            "threshold_source": self.threshold_source, "below_threshold": self.below_threshold, "notes": self.notes,
+            "threshold_source": self.threshold_source, "below_threshold": self.below_threshold, "notes": [*self.notes],
             "moving_channels": list(self.sources), "moving_channels_source": self.sources_note,
         }
 

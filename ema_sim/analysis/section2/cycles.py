@@ -26,7 +26,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,6 +49,7 @@ from ema_sim.analysis.formatting.markdown import bullets, image, num, quality, t
 from ema_sim.analysis.records.periodic import Periodicity, dwell_runs
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import Segment
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -146,7 +146,7 @@ class CycleResult:
             return f"coherence under {COHERENCE_GOOD} at every harmonic"
         return ""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -166,7 +166,7 @@ class CycleResult:
             "transitions": [tr.as_dict() for tr in self.transitions], "lag_s": self.lag.as_dict(),
             "repeatability_rms": self.repeatability, "output_peak_to_peak": self.output_span,
             "slope": self.slope.as_dict(), "quality": self.quality, "quality_note": self.quality_note,
-            "notes": self.notes, "changes": self.changes.as_dict(),
+            "notes": [*self.notes], "changes": self.changes.as_dict(),
         }
 
 

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +35,7 @@ from ema_sim.analysis.estimation.sine_fit import fit_sine
 from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.formatting.markdown import image
 from ema_sim.analysis.section2.base import Quality, RecordAnalysis, Section2Test
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -104,7 +104,7 @@ class DitherResult:
         """``ok``: a limit cycle is found, or none is, on evidence the record supports."""
         return "ok"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

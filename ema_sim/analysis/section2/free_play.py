@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +29,7 @@ from ema_sim.analysis.records.series import Edge, Hold, settled
 from ema_sim.analysis.section2.base import Quality, RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.compliance import TEST as COMPLIANCE
 from ema_sim.analysis.section2.segments import HeldStretch, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -123,7 +123,7 @@ class FreePlayResult:
             return ""
         return f"below the surface sensor's count {self.resolution_deg:g}°"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -133,8 +133,8 @@ class FreePlayResult:
         """
         return {"method": self.method, "width_deg": self.width_deg, "spread_deg": self.spread_deg,
                 "compliance_removed_deg_per_kinlb": self.compliance_deg_per_kinlb,
-                "compliance_source": self.compliance_source, "reversals": [r.as_dict() for r in self.reversals],
-                "quality": self.quality, "quality_note": self.quality_note, "notes": self.notes}
+                "compliance_source": self.compliance_source, "reversals": [{**r.as_dict()} for r in self.reversals],
+                "quality": self.quality, "quality_note": self.quality_note, "notes": [*self.notes]}
 
     def with_compliance(self, deg_per_kinlb: float, source: str) -> FreePlayResult:
         """The same reversals with the elastic deflection of ``deg_per_kinlb`` taken out.

@@ -69,6 +69,7 @@ from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import MovingStretch, Reading, Segment
 from ema_sim.analysis.section2.steps import TEST as STEPS
 from ema_sim.analysis.section2.steps import slew_rates
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create
 
 FloatArray = NDArray[np.float64]
@@ -117,7 +118,7 @@ class SlewCheck:
     third_harmonic_excess: float | None
     """Mean output-minus-command third harmonic (over fundamental) on the ceiling."""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -408,7 +409,7 @@ class FrequencyResult:
         own = worst(self.bandwidth_quality, self.fit.quality if self.fit else "not_determined")
         return worst(own, "non_causal") if self.leads else own
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +31,7 @@ from ema_sim.analysis.formatting.markdown import bullets, image
 from ema_sim.analysis.records.series import moving_average
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import HeldStretch, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -146,7 +146,7 @@ class HysteresisResult:
         """``A/(π·Pk²)`` from the mean area and peak."""
         return hysteretic_damping_constant(abs(self.area_inlb), self.peak_in)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -158,12 +158,12 @@ class HysteresisResult:
         return {
             "output": self.output, "load_freq_hz": self.freq_hz, "load_omega_rad_s": 2 * np.pi * self.freq_hz,
             "load_amplitude_inlb": self.load_amplitude_inlb, "force_amplitude_lb": self.load_amplitude_inlb
-            / self.crank_arm_in, "crank_arm_in": self.crank_arm_in, "cycles": [c.as_dict() for c in self.cycles],
+            / self.crank_arm_in, "crank_arm_in": self.crank_arm_in, "cycles": [{**c.as_dict()} for c in self.cycles],
             "area_inlb": self.area_inlb, "peak_deflection_in": self.peak_in, "h_lb_per_in": self.h_lb_per_in,
             "h_spread_lb_per_in": float(np.std(hs)) if len(hs) > 1 else None,
             "formula": "h = A / (pi * Pk^2); A = loop area of force (hinge moment / crank arm, lb) against actuator "
                        "deflection (surface rad x crank arm, in), in in*lb; Pk = half peak-to-peak deflection, in",
-            "notes": self.notes,
+            "notes": [*self.notes],
         }
 
 

@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from itertools import pairwise
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,6 +41,7 @@ from ema_sim.analysis.formatting.markdown import bullets, image, num, quality, t
 from ema_sim.analysis.records.series import Hold, settled
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import Move, MoveRun, MovingStretch, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -255,7 +255,7 @@ class MoveMetrics:
     """After the command reached its new level."""
     saturated: bool
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -319,7 +319,7 @@ class ProfileResult:
         lags = [m.lag_s for m in self.moves if m.lag_s is not None and not m.saturated]
         return float(np.median(lags)) if lags else None
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -329,7 +329,7 @@ class ProfileResult:
         """
         return {"output": self.output, "moves": [m.as_dict() for m in self.moves], "lag_s": self.lag_s,
                 "second_order_fit": self.fit.as_dict() if self.fit else None, "quality": self.quality,
-                "quality_note": self.quality_note, "notes": self.notes}
+                "quality_note": self.quality_note, "notes": [*self.notes]}
 
 
 def move_metrics(t: FloatArray, u: FloatArray, y: FloatArray, move: Move, noise: float,

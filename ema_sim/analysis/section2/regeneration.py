@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +20,7 @@ from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.formatting.markdown import image
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -59,7 +59,7 @@ class RegenerationResult:
         """Limit minus peak (negative: over the limit)."""
         return self.limit_v - self.peak_v
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -133,7 +133,7 @@ class Regeneration(Section2Test[RegenerationResult]):
 
 
     @override
-    def as_json(self, results: list[RegenerationResult], ra: RecordAnalysis) -> dict[str, Any]:
+    def as_json(self, results: list[RegenerationResult], ra: RecordAnalysis) -> JsonObject:
         return {self.key: results[0].as_dict() if results else None}
 
     @override

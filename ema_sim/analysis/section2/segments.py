@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import pairwise
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -131,7 +130,7 @@ class Segment:
     holds: tuple[Hold, ...] = ()
     moves: tuple[Move, ...] = ()
 
-    def as_dict(self, t: FloatArray) -> dict[str, Any]:
+    def as_dict(self, t: FloatArray) -> dict[str, object]:
         """Plain values for JSON.
 
         Parameters

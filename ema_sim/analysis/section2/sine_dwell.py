@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,6 +31,7 @@ from ema_sim.analysis.formatting.markdown import quality, table
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import SINE_R2, MovingStretch, Reading
 from ema_sim.errors import EmaError
+from ema_sim.jsontypes import JsonObject
 
 if TYPE_CHECKING:
     from ema_sim.models import ActuatorModel
@@ -250,7 +251,7 @@ class DwellResult:
             return causal.phase_note(self.phase_deg, self.phase_sigma_deg, self.freq_hz)
         return f"output R² {self.output_r2:.2f}"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns

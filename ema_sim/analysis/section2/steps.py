@@ -54,6 +54,7 @@ from ema_sim.analysis.records.series import Edge, derivative, moving_average, se
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, Reading
 from ema_sim.analysis.section2.timing import first_motion
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -177,7 +178,7 @@ class StepResponse:
         """``step +1.00° at 2.500 s``."""
         return f"step {self.command_step_deg:+.2f}° at {self.time_s:.3f} s"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -386,7 +387,7 @@ class SlewRates:
     plateau_dps: float | None = None
     agreement: str = ""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -394,9 +395,9 @@ class SlewRates:
         dict
             Small- and large-amplitude slew rates, the steps they come from, and their definition.
         """
-        return {"small_amplitude_dps": self.small_dps, "small_amplitude_steps_deg": self.small_steps_deg,
+        return {"small_amplitude_dps": self.small_dps, "small_amplitude_steps_deg": [*self.small_steps_deg],
                 "large_amplitude_dps": self.large_dps, "large_amplitude_sigma_dps": self.large_sigma_dps,
-                "large_amplitude_source": self.large_source, "large_amplitude_steps_deg": self.large_steps_deg,
+                "large_amplitude_source": self.large_source, "large_amplitude_steps_deg": [*self.large_steps_deg],
                 "plateau_dps": self.plateau_dps, "agreement": self.agreement,
                 "definition": "small: peak rate of the steps that are not rate-limited; large: slope of the straight "
                               "middle (20-80 %) of the record's rate-limited moves, median over the moves (the same "
@@ -552,7 +553,7 @@ class Steps(Section2Test[StepResponse]):
         return out
 
     @override
-    def as_json(self, results: list[StepResponse], ra: RecordAnalysis) -> dict[str, Any]:
+    def as_json(self, results: list[StepResponse], ra: RecordAnalysis) -> JsonObject:
         return {self.key: [s.as_dict() for s in results],
                 "slew_rates": slew_rates(results, ra.slew).as_dict() if results else None}
 

@@ -34,6 +34,7 @@ from ema_sim.analysis.formatting.markdown import bullets, image, num, quality
 from ema_sim.analysis.records.series import extrema, moving_average
 from ema_sim.analysis.section2.base import Quality, RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import MovingStretch, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -89,7 +90,7 @@ class StaticThreshold:
     start_s: float = 0.0
     end_s: float = 0.0
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -109,7 +110,7 @@ class StaticThreshold:
                             "output_swing_deg": self.output_swing_deg.tolist()},
             "definition": "onset: dead-zone half width d from output swing = g*(command swing - 2d); follow: "
                           "smallest amplitude from which every half cycle moves >= 50 % of the command swing",
-            "notes": self.notes,
+            "notes": [*self.notes],
         }
 
 
@@ -200,7 +201,7 @@ class DynamicThreshold:
     r2: FloatArray
     notes: list[str] = field(default_factory=list)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -219,7 +220,7 @@ class DynamicThreshold:
                         "output_amplitude_deg": self.output_amp_deg.tolist(), "r2": self.r2.tolist()},
             "definition": "onset: command amplitude from which the output tone stays above 6 standard errors of "
                           "the noise; follow: from which R^2 >= 0.9 and gain within 3 dB",
-            "notes": self.notes,
+            "notes": [*self.notes],
         }
 
 

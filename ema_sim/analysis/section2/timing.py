@@ -42,7 +42,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,6 +54,7 @@ from ema_sim.analysis.formatting.markdown import bullets, image, ms, quality, ta
 from ema_sim.analysis.records.series import Edge, settled
 from ema_sim.analysis.section2.base import RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import EdgeRun, Reading
+from ema_sim.jsontypes import JsonObject
 
 FloatArray = NDArray[np.float64]
 
@@ -173,7 +173,7 @@ class EdgeTiming:
     motion_signal: str = ""
     moving_before: bool = False
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -286,7 +286,7 @@ class TimingResult:
             return None
         return self.command_to_motion_s + self.motion_to_feedback_s
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -302,7 +302,7 @@ class TimingResult:
             "motion_signal": self.motion_signal, "command_to_motion_s": self.command_to_motion_s,
             "command_to_motion_spread_s": float(np.std(spread)) if len(spread) > 1 else None,
             "motion_to_feedback_s": self.motion_to_feedback_s, "command_to_feedback_s": self.total_s,
-            "edges": [e.as_dict() for e in self.edges], "notes": self.notes,
+            "edges": [e.as_dict() for e in self.edges], "notes": [*self.notes],
         }
 
 
@@ -490,7 +490,7 @@ class Timing(Section2Test[TimingResult]):
 
 
     @override
-    def as_json(self, results: list[TimingResult], ra: RecordAnalysis) -> dict[str, Any]:
+    def as_json(self, results: list[TimingResult], ra: RecordAnalysis) -> JsonObject:
         return {self.key: results[0].as_dict() if results else None}
 
     @override

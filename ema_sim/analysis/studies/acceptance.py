@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ema_sim.analysis.section2.sine_dwell import sine_dwell
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import ActuatorModel, Flags, create
 
 FRAME_S = 0.005
@@ -51,7 +52,7 @@ class Figure:
     requirement: str
     passed: bool
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -63,7 +64,7 @@ class Figure:
                 "passed": self.passed}
 
 
-def _model(name: str, channel: str, **kwargs: Any) -> ActuatorModel:
+def _model(name: str, channel: str, **kwargs: object) -> ActuatorModel:
     """The model as a test stand sees it: the FMU's quantization and noise are not in the test set-up."""
     opts = {"noise": False, "quantization_v": 0.0} if name in ("hoad2", "hoad3") else {}
     return create(name, channel, **opts, **kwargs)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -20,6 +19,7 @@ from ema_sim.analysis.estimation.tf_fit import TransferFunctionFit, fit_transfer
 from ema_sim.analysis.section2.sine_dwell import FrequencyResponse, sine_dwell
 from ema_sim.config import config_dir, load_channel
 from ema_sim.errors import ConfigError
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create
 
 DEFAULT_BAND_HZ = (0.5, 20.0)
@@ -65,7 +65,7 @@ class LoesFit:
         phase += 360.0 * np.round((self.data.phase_deg[0] - phase[0]) / 360.0)
         return 20.0 * np.log10(np.abs(h)), phase
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
@@ -103,7 +103,7 @@ def fit_band(channel: str) -> tuple[np.ndarray, float]:
 
 
 def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_deg: float | None = None,
-                   *, load_inlb: float = 0.0, **model_kwargs: Any) -> FrequencyResponse:
+                   *, load_inlb: float = 0.0, **model_kwargs: object) -> FrequencyResponse:
     """HOAD3's command-to-position response from sine dwells, one batch instance per frequency.
 
     Parameters
@@ -116,7 +116,7 @@ def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None
         Amplitude, deg.
     load_inlb : float
         Hinge moment the dwells run under, in·lb.
-    **model_kwargs : Any
+    **model_kwargs : object
         Passed to the model.
 
     Returns
@@ -132,7 +132,7 @@ def hoad3_response(channel: str = "left_wing", freq_hz: np.ndarray | None = None
 
 
 def fit_loes(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_deg: float | None = None,
-             *, load_inlb: float = 0.0, **model_kwargs: Any) -> LoesFit:
+             *, load_inlb: float = 0.0, **model_kwargs: object) -> LoesFit:
     """Dwell HOAD3 and fit ``K·ωn²/(s² + 2ζωn·s + ωn²)·e^{−sτ}`` to it (section 3.4).
 
     Parameters
@@ -145,7 +145,7 @@ def fit_loes(channel: str = "left_wing", freq_hz: np.ndarray | None = None, amp_
         Amplitude, deg.
     load_inlb : float
         Hinge moment the dwells run under, in·lb.
-    **model_kwargs : Any
+    **model_kwargs : object
         Passed to the model.
 
     Returns

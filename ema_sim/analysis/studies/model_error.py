@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ema_sim.jsontypes import JsonObject
 from ema_sim.models import create
 from ema_sim.signals import Load, Maneuver, parse_maneuver
 from ema_sim.simulation import FRAME_HZ, frame_inputs, run_maneuver
@@ -46,7 +47,7 @@ class ErrorRow:
     std_abs_deg: float
     max_abs_deg: float
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """Plain values for JSON.
 
         Returns
