@@ -139,6 +139,7 @@ class EmacFrames(EmacReceiver):
     def _poll_lockstep(self) -> float:
         if self.clock_ns is None:
             return 0.05
+        self.ports.take_at_frame()
         if self.model_ns is None:  # first tick: report the trimmed state at the start time
             self.model_ns = self.clock_ns
             trimmed = {ch: u.last for ch, u in self.units.items()}

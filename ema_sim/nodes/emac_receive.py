@@ -38,9 +38,11 @@ class EmacReceiver(EmacState):
         self._make_outputs()
         ports = self.ports
         # Real time: a command is the frame's event; the frame takes the hinge moment and the crosstalk sources
-        # waiting for it (they need not wake the process). Lockstep waits on every input of the frame.
-        at_frame = not self.lockstep
-        ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad)
+        # waiting for it (they need not wake the process). Lockstep: /clock is the frame's event; a frame's
+        # inputs were sent a frame before the clock reaches its end, so the frame takes them too (and waits for
+        # any not in yet, :meth:`~ema_sim.nodes.emac_frames.EmacFrames._poll_lockstep`).
+        at_frame = True
+        ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad, at_frame=self.lockstep)
         ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad, at_frame=at_frame)
         for ch in self.channels:
             self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)), self._failure_callback(ch),
