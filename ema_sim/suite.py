@@ -127,6 +127,8 @@ class Suite:
     def __init__(self, cfg: RunDescription, names_look_s: float = NAMES_LOOK_S) -> None:
         self.cfg = cfg
         self.names_look_s = names_look_s
+        self.names_checked = False
+        """:meth:`check_names` found the run's names free (:meth:`start` then does not look again)."""
         self.domain_id = cfg.domain_id if cfg.domain_id is not None else int(
             os.environ.get("ROS_DOMAIN_ID") or free_domain_id())
         self.bag = cfg.bag_dir
@@ -180,7 +182,8 @@ class Suite:
         self._stopping = False
         if self.bag.exists():
             raise EmaError(f"{self.bag} exists already; give a new bag directory")
-        self.check_names()
+        if not self.names_checked:
+            self.check_names()
         self.log_dir.mkdir(parents=True, exist_ok=True)
         cfg.write(self.params_file)
         self.started = time.monotonic()
@@ -216,6 +219,7 @@ class Suite:
         refusal = taken.refusal(self.domain_id)
         if refusal is not None:
             raise EmaError(refusal)
+        self.names_checked = True
         if taken.graph_only:
             print(f"ema launch: {', '.join(taken.graph_only)} in the graph of ROS domain {self.domain_id} without a "
                   "live claim (a node that just ended, or not the suite's): starting anyway", file=sys.stderr,
