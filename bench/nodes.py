@@ -12,18 +12,23 @@ with one EMAC node per channel (``processes``, its target: < 0.1 % of frames mis
 ``_fifo`` runs use the real-time set-up of :mod:`ema_sim.nodes.realtime` (``--rt-priority 20``): SCHED_FIFO,
 memory locked, and idle CPUs that poll instead of halting (their time is the idle task's, not counted in
 the processes' CPU; a waker then need not interrupt a halted virtual CPU, the likely reason the request alone
-lowers the processes' CPU, see docs/nodes.md).
+lowers the processes' CPU, see docs/nodes.md). ``nodes_emac_startup``: one EMAC channel process started three
+times, its first feedback as published (the node's count from its process's start) and as received by a listener
+already on the domain (Fast DDS discovery included), then its idle CPU and resident memory.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
+from typing import Any
 
 from ema_sim.benchmark import Benchmark, Result
 from ema_sim.nodes.frametimes import CAUSES
@@ -162,6 +167,95 @@ def executor_choice() -> Result:
     return Result(rtt["events"], "µs RTT", best == "events", f"median round trip: {detail}")
 
 
+FIRST_FEEDBACK_MAX_S = 1.5
+"""One EMAC's first feedback after its process starts, at most, s."""
+IDLE_S = 10.0
+"""Wall seconds over which an idle EMAC's CPU share is counted."""
+
+
+def _cpu_s(pid: int) -> float:
+    """A process's user and system CPU so far, s (``/proc``)."""
+    with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status", encoding="ascii") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS")) / 1024
+
+
+def _listener(env: dict[str, str]) -> tuple[Any, Any, Any, list[float]]:
+    """A node on ``env``'s domain noting when each ``/ema/emac/feedback`` message arrives (perf_counter)."""
+    import rclpy  # noqa: PLC0415 - the listener; the other benchmarks need no ROS in this process
+    from rclpy.context import Context  # noqa: PLC0415
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+    from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
+    from sensor_msgs.msg import JointState  # noqa: PLC0415
+
+    context = Context()
+    saved = {key: os.environ.get(key) for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
+    os.environ.update({key: env[key] for key in saved})  # the middleware reads them when the context starts
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    for key, value in saved.items():
+        if value is None:
+            del os.environ[key]
+        else:
+            os.environ[key] = value
+    node = rclpy.create_node("startup_listener", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    got: list[float] = []
+    node.create_subscription(JointState, "/ema/emac/feedback", lambda _msg: got.append(time.perf_counter()), 10)
+    return context, node, executor, got
+
+
+def emac_startup(starts: int = 3) -> Result:
+    """One EMAC channel process (real time, no commands: idle frames at 200 Hz), started ``starts`` times.
+
+    Each start: seconds to its first feedback as the node publishes it (its summary's ``first_feedback_s``, from
+    the process's start) and as a listener already on the domain receives it (DDS discovery included); the last
+    one's CPU share over :data:`IDLE_S` and its resident memory.
+    """
+    domain = free_domain_id(os.getpid() + 61)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    context, node, executor, got = _listener(env)
+    cmd = [sys.executable, "-m", "ema_sim.nodes.emac", "--model", MODEL, "--channel", "left_wing"]
+    arrived: list[float] = []
+    published: list[float | None] = []
+    idle = rss = float("nan")
+    try:
+        for k in range(starts):
+            got.clear()
+            t0 = time.perf_counter()
+            proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            try:
+                while not got and time.perf_counter() - t0 < 60 and proc.poll() is None:
+                    executor.spin_once(timeout_sec=0.005)
+                arrived.append(got[0] - t0 if got else float("nan"))
+                if k == starts - 1:
+                    time.sleep(2.0)  # settled
+                    c0, w0 = _cpu_s(proc.pid), time.monotonic()
+                    time.sleep(IDLE_S)
+                    idle = (_cpu_s(proc.pid) - c0) / (time.monotonic() - w0)
+                    rss = _rss_mb(proc.pid)
+            finally:
+                proc.send_signal(signal.SIGINT)
+                out, _ = proc.communicate(timeout=30)
+            line = next((x for x in out.splitlines() if x.startswith("EMA_SUMMARY ")), "")
+            published.append(json.loads(line[len("EMA_SUMMARY "):]).get("first_feedback_s") if line else None)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()
+    first = statistics.median(arrived)
+    return Result(first, "s first feedback", first <= FIRST_FEEDBACK_MAX_S,
+                  f"{MODEL}, one channel, real time, idle: first feedback received "
+                  f"{', '.join(f'{x:.2f}' for x in arrived)} s after the process started (published at "
+                  f"{', '.join('?' if x is None else f'{x:.2f}' for x in published)} s, the node's own count); "
+                  f"idle {idle:.1%} of one core, {rss:.0f} MB resident")
+
+
 BENCHMARKS = [
     Benchmark(f"nodes_lockstep_single_{MODEL}", "≥ 10× real time", lambda: lockstep("single")),
     Benchmark(f"nodes_lockstep_processes_{MODEL}", "≥ 10× real time", lambda: lockstep("processes")),
@@ -173,4 +267,5 @@ BENCHMARKS = [
     Benchmark(f"nodes_realtime_processes_fifo_{MODEL}", "< 0.1 % missed, ≤ 60 % CPU",
               lambda: realtime("processes", rt=20)),
     Benchmark("nodes_executor_choice", "EventsExecutor fastest", executor_choice),
+    Benchmark(f"nodes_emac_startup_{MODEL}", f"first feedback ≤ {FIRST_FEEDBACK_MAX_S:g} s", emac_startup),
 ]

@@ -15,6 +15,8 @@ one box (default), or ``channels``, one EMAC node per channel.
 
 What runs where, and the one parameter file every process reads, is the run's
 :class:`~ema_sim.run.RunDescription` (the launch files under ``launch/`` start the same processes).
+Before it starts anything, the suite looks on its domain for live nodes with its run's names (each suite node
+claims its name, :mod:`ema_sim.nodes.names`) and refuses, naming them, when there are any.
 The maneuver node waits for the others on ``/ema/ready`` and then records; under lockstep the clock
 waits for all of them. A process named in the run's ``respawn`` that ends before the driver is started again
 at once, with the same command (at most :data:`RESPAWN_LIMIT` times; each restart is a line on stderr and in
@@ -55,6 +57,9 @@ RESPAWN_LIMIT = 5
 STANDBY_AFTER_S = 5.0
 """After a standby stood in, wall seconds before the next standby of that process starts."""
 STANDBY = "ema_sim.nodes.standby"
+NAMES_LOOK_S = 1.5
+"""Before a run starts, how long the launcher looks on its domain for live nodes with the run's names (discovery
+on a busy two-core machine; each node's own refusal remains for a node found later)."""
 SuiteConfig = RunDescription
 """One run of the suite (the name the tests and benchmarks use)."""
 __all__ = ["DEFAULT_EMAC", "DEFAULT_LAYOUT", "DOMAIN_RANGE_ENV", "EMAC_HOSTING", "LAYOUTS", "Suite", "SuiteConfig",
@@ -116,10 +121,15 @@ class Suite:
     ----------
     cfg : RunDescription
         The run: what runs in which process, and its parameters.
+    names_look_s : float
+        How long :meth:`start` looks for live nodes with the run's names before starting any, s (0: no look).
     """
 
-    def __init__(self, cfg: RunDescription) -> None:
+    def __init__(self, cfg: RunDescription, names_look_s: float = NAMES_LOOK_S) -> None:
         self.cfg = cfg
+        self.names_look_s = names_look_s
+        self.names_checked = False
+        """:meth:`check_names` found the run's names free (:meth:`start` then does not look again)."""
         self.domain_id = cfg.domain_id if cfg.domain_id is not None else int(
             os.environ.get("ROS_DOMAIN_ID") or free_domain_id())
         self.bag = cfg.bag_dir
@@ -173,6 +183,8 @@ class Suite:
         self._stopping = False
         if self.bag.exists():
             raise EmaError(f"{self.bag} exists already; give a new bag directory")
+        if not self.names_checked:
+            self.check_names()
         self.log_dir.mkdir(parents=True, exist_ok=True)
         cfg.write(self.params_file)
         self.started = time.monotonic()
@@ -186,6 +198,33 @@ class Suite:
             self._spawn(proc.name)
         self._standby_due = dict.fromkeys(self.cfg.respawn, self.started)
         self._start_standbys()
+
+    def full_names(self) -> list[str]:
+        """The run's nodes by full name (its namespace included), as they claim them."""
+        return [f"{self.cfg.namespace}/{name}" for name in self.node_names()]
+
+    def check_names(self) -> None:
+        """Refuse to start when live nodes with the run's names are on its domain (they would merge with its own).
+
+        Raises
+        ------
+        EmaError
+            One line naming each such node (pid, host, how long it has been up).
+        """
+        if self.names_look_s <= 0:
+            return
+        from ema_sim.nodes.names import running_claims  # noqa: PLC0415 - rclpy only where a run starts
+
+        taken = running_claims(self.full_names(), self.domain_id, self.names_look_s,
+                               self._env()["ROS_AUTOMATIC_DISCOVERY_RANGE"])  # looked at as the nodes will look
+        refusal = taken.refusal(self.domain_id)
+        if refusal is not None:
+            raise EmaError(refusal)
+        self.names_checked = True
+        if taken.graph_only:
+            print(f"ema launch: {', '.join(taken.graph_only)} in the graph of ROS domain {self.domain_id} without a "
+                  "live claim (a node that just ended, or not the suite's): starting anyway", file=sys.stderr,
+                  flush=True)
 
     def _spawn(self, name: str) -> None:
         # A session of its own: the terminal's Ctrl-C reaches the launcher, which stops the nodes in order

@@ -19,6 +19,7 @@ from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from ros_context import ros_context
+from test_ros_integration import READY_BOUND_S
 
 from ema_msgs_py.cdr import JointFrame
 from ema_sim.errors import ConfigError, EmaError
@@ -165,9 +166,9 @@ def test_two_vehicles_on_one_graph_take_their_own_sections_of_one_file(emac, tmp
 
 # --------------------------------------------------------------------------- through the standard services
 def _call(ex, client, request):
-    assert client.wait_for_service(timeout_sec=10.0)
+    assert client.wait_for_service(timeout_sec=READY_BOUND_S)  # the node is in this process: a bound, not a wait
     future = client.call_async(request)
-    end = time.monotonic() + 10.0
+    end = time.monotonic() + READY_BOUND_S
     while not future.done() and time.monotonic() < end:
         ex.spin_once(timeout_sec=0.01)
     assert future.done()

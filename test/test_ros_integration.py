@@ -25,6 +25,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
 from ema_sim.config import load_channel
 from ema_sim.suite import free_domain_id
@@ -49,6 +50,15 @@ def domain(offset):
     return free_domain_id(os.getpid() + 53 * offset)
 
 
+READY_BOUND_S = 120.0
+"""How long a service call waits for its node to come up: a bound for a loaded two-core machine (start-up and
+discovery), not a timing; the wait ends as soon as the service is there."""
+AFTER_READY_S = 30.0
+"""Once the node has called itself ready on ``/ema/ready``, how long its service may still take to be seen."""
+READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)  # the nodes' latched /ema/ready
+
+
 class Client:
     """A plain rclpy node on its own context and domain."""
 
@@ -58,6 +68,10 @@ class Client:
         self.node = rclpy.create_node(name, context=self.ctx)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
+        self.ready = {}
+        """Node name → when (monotonic) it first said it was ready on ``/ema/ready``."""
+        self.node.create_subscription(String, "/ema/ready", lambda m: self.ready.setdefault(m.data, time.monotonic()),
+                                      READY_QOS)
 
     def spin(self, seconds, until=None):
         end = time.monotonic() + seconds
@@ -67,9 +81,21 @@ class Client:
             self.ex.spin_once(timeout_sec=0.005)
         return until() if until is not None else True
 
-    def call(self, srv_type, name, request, timeout=10.0):
+    def _service_up(self, cli, node):
+        """The service is there; fails once its node has been ready for :data:`AFTER_READY_S` without it."""
+        if cli.service_is_ready():
+            return True
+        since = self.ready.get(node.rpartition("/")[2]) if node.count("/") == 1 else None
+        assert since is None or time.monotonic() - since < AFTER_READY_S, \
+            f"{node} has been ready for {AFTER_READY_S:g} s and {cli.srv_name} is still not seen"
+        return False
+
+    def call(self, srv_type, name, request, timeout=READY_BOUND_S):
+        """Call a node's service once it is there (its node up: the ready signal, within ``timeout``)."""
         cli = self.node.create_client(srv_type, name)
-        assert self.spin(timeout, cli.service_is_ready), f"no service {name}"
+        node = name.rpartition("/")[0]
+        up = self.spin(timeout, lambda: self._service_up(cli, node))
+        assert up, f"no service {name} in {timeout:g} s ({node} {'ready' if node[1:] in self.ready else 'never ready'})"
         future = cli.call_async(request)
         assert self.spin(timeout, future.done), f"{name} did not answer"
         self.node.destroy_client(cli)

@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     try:  # from the handlers on, a signal anywhere here (its first line printed or not) stops the suite
         for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # each stops the suite the same way, the
             signal.signal(signum, _interrupt)  # bag closed (SIGHUP: the terminal closed; SIGKILL: nodes.lifetime)
+        suite.check_names()  # nodes of the run's names already running: one error before anything is started
         print(f"ema launch: {test} on {what} for {duration:g} s, {args.model}, profile {args.profile}, {mode}, "
               f"ROS_DOMAIN_ID {suite.domain_id}; logs and the run's parameters ({suite.params_file.name}) in "
               f"{suite.log_dir}", flush=True)

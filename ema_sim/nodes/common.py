@@ -12,6 +12,7 @@ import argparse
 import gc
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -49,6 +50,22 @@ ROSOUT_GRACE_S = 1.0
 """... and stays up this long once one is there, so the error reaches it (the match precedes the delivery)."""
 _process_argv: list[str] = []
 """The process's command line, ROS arguments included, as :func:`run_nodes` gave it to ``rclpy.init``."""
+
+
+def process_age_s() -> float:
+    """Seconds since this process started (the kernel's start time, so the interpreter's start-up counts too).
+
+    Returns
+    -------
+    float
+        The age, s (NaN where ``/proc`` does not say).
+    """
+    try:
+        with open("/proc/self/stat", encoding="ascii") as f:
+            start_ticks = int(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime, in clock ticks
+        return time.clock_gettime(time.CLOCK_BOOTTIME) - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return math.nan
 
 
 def command_line(options: dict[str, Any]) -> list[str]:

@@ -17,7 +17,7 @@ from std_msgs.msg import String
 from ema_msgs_py import contract as ct
 from ema_sim.emac import Feedback
 from ema_sim.emac.stamps import Lateness
-from ema_sim.nodes.common import MAX_SPIN_S
+from ema_sim.nodes.common import MAX_SPIN_S, process_age_s
 from ema_sim.nodes.emac_receive import EmacReceiver
 from ema_sim.nodes.emac_state import IDLE_AFTER_FRAMES, NS
 from ema_sim.nodes.emac_streams import Stream
@@ -139,6 +139,7 @@ class EmacFrames(EmacReceiver):
     def _poll_lockstep(self) -> float:
         if self.clock_ns is None:
             return 0.05
+        self.ports.take_at_frame()
         if self.model_ns is None:  # first tick: report the trimmed state at the start time
             self.model_ns = self.clock_ns
             trimmed = {ch: u.last for ch, u in self.units.items()}
@@ -238,4 +239,6 @@ class EmacFrames(EmacReceiver):
 
     def _publish(self, stamp: int, out: dict[str, Feedback]) -> None:
         self.outputs.publish(stamp, out)
+        if not self.published:
+            self.first_feedback_s = round(process_age_s(), 3)
         self.published += 1

@@ -37,16 +37,17 @@ class EmacReceiver(EmacState):
         """The publishers (:meth:`_make_outputs`) and the subscriptions, each to its callback."""
         self._make_outputs()
         ports = self.ports
-        # Real time: a command is the frame's event; the frame takes the hinge moment and the crosstalk sources
-        # waiting for it (they need not wake the process). Lockstep waits on every input of the frame.
-        at_frame = not self.lockstep
+        # A command is the frame's event (real time), or the last of its inputs to come (lockstep: it passes the
+        # test environment after the FMU saw the previous frame's feedback); the frame takes the hinge moment and
+        # the crosstalk sources waiting for it (sent before the command, they need not wake the process). Lockstep
+        # waits for any not in yet (:meth:`~ema_sim.nodes.emac_frames.EmacFrames._poll_lockstep`).
         ports.frame_subscription(ct.EMAC_COMMAND, self._on_command, self._bad)
-        ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad, at_frame=at_frame)
+        ports.frame_subscription(ct.HINGE_MOMENT, self._on_load, self._bad, at_frame=True)
         for ch in self.channels:
             self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)), self._failure_callback(ch),
                                      qos(ct.FAILURE_QOS))
         if self.sources:
-            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad, at_frame=at_frame)
+            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad, at_frame=True)
         if self.lockstep:
             ports.clock_subscription(self._on_clock)
 

@@ -136,6 +136,8 @@ class EmacState(SuiteNode):
         self.turnaround = DurationHistogram()
         self.waits_given_up = 0
         self.published = 0
+        self.first_feedback_s: float | None = None
+        """Seconds from the process's start to its first feedback published (start-up, :func:`process_age_s`)."""
         self.commands_taken = 0
         """Command messages taken (each a frame in real time)."""
         self.command_gaps = 0
@@ -245,7 +247,8 @@ class EmacState(SuiteNode):
     def summary(self) -> dict[str, Any]:  # noqa: D102
         return {
             "channels": self.channels, "mode": "lockstep" if self.lockstep else "realtime",
-            "frames_published": self.published, "late_frames": self.late_frames,
+            "frames_published": self.published, "first_feedback_s": self.first_feedback_s,
+            "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,
             "skipped_frames": self.skipped_frames, "dropped": dict(self.drops), "commands": self.commands_taken,
             "late_commands": self.late_commands, "command_resyncs": self.command_resyncs,

@@ -104,9 +104,11 @@ class ManeuverNode(DriverNode):
         self.recorder = Recorder(self, self.writer, lockstep=self.lockstep, ports=self.ports,
                                  own=(ct.FMU_COMMAND, ct.HINGE_MOMENT),
                                  hooks={ct.FMU_FEEDBACK: self._on_fmu_feedback}, on_clock=self._on_clock,
-                                 hooks_at_frame=not self.lockstep)
-        """Real time: the FMU's feedback too is read once a frame (as a flight computer reads its inputs), each
-        message's arrival being the time DDS received it; under lockstep it comes as it arrives (the clock)."""
+                                 hooks_at_frame=True)
+        """The FMU's feedback too is read once a frame (as a flight computer reads its inputs), each message's
+        arrival being the time DDS received it. Under lockstep ``/clock`` wakes the node: the clock's frame and the
+        FMU feedback ending the frame before it leave the EMACs' feedback at the same time, two hops from it (the
+        clock; the test environment), so the five feedback messages need not wake it too."""
         self.cmd_pub = self.ports.frame_publisher(ct.FMU_COMMAND)
         self.load_pub = self.ports.frame_publisher(ct.HINGE_MOMENT)
         self._names = list(self.commanded)

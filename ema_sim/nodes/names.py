@@ -14,17 +14,28 @@ transient-local data, by contrast, is delivered by its writer itself, so only a 
 arrives. A node is ready only once matched with every writer in the graph (the claim subscription among
 them, :meth:`~ema_sim.nodes.common.SuiteNode.matched`), so a node that meets an older one of its name
 refuses before it calls itself ready.
+
+:func:`running_claims` looks from outside, before a run starts (``ema launch``): which of the run's names have
+a live claim on the domain (those nodes would make the run's own refuse), and which are in the graph
+without one (a node that died within its lease, or a node that is not the suite's: warned about, not refused).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
 import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
 from typing import Any
 
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
@@ -99,3 +110,112 @@ def describe(claim: dict[str, Any]) -> str:
     """
     up_s = (time.time_ns() - int(claim["since_ns"])) / 1e9
     return f"pid {claim['pid']} on host {claim['host']}, up {up_s:.1f} s"
+
+
+CLAIMS_GRACE_S = 0.5
+"""Once a claim of one of the names came, how much longer :func:`running_claims` looks for the others, s."""
+
+
+@dataclass
+class Taken:
+    """The names of a run already used on its domain (:func:`running_claims`)."""
+
+    claimed: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Full name → the live claim of a suite node of that name (its run's node would refuse to start)."""
+    graph_only: list[str] = field(default_factory=list)
+    """Full names in the graph without a live claim: a node killed within its DDS lease, or not a suite node."""
+
+    def refusal(self, domain_id: int) -> str | None:
+        """One error naming the claimed names, or None when none is.
+
+        Parameters
+        ----------
+        domain_id : int
+            The run's ROS domain (named in the error).
+
+        Returns
+        -------
+        str or None
+            The error, one line.
+        """
+        if not self.claimed:
+            return None
+        which = "; ".join(f"{name} ({describe(claim)})" for name, claim in sorted(self.claimed.items()))
+        return (f"nodes with this run's names are running on ROS domain {domain_id}: {which}; stop them, or give "
+                "the run another --domain-id or --namespace")
+
+
+@contextlib.contextmanager
+def _environment(**values: str) -> Iterator[None]:
+    """These environment variables set for the block, then as they were."""
+    saved = {key: os.environ.get(key) for key in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def running_claims(names: Iterable[str], domain_id: int, look_s: float, discovery_range: str = "LOCALHOST") -> Taken:
+    """Which of these full node names are in use on a domain, looked at from a probe node for ``look_s``.
+
+    A claim is transient local, so every live suite node's comes once discovery has matched the probe with
+    it; the look is a bound on that, not a proof (the younger node's own refusal stays the last word). It ends
+    :data:`CLAIMS_GRACE_S` after the first claim of one of the names.
+
+    Parameters
+    ----------
+    names : iterable of str
+        Full node names (``/emac_left_wing``, ``/aircraft2/testenv``).
+    domain_id : int
+        The ROS domain to look at.
+    look_s : float
+        How long to look, s (wall time).
+    discovery_range : str
+        ``ROS_AUTOMATIC_DISCOVERY_RANGE`` of the look (the run's nodes').
+
+    Returns
+    -------
+    Taken
+        The names claimed by live nodes, and those only in the graph.
+    """
+    wanted = set(names)
+    claimed: dict[str, dict[str, Any]] = {}
+
+    def on_claim(msg: String) -> None:
+        try:
+            claim = json.loads(msg.data)
+            if claim.get("node") in wanted:
+                claimed[str(claim["node"])] = claim
+        except (ValueError, KeyError, TypeError, AttributeError):
+            return  # not a claim: nothing to judge by
+
+    context = Context()
+    with _environment(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE=discovery_range):
+        # the middleware reads both here (init's domain_id is not taken); the caller's signal handlers stay its own
+        rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        node = Node(f"_ema_names_probe_{os.getpid()}", context=context, start_parameter_services=False,
+                    enable_rosout=False)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            for namespace in {n.rpartition("/")[0] or "/" for n in wanted}:
+                topic = f"{namespace.rstrip('/')}/{ct.endpoint(ct.NODES)}"
+                node.create_subscription(String, topic, on_claim, qos(ct.LATCHED_QOS))
+            end = time.monotonic() + look_s
+            while (left := end - time.monotonic()) > 0:
+                executor.spin_once(timeout_sec=min(left, 0.05))
+                if claimed:  # a refusal: the look ends soon after, once a left-over run's other claims came too
+                    end = min(end, time.monotonic() + CLAIMS_GRACE_S)
+            graph = {(ns.rstrip("/") + "/" + name) for name, ns in node.get_node_names_and_namespaces()}
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    return Taken(claimed, sorted((wanted & graph) - set(claimed)))
