@@ -21,13 +21,16 @@ model is chosen:
 3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
    record allows: the windows refitted without it. When the windows, each with its own parameters, do
    not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
-   effect only helped the whole-record fit because of the change: it is taken out, and said so.
+   effect only helped the whole-record fit because of the change: it is taken out, and said so. The windows
+   are refitted without it largest error first, and no further once those fitted already leave so much that the
+   summed ΔBIC cannot get above that bound (:func:`refit_without`; the report says after how many).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -161,6 +164,8 @@ class Changes:
     proxies: list[str] = field(default_factory=list)
     """Effects taken out because they only stood in for the change, one line each."""
     skipped: str = ""
+    tests: list[ProxyTest] = field(default_factory=list)
+    """Each added effect tested on the windows with their own parameters (when a parameter changes)."""
 
     @property
     def changed(self) -> bool:
@@ -178,7 +183,8 @@ class Changes:
                 "windows_s": [[w.start_s, w.end_s] for w in self.windows],
                 "parameters": [t.as_dict() for t in self.tracks],
                 "bandwidth_hz": list(self.bandwidth_hz), "rms_over_noise_windowed": self.rms_over_noise,
-                "proxies_removed": self.proxies, "statements": self.statements}
+                "proxies_removed": self.proxies, "proxy_tests": [t.as_dict() for t in self.tests],
+                "statements": self.statements}
 
 
 # ------------------------------------------------------------------------------------------ windows
@@ -346,6 +352,81 @@ def fit_windows(subs: list[Problem], params: SecondOrderParams, free: tuple[str,
     return WindowFit(free, fits, sum(sub.n_fit for sub in subs))
 
 
+@dataclass(frozen=True)
+class ProxyTest:
+    """One added effect tested on the windows: what its ΔBIC came to, and how many windows that took."""
+
+    effect: str
+    delta_bic: float
+    """Over all windows; with :attr:`fitted` short of :attr:`windows`, the bound the fitted ones already set."""
+    fitted: int
+    windows: int
+    elapsed_s: float
+
+    @property
+    def needed(self) -> bool:
+        """The windows need the effect (it is kept)."""
+        return self.delta_bic <= MAX_DELTA_BIC
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        stopped = (f"stopped after {self.fitted} of {self.windows} windows: those alone leave more without the "
+                   f"effect than the windows with it leave on all {self.windows}, so its ΔBIC is at most "
+                   f"{self.delta_bic:+.1f} whatever the others give" if self.fitted < self.windows else None)
+        return {"effect": self.effect, "delta_bic": self.delta_bic, "windows_fitted": self.fitted,
+                "windows": self.windows, "elapsed_s": round(self.elapsed_s, 3), "stopped_early": stopped}
+
+
+def refit_without(subs: list[Problem], params: SecondOrderParams, free: tuple[str, ...], flip: bool, with_: WindowFit
+                 ) -> tuple[WindowFit | None, float, int]:
+    """The windows refitted with ``free`` only, stopped once the ones fitted show the effect is needed.
+
+    The ΔBIC of the model with the effect against the one without falls as the error without it grows, and the
+    windows not yet fitted can add no less than nothing to that error: once the windows fitted leave, without the
+    effect, so much that the ΔBIC is at most :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC` even with nothing on
+    the rest, the effect is needed whatever they give, and they are not fitted. The windows are fitted in the
+    order of the error the effect's absence leaves at the start (one run each), largest first.
+
+    Parameters
+    ----------
+    subs : list of Problem
+        The windows (:func:`window_problem`).
+    params : SecondOrderParams
+        The start: the final model with the effect switched off.
+    free : tuple of str
+        The parameters fitted without the effect.
+    flip : bool
+        Run with the hinge moment reversed.
+    with_ : WindowFit
+        The windows' fits with the effect.
+
+    Returns
+    -------
+    tuple
+        The windows' fits without it (None when stopped early), the ΔBIC (its bound when stopped early) and
+        the windows fitted.
+    """
+    starts = []
+    for sub in subs:
+        r = sub.weighted_residual(sub.simulate([params], [flip])[0])
+        starts.append(float(np.dot(r, r)))
+    order = sorted(range(len(subs)), key=lambda k: -starts[k])
+    q = (len(with_.free) - len(free)) * len(subs)
+    n = with_.n
+    fits: dict[int, Fit] = {}
+    for k in order:
+        sub = subs[k]
+        fits[k] = no_worse(sub, params, free, fit_model(sub, params, free, flip=flip))
+        if len(fits) == len(subs):
+            break
+        least = sum(f.rss for f in fits.values())  # the windows left add at least nothing
+        bound = n * math.log(max(with_.rss, TINY) / max(least, TINY)) + q * math.log(max(n, 2))
+        if bound <= MAX_DELTA_BIC:
+            return None, bound, len(fits)
+    without = WindowFit(free, [fits[k] for k in range(len(subs))], n)
+    return without, _pays(without, with_), len(subs)
+
+
 def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
     """One parameter across the windows, and its trend (:func:`ema_sim.analysis.estimation.trend.trend`).
 
@@ -438,6 +519,12 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
         out.statements = [f"the parameters hold over the record ({how}): "
                           + "; ".join(t.statement() for t in out.tracks if t.kind != "not determined")]
     out.statements += ridge
+    early = [t for t in out.tests if t.fitted < t.windows]
+    if early:
+        out.statements.append("the added effects tested on the windows with their own parameters, the refits without "
+                              "each stopped once the windows fitted decided it: " + "; ".join(
+                                  f"{t.effect} needed (ΔBIC at most {t.delta_bic:+.1f} after {t.fitted} of "
+                                  f"{t.windows} windows, {t.elapsed_s:.1f} s)" for t in early))
     return out
 
 
@@ -477,10 +564,13 @@ def _proxies(problem: Problem, result: Identification, declared: SecondOrderPara
         free = tuple(f for f in final.free if f not in off)
         if not free:
             continue
-        without = fit_windows(subs, final.params.replace(**off), free, final.flip)
-        d = _pays(without, cur)
-        say(f"  changes: {effect.name} on windows with their own parameters: ΔBIC {d:+.1f}")
-        if d <= MAX_DELTA_BIC:
+        clock = time.perf_counter()
+        without, d, fitted = refit_without(subs, final.params.replace(**off), free, final.flip, cur)
+        test = ProxyTest(effect.name, d, fitted, len(subs), time.perf_counter() - clock)
+        out.tests.append(test)
+        bound = f"at most {d:+.1f} after {fitted} of {len(subs)} windows" if fitted < len(subs) else f"{d:+.1f}"
+        say(f"  changes: {effect.name} on windows with their own parameters: ΔBIC {bound}")
+        if test.needed or without is None:
             continue
         refit = no_worse(problem, final.params.replace(**off), free,
                          fit_model(problem, final.params.replace(**off), free, flip=final.flip))
