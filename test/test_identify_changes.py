@@ -8,6 +8,7 @@ wanders between 2 and 12 ms, a steady servo, and a steady servo whose integer-ms
 from __future__ import annotations
 
 import json
+from dataclasses import astuple
 
 import numpy as np
 import pytest
@@ -18,10 +19,12 @@ from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.analysis.records import stamps
 from ema_sim.config import load_channel
 from ema_sim.identify import changes
+from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.declared import declared
 from ema_sim.identify.fit import Fit
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import Identification, Step
+from ema_sim.identify.parallel import Pool
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_report
@@ -130,6 +133,77 @@ def test_an_added_effect_the_windows_do_not_need_is_taken_out():
     assert [r.effect for r in result.removed] == ["time_delay"]
     assert "delay_s" not in result.final.free
     assert _track(found, "wn_rad_s").kind == "falls"
+
+
+def test_a_needed_effect_is_tested_on_as_few_windows_as_decide_it():
+    # the wandering delay is needed on every window: the refits without it stop once the windows fitted leave more
+    # than the windows with it leave on all of them, and the ΔBIC over every window is no higher than that bound
+    data = record(30.0, seed=4, delay_s=lambda t: 0.007 + 0.005 * np.sin(2.0 * np.pi * t / 30.0 + 0.5))
+    problem, result, _ = _fitted(data, ("delay_s",), {"delay_s": 0.006})
+    ws, _ = changes.windows(problem)
+    subs = [changes.window_problem(problem, w) for w in ws]
+    final = result.final
+    with_ = changes.fit_windows(subs, final.params, final.free, final.flip)
+    free = tuple(f for f in final.free if f != "delay_s")
+    start = final.params.replace(delay_s=0.0)
+    without, bound, fitted = changes.refit_without(subs, start, free, final.flip, with_)
+    assert without is None
+    assert 1 <= fitted < len(subs)
+    every = changes._pays(changes.fit_windows(subs, start, free, final.flip), with_)
+    assert every <= bound <= MAX_DELTA_BIC
+
+
+def test_a_needed_effect_stays_and_the_report_says_after_how_many_windows():
+    data = record(30.0, seed=4, delay_s=lambda t: 0.007 + 0.005 * np.sin(2.0 * np.pi * t / 30.0 + 0.5))
+    problem, result, base = _fitted(data, ("delay_s",), {"delay_s": 0.006})
+    result.steps.append(Step("time_delay", "command", {"delay_s": float(result.final.params.delay_s)}, {}, {}, {},
+                             "found"))
+    found = changes.analyse(problem, result, base)
+    assert not found.proxies
+    assert [s.effect for s in result.steps] == ["time_delay"]
+    (tested,) = found.tests
+    assert tested.needed
+    assert tested.fitted < tested.windows
+    assert any("stopped once the windows fitted decided it" in s for s in found.statements)
+    assert found.as_dict()["proxy_tests"][0]["stopped_early"]
+
+
+def test_windows_fitted_on_two_workers_give_the_serial_fits_and_stop():
+    data = record(30.0, seed=4, delay_s=lambda t: 0.007 + 0.005 * np.sin(2.0 * np.pi * t / 30.0 + 0.5))
+    problem, result, _ = _fitted(data, ("delay_s",), {"delay_s": 0.006})
+    ws, _ = changes.windows(problem)
+    subs = [changes.window_problem(problem, w) for w in ws]
+    final = result.final
+    start = final.params.replace(delay_s=0.0)
+    free = tuple(f for f in final.free if f != "delay_s")
+    serial = changes.fit_windows(subs, final.params, final.free, final.flip)
+    alone = changes.refit_without(subs, start, free, final.flip, serial)
+    pool = Pool(workers=2)
+    try:
+        spread = changes.fit_windows(subs, final.params, final.free, final.flip, pool)
+        together = changes.refit_without(subs, start, free, final.flip, spread, pool)
+    finally:
+        pool.close()
+    assert not pool.failed  # the cluster started: the fits ran on its two threads
+    assert pool.workers == 2
+    assert [astuple(f.params) for f in spread.fits] == [astuple(f.params) for f in serial.fits]
+    assert spread.rss == serial.rss
+    assert together[1:] == alone[1:]
+    assert together[0] is None
+
+
+def test_an_effect_not_needed_is_refitted_on_every_window():
+    problem, result, _ = _fitted(_falling(), ("delay_s",), {"delay_s": 0.004})
+    ws, _ = changes.windows(problem)
+    subs = [changes.window_problem(problem, w) for w in ws]
+    final = result.final
+    with_ = changes.fit_windows(subs, final.params, final.free, final.flip)
+    free = tuple(f for f in final.free if f != "delay_s")
+    without, d, fitted = changes.refit_without(subs, final.params.replace(delay_s=0.0), free, final.flip, with_)
+    assert without is not None
+    assert fitted == len(subs)
+    assert d == changes._pays(changes.fit_windows(subs, final.params.replace(delay_s=0.0), free, final.flip), with_)
+    assert d > MAX_DELTA_BIC
 
 
 def test_jitter_only_adds_nothing_and_names_the_jitter():

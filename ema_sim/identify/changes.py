@@ -21,13 +21,16 @@ model is chosen:
 3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
    record allows: the windows refitted without it. When the windows, each with its own parameters, do
    not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
-   effect only helped the whole-record fit because of the change: it is taken out, and said so.
+   effect only helped the whole-record fit because of the change: it is taken out, and said so. The windows
+   are refitted without it largest error first, and no further once those fitted already leave so much that the
+   summed ΔBIC cannot get above that bound (:func:`refit_without`; the report says after how many).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -40,7 +43,9 @@ from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
 from ema_sim.identify.fit import TINY, Fit
 from ema_sim.identify.outcome import Identification, Removal, Step
-from ema_sim.identify.problem import SETTLE_S, Problem
+from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread
+from ema_sim.identify.parallel import result as value_of
+from ema_sim.identify.problem import SETTLE_S, Cancelled, Problem
 from ema_sim.identify.stepwise import fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
 from ema_sim.io.measured import MeasuredData
@@ -48,6 +53,8 @@ from ema_sim.jsontypes import JsonObject
 from ema_sim.models.second_order import SecondOrderParams
 
 FloatArray = NDArray[np.float64]
+_TESTS = itertools.count()
+"""Window fits of the proxy tests, for their cancellation tokens."""
 MIN_WINDOW_S = 5.0
 """The shortest window fitted (and the shortest period of a repeating command taken as one)."""
 MAX_WINDOWS = 8
@@ -162,6 +169,8 @@ class Changes:
     proxies: list[str] = field(default_factory=list)
     """Effects taken out because they only stood in for the change, one line each."""
     skipped: str = ""
+    tests: list[ProxyTest] = field(default_factory=list)
+    """Each added effect tested on the windows with their own parameters (when a parameter changes)."""
 
     @property
     def changed(self) -> bool:
@@ -179,7 +188,8 @@ class Changes:
                 "windows_s": [[w.start_s, w.end_s] for w in self.windows],
                 "parameters": [t.as_dict() for t in self.tracks],
                 "bandwidth_hz": list(self.bandwidth_hz), "rms_over_noise_windowed": {**self.rms_over_noise},
-                "proxies_removed": [*self.proxies], "statements": [*self.statements]}
+                "proxies_removed": [*self.proxies], "proxy_tests": [t.as_dict() for t in self.tests],
+                "statements": [*self.statements]}
 
 
 # ------------------------------------------------------------------------------------------ windows
@@ -324,8 +334,33 @@ def window_problem(problem: Problem, w: Window) -> Problem:
     return sub
 
 
-def fit_windows(subs: list[Problem], params: SecondOrderParams, free: tuple[str, ...], flip: bool) -> WindowFit:
-    """``free`` of ``params`` fitted on every window (never worse than at ``params``).
+def fit_window(sub: Problem, params: SecondOrderParams, free: tuple[str, ...], flip: bool, token: str = ""
+               ) -> Fit | None:
+    """``free`` of ``params`` fitted on one window (never worse than at ``params``), with one BLAS thread.
+
+    Parameters
+    ----------
+    sub : Problem
+        The window (:func:`window_problem`).
+    params : SecondOrderParams
+        The start.
+    free : tuple of str
+        The parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed.
+    token : str
+        What the fit is stopped by (:meth:`Problem.cancel`): then None.
+    """
+    try:
+        with one_blas_thread(), sub.tally(token):
+            return no_worse(sub, params, free, fit_model(sub, params, free, flip=flip))
+    except Cancelled:
+        return None
+
+
+def fit_windows(subs: list[Problem], params: SecondOrderParams, free: tuple[str, ...], flip: bool,
+                pool: Pool = SERIAL) -> WindowFit:
+    """``free`` of ``params`` fitted on every window (never worse than at ``params``), on ``pool``'s workers at once.
 
     Parameters
     ----------
@@ -337,14 +372,106 @@ def fit_windows(subs: list[Problem], params: SecondOrderParams, free: tuple[str,
         The parameters fitted.
     flip : bool
         Run with the hinge moment reversed.
+    pool : Pool
+        Where the windows' fits run (each independent of the others: the same fits wherever they run).
 
     Returns
     -------
     WindowFit
         One fit per window.
     """
-    fits = [no_worse(sub, params, free, fit_model(sub, params, free, flip=flip)) for sub in subs]
+    pending = [pool.submit(fit_window, sub, params, free, flip) for sub in subs]
+    fits = [value_of(f) for f in pending]
+    assert all(f is not None for f in fits)  # only a token stops a window's fit, and none was given
     return WindowFit(free, fits, sum(sub.n_fit for sub in subs))
+
+
+@dataclass(frozen=True)
+class ProxyTest:
+    """One added effect tested on the windows: what its ΔBIC came to, and how many windows that took."""
+
+    effect: str
+    delta_bic: float
+    """Over all windows; with :attr:`fitted` short of :attr:`windows`, the bound the fitted ones already set."""
+    fitted: int
+    windows: int
+    elapsed_s: float
+
+    @property
+    def needed(self) -> bool:
+        """The windows need the effect (it is kept)."""
+        return self.delta_bic <= MAX_DELTA_BIC
+
+    def as_dict(self) -> JsonObject:
+        """Plain values for JSON."""
+        stopped = (f"stopped after {self.fitted} of {self.windows} windows: those alone leave more without the "
+                   f"effect than the windows with it leave on all {self.windows}, so its ΔBIC is at most "
+                   f"{self.delta_bic:+.1f} whatever the others give" if self.fitted < self.windows else None)
+        return {"effect": self.effect, "delta_bic": self.delta_bic, "windows_fitted": self.fitted,
+                "windows": self.windows, "elapsed_s": round(self.elapsed_s, 3), "stopped_early": stopped}
+
+
+def refit_without(subs: list[Problem], params: SecondOrderParams, free: tuple[str, ...], flip: bool, with_: WindowFit,
+                  pool: Pool = SERIAL) -> tuple[WindowFit | None, float, int]:
+    """The windows refitted with ``free`` only, stopped once the ones fitted show the effect is needed.
+
+    The ΔBIC of the model with the effect against the one without falls as the error without it grows, and the
+    windows not yet fitted can add no less than nothing to that error: once the windows fitted leave, without the
+    effect, so much that the ΔBIC is at most :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC` even with nothing on
+    the rest, the effect is needed whatever they give, and they are not fitted. The windows are fitted in the
+    order of the error the effect's absence leaves at the start (one run each), largest first, as many at once as
+    ``pool`` has workers; the bound is checked after each in that order, so the answer and the count said are the
+    same wherever they ran.
+
+    Parameters
+    ----------
+    subs : list of Problem
+        The windows (:func:`window_problem`).
+    params : SecondOrderParams
+        The start: the final model with the effect switched off.
+    free : tuple of str
+        The parameters fitted without the effect.
+    flip : bool
+        Run with the hinge moment reversed.
+    with_ : WindowFit
+        The windows' fits with the effect.
+    pool : Pool
+        Where the windows' fits run.
+
+    Returns
+    -------
+    tuple
+        The windows' fits without it (None when stopped early), the ΔBIC (its bound when stopped early) and
+        the windows fitted.
+    """
+    starts = []
+    for sub in subs:
+        r = sub.weighted_residual(sub.simulate([params], [flip])[0])
+        starts.append(float(np.dot(r, r)))
+    order = sorted(range(len(subs)), key=lambda k: -starts[k])
+    q = (len(with_.free) - len(free)) * len(subs)
+    n = with_.n
+    fits: dict[int, Fit] = {}
+    batch = max(1, pool.workers) if pool.enabled else 1
+    for first in range(0, len(order), batch):
+        chunk = order[first:first + batch]
+        tokens = {k: f"without/{next(_TESTS)}" for k in chunk}
+        pending = {k: pool.submit(fit_window, subs[k], params, free, flip, tokens[k]) for k in chunk}
+        for k, future in pending.items():
+            fit = value_of(future)
+            assert fit is not None  # cancelled only after the loop stopped taking fits
+            fits[k] = fit
+            if len(fits) == len(subs):
+                break
+            least = sum(f.rss for f in fits.values())  # the windows left add at least nothing
+            bound = n * math.log(max(with_.rss, TINY) / max(least, TINY)) + q * math.log(max(n, 2))
+            if bound <= MAX_DELTA_BIC:
+                for j in chunk:  # the batch's fits still running stop at their next simulation
+                    if j not in fits:
+                        subs[j].cancel(tokens[j])
+                return None, bound, len(fits)
+    without = WindowFit(free, [fits[k] for k in range(len(subs))], n)
+    return without, _pays(without, with_), len(subs)
 
 
 def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
@@ -383,7 +510,7 @@ def _pays(without: WindowFit, with_: WindowFit) -> float:
 
 
 def analyse(problem: Problem, result: Identification, declared: SecondOrderParams,
-            say: Callable[[str], None] = lambda _m: None) -> Changes:
+            say: Callable[[str], None] = lambda _m: None, pool: Pool = SERIAL) -> Changes:
     """Refit the final model on windows of the record, report what changes, take out what stood in for it.
 
     ``result.final``, ``steps`` and ``removed`` change when an effect is taken out (module docstring).
@@ -416,11 +543,11 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
         return out
     out.windows = ws
     subs = [window_problem(problem, w) for w in ws]
-    cur = fit_windows(subs, final.params, final.free, final.flip)
+    cur = fit_windows(subs, final.params, final.free, final.flip, pool)
     out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in final.free], cur)
     say(f"changes: {how}; " + ", ".join(f"{t.name} {t.kind}" for t in out.tracks))
     if out.changed:
-        cur = _proxies(problem, result, declared, subs, cur, out, say)
+        cur = _proxies(problem, result, declared, subs, cur, out, say, pool)
         out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in result.final.free], cur)
     out.bandwidth_hz = tuple(bandwidth_hz(f.params) for f in cur.fits)
     out.rms_over_noise = {
@@ -439,6 +566,12 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
         out.statements = [f"the parameters hold over the record ({how}): "
                           + "; ".join(t.statement() for t in out.tracks if t.kind != "not determined")]
     out.statements += ridge
+    early = [t for t in out.tests if t.fitted < t.windows]
+    if early:
+        out.statements.append("the added effects tested on the windows with their own parameters, the refits without "
+                              "each stopped once the windows fitted decided it: " + "; ".join(
+                                  f"{t.effect} needed (ΔBIC at most {t.delta_bic:+.1f} after {t.fitted} of "
+                                  f"{t.windows} windows, {t.elapsed_s:.1f} s)" for t in early))
     return out
 
 
@@ -466,7 +599,7 @@ def _on_the_ridge(tracks: list[Track], wf: WindowFit) -> tuple[list[Track], list
 
 
 def _proxies(problem: Problem, result: Identification, declared: SecondOrderParams, subs: list[Problem],
-             cur: WindowFit, out: Changes, say: Callable[[str], None]) -> WindowFit:
+             cur: WindowFit, out: Changes, say: Callable[[str], None], pool: Pool) -> WindowFit:
     """Take out each added effect the windows, each with its own parameters, do not need (module docstring)."""
     changed = ", ".join(t.name for t in out.tracks if t.changed)
     for step in reversed(list(result.steps)):
@@ -478,10 +611,13 @@ def _proxies(problem: Problem, result: Identification, declared: SecondOrderPara
         free = tuple(f for f in final.free if f not in off)
         if not free:
             continue
-        without = fit_windows(subs, final.params.replace(**off), free, final.flip)
-        d = _pays(without, cur)
-        say(f"  changes: {effect.name} on windows with their own parameters: ΔBIC {d:+.1f}")
-        if d <= MAX_DELTA_BIC:
+        clock = time.perf_counter()
+        without, d, fitted = refit_without(subs, final.params.replace(**off), free, final.flip, cur, pool)
+        test = ProxyTest(effect.name, d, fitted, len(subs), time.perf_counter() - clock)
+        out.tests.append(test)
+        bound = f"at most {d:+.1f} after {fitted} of {len(subs)} windows" if fitted < len(subs) else f"{d:+.1f}"
+        say(f"  changes: {effect.name} on windows with their own parameters: ΔBIC {bound}")
+        if test.needed or without is None:
             continue
         refit = no_worse(problem, final.params.replace(**off), free,
                          fit_model(problem, final.params.replace(**off), free, flip=final.flip))

@@ -286,7 +286,7 @@ def _changes(chain: _Chain, base: SecondOrderParams) -> None:
     before = chain.now
     saved = _snapshot(chain.result)
     found = guarded("changes", chain.result.failures,
-                    lambda: changes.analyse(chain.problem, chain.result, base, chain.say))
+                    lambda: changes.analyse(chain.problem, chain.result, base, chain.say, chain.pool))
     if found is None:
         _restore(chain.result, saved)
         status, reason = "failed", "the windowed refit failed: no change over the record is reported"
