@@ -68,10 +68,9 @@ class Client:
         self.node = rclpy.create_node(name, context=self.ctx)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
-        self.ready = {}
-        """Node name → when (monotonic) it first said it was ready on ``/ema/ready``."""
-        self.node.create_subscription(String, "/ema/ready", lambda m: self.ready.setdefault(m.data, time.monotonic()),
-                                      READY_QOS)
+        self.ready = None
+        """Node name → when (monotonic) it first said it was ready on ``/ema/ready``; listened to from the first
+        service call on (a test of the graph's topics sees no topic of the client's own before)."""
 
     def spin(self, seconds, until=None):
         end = time.monotonic() + seconds
@@ -92,6 +91,10 @@ class Client:
 
     def call(self, srv_type, name, request, timeout=READY_BOUND_S):
         """Call a node's service once it is there (its node up: the ready signal, within ``timeout``)."""
+        if self.ready is None:
+            self.ready = {}
+            self.node.create_subscription(String, "/ema/ready",
+                                          lambda m: self.ready.setdefault(m.data, time.monotonic()), READY_QOS)
         cli = self.node.create_client(srv_type, name)
         node = name.rpartition("/")[0]
         up = self.spin(timeout, lambda: self._service_up(cli, node))
