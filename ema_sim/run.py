@@ -297,8 +297,11 @@ class RunDescription:
         for name in self.emac_nodes():
             chans = self.emac_channels if name == "emac" else [name[len("emac_"):]]
             out[name] = {**common, **sim, "model": self.model, "channels": chans, "disable": self.disable,
-                         "emac": {"frame_hz": self.frame_hz, **({"faults": ";".join(self.faults)} if self.faults
-                                                                 else {})}}
+                         "emac": {"frame_hz": self.frame_hz,
+                                  # a peer's feedback is waited for at most half the clock's stall timeout: a
+                                  # live channel waiting on a dead peer steps on and is not left out with it
+                                  **({"lockstep_source_wait_s": self.stall_timeout_s / 2} if self.lockstep else {}),
+                                  **({"faults": ";".join(self.faults)} if self.faults else {})}}
         out["testenv"] = {**common, **sim, "profile": self.profile, "frame_hz": self.frame_hz,
                           "disable": list(environment_elements(self.disable)),
                           **({"seed": self.seed} if self.seed is not None else {})}

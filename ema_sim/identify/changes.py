@@ -525,6 +525,8 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
         The declared model's starting values (an effect's off value where it has none).
     say : callable
         Progress lines.
+    pool : Pool
+        The identification's workers: the windows' fits and the proxy tests' refits run on them.
 
     Returns
     -------

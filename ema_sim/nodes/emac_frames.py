@@ -185,13 +185,14 @@ class EmacFrames(EmacReceiver):
                 continue
             if s.waiting_since is None:
                 s.waiting_since = now
-            if now - s.waiting_since < self.wait_s:
+            limit = self.source_wait_s if s is self.source_fb else self.wait_s
+            if now - s.waiting_since < limit:
                 go = False
             else:
                 s.gave_up = True
                 self.waits_given_up += 1
                 self.throttled("wait", f"no input on {topics[id(s)]} for frame {t / NS:.3f} s after "
-                               f"{self.wait_s:g} s; stepping with held values")
+                               f"{limit:g} s; stepping with held values")
         if go:
             for s in pending:
                 s.waiting_since = None

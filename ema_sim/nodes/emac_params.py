@@ -171,6 +171,10 @@ def emac_specs(base: dict[str, Any]) -> list[Spec]:
     out.append(Spec("emac.lockstep_wait_s", float(base.get("lockstep_wait_s", 5.0)),
                     "lockstep: wall time to wait for a frame's inputs while their publishers live", "s", 0.0, 3600.0,
                     read_only=False))
+    out.append(Spec("emac.lockstep_source_wait_s", float(base.get("lockstep_source_wait_s", 2.5)),
+                    "lockstep: wall time to wait for a frame's peer feedback (the crosstalk sources) while their "
+                    "publishers live; below the clock's stall_timeout_s, so a live channel waiting on a dead peer is "
+                    "not left out with it", "s", 0.0, 3600.0, read_only=False))
     out += [Spec(f"emac.crosstalk.{ch}_pp_v", float(base.get("crosstalk", {}).get(f"{ch}_pp_v", 0.0)),
                  f"peak-to-peak feedback noise on {ch} while the other channels slew (section 2.2)", "V", 0.0, 20.0)
             for ch in CHANNELS]

@@ -79,6 +79,7 @@ class EmacState(SuiteNode):
         self.settings = EmacSettings.from_parameters(
             {k: v for k, v in nested(settings)["emac"].items() if not isinstance(v, dict)}, f"{name}: emac")
         self.wait_s = float(settings["emac.lockstep_wait_s"])
+        self.source_wait_s = float(settings["emac.lockstep_source_wait_s"])
         self.frame_ns = round(NS / self.settings.frame_hz)
         self.frame_s = self.frame_ns / NS
         self.model_name = own["model"]
@@ -206,6 +207,10 @@ class EmacState(SuiteNode):
             old, self.wait_s = self.wait_s, float(value)
             return f"emac.lockstep_wait_s: {old:g} → {self.wait_s:g} s"
 
+        def source_wait(value: Any) -> str:
+            old, self.source_wait_s = self.source_wait_s, float(value)
+            return f"emac.lockstep_source_wait_s: {old:g} → {self.source_wait_s:g} s"
+
         def faults(value: object) -> str:
             specs = [u.set_faults(str(value)) for u in self.units.values()]
             text = "; ".join(f.spec() for f in specs[0]) if specs and specs[0] else "none"
@@ -217,6 +222,7 @@ class EmacState(SuiteNode):
         on("emac.failure", failure)
         on("emac.motor_power_on", power)
         on("emac.lockstep_wait_s", wait)
+        on("emac.lockstep_source_wait_s", source_wait)
 
     def _make_outputs(self) -> None:
         """The publishers: feedback, sensors and ``/diagnostics`` (:class:`Outputs`), and the faults' truth."""
