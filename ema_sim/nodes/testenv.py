@@ -128,6 +128,8 @@ class TestEnvNode(SuiteNode):
         self.silent: dict[str, float] = {}
         """Channels commanded without feedback beyond ``silent_after_s``: since when (wall)."""
         self.silences = 0
+        self.silences_by_channel: dict[str, int] = {}
+        """Each channel's silences (a killed EMAC's, told from a busy machine's hold-up of another)."""
         self.next_check = 0.0
         self.status_due = 0.0
         self.diag_pub = self.create_publisher(DiagnosticArray, ct.endpoint(ct.DIAGNOSTICS), qos(ct.EVENT_QOS))
@@ -160,6 +162,7 @@ class TestEnvNode(SuiteNode):
                 if ch not in self.silent:
                     self.silent[ch] = heard
                     self.silences += 1
+                    self.silences_by_channel[ch] = self.silences_by_channel.get(ch, 0) + 1
                     changed = True
                     self.get_logger().warning(f"{ch}: no feedback from its EMAC for {(now - heard) * 1e3:.0f} ms "
                                               f"while commanded (silent_after_s {self.silent_s:g} s): ERROR")
@@ -277,7 +280,8 @@ class TestEnvNode(SuiteNode):
 
     def summary(self) -> dict[str, Any]:  # noqa: D102
         return {"profile": self.profile.describe(), "frames": dict(self.frames), "passed_bad": self.passed_bad,
-                "run_time_changes": self.changes, "silences": self.silences}
+                "run_time_changes": self.changes, "silences": self.silences,
+                "silences_by_channel": dict(self.silences_by_channel)}
 
 
 def parser() -> argparse.ArgumentParser:
