@@ -255,11 +255,6 @@ class _Runs:
             return np.column_stack(list(pool.map(column, cols))) if cols else np.zeros((r0.size, 0))
 
 
-def _first(value: ParamValue) -> float:
-    """A value as one number (a curve by its first segment)."""
-    return value[0] if isinstance(value, tuple) else value
-
-
 def _param_value(name: str, value: object) -> ParamValue:
     """A declared parameter's value as a number or a curve's tuple (one clear error for anything else)."""
     if isinstance(value, float) or (isinstance(value, tuple) and all(isinstance(q, float) for q in value)):
@@ -440,7 +435,7 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
     names = [n for n in (*DELAYS, *CANDIDATES) if n in info
              and (n in DELAYS or _positive(info[n].default))]
     runs = _Runs(problem, model, names, declared)
-    x = np.array([_first(declared[n]) if n in DELAYS else 0.0 for n in names])
+    x = np.array([(d[0] if isinstance(d := declared[n], tuple) else d) if n in DELAYS else 0.0 for n in names])
     coarse = coarse_problem(problem) if beat is not None and current is not None else None
     screen = ""
     if coarse is not None and beat is not None and current is not None:
@@ -690,7 +685,7 @@ def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArr
         v = values[name]
         if runs.delay[i]:  # absolute, never finer than the model's own step
             sigma[i] = max(float(sx[j]), 0.5 * DELAY_RESOLUTION_S) if math.isfinite(sx[j]) else math.inf
-            if sigma[i] > max(_first(v), DELAY_RESOLUTION_S):
+            if sigma[i] > max(v[0] if isinstance(v, tuple) else v, DELAY_RESOLUTION_S):
                 vague.append(name)
             continue
         scale = float(v[0] if isinstance(v, tuple) else v)
