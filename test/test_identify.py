@@ -134,6 +134,9 @@ def test_pairs_of_effects_are_both_found(effects, seed):
 def test_null_case_adds_nothing(seed, noise):
     result = run_case({}, seed, noise=noise)
     assert result.steps == []
+    (effects,) = [s for s in result.stages if s.stage == "effects"]
+    assert effects.reason.endswith(f"({result.search_ended})")  # the report says why the search ended
+    assert result.search_ended.startswith("it stopped")
     for output, sigma in zip(("position_deg", "surface_deg"), noise, strict=True):
         assert result.problem.sigma_deg[output] == pytest.approx(sigma, rel=0.1)
 

@@ -338,8 +338,8 @@ def _effects(chain: _Chain, base: SecondOrderParams, searched: int) -> tuple[str
         return "kept", why
     r.final = final
     if not r.steps:
-        return "nothing to add", "no effect of the vocabulary pays for itself"
-    return "kept", f"added {', '.join(s.effect for s in r.steps)}"
+        return "nothing to add", f"no effect of the vocabulary pays for itself ({r.search_ended})"
+    return "kept", f"added {', '.join(s.effect for s in r.steps)} ({r.search_ended})"
 
 
 def _escalate(chain: _Chain) -> tuple[str, str]:

@@ -132,6 +132,8 @@ class Identification:
     """:attr:`equivalent` in words (``loada + compliance + …``, ``hoad3 (as declared)``)."""
     escalated: str = ""
     """Why the physical fit of :data:`ema_sim.identify.physical.ESCALATE_TO` was tried (empty: it was not)."""
+    search_ended: str = ""
+    """Why the effects search ended (:func:`ema_sim.identify.stepwise.search`; empty: it did not run)."""
     stages: list[Outcome] = field(default_factory=list)
     """Every stage in order: what it did and the error before and after it."""
     failures: list[Failure] = field(default_factory=list)

@@ -718,8 +718,11 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
     Fit
         The model with every effect that paid.
     """
-    for _ in range(max_effects):
+    result.search_ended = f"it added the most effects asked for ({max_effects})"
+    for round_no in range(1, max_effects + 1):
         if cur.rss / problem.n_fit - 1.0 <= DONE_EXCESS:
+            result.search_ended = (f"it stopped before round {round_no}: the error left is within "
+                                   f"{100 * DONE_EXCESS:g} % of the noise floor")
             break
         steps = (step_candidates(problem, cur.params, cur.sim)
                  if cur.params.quantization_deg == 0.0 and "quantization_deg" not in cur.free else [])
@@ -755,6 +758,8 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
         best, said = _pick(problem, cur, accepted)
         result.ambiguities += said
         if best is None:
+            result.search_ended = (f"it stopped after round {round_no}: none of its {len(tried)} candidate fit"
+                                   f"{'s' if len(tried) != 1 else ''} paid for itself")
             break
         new, cand = best
         result.steps.extend(_entries(problem, cur, new, cand))
