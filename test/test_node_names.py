@@ -10,6 +10,7 @@ import time
 import pytest
 
 from ema_sim.errors import EmaError
+from ema_sim.launching import check_names
 from ema_sim.suite import Suite, SuiteConfig, free_domain_id
 
 pytestmark = pytest.mark.ros
@@ -64,6 +65,22 @@ def test_a_run_refuses_before_starting_anything_when_its_names_are_running(tmp_p
         assert not suite.procs  # nothing started...
         assert not (tmp_path / "bag.logs").exists()  # ... nothing written
         assert first.poll() is None
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.wait(timeout=20)
+
+
+def test_ros2_launch_refuses_before_making_its_nodes_when_its_names_are_running(tmp_path, monkeypatch):
+    first, env, _ = _start_right_rudder(tmp_path, 139)
+    try:
+        monkeypatch.setenv("ROS_DOMAIN_ID", env["ROS_DOMAIN_ID"])
+        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        with pytest.raises(EmaError) as err:  # the launch files' check, with a look generous for a busy machine
+            check_names(["/emac_left_wing", "/emac_right_rudder"], look_s=30.0)
+        message = str(err.value)
+        assert f"running on ROS domain {env['ROS_DOMAIN_ID']}: /emac_right_rudder (pid {first.pid} on host" in message
+        assert "/emac_left_wing" not in message
+        check_names(["/aircraft2/emac_right_rudder"], look_s=2.0)  # another namespace: free
     finally:
         first.send_signal(signal.SIGINT)
         first.wait(timeout=20)
