@@ -43,7 +43,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from ema_sim.errors import EmaError
 from ema_sim.jsontypes import JsonObject
@@ -345,7 +345,7 @@ class Suite:
             log.close()
         return {name: proc.returncode for name, proc in self.procs.items()}
 
-    def summaries(self) -> dict[str, JsonObject]:
+    def summaries(self) -> dict[str, dict[str, Any]]:
         """The JSON summary each node printed when it stopped, by node name."""
         out: dict[str, JsonObject] = {}
         for name in self.procs:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -203,7 +204,7 @@ def _for_record(progress: Callable[[int, float], None], i: int) -> Callable[[flo
 
 
 # ---------------------------------------------------------------------------------------------- across tests
-def spread(fits: list[SecondOrderFit]) -> dict[str, object]:
+def spread(fits: list[SecondOrderFit]) -> dict[str, Any]:
     """Figure 23: the estimates of every test whose fit the record determines, and their range, per output.
 
     Parameters
@@ -216,11 +217,11 @@ def spread(fits: list[SecondOrderFit]) -> dict[str, object]:
     dict
         Output → the tests and the min, max, mean, std and count of ωn, ζ and delay.
     """
-    out: dict[str, object] = {}
+    out: dict[str, Any] = {}
     for output in sorted({f.output for f in fits}):
         every = [f for f in fits if f.output == output]
         rows = [f for f in every if f.quality == "ok"]
-        entry: dict[str, object] = {"tests": [{"test": f.test, "method": f.method, "wn_rad_s": f.wn_rad_s.value,
+        entry: dict[str, Any] = {"tests": [{"test": f.test, "method": f.method, "wn_rad_s": f.wn_rad_s.value,
                                             "wn_sigma": f.wn_rad_s.sigma, "zeta": f.zeta.value,
                                             "zeta_sigma": f.zeta.sigma, "delay_s": f.delay_s.value,
                                             "delay_sigma_s": f.delay_s.sigma, "quality": f.quality} for f in every]}
