@@ -64,7 +64,7 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
-def _physical_final(result: Identification) -> JsonObject:
+def _physical_final(result: Identification) -> dict[str, object]:
     """The final block of a high-order model whose physical parameters were fitted (model names and units)."""
     pf = result.physical
     assert pf is not None
@@ -90,7 +90,7 @@ def _rms_of(problem: Problem, fit: Fit) -> dict[str, float]:
     return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(fit.sim).items()}
 
 
-def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
+def _stats(problem: Problem, fit: Fit) -> dict[str, object]:
     errors = problem.errors_deg(fit.sim)
     rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in errors.items()}
     return {
