@@ -213,14 +213,15 @@ class TestEnvNode(SuiteNode):
                     f"{now}")
         return apply
 
-    def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> object:
+    def _path(self, table: dict[str, SignalPath], channel: str, make: Callable[[float, int, float], SignalPath],
+              value: float) -> SignalPath:
         path = table.get(channel)
         if path is None:
             stream = ct.CHANNELS.index(channel) if channel in ct.CHANNELS else len(table) + len(ct.CHANNELS)
             path = table[channel] = make(self.frame_s, stream, value if math.isfinite(value) else 0.0)
         return path
 
-    def _through(self, path: Any, value: float) -> float:
+    def _through(self, path: SignalPath, value: float) -> float:
         if not math.isfinite(value):
             self.passed_bad += 1
             self.throttled("bad", f"non-finite value passed through untouched ({self.passed_bad} so far)")
