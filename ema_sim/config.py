@@ -14,14 +14,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache, cached_property
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, SupportsFloat
 
 import yaml
+from numpy.typing import ArrayLike
 
 from ema_msgs_py import contract
 from ema_msgs_py.contract import Scaling, scaling_of
 from ema_sim import parameters as pm
-from ema_sim.calibration import Cubic
+from ema_sim.calibration import Cubic, FloatArray
 from ema_sim.errors import ConfigError, UnknownNameError
 from ema_sim.jsontypes import JsonObject
 
@@ -117,19 +118,19 @@ class ChannelConfig:
         """A model family's parameter section (a copy; empty when the file has none)."""
         return dict(self.sections.get(name, {}))
 
-    def deg_to_v(self, deg: Any) -> Any:
+    def deg_to_v(self, deg: ArrayLike) -> FloatArray:
         """Command volts the FMU sends for a surface command in degrees (command curve)."""
         return self.command_cal(deg)
 
-    def v_to_deg(self, volts: Any) -> Any:
+    def v_to_deg(self, volts: ArrayLike) -> FloatArray:
         """Surface degrees the FMU reads from LVDT feedback volts (feedback curve)."""
         return self.feedback_cal(volts)
 
-    def command_v_to_deg(self, volts: Any) -> Any:
+    def command_v_to_deg(self, volts: ArrayLike) -> FloatArray:
         """The surface command in degrees that a command voltage stands for (inverse command curve)."""
         return self.command_cal.inverse(volts)
 
-    def position_deg_to_v(self, deg: Any) -> Any:
+    def position_deg_to_v(self, deg: ArrayLike) -> FloatArray:
         """The LVDT feedback voltage that reads back as ``deg`` (inverse feedback curve)."""
         return self.feedback_cal.inverse(deg)
 
@@ -149,12 +150,15 @@ def ros_parameters(path: Path) -> dict[str, Any]:
     return params
 
 
-def finite_parameter(params: Mapping[str, Any], key: str, origin: str) -> float:
+def finite_parameter(params: Mapping[str, object], key: str, origin: str) -> float:
     """``params[key]`` as a finite float, or one :class:`ConfigError` that names the file and the key."""
     if key not in params:
         raise ConfigError(f"{origin}: missing parameter {key!r}")
+    raw = params[key]
     try:
-        value = float(params[key])
+        if not isinstance(raw, SupportsFloat | str):
+            raise TypeError
+        value = float(raw)
     except (TypeError, ValueError):
         raise ConfigError(f"{origin}: parameter {key!r} must be a number, got {params[key]!r}") from None
     if not math.isfinite(value):

@@ -100,7 +100,7 @@ def simulate(model_name: str, maneuver: Maneuver, load: Load | None = None, *, c
 
     ``faults`` are injected on their schedules; the metadata names them (``faults``, ``;``-separated specs).
     """
-    kwargs: dict[str, Any] = dict(overrides)
+    kwargs: dict[str, object] = dict(overrides)
     if rate_hz is not None:
         kwargs["rate_hz"] = rate_hz
     model = create(model_name, channel, **kwargs)

@@ -24,8 +24,8 @@ SURFACE_LOADS = ("aerodynamic", "bungee")
 """What loads the real surfaces: the hinge-moment model (flight) or a bungee / nothing (AIL, on the ground)."""
 WINGS = ("left_wing", "right_wing")
 
-# The mappings below are the vehicle file's sections as YAML (or ROS parameters) gave them (Any where a value goes
-# to float() before its check); every value is checked where it is read (a wrong one is one ConfigError naming it).
+# The mappings below are the vehicle file's sections as YAML (or ROS parameters) gave them; every value
+# is checked where it is read (a wrong one is one ConfigError naming it).
 
 
 def _numbers(cls: type, values: Mapping[str, object], origin: str) -> dict[str, float]:

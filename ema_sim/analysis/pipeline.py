@@ -29,9 +29,8 @@ from ema_sim.analysis.recognize import recognize
 from ema_sim.analysis.records import series, stamps
 from ema_sim.analysis.records.command_hold import CommandHold
 from ema_sim.analysis.registry import TESTS
-from ema_sim.analysis.section2.base import Options, RecordAnalysis
+from ema_sim.analysis.section2.base import Options, RecordAnalysis, TimingAlternative
 from ema_sim.io.measured import MeasuredData
-from ema_sim.jsontypes import JsonObject
 
 RECOGNISED = 0.1
 """Share of a record's analysis reported done once its tests are recognised."""
@@ -142,7 +141,7 @@ def _timing_figures(ra: RecordAnalysis) -> dict[str, tuple[str, float, float | N
     return out
 
 
-def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[JsonObject]:
+def timing_alternatives(held: RecordAnalysis, sampled: RecordAnalysis) -> list[TimingAlternative]:
     """Each phase and delay of a record analysed with its command taken as held and as sampled, side by side.
 
     Parameters

@@ -33,8 +33,9 @@ every segment says what it was recognised from.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,6 +60,8 @@ from ema_sim.io.measured import MeasuredData
 from ema_sim.signals import Load, Maneuver, parse_load, parse_maneuver
 
 FloatArray = NDArray[np.float64]
+_S = TypeVar("_S")
+"""A stretch of the record a reader reads (an edge run, a move run...)."""
 
 EDGE_KINDS = ("steps", "square", "regen", "staircase")
 MOVING_KINDS = ("sweep", "schroeder", "broadband", "sine", "triangle", "static_threshold", "dynamic_threshold", "ramp")
@@ -90,12 +93,12 @@ COMPATIBLE = {("broadband", "schroeder"), ("broadband", "sweep"), ("sine", "tria
 """(signal reading, metadata kind) pairs a signal can mistake for each other."""
 
 
-def _read(readers: tuple[Any, ...], stretch: object) -> Reading:
+def _read(readers: tuple[Callable[[_S], Reading | None], ...], stretch: _S) -> Reading:
     """The first reader's answer (the last reader of a tuple always answers)."""
     for reader in readers:
         reading = reader(stretch)
         if reading is not None:
-            return reading  # type: ignore[no-any-return]
+            return reading
     raise AssertionError("the last reader answers every stretch")
 
 

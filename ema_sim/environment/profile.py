@@ -106,7 +106,6 @@ class Profile:
         """Pass-through in both directions: the FMU talks to the EMACs directly."""
         return cls()
 
-    # Any: ROS parameters as a parameter file or rclpy gave them, checked here.
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> Profile:
         """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``).

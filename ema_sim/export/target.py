@@ -254,7 +254,6 @@ def _from_json_float(x: float | str) -> float:
     return float(x)
 
 
-# Any: an artefact's JSON as read, its shape checked here (a wrong one is the ExportError below).
 def from_manifest(doc: Mapping[str, Any]) -> ExportTarget:
     """The target an artefact's manifest describes.
 
@@ -273,7 +272,6 @@ def from_manifest(doc: Mapping[str, Any]) -> ExportTarget:
         params.validate()
         high = None
         if "high_order_params" in doc:
-            # Any: each value takes its own field's type (a float, or a tuple of them)
             values: dict[str, Any] = {k: tuple(_from_json_float(x) for x in v) if isinstance(v, list)
                                       else _from_json_float(v) for k, v in doc["high_order_params"].items()}
             high = HighOrderParams(**values)

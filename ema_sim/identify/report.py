@@ -14,7 +14,7 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from ema_sim.analysis.estimation import slew
 from ema_sim.analysis.estimation.noise import input_independence, whiteness
 from ema_sim.analysis.formatting.units import texts_in_unit
 from ema_sim.config import GENERIC
-from ema_sim.identify.contract import identify_schema
+from ema_sim.identify.contract import Baseline, DiscoveredTerm, Final, IdentifyReport, Num, identify_schema
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.effects import FREE, KEYS
 from ema_sim.identify.fit import Fit
@@ -64,7 +64,7 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
-def _physical_final(result: Identification) -> JsonObject:
+def _physical_final(result: Identification) -> dict[str, object]:
     """The final block of a high-order model whose physical parameters were fitted (model names and units)."""
     pf = result.physical
     assert pf is not None
@@ -90,7 +90,7 @@ def _rms_of(problem: Problem, fit: Fit) -> dict[str, float]:
     return {o: float(np.sqrt(np.mean(e**2))) for o, e in problem.errors_deg(fit.sim).items()}
 
 
-def _stats(problem: Problem, fit: Fit) -> dict[str, Any]:
+def _stats(problem: Problem, fit: Fit) -> dict[str, object]:
     errors = problem.errors_deg(fit.sim)
     rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in errors.items()}
     return {
@@ -199,7 +199,7 @@ def _slew(result: Identification) -> tuple[JsonObject, str | None]:
         f"{100 * (fitted / measured.rate - 1):+.0f} %: the model's limit is not the slope the data show")
 
 
-def to_json(result: Identification, data_name: str) -> JsonObject:
+def to_json(result: Identification, data_name: str) -> IdentifyReport:
     """The report of ``../shared/data-contract.md`` (and more: uncertainty, diagnostics, verdicts, warnings).
 
     Parameters
@@ -332,7 +332,7 @@ def to_json(result: Identification, data_name: str) -> JsonObject:
     # every text in the record's unit (a stage's words in degrees said in mm on a linear rig)
     out: JsonObject = texts_in_unit(strict(report), report["unit"])
     check(out, identify_schema(), "ema identify")
-    return out
+    return cast(IdentifyReport, out)  # the schema check above is the narrowing
 
 
 ZERO_SIGMA = ("not determined: its one-sigma came out exactly 0 (the fit cannot move it, or it sits on a bound), "
@@ -374,7 +374,7 @@ def _resolution(p: Problem, output: str) -> float | None:
     return None if q is None else _round(q)
 
 
-def write_json(report: JsonObject, path: str | Path) -> None:
+def write_json(report: IdentifyReport | JsonObject, path: str | Path) -> None:
     """Write the report as indented strict JSON (no NaN or Infinity tokens: :func:`strict`).
 
     Parameters
@@ -417,7 +417,7 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
     return Path(path)
 
 
-def summary(report: dict[str, Any]) -> str:
+def summary(report: IdentifyReport) -> str:
     """A few lines for the terminal.
 
     Parameters
@@ -455,7 +455,7 @@ def summary(report: dict[str, Any]) -> str:
     changes = report.get("changes") or {}
     if changes.get("changed"):
         lines.append("the record changed: the final values are the whole record's equivalents; per window:")
-        lines += [f"  {s}" for s in changes.get("statements", [])]
+        lines += [f"  {s}" for s in _texts(changes.get("statements"))]
     lines += [f"warning: {w}" for w in report.get("warnings", [])]
     return "\n".join(lines)
 
@@ -465,28 +465,33 @@ def _num(v: object, spec: str = ".4g") -> str:
     return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
-def _fmt_params(params: dict[str, object]) -> str:
+def _fmt_params(params: Mapping[str, object]) -> str:
     return ", ".join(f"{k} {_num(v)}" for k, v in params.items()) or "(none)"
 
 
-def _fmt_sigma(sigma: JsonObject) -> str:
+def _fmt_sigma(sigma: Mapping[str, object]) -> str:
     """One-sigma values, a null one (an exact 0: :data:`ZERO_SIGMA`) said as not determined."""
     return ", ".join(f"{k} {'not determined' if v is None else _num(v)}" for k, v in sigma.items()) or "(none)"
 
 
-def _fmt_term(t: dict[str, Any]) -> str:
+def _fmt_term(t: DiscoveredTerm) -> str:
     """A discovered term: its name, where it acts, its coefficients ± one-sigma and unit."""
     coef = ", ".join(f"{_num(c)} ± {'not determined' if s is None else _num(s, '.2g')}"
                      for c, s in zip(t["coefficient"], t["uncertainty"], strict=False))
     return f"{t['term']} ({t['on']}, {t['placement']}): {coef} {t['unit']}".rstrip()
 
 
-def _fmt_rms(rms: dict[str, float], unit: str = "deg") -> str:
+def _texts(value: object) -> list[str]:
+    """An open block's list of sentences (none when it has none)."""
+    return [str(s) for s in value] if isinstance(value, list) else []
+
+
+def _fmt_rms(rms: Mapping[str, Num], unit: str = "deg") -> str:
     u = "°" if unit == "deg" else f" {unit}"
     return ", ".join(f"{k.split('_')[0]} {v:.4g}{u}" for k, v in rms.items())
 
 
-def write_report(result: Identification, report: JsonObject, directory: str | Path) -> Path:
+def write_report(result: Identification, report: IdentifyReport, directory: str | Path) -> Path:
     """Markdown report with plots of the residual before and after, under ``directory``.
 
     Parameters
@@ -504,7 +509,7 @@ def write_report(result: Identification, report: JsonObject, directory: str | Pa
     return _markdown(result, report, out)
 
 
-def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
+def _plots(result: Identification, report: IdentifyReport, out: Path) -> None:
     """``residual.png`` (before and after, with the noise floor) and ``fit.png`` (measured and model)."""
     import matplotlib as mpl  # noqa: PLC0415 - plotting only when asked
 
@@ -555,7 +560,7 @@ def _plots(result: Identification, report: dict[str, Any], out: Path) -> None:
 
 
 
-def _md_terms(report: dict[str, Any]) -> list[str]:
+def _md_terms(report: IdentifyReport) -> list[str]:
     """The discovered terms of the final model as a table (none: nothing)."""
     terms = report.get("discovered_terms") or []
     if not terms:
@@ -569,7 +574,7 @@ def _md_terms(report: dict[str, Any]) -> list[str]:
     return [*rows, ""]
 
 
-def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path:
+def _markdown(result: Identification, report: IdentifyReport, out: Path) -> Path:
     """``report.md``: the summary, the record, the warnings, the errors, the effects, the diagnosis."""
     p = result.problem
     unit = report.get("unit", "deg")
@@ -583,9 +588,9 @@ def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path
     ref = report["reference"]
     for o in p.outputs:
         md.append(f"| reference ({ref['model']}) | {o} | {ref['rms_deg'][o]:.4g} | {ref['max_abs_deg'][o]:.4g} | | "
-                  f"{ref['rms_deg'][o] / report['noise_deg'][o]:.3g} | |")
-    for label, key in (("baseline", "baseline"), ("final", "final")):
-        block = report[key]
+                  f"{cast(float, ref['rms_deg'][o]) / cast(float, report['noise_deg'][o]):.3g} | |")
+    blocks: tuple[tuple[str, Baseline | Final], ...] = (("baseline", report["baseline"]), ("final", report["final"]))
+    for label, block in blocks:
         for o in p.outputs:
             md.append(f"| {label} | {o} | {block['rms_deg'][o]:.4g} | {block['max_abs_deg'][o]:.4g} | "
                       f"{block['nrmse'][o]:.4g} | {block['rms_over_noise'][o]:.3g} | "
@@ -614,7 +619,7 @@ def _markdown(result: Identification, report: dict[str, Any], out: Path) -> Path
                for r in report["removed"]]
     md += _changes_md(report.get("changes"))
     md += ["", "## What the final model leaves (residual diagnosis)", ""]
-    md += [f"- {line}" for line in report["diagnosis"]["text"]]
+    md += [f"- {line}" for line in _texts((report["diagnosis"] or {}).get("text"))]
     if report["rejected"]:
         md += ["", "## Candidates fitted and rejected", "", "| effect | where | value | why |",
                "| --- | --- | --- | --- |"]

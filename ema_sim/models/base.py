@@ -239,7 +239,7 @@ class ActuatorModel(ABC):
 
     @classmethod
     @abstractmethod
-    def default_params(cls, channel: ChannelConfig, **overrides: float) -> Any:  # Any: the family's own set
+    def default_params(cls, channel: ChannelConfig, **overrides: float) -> Any:
         """The parameters a model of this class takes from ``channel``, then ``overrides`` (validated).
 
         Parameters

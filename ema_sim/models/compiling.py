@@ -27,7 +27,6 @@ from numba.core.typing.templates import Signature
 from numba.extending import intrinsic
 
 _F = TypeVar("_F", bound=Callable[..., object])
-# Any below: a kernel of any signature; and llvmlite's IR builder and values, which llvmlite leaves untyped.
 
 
 @overload

@@ -36,7 +36,7 @@ FLAG_PWM_DEAD_BAND = 32
 FLAG_BRAKE = 64
 FLAG_STALL = 128
 
-_F = TypeVar("_F", bound=Callable[..., object])  # Any: a kernel of any signature (the compiled one keeps it)
+_F = TypeVar("_F", bound=Callable[..., object])
 
 jit = nb.njit(cache=True, inline="always")
 """Compile an element for inlining into the kernels (it takes the caller's floating-point flags)."""

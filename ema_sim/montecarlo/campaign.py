@@ -293,8 +293,8 @@ def ail_targets(profile: str) -> dict[str, Target]:
 
 
 # ----------------------------------------------------------------------------------------------- parsing
-# The parsers below take a campaign file's values as YAML gave them (object; Any where a value goes to float() or a
-# loop before its check), each checked where it is read (a wrong one is one ConfigError naming its place).
+# The parsers below take a campaign file's values as YAML gave them, each checked
+# where it is read (a wrong one is one ConfigError naming its place).
 def _number(values: Mapping[str, Any], key: str, where: str, default: float | None = None,
             positive: bool = True) -> float:
     if key not in values:

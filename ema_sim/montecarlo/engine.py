@@ -86,7 +86,6 @@ def blocks(runs: int, batch: int) -> list[tuple[int, int]]:
     return [(s, min(s + batch, runs)) for s in range(0, runs, batch)]
 
 
-# Any: Dask's Client and LocalCluster, whose methods the code below calls are left unannotated by distributed.
 def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
     from distributed import Client, LocalCluster  # noqa: PLC0415 - Dask (0.3 s of import) only when a campaign runs
 

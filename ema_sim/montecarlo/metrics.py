@@ -458,7 +458,6 @@ OPTIONS: dict[str, tuple[str, ...]] = {"gain_phase": ("at_hz",)}
 """The options each metric takes."""
 
 
-# Any: a campaign file's entry as YAML gave it, checked here.
 def parse_metric(entry: Any, experiments: Mapping[str, str], where: str) -> MetricSpec:
     """One ``metrics`` entry: a name, or ``{metric: NAME, experiment: E, <options>}``.
 

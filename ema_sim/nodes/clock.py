@@ -29,6 +29,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.config import config_dir, ros_parameters
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list
 from ema_sim.nodes.ports import Ports
@@ -250,7 +251,7 @@ class ClockNode(SuiteNode):
         self.diag_pub.publish(msg)
         return 0.002
 
-    def summary(self) -> dict[str, Any]:  # noqa: D102
+    def summary(self) -> JsonObject:  # noqa: D102
         frames = max(self.k, 0)
         if self.started_wall is None:
             return {"frames": 0}
@@ -259,7 +260,7 @@ class ClockNode(SuiteNode):
         return {"frames": frames, "sim_s": sim, "wall_s": wall, "realtime_factor": sim / wall if wall > 0 else 0.0,
                 "stalls": self.stalls, "resent": self.resent, "left_out": self.left_out_count,
                 "rejoined": self.rejoined, "rejoin_s": [round(x, 3) for x in self.rejoin_s],
-                "out_of_lockstep": sorted(self.left_out)}
+                "out_of_lockstep": list[JsonValue](sorted(self.left_out))}
 
 
 def parser() -> argparse.ArgumentParser:

@@ -17,7 +17,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import rclpy
@@ -38,6 +38,9 @@ from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes import lifetime, realtime
 from ema_sim.nodes.names import NameClaim
 from ema_sim.nodes.params import Declared, Spec, cli_overrides, names_list
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
 """Each node prints one line with this prefix and a JSON summary when it stops."""
@@ -85,7 +88,7 @@ def command_line(options: dict[str, Any]) -> list[str]:
     return own if options.get("use_global_arguments") is False else [*_process_argv, *own]
 
 
-def make_executor(context: object = None) -> Any:
+def make_executor(context: Context | None = None) -> Any:
     """The executor every node uses (see the module docstring for the measurement behind it).
 
     Parameters
@@ -344,12 +347,22 @@ def run(factory: Callable[[argparse.Namespace], SuiteNode], parser: argparse.Arg
     return run_nodes(lambda args: ([factory(args)], None), parser, argv)
 
 
+class Handover(Protocol):
+    """What the loop needs of a container's bus (:class:`ema_sim.nodes.container.Bus`)."""
+
+    progress: bool
+    """Whether a composed node handed something over in-process this round."""
+
+    def release(self) -> None:
+        """Emit merged frames that waited too long for a composed publisher."""
+
+
 MAX_ROUNDS = 50
 """Polling rounds of composed nodes between two looks at the middleware (in-process work first)."""
 
 
-def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any]], parser: argparse.ArgumentParser,
-              argv: Sequence[str] | None = None) -> int:
+def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Handover | None]],
+              parser: argparse.ArgumentParser, argv: Sequence[str] | None = None) -> int:
     """Several nodes in one process (:mod:`ema_sim.nodes.container`), or one: the loop of :func:`run`.
 
     ``factory`` returns the nodes and the container's bus (None for a lone node). The nodes are polled
@@ -390,7 +403,7 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     nodes: list[SuiteNode] = []
-    bus: object = None
+    bus: Handover | None = None
     status = 0
     try:
         nodes, bus = factory(args)
@@ -417,7 +430,7 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Any
     return status
 
 
-def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any]) -> None:
+def _loop(nodes: list[SuiteNode], bus: Handover | None, executor: Any, stop: dict[str, int | None]) -> None:
     if bus is None and len(nodes) == 1:
         _loop_one(nodes[0], executor, stop)
         return
@@ -445,7 +458,7 @@ def _loop(nodes: list[SuiteNode], bus: Any, executor: Any, stop: dict[str, Any])
         executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
 
 
-def _loop_one(node: SuiteNode, executor: Any, stop: JsonObject) -> None:
+def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, int | None]) -> None:
     """:func:`_loop` for a node alone in its process (the ``processes`` layout): the same steps, fewer calls.
 
     The loop runs once per message taken (a channel node of the ``processes`` layout: 2 to 7 a frame, its

@@ -129,7 +129,7 @@ class Outlet:
         self.bus = bus
         self.topic = topic
         self.sources: list[str] = []
-        self.dds: Any = None
+        self.dds: FramePublisher | None = None
         self.pending: dict[int, dict[str, JointFrame]] = {}
         self.since: dict[int, float] = {}
         self.latest: dict[str, int] = {}
@@ -177,7 +177,7 @@ class Outlet:
             raw = encode(frame)
             for raw_callback in raws or ():
                 raw_callback(raw)
-            if outside:
+            if outside and self.dds is not None:  # outside: someone subscribes to its DDS publisher
                 self.dds.dds.publish(raw)
 
     def put(self, source: str, frame: JointFrame) -> None:

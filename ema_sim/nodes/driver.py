@@ -13,9 +13,8 @@ import abc
 import datetime as dt
 import json
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
 
 from rcl_interfaces.msg import ParameterType
 from std_msgs.msg import String
@@ -171,7 +170,7 @@ class DriverNode(SuiteNode, abc.ABC):
         """Record what waits on the topics taken at the frame: once a frame while running, each poll otherwise."""
         self.recorder.take()
 
-    def _close_bag(self, frames: int, extra: dict[str, Any] | None = None) -> None:
+    def _close_bag(self, frames: int, extra: Mapping[str, object] | None = None) -> None:
         """Note how far the run got (and ``extra``) in the bag's metadata, and close it."""
         self._take_recorded()
         self.writer.set_metadata("frames_commanded", str(self.k))

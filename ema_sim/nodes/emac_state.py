@@ -22,6 +22,7 @@ from ema_sim.config import CHANNELS, config_dir, load_channel, parse_channel, ro
 from ema_sim.emac import ActivityMeter, EmacChannel, EmacSettings, parse_failure
 from ema_sim.emac.stamps import CommandClock, FrameGate
 from ema_sim.errors import UnknownNameError
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models import create, model_names
 from ema_sim.nodes.common import DurationHistogram, SuiteNode
 from ema_sim.nodes.emac_inputs import StampPolicy
@@ -250,9 +251,9 @@ class EmacState(SuiteNode):
             recent_fault=time.monotonic() - self.last_fault_wall < FAULT_HOLD_S, hold_s=FAULT_HOLD_S,
             inactive=not self.active))
 
-    def summary(self) -> dict[str, Any]:  # noqa: D102
+    def summary(self) -> JsonObject:  # noqa: D102
         return {
-            "channels": self.channels, "mode": "lockstep" if self.lockstep else "realtime",
+            "channels": list[JsonValue](self.channels), "mode": "lockstep" if self.lockstep else "realtime",
             "frames_published": self.published, "first_feedback_s": self.first_feedback_s,
             "late_frames": self.late_frames,
             "waits_given_up": self.waits_given_up, "bad_messages": self.bad_messages,

@@ -85,7 +85,7 @@ def _plain(value: object) -> object:
     return list(value) if isinstance(value, tuple) else value
 
 
-def flatten(mapping: Mapping[str, object], prefix: str = "") -> Iterator[tuple[str, Any]]:
+def flatten(mapping: Mapping[str, object], prefix: str = "") -> Iterator[tuple[str, object]]:
     """``{"a": {"b": 1}}`` → ``("a.b", 1)``: a nested parameter mapping as ROS parameter names.
 
     Parameters
@@ -97,7 +97,7 @@ def flatten(mapping: Mapping[str, object], prefix: str = "") -> Iterator[tuple[s
 
     Yields
     ------
-    tuple of (str, Any)
+    tuple of (str, object)
         Each leaf's dotted name and value.
     """
     for key, value in mapping.items():
@@ -131,7 +131,7 @@ def nested(flat: Mapping[str, object]) -> dict[str, Any]:
     return out
 
 
-def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, object]:
+def merged(base: Mapping[str, object], override: Mapping[str, object]) -> dict[str, object]:
     """Deep merge, ``override`` winning.
 
     Parameters
@@ -148,8 +148,9 @@ def merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, ob
     """
     out = copy.deepcopy(dict(base))
     for key, value in override.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = merged(out[key], value)
+        current = out.get(key)
+        if isinstance(value, Mapping) and isinstance(current, Mapping):
+            out[key] = merged(current, value)
         else:
             out[key] = value
     return out
@@ -510,7 +511,7 @@ def file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise ConfigError(f"parameter file {path}: cannot read ({exc})") from None
-    out: list[tuple[str, JsonObject]] = []
+    out: list[tuple[str, dict[str, Any]]] = []
 
     def walk(mapping: Mapping[str, object], prefix: str) -> None:
         for key, value in mapping.items():

@@ -34,6 +34,7 @@ from ema_msgs_py.ros import qos
 
 if TYPE_CHECKING:
     from rclpy.node import Node
+    from rclpy.qos import QoSProfile
 
 FrameCallback = Callable[[cdr.JointFrame], None]
 ClockCallback = Callable[[int], None]
@@ -54,7 +55,7 @@ class FramePublisher:
         Its QoS.
     """
 
-    def __init__(self, node: Node, topic: str, profile: Any) -> None:
+    def __init__(self, node: Node, topic: str, profile: QoSProfile) -> None:
         self.topic = topic
         self.dds = node.create_publisher(JointState, ct.endpoint(topic), profile)
 

@@ -24,9 +24,8 @@ import os
 import resource
 import struct
 from dataclasses import dataclass, field
-from typing import Any
 
-from ema_sim.jsontypes import JsonObject
+from ema_sim.jsontypes import JsonObject, JsonValue
 
 MCL_CURRENT = 1
 MCL_FUTURE = 2
@@ -46,10 +45,10 @@ class Setup:
 
     def summary(self) -> JsonObject:
         """For the node's summary line."""
-        out: dict[str, Any] = {"sched_fifo": self.priority, "memory_locked": self.memory_locked,
-                               "cpu_latency_us": self.cpu_latency_us}
+        out: JsonObject = {"sched_fifo": self.priority, "memory_locked": self.memory_locked,
+                         "cpu_latency_us": self.cpu_latency_us}
         if self.notes:
-            out["notes"] = self.notes
+            out["notes"] = list[JsonValue](self.notes)
         return out
 
 

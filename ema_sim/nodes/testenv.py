@@ -36,6 +36,7 @@ from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.environment import Profile, SignalPath, TransportDelay, load_profile
 from ema_sim.environment.profile import PATHS, PathSpec
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.nodes.clock import watchdog_s
 from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list, nested
@@ -212,14 +213,15 @@ class TestEnvNode(SuiteNode):
                     f"{now}")
         return apply
 
-    def _path(self, table: dict[str, Any], channel: str, make: Any, value: float) -> object:
+    def _path(self, table: dict[str, SignalPath], channel: str, make: Callable[[float, int, float], SignalPath],
+              value: float) -> SignalPath:
         path = table.get(channel)
         if path is None:
             stream = ct.CHANNELS.index(channel) if channel in ct.CHANNELS else len(table) + len(ct.CHANNELS)
             path = table[channel] = make(self.frame_s, stream, value if math.isfinite(value) else 0.0)
         return path
 
-    def _through(self, path: Any, value: float) -> float:
+    def _through(self, path: SignalPath, value: float) -> float:
         if not math.isfinite(value):
             self.passed_bad += 1
             self.throttled("bad", f"non-finite value passed through untouched ({self.passed_bad} so far)")
@@ -278,8 +280,9 @@ class TestEnvNode(SuiteNode):
         except Exception as exc:
             self.throttled("drop", f"feedback message dropped: {exc}")
 
-    def summary(self) -> dict[str, Any]:  # noqa: D102
-        return {"profile": self.profile.describe(), "frames": dict(self.frames), "passed_bad": self.passed_bad,
+    def summary(self) -> JsonObject:  # noqa: D102
+        return {"profile": dict[str, JsonValue](self.profile.describe()), "frames": dict(self.frames),
+                "passed_bad": self.passed_bad,
                 "run_time_changes": self.changes, "silences": self.silences,
                 "silences_by_channel": dict(self.silences_by_channel)}
 

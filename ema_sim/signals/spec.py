@@ -17,7 +17,6 @@ FieldValue = bool | int | float | str
 """What a spec field holds (:func:`_convert` makes it from the spec's text)."""
 
 
-# Any: returns the dataclass field that stands as the attribute's default (as ``dataclasses.field`` does).
 def param(default: FieldValue, *, low: float | None = None, high: float | None = None, strict: bool = False,
           doc: str = "") -> Any:
     """A spec field with bounds: ``low`` ≤ value (``<`` when ``strict``), value ≤ ``high``.

@@ -6,10 +6,13 @@ Matplotlib is imported only when a plot is drawn (``ema --help`` and the JSON pa
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 FloatArray = NDArray[np.float64]
 COLORS: dict[str, str] = {"position_deg": "tab:blue", "surface_deg": "tab:orange", "model": "tab:green",
@@ -32,7 +35,7 @@ def pyplot() -> Any:
     return plt
 
 
-def save(fig: Any, path: Path) -> None:
+def save(fig: Figure, path: Path) -> None:
     """Lay out, write and close a figure.
 
     Parameters

@@ -19,7 +19,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypedDict, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,6 +84,17 @@ class Options:
     """How the command was logged: ``detect`` it, or take it as ``held`` or ``sampled``."""
 
 
+class TimingAlternative(TypedDict):
+    """A timing figure of a record analysed with its command taken as held and as sampled."""
+
+    figure: str
+    quantity: str
+    """``phase_deg`` or ``delay_s``."""
+    held: float
+    sampled: float
+    sigma: float | None
+
+
 @dataclass
 class RecordAnalysis:
     """One record, what the pipeline found in it, and every test's results.
@@ -139,7 +150,7 @@ class RecordAnalysis:
     """The slope of the record's rate-limited moves, on its own stamps."""
     stand_in: bool = False
     """The channel's configuration is a stand-in: no X-43A table applies to the record."""
-    other_timing: list[dict[str, Any]] = field(default_factory=list)
+    other_timing: list[TimingAlternative] = field(default_factory=list)
     """When the record cannot tell held from sampled: each timing figure under both assumptions
     (:func:`ema_sim.analysis.pipeline.timing_alternatives`)."""
 

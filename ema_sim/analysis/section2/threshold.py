@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,9 @@ from ema_sim.analysis.records.series import extrema, moving_average
 from ema_sim.analysis.section2.base import Quality, RecordAnalysis, Section2Test
 from ema_sim.analysis.section2.segments import MovingStretch, Reading
 from ema_sim.jsontypes import JsonObject
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 FloatArray = NDArray[np.float64]
 
@@ -428,7 +431,7 @@ class Dynamic(Section2Test[DynamicThreshold]):
         return True
 
 
-def _finish_threshold_plot(ax: Any, title: str) -> None:
+def _finish_threshold_plot(ax: Axes, title: str) -> None:
     lim = ax.get_xlim()
     ax.plot(lim, lim, ":", color="0.5", lw=0.8, label="1:1")
     ax.set_ylabel("output amplitude, deg")

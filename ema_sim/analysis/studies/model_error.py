@@ -91,7 +91,7 @@ def model_errors(
         Sample rate of the comparison, Hz.
     output : str
         Name of the output.
-    **overrides : Any
+    **overrides : float
         Parameter overrides of every model.
 
     Returns
@@ -104,7 +104,7 @@ def model_errors(
     ref = getattr(run_maneuver(create(reference, channel, **overrides), inputs, sample_hz=sample_hz), output)[0]
     rows = []
     for name, rate in candidates:
-        kwargs: dict[str, Any] = dict(overrides)
+        kwargs: dict[str, object] = dict(overrides)
         if rate is not None:
             kwargs["rate_hz"] = rate
         model = create(name, channel, **kwargs)

@@ -44,7 +44,6 @@ NONNEG = {"min": 0.0}
 ILLUSTRATIVE = "illustrative: chosen inside the report's specifications (config)"
 
 
-# Any: these return a dataclass field that stands as the attribute's default (as ``dataclasses.field`` does).
 def _curve(description: str, size: int, **meta: object) -> Any:
     """A figure-33 curve field (in the ``hoad3`` subsection)."""
     return pm.param("lbf" if "breakpoints" in description else "lbf/in", description, size=size, section="hoad3",
@@ -225,7 +224,6 @@ class HighOrderParams:
             The validated copy.
         """
         info = pm.metas(self)
-        # Any: each value is coerced to its own field's type, which mypy cannot tie to the key.
         coerced: dict[str, Any] = {k: pm.coerce(k, info[k], v, "replace", FAMILY) for k, v in changes.items()}
         out = replace(self, **coerced)
         out.validate()
