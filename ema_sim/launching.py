@@ -15,8 +15,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ema_sim.errors import EmaError
-from ema_sim.nodes.names import running_claims
+from ema_sim.nodes.names import refuse_taken
 from ema_sim.run import LAUNCH_ARGUMENTS, from_launch_arguments
 
 PACKAGE = "ema_sim"
@@ -62,12 +61,8 @@ def check_names(full_names: list[str], look_s: float = NAMES_LOOK_S) -> None:
     EmaError
         One line naming each node that claims one of the names (they would merge with the launch's own).
     """
-    domain = int(os.environ.get("ROS_DOMAIN_ID") or 0)
-    taken = running_claims(full_names, domain, look_s,
-                           os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "SUBNET")  # as the nodes will look
-    refusal = taken.refusal(domain)
-    if refusal is not None:
-        raise EmaError(refusal)
+    refuse_taken(full_names, int(os.environ.get("ROS_DOMAIN_ID") or 0), look_s,
+                 os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "SUBNET")  # as the nodes will look
 
 
 def _nodes(context: object, layout: str) -> list[object]:

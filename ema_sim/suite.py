@@ -213,13 +213,10 @@ class Suite:
         """
         if self.names_look_s <= 0:
             return
-        from ema_sim.nodes.names import running_claims  # noqa: PLC0415 - rclpy only where a run starts
+        from ema_sim.nodes.names import refuse_taken  # noqa: PLC0415 - rclpy only where a run starts
 
-        taken = running_claims(self.full_names(), self.domain_id, self.names_look_s,
-                               self._env()["ROS_AUTOMATIC_DISCOVERY_RANGE"])  # looked at as the nodes will look
-        refusal = taken.refusal(self.domain_id)
-        if refusal is not None:
-            raise EmaError(refusal)
+        taken = refuse_taken(self.full_names(), self.domain_id, self.names_look_s,
+                             self._env()["ROS_AUTOMATIC_DISCOVERY_RANGE"])  # looked at as the nodes will look
         self.names_checked = True
         if taken.graph_only:
             print(f"ema launch: {', '.join(taken.graph_only)} in the graph of ROS domain {self.domain_id} without a "

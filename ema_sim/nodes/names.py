@@ -40,6 +40,7 @@ from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
+from ema_sim.errors import EmaError
 from ema_sim.jsontypes import JsonObject
 
 
@@ -219,3 +220,34 @@ def running_claims(names: Iterable[str], domain_id: int, look_s: float, discover
     finally:
         rclpy.shutdown(context=context)
     return Taken(claimed, sorted((wanted & graph) - set(claimed)))
+
+
+def refuse_taken(names: Iterable[str], domain_id: int, look_s: float, discovery_range: str) -> Taken:
+    """:func:`running_claims`, refusing a run whose names live nodes claim (they would merge with its own).
+
+    Parameters
+    ----------
+    names : iterable of str
+        The run's nodes by full name.
+    domain_id : int
+        The run's ROS domain.
+    look_s : float
+        How long to look at most, s.
+    discovery_range : str
+        ``ROS_AUTOMATIC_DISCOVERY_RANGE`` of the look (the run's nodes').
+
+    Returns
+    -------
+    Taken
+        What the look found (names only in the graph, for a warning) when no live node claims one.
+
+    Raises
+    ------
+    EmaError
+        One line naming each node that claims one of the names (pid, host, how long it has been up).
+    """
+    taken = running_claims(names, domain_id, look_s, discovery_range)
+    refusal = taken.refusal(domain_id)
+    if refusal is not None:
+        raise EmaError(refusal)
+    return taken
