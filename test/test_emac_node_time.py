@@ -53,6 +53,18 @@ def test_a_pause_a_burst_and_a_gap_fit_but_a_clock_that_moved_is_followed_after_
     assert clock.resyncs == 2
 
 
+def test_a_late_delivery_then_a_pause_is_a_gap_not_a_loss():
+    clock = CommandClock(F_NS, tolerance_s=0.1, resync_after=5)
+    for k in range(4):  # real time, each delivered at once
+        assert clock.check(BASE_NS + k * F_NS, k * F_S).missing == 0
+    late = clock.check(BASE_NS + 4 * F_NS, 8 * F_S)  # delivered 4 frames late (a loaded machine)
+    paused = clock.check(BASE_NS + 7 * F_NS, 8.1 * F_S)  # the FMU skipped frames 5 and 6; behind it in the queue
+    assert (late.missing, late.gap) == (0, 0)
+    assert (paused.verdict, paused.missing, paused.gap) == (Verdict.TAKEN, 0, 2)
+    ahead = clock.check(BASE_NS + 20 * F_NS, 9 * F_S)  # 12 frames missing, the stamps 11 frames ahead of the wall
+    assert (ahead.missing, ahead.gap) == (11, 1)
+
+
 def test_a_backlog_that_catches_up_stays_late_but_a_clock_that_lags_the_frames_is_followed():
     gate = FrameGate(F_NS, follow_after=5)
     next_ns, seen = 20 * F_NS, []  # a stalled publisher: idle frames stood in for frames 10 to 19

@@ -1,11 +1,13 @@
 """Real time: which stamped FMU commands the EMAC takes, and when it follows a clock that moved.
 
 Each command carries its FMU frame's stamp. The EMAC takes a command stamped after the last one it took
-(its *anchor*) and tells the frames missing between the two apart: those the wall time since the anchor
-also had room for are a *gap* (the publisher paused, stamps off the frame grid, a publisher's jitter: the
-watchdog's business, never a loss), those beyond it are *lost* (the stamps ran ahead of the wall time, a
-backlog whose queue overflowed: commands that were sent and never came). A command that does not fit the anchor is
-dropped and counted:
+(its *anchor*) and tells the frames missing between the two apart: those the wall time had room for are a
+*gap* (the publisher paused, stamps off the frame grid, a publisher's jitter: the watchdog's business, never a
+loss), those beyond it are *lost* (the stamps ran ahead of the wall time, a backlog whose queue overflowed:
+commands that were sent and never came). The wall time's room is measured from the command that came soonest
+after its stamp so far (the largest stamp-minus-arrival *lead*), not from the anchor: a command delivered late
+(a loaded machine, the transport's jitter) and the next one on time squeeze the arrivals, never the stamps, and
+are no loss. A command that does not fit the anchor is dropped and counted:
 
 * ``out_of_order``: stamped at or before the anchor (an older frame's command, a duplicate);
 * ``future_stamp``: stamped further ahead of the anchor than the wall time since the anchor came plus
@@ -53,12 +55,12 @@ class Check(NamedTuple):
     verdict: Verdict
     missing: int = 0
     """Frames of commands lost between the anchor and this command (taken in sequence only): missing stamps
-    beyond what the wall time since the anchor had room for."""
+    beyond what the wall time had room for (measured from :attr:`CommandClock.lead_ns`)."""
     previous_ns: int | None = None
     """The anchor before this command (the stamp the clock jumped from, on a resync)."""
     gap: int = 0
-    """Frames of commands missing between the anchor and this command that the wall time since the anchor also
-    had room for (a pause or jitter of the publisher: not a loss)."""
+    """Frames of commands missing between the anchor and this command that the wall time also had room for (a
+    pause or jitter of the publisher, a late delivery: not a loss)."""
 
 
 class CommandClock:
@@ -84,6 +86,9 @@ class CommandClock:
         """The last stamp taken (ns) and the wall time it came (monotonic s)."""
         self.resyncs = 0
         """Times the clock re-anchored."""
+        self.lead_ns: int | None = None
+        """The largest stamp-minus-arrival of the commands taken since the clock (re-)anchored, ns: the command
+        that came soonest after its stamp, the reference a later stamp is judged against for losses."""
         self._misfit: tuple[int, float] | None = None
         self._misfits = 0
 
@@ -109,20 +114,22 @@ class CommandClock:
             a gap in publishing before it.
         """
         anchor = self.anchor
-        if anchor is None:
-            self.anchor = (stamp_ns, wall_s)
+        lead = stamp_ns - round(wall_s * NS)
+        if anchor is None or self.lead_ns is None:
+            self.anchor, self.lead_ns = (stamp_ns, wall_s), lead
             return Check(Verdict.TAKEN)
         if self._fits(stamp_ns, wall_s, anchor):
             self.anchor = (stamp_ns, wall_s)
             self._misfit, self._misfits = None, 0
             missing = max(round((stamp_ns - anchor[0]) / self.frame_ns) - 1, 0)
-            gap = min(missing, max(round((wall_s - anchor[1]) * NS / self.frame_ns) - 1, 0))
-            return Check(Verdict.TAKEN, missing - gap, anchor[0], gap)
+            lost = min(missing, max(round((lead - self.lead_ns) / self.frame_ns), 0))
+            self.lead_ns = max(self.lead_ns, lead)
+            return Check(Verdict.TAKEN, lost, anchor[0], missing - lost)
         in_run = self._misfit is not None and self._fits(stamp_ns, wall_s, self._misfit)
         self._misfits = self._misfits + 1 if in_run else 1
         self._misfit = (stamp_ns, wall_s)
         if self._misfits >= self.resync_after:
-            self.anchor = (stamp_ns, wall_s)
+            self.anchor, self.lead_ns = (stamp_ns, wall_s), lead
             self._misfit, self._misfits = None, 0
             self.resyncs += 1
             return Check(Verdict.RESYNC, 0, anchor[0])
