@@ -65,6 +65,17 @@ def test_a_late_delivery_then_a_pause_is_a_gap_not_a_loss():
     assert (ahead.missing, ahead.gap) == (11, 1)
 
 
+def test_a_first_command_held_while_the_transport_matched_makes_no_loss():
+    clock = CommandClock(F_NS, tolerance_s=10.0, resync_after=5)
+    assert clock.check(BASE_NS, 0.392).verdict is Verdict.TAKEN  # came 392 ms after its stamp
+    on_time = clock.check(BASE_NS + 77 * F_NS, 0.392 + 0.001)  # the FMU skipped 76 frames meanwhile; on time
+    assert (on_time.missing, on_time.gap) == (0, 76)
+    for k in range(78, 82):
+        assert clock.check(BASE_NS + k * F_NS, 0.392 + (k - 77) * F_S).missing == 0
+    burst = clock.check(BASE_NS + 100 * F_NS, 0.392 + 5 * F_S)  # the reference known: 18 frames skipped in a frame
+    assert (burst.missing, burst.gap) == (18, 0)
+
+
 def test_a_backlog_that_catches_up_stays_late_but_a_clock_that_lags_the_frames_is_followed():
     gate = FrameGate(F_NS, follow_after=5)
     next_ns, seen = 20 * F_NS, []  # a stalled publisher: idle frames stood in for frames 10 to 19

@@ -7,7 +7,10 @@ loss), those beyond it are *lost* (the stamps ran ahead of the wall time, a back
 commands that were sent and never came). The wall time's room is measured from the command that came soonest
 after its stamp so far (the largest stamp-minus-arrival *lead*), not from the anchor: a command delivered late
 (a loaded machine, the transport's jitter) and the next one on time squeeze the arrivals, never the stamps, and
-are no loss. A command that does not fit the anchor is dropped and counted:
+are no loss. The first :data:`REFERENCE_COMMANDS` commands after the clock (re-)anchors only set that reference
+(frames they skip are a gap): the first command of a run often comes hundreds of ms after its stamp, held while
+the transport matched the two ends, and alone it would make the next one, on time, look like a backlog.
+A command that does not fit the anchor is dropped and counted:
 
 * ``out_of_order``: stamped at or before the anchor (an older frame's command, a duplicate);
 * ``future_stamp``: stamped further ahead of the anchor than the wall time since the anchor came plus
@@ -29,6 +32,8 @@ import enum
 from typing import NamedTuple
 
 NS = 1_000_000_000
+REFERENCE_COMMANDS = 5
+"""Commands taken after the clock (re-)anchors before a frame they skip may be judged lost (module docstring)."""
 
 
 class Verdict(enum.Enum):
@@ -91,6 +96,8 @@ class CommandClock:
         that came soonest after its stamp, the reference a later stamp is judged against for losses."""
         self._misfit: tuple[int, float] | None = None
         self._misfits = 0
+        self._taken = 0
+        """Commands taken since the clock (re-)anchored."""
 
     def _fits(self, stamp_ns: int, wall_s: float, after: tuple[int, float]) -> bool:
         ref_ns, ref_wall = after
@@ -116,20 +123,22 @@ class CommandClock:
         anchor = self.anchor
         lead = stamp_ns - round(wall_s * NS)
         if anchor is None or self.lead_ns is None:
-            self.anchor, self.lead_ns = (stamp_ns, wall_s), lead
+            self.anchor, self.lead_ns, self._taken = (stamp_ns, wall_s), lead, 1
             return Check(Verdict.TAKEN)
         if self._fits(stamp_ns, wall_s, anchor):
             self.anchor = (stamp_ns, wall_s)
             self._misfit, self._misfits = None, 0
             missing = max(round((stamp_ns - anchor[0]) / self.frame_ns) - 1, 0)
-            lost = min(missing, max(round((lead - self.lead_ns) / self.frame_ns), 0))
+            ahead = max(round((lead - self.lead_ns) / self.frame_ns), 0) if self._taken >= REFERENCE_COMMANDS else 0
+            lost = min(missing, ahead)
             self.lead_ns = max(self.lead_ns, lead)
+            self._taken += 1
             return Check(Verdict.TAKEN, lost, anchor[0], missing - lost)
         in_run = self._misfit is not None and self._fits(stamp_ns, wall_s, self._misfit)
         self._misfits = self._misfits + 1 if in_run else 1
         self._misfit = (stamp_ns, wall_s)
         if self._misfits >= self.resync_after:
-            self.anchor, self.lead_ns = (stamp_ns, wall_s), lead
+            self.anchor, self.lead_ns, self._taken = (stamp_ns, wall_s), lead, 1
             self._misfit, self._misfits = None, 0
             self.resyncs += 1
             return Check(Verdict.RESYNC, 0, anchor[0])
