@@ -161,5 +161,6 @@ def test_a_killed_emac_in_real_time_is_error_while_commanded_and_ok_once_restart
             suite.stop()
             watch.node.destroy_node()
     assert suite.restarts == {f"emac_{KILLED}": 1}
-    # the killed channel fell silent once; a busy machine may hold another EMAC beyond the 50 ms silence too
-    assert suite.summaries()["testenv"]["silences_by_channel"][KILLED] == 1
+    # the killed channel fell silent, and the testenv said so; on a busy machine the restarted process may pause
+    # beyond the 50 ms silence again while it warms up, and another EMAC may be held beyond it too
+    assert suite.summaries()["testenv"]["silences_by_channel"][KILLED] >= 1
