@@ -11,6 +11,7 @@ import random
 from types import SimpleNamespace
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from ros_context import ros_context
 from scripted_ports import ScriptedPorts
 
@@ -267,6 +268,33 @@ def test_an_fmu_clock_that_moved_is_followed_after_five_commands_and_the_brake_r
     assert node.log.count("warning", "the command clock follows it from here") == 1
     assert diagnostics(node)["command_resyncs"] == "1"
     assert feedback_stamps(node)[-1] == new(299) + F_NS  # the frames follow the new clock
+
+
+def _status(node):
+    node._publish_diagnostics()
+    (status,) = node.diagnostics[-1].status
+    return status.level, status.message
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(("lag_frames", "warn"), [(2, False), (40, True)])
+def test_commands_that_lag_the_frames_are_followed_and_warn_only_beyond_the_watchdog(make_node, lag_frames, warn):
+    """Commands that resume after a pause stamped behind the idle frames the node stepped meanwhile: 10 ms
+    behind (stamps that sit behind the grid, a node that was held up) is followed with an info line and
+    /diagnostics stays OK; 200 ms behind (an FMU clock that stopped while it paused) is a WARN."""
+    node = make_node()
+    t0 = node.wall["t"]
+    before = _stream(t0, 0, 100, 0.5)
+    resume = t0 + 100 * F_S + 1.0  # a 1 s pause: the node steps idle frames on its own clock
+    after = [(resume + (k - 300) * F_S, BASE_NS + (k - lag_frames) * F_NS, 0.5) for k in range(300, 400)]
+    replay(node, before + after)
+    assert node.command_resyncs == 1  # followed once, then every command is on time again
+    assert node.drops["lost_commands"] == node.drops["out_of_order"] == 0
+    level, message = _status(node)
+    assert (level == DiagnosticStatus.WARN) is warn, message
+    assert node.log.count("warning", "a clock that stopped or lags") == int(warn)
+    assert node.log.count("info", "within the watchdog") == int(not warn)
+    assert feedback_stamps(node)[-1] == BASE_NS + (399 - lag_frames) * F_NS + F_NS  # the frames follow the stamps
 
 
 @pytest.mark.ros

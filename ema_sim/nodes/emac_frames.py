@@ -121,15 +121,27 @@ class EmacFrames(EmacReceiver):
         return True
 
     def _follow(self, stamp: int) -> None:
-        """Commands stayed late without catching up (their clock lags the frames): follow their stamps."""
+        """Commands stayed late without catching up (their clock lags the frames): follow their stamps.
+
+        A lag within the watchdog's timeout is the node's own doing (idle frames stepped on while it was held up,
+        commands stamped with their publishing time a little behind the frame grid): counted and logged, no WARN.
+        A longer one is the FMU's clock (stopped, or lagging): WARN on ``/diagnostics``.
+        """
         self.command_resyncs += 1
-        self.last_fault_wall = time.monotonic()
-        self._diagnose_now = True
-        self.get_logger().warning(
-            f"{self.gate.follow_after} commands in a row came after their frames were stepped without catching up "
-            f"(the last stamped {stamp / NS:.6f} s, {((self.model_ns or stamp) - stamp) / NS:.3f} s behind the "
-            "frames; a clock that stopped or lags): the frames follow their stamps from here "
-            f"({self.command_resyncs} resynchronisation(s) so far)")
+        lag_s = ((self.model_ns or stamp) - stamp) / NS
+        text = (f"{self.gate.follow_after} commands in a row came after their frames were stepped without catching "
+                f"up (the last stamped {stamp / NS:.6f} s, {lag_s:.3f} s behind the frames; ")
+        if lag_s > self.settings.watchdog_timeout_s:
+            self.last_fault_wall = time.monotonic()
+            self._diagnose_now = True
+            self.get_logger().warning(
+                f"{text}a clock that stopped or lags): the frames follow their stamps from here "
+                f"({self.command_resyncs} resynchronisation(s) so far)")
+        else:
+            self.get_logger().info(
+                f"{text}within the watchdog's {self.settings.watchdog_timeout_s * 1e3:g} ms: the node was held up, "
+                f"or the stamps sit behind the frame grid): the frames follow their stamps from here "
+                f"({self.command_resyncs} resynchronisation(s) so far)")
         self.model_ns = None
 
     def _age_wall(self, ch: str, now: float) -> float | None:
