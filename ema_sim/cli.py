@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from collections.abc import Sequence
 from importlib import import_module
+from types import FrameType
 from typing import NoReturn
 
 from ema_sim import __version__
@@ -65,12 +67,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         The exit status: 0 on success, 2 for a user error (one line on stderr), 130 when interrupted.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    interrupted: list[int] = []
+
+    def on_interrupt(signum: int, frame: FrameType | None) -> None:  # noqa: ARG001
+        interrupted.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_interrupt)
     try:
         parser = build_parser(argv)  # a second of imports: Ctrl-C here is an interruption too, not a traceback
         args = parser.parse_args(argv)
+        if interrupted:  # raised inside a library's import that swallowed it (a bare ``except:``): still Ctrl-C
+            raise KeyboardInterrupt
     except KeyboardInterrupt:
         print("ema: interrupted", file=sys.stderr)
         return 130
+    finally:
+        signal.signal(signal.SIGINT, previous)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:

@@ -1,12 +1,16 @@
 import argparse
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 from importlib import import_module
 
 import numpy as np
 import pytest
 
+from ema_sim import cli
 from ema_sim.cli import main
 from ema_sim.commands import COMMANDS, SUBCOMMANDS
 from ema_sim.io.csv import read_csv
@@ -96,3 +100,23 @@ def test_ema_help_lists_every_subcommand():
                           check=False)
     assert done.returncode == 0, done.stderr
     assert all(name in done.stdout for name in SUBCOMMANDS)
+
+
+def test_ctrl_c_swallowed_by_a_library_while_importing_is_still_an_interruption(monkeypatch, capsys):
+    """A library that imports under a bare ``except:`` (ruamel.yaml does) swallows the KeyboardInterrupt of a
+    Ctrl-C that lands there; ``ema`` still stops with status 130, one line, before running anything."""
+    real = cli.build_parser
+
+    def build(argv):
+        try:  # what the library does: the interrupt lands inside its guarded import and is dropped
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5.0)  # the handler runs (and raises) at once; never slept through
+        except:  # noqa: E722
+            pass
+        return real(argv)
+
+    monkeypatch.setattr(cli, "build_parser", build)
+    assert cli.main(["models"]) == 130
+    out = capsys.readouterr()
+    assert (out.out, out.err.strip()) == ("", "ema: interrupted")  # the command never ran
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler put back
