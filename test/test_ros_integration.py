@@ -391,6 +391,7 @@ def test_lockstep_follows_any_clock_publisher_and_keeps_every_frame(client, tmp_
         # discovery of three endpoints: 20 s was once not enough with numba compiling beside it on two cores
         assert client.spin(60, lambda: min(clock.get_subscription_count(), cmd.get_subscription_count(),
                                            sub.get_publisher_count()) > 0)
+        client.spin(2.0)  # the node's side of each match too (discovery takes longer under load)
         volts = [command_v(2.0 * math.sin(k / 15.0)) for k in range(frames)]
 
         def tick(ns):
@@ -398,11 +399,7 @@ def test_lockstep_follows_any_clock_publisher_and_keeps_every_frame(client, tmp_
             m.clock.sec, m.clock.nanosec = divmod(ns, NS)
             clock.publish(m)
 
-        def started():  # the node's side of the match too (discovery takes longer under load): its first frame
-            tick(0)
-            return client.spin(0.2, lambda: 0 in fb)
-
-        assert client.spin(60, started), "the node never answered the first /clock tick"
+        tick(0)
         for k in range(frames):
             msg = JointState(name=["left_wing"], position=[volts[k]])
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(k * FRAME_NS, NS)
