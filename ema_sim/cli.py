@@ -73,7 +73,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         interrupted.append(signum)
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGINT, on_interrupt)
+    # a Ctrl-C the shell ignores for this process (a background job's SIG_IGN) stays ignored
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, on_interrupt)
     try:
         parser = build_parser(argv)  # a second of imports: Ctrl-C here is an interruption too, not a traceback
         args = parser.parse_args(argv)
@@ -83,7 +86,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("ema: interrupted", file=sys.stderr)
         return 130
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if previous is not signal.SIG_IGN:
+            signal.signal(signal.SIGINT, previous)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:

@@ -287,7 +287,9 @@ def test_ema_launch_interrupted_in_its_first_second_prints_no_traceback(tmp_path
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain(12 + len(when))), PYTHONUNBUFFERED="1", PYTHONVERBOSE="1")
     cmd = [sys.executable, "-m", "ema_sim.cli", "launch", "--maneuver", "step", "--lockstep", "--layout",
            "processes", "--bag", str(bag)]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # Ctrl-C as a terminal's foreground job gets it: a test worker may ignore SIGINT, which a child inherits
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
     mark = "import 'numpy'" if when == "importing" else "ema launch:"
     seen = ""
     while mark not in seen:
