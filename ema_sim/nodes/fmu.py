@@ -48,7 +48,7 @@ from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.params import Spec, config_specs, names_list, nested
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.ports import Ports, PortsFactory
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.parameters import ParameterInfo, describe
 
@@ -102,7 +102,8 @@ class FmuNode(DriverNode):
         The node's name (a ``-r __node:=`` remapping renames it).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "fmu") -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports,
+                 name: str = "fmu") -> None:
         super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False  # ready when the run starts, after its recorder is matched
