@@ -31,7 +31,7 @@ from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stages import guarded
 from ema_sim.identify.trust import assess, reference
 from ema_sim.io.contract import check
-from ema_sim.io.csv import write_csv
+from ema_sim.io.csv import FloatArray, write_csv
 from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models import create
 
@@ -414,7 +414,8 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
         Where to write it.
     """
     p = result.problem
-    cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
+    cols: dict[str, FloatArray] = {"time_s": p.time_s, "fitted": p.mask.astype(float),
+                                   "command_deg": p.data.command_deg}
     for o in p.outputs:
         meas = p.observed[o]
         col = OUTPUT_COLUMN[o]
