@@ -20,10 +20,10 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Required, TypedDict
 
 from ema_sim.errors import EmaError
 
@@ -36,6 +36,17 @@ class Result:
     unit: str
     passed: bool
     detail: str = ""
+
+
+class BenchEntry(TypedDict, total=False):
+    """One benchmark's recorded entry in ``baseline.json`` (an old entry is its figure alone)."""
+
+    value: Required[float]
+    unit: str
+    target: str
+    passed: bool
+    detail: str
+    date: str
 
 
 @dataclass(frozen=True)
@@ -66,16 +77,41 @@ def recorded(path: Path | None = None) -> dict[str, float]:
     return {k: float(v["value"]) for k, v in recorded_entries(path).items()}
 
 
-def recorded_entries(path: Path | None = None) -> dict[str, dict[str, Any]]:
+def recorded_entries(path: Path | None = None) -> dict[str, BenchEntry]:
     """Each benchmark's recorded entry: ``value``, ``unit``, ``target``, ``passed``, ``detail`` and ``date``."""
     file = baseline_path(path)
     if not file.exists():
         return {}
     figures = json.loads(file.read_text(encoding="utf-8")).get("bench", {})
-    return {str(k): dict(v) if isinstance(v, dict) else {"value": float(v)} for k, v in figures.items()}
+    return {str(k): _entry(v) for k, v in figures.items()}
 
 
-def record(entries: dict[str, dict[str, Any]], path: Path | None = None) -> Path:
+def _entry(v: object) -> BenchEntry:
+    """A recorded entry as read from JSON: its known fields (an old entry, a bare number, is its value)."""
+    if not isinstance(v, dict):
+        return {"value": _number(v)}
+    entry: BenchEntry = {"value": _number(v["value"])}
+    if "unit" in v:
+        entry["unit"] = str(v["unit"])
+    if "target" in v:
+        entry["target"] = str(v["target"])
+    if isinstance(v.get("passed"), bool):
+        entry["passed"] = v["passed"]
+    if "detail" in v:
+        entry["detail"] = str(v["detail"])
+    if "date" in v:
+        entry["date"] = str(v["date"])
+    return entry
+
+
+def _number(v: object) -> float:
+    """A recorded figure (a JSON number) as a float."""
+    if isinstance(v, int | float | str):
+        return float(v)
+    raise TypeError(f"a recorded figure is a number, not {v!r}")
+
+
+def record(entries: Mapping[str, BenchEntry], path: Path | None = None) -> Path:
     """Write ``entries`` as the recorded ones (other benchmarks' entries and the counts are kept).
 
     Each entry is what ``ema bench`` printed (``value``, ``unit``, ``target``, ``passed``, ``detail``) and the
@@ -97,7 +133,7 @@ runs of the same span, so a figure holds whatever else the machine ran; the abso
 """
 
 
-def figures_page(entries: dict[str, dict[str, Any]]) -> str:
+def figures_page(entries: Mapping[str, BenchEntry]) -> str:
     """The documentation's page of figures (``docs/figures.md``) from the recorded entries.
 
     Parameters

@@ -11,7 +11,6 @@ relation (negative slope), the trap behind the hinge-moment sign error of sectio
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numba as nb
 import numpy as np
@@ -120,13 +119,14 @@ def _cubic_map(kind: int, c0: float, c1: float, c2: float, c3: float, x: FloatAr
             out[j] = cubic_inverse(c0, c1, c2, c3, x[j])
 
 
-def _apply(kind: int, c: Cubic, x: ArrayLike) -> Any:
-    """The compiled scalar function on an array (a 0-d input gives a numpy scalar)."""
+def _apply(kind: int, c: Cubic, x: ArrayLike) -> FloatArray:
+    """The compiled scalar function on an array (a 0-d input gives a numpy scalar, which acts as one)."""
     arr = np.asarray(x, dtype=float)
     flat = np.ascontiguousarray(arr.reshape(-1))
     out = np.empty_like(flat)
     _cubic_map(kind, c.c0, c.c1, c.c2, c.c3, flat, out)
-    return out.reshape(arr.shape)[()]
+    result: FloatArray = out.reshape(arr.shape)[()]  # an array, or (0-d) its scalar
+    return result
 
 
 @dataclass(frozen=True)
@@ -163,15 +163,15 @@ class Cubic:
 
     def __call__(self, x: ArrayLike) -> FloatArray:
         """Evaluate the curve (:func:`cubic`)."""
-        return _apply(0, self, x)  # type: ignore[no-any-return]
+        return _apply(0, self, x)
 
     def slope(self, x: ArrayLike) -> FloatArray:
         """dy/dx (:func:`cubic_slope`)."""
-        return _apply(1, self, x)  # type: ignore[no-any-return]
+        return _apply(1, self, x)
 
     def inverse(self, y: ArrayLike) -> FloatArray:
         """X such that ``self(x) = y`` (:func:`cubic_inverse`)."""
-        return _apply(2, self, y)  # type: ignore[no-any-return]
+        return _apply(2, self, y)
 
 
 @dataclass(frozen=True)

@@ -192,7 +192,7 @@ def carried(description: str, *, default_factory: Callable[[], object]) -> Any:
     return dataclasses.field(default_factory=default_factory, metadata={CARRIED_KEY: description})
 
 
-def meta_of(field: dataclasses.Field[Any]) -> Meta:
+def meta_of(field: dataclasses.Field[object]) -> Meta:
     """The :class:`Meta` of a field declared with :func:`param`.
 
     Parameters

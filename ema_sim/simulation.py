@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -95,7 +94,7 @@ def csv_columns(model: ActuatorModel, record: Record, i: int = 0,
 def simulate(model_name: str, maneuver: Maneuver, load: Load | None = None, *, channel: str = "left_wing",
              rate_hz: float | None = None, duration_s: float | None = None, frame_hz: float = FRAME_HZ,
              sample_hz: float = DAU_HZ, progress: Callable[[float], None] | None = None,
-             faults: Sequence[Fault] = (), **overrides: object) -> tuple[ActuatorModel, Record, dict[str, Any]]:
+             faults: Sequence[Fault] = (), **overrides: object) -> tuple[ActuatorModel, Record, dict[str, str]]:
     """Build ``model_name`` for ``channel`` and run the maneuver; returns model, record and metadata.
 
     ``faults`` are injected on their schedules; the metadata names them (``faults``, ``;``-separated specs).

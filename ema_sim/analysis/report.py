@@ -9,7 +9,7 @@ test's section as the test writes it, then what was not computed and why. Schema
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import overload
 
 import numpy as np
 
@@ -26,19 +26,24 @@ from ema_sim.analysis.section2.calibration_fit import TEST as CALIBRATION
 from ema_sim.analysis.section2.calibration_fit import pooled_bounds
 from ema_sim.analysis.section2.hysteresis import RW13_AREA_INLB, RW13_PEAK_IN, hysteretic_damping_constant
 from ema_sim.io.contract import check
-from ema_sim.jsontypes import JsonObject
+from ema_sim.jsontypes import JsonObject, JsonValue
 
 __all__ = ["RW13_AREA_INLB", "RW13_PEAK_IN", "record_json", "slope_json", "slope_statement", "to_json", "to_markdown"]
 
 
-def _clean(value: object) -> Any:  # noqa: PLR0911 - one return per type
-    """JSON-safe: numpy scalars to Python, non-finite floats to None."""
+@overload
+def _clean(value: dict[str, object]) -> JsonObject: ...
+@overload
+def _clean(value: object) -> JsonValue: ...
+def _clean(value: object) -> JsonValue:  # noqa: PLR0911 - one return per type
+    """JSON-safe: numpy scalars to Python, non-finite floats to None (anything else: json.dumps' own TypeError)."""
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [_clean(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
+        items: object = value.tolist()  # nested lists of Python scalars (numpy leaves it untyped)
+        return _clean(items)
     if isinstance(value, np.bool_ | bool):
         return bool(value)
     if isinstance(value, np.integer):
@@ -46,7 +51,9 @@ def _clean(value: object) -> Any:  # noqa: PLR0911 - one return per type
     if isinstance(value, float | np.floating):
         v = float(value)
         return v if np.isfinite(v) else None
-    return value
+    if value is None or isinstance(value, int | str):
+        return value
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
 
 
 def record_json(ra: RecordAnalysis) -> JsonObject:

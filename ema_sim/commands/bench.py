@@ -7,7 +7,7 @@ import datetime
 import json
 from pathlib import Path
 
-from ema_sim.benchmark import discover, figures_page, figures_path, record, recorded, recorded_entries
+from ema_sim.benchmark import BenchEntry, discover, figures_page, figures_path, record, recorded, recorded_entries
 from ema_sim.commands.common import Subparsers
 
 
@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     """
     before = recorded()
     results: list[dict[str, object]] = []
-    figures: dict[str, dict[str, object]] = {}
+    figures: dict[str, BenchEntry] = {}
     today = datetime.date.today().isoformat()
     failed = 0
     for bench in discover():

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import SupportsFloat, SupportsInt
 
 import yaml
 
@@ -107,7 +107,7 @@ class Profile:
         return cls()
 
     @classmethod
-    def from_parameters(cls, params: Mapping[str, Any], origin: str = "<params>") -> Profile:
+    def from_parameters(cls, params: Mapping[str, object], origin: str = "<params>") -> Profile:
         """A profile from its ROS parameters (``profile``, ``seed``, ``command.*``, ``feedback.*``).
 
         Parameters
@@ -122,9 +122,14 @@ class Profile:
         Profile
             The validated profile.
         """
+        seed_raw, full_scale_raw = params.get("seed", 0), params.get("full_scale_v", 10.0)
         try:
-            seed = int(params.get("seed", 0))
-            full_scale = float(params.get("full_scale_v", 10.0))
+            if not isinstance(seed_raw, SupportsInt | str):
+                raise TypeError(f"seed must be an integer, got {seed_raw!r}")
+            if not isinstance(full_scale_raw, SupportsFloat | str):
+                raise TypeError(f"full_scale_v must be a number, got {full_scale_raw!r}")
+            seed = int(seed_raw)
+            full_scale = float(full_scale_raw)
         except (TypeError, ValueError) as exc:
             raise ConfigError(f"{origin}: {exc}") from None
         paths: dict[str, PathSpec] = {}

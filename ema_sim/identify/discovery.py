@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,7 +39,7 @@ from ema_sim.identify.library import describe, library
 from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.regression import Regression, Selected, Term, stepwise
 from ema_sim.identify.stages import worse
-from ema_sim.jsontypes import JsonObject
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models.base import O_RATE
 from ema_sim.models.second_order import SecondOrderParams
 
@@ -147,10 +146,11 @@ class Discovery:
         dict
             Per output the terms that hold and those tried and dropped, the placements and the words.
         """
-        out: dict[str, Any] = {"outputs": {}, "closures": [], "text": list(self.statements)}
+        outputs: JsonObject = {}
+        closures: list[JsonValue] = []
         for o, f in self.found.items():
             reg = f.regression
-            out["outputs"][o] = {
+            outputs[o] = {
                 "rms_deg": f.rms_deg, "noise_deg": f.noise_deg, "white": f.white, "structured": f.structured,
                 "terms": [_selected(s) for s in reg.selected],
                 "dropped": [_selected(s) for s in reg.dropped],
@@ -158,13 +158,13 @@ class Discovery:
                 "statement": f.statement,
             }
         for c in self.closures:
-            out["closures"].append({
+            closures.append({
                 "where": c.where, "kept": c.kept, "reason": c.reason, "delta_bic": c.delta_bic,
-                "rms_deg_before": c.rms_deg_before, "rms_deg_after": c.rms_deg_after,
+                "rms_deg_before": dict(c.rms_deg_before), "rms_deg_after": dict(c.rms_deg_after),
                 "terms": {o: [{"term": n, "coefficient": list(v), "uncertainty": list(s), "unit": u}
                               for n, v, s, u in ts] for o, ts in c.terms.items()},
             })
-        return out
+        return {"outputs": outputs, "closures": closures, "text": list(self.statements)}
 
 
 def named_stands(named_rms: Mapping[str, float], noise: Mapping[str, float]) -> bool:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -146,6 +146,13 @@ FREE: dict[str, Free] = {
 }
 
 
+class ArmParams(Protocol):
+    """Model parameters with the moment arm a per-force rate is turned into a per-moment one with."""
+
+    @property
+    def moment_arm_in(self) -> float: ...  # noqa: D102
+
+
 def _same_unit(_p: object) -> float:
     """The report's unit is the model's: factor 1."""
     return 1.0
@@ -156,10 +163,10 @@ class Key:
     """How the report names a model parameter, and the factor from the model's unit to the report's."""
 
     name: str
-    factor: Callable[[Any], float] = _same_unit
+    factor: Callable[[ArmParams], float] = _same_unit
 
 
-def _per_kinlb_from_per_lb(p: Any) -> float:
+def _per_kinlb_from_per_lb(p: ArmParams) -> float:
     """K2 (°/s per lbf at the moment arm) → °/s per 1000 in·lb of hinge moment."""
     return 1000.0 / float(p.moment_arm_in)
 
@@ -672,7 +679,7 @@ VOCABULARY = tuple(dict.fromkeys(e.name for e in EFFECTS))
 """The effect names identification can report."""
 
 
-def report_values(p: object, fields: tuple[str, ...] | list[str]) -> dict[str, float]:
+def report_values(p: ArmParams, fields: tuple[str, ...] | list[str]) -> dict[str, float]:
     """The report's key → value of some model parameters (each in the report's unit).
 
     Parameters

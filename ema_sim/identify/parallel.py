@@ -25,9 +25,8 @@ import logging
 import os
 import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, Protocol, overload
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -63,6 +62,31 @@ def one_blas_thread() -> Iterator[None]:
         yield
 
 
+class TaskFuture(Protocol):
+    """A fit submitted to the workers (a Dask future): its value, or cancelled when no longer needed."""
+
+    def result(self) -> Any: ...  # noqa: D102 - what the remote function returned, unpickled
+    def cancel(self) -> object: ...  # noqa: D102
+
+
+class DaskClient(Protocol):
+    """What the identification uses of a Dask ``distributed.Client``."""
+
+    def submit(self, fn: Callable[..., object], /, *args: object, pure: bool = ...) -> TaskFuture: ...  # noqa: D102
+    @overload
+    def scatter(self, data: list[object], /, *, broadcast: bool = ...) -> list[object]: ...
+    @overload
+    def scatter(self, data: object, /, *, broadcast: bool = ...) -> object: ...
+    def run(self, fn: Callable[[], object], /) -> object: ...  # noqa: D102
+    def close(self) -> object: ...  # noqa: D102
+
+
+class DaskCluster(Protocol):
+    """What the identification uses of a Dask ``distributed.LocalCluster``: closing it."""
+
+    def close(self) -> object: ...  # noqa: D102
+
+
 def _warm() -> None:
     """Load the identification simulator's kernels from numba's cache in a worker process (one tiny batch)."""
     model = SecondOrder("left_wing", n=2)
@@ -87,8 +111,8 @@ class Pool:
             workers = int(os.environ.get(ENV_WORKERS, DEFAULT_WORKERS))
         self.scheduler = scheduler or ""
         self.workers = workers
-        self._client: Any = None
-        self._cluster: Any = None
+        self._client: DaskClient | None = None
+        self._cluster: DaskCluster | None = None
         self._error: BaseException | None = None
         self._ready = threading.Event()
         self._thread: threading.Thread | None = None
@@ -116,7 +140,7 @@ class Pool:
             if self.scheduler:
                 try:
                     # waits up to Dask's connect timeout (distributed.comm.timeouts.connect, 30 s by default)
-                    self._client = Client(self.scheduler)  # type: ignore[no-untyped-call]
+                    client: DaskClient = Client(self.scheduler)  # type: ignore[no-untyped-call]
                 except OSError as exc:
                     raise EmaError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
             else:
@@ -125,13 +149,14 @@ class Pool:
                     silence_logs=logging.ERROR)
                 self._client = Client(self._cluster)  # type: ignore[no-untyped-call]
                 return
-            self._client.run(_warm)
+            self._client = client
+            client.run(_warm)
         except Exception as exc:  # reported to the caller that waits for the client
             self._error = exc
         finally:
             self._ready.set()
 
-    def client(self) -> Any:
+    def client(self) -> DaskClient | None:
         """The Dask client once it is up (None when fits stay in the calling process).
 
         A local cluster that cannot start leaves every fit in the calling process (:attr:`failed` says why).
@@ -154,7 +179,7 @@ class Pool:
             return None
         return self._client
 
-    def submit(self, fn: Callable[..., object], *args: object) -> Future[Any] | Any:
+    def submit(self, fn: Callable[..., object], *args: object) -> TaskFuture | object:
         """``fn(*args)`` on a worker (a Dask future), or its result computed here when fits stay here.
 
         Parameters

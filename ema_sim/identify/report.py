@@ -14,7 +14,7 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, cast, overload
 
 import numpy as np
 
@@ -31,8 +31,8 @@ from ema_sim.identify.problem import OUTPUT_COLUMN, Problem
 from ema_sim.identify.stages import guarded
 from ema_sim.identify.trust import assess, reference
 from ema_sim.io.contract import check
-from ema_sim.io.csv import write_csv
-from ema_sim.jsontypes import JsonObject
+from ema_sim.io.csv import FloatArray, write_csv
+from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.models import create
 
 DIVERGED_DEG = 1.0e3
@@ -158,7 +158,11 @@ def implementation_warning(result: Identification, errors: Mapping[str, float]) 
             f"report's figures are those of the same equations simulated accurately")
 
 
-def strict(value: object) -> object:
+@overload
+def strict(value: Mapping[str, object]) -> JsonObject: ...
+@overload
+def strict(value: object) -> JsonValue: ...
+def strict(value: object) -> JsonValue:
     """``value`` with every non-finite number made strict JSON: NaN → null, ±inf → "unbounded" in words.
 
     Parameters
@@ -168,8 +172,13 @@ def strict(value: object) -> object:
 
     Returns
     -------
-    object
+    JSON value
         The same structure with plain Python scalars only.
+
+    Raises
+    ------
+    TypeError
+        A value JSON cannot hold (json.dumps' own error).
     """
     if isinstance(value, Mapping):
         return {str(k): strict(v) for k, v in value.items()}
@@ -180,7 +189,9 @@ def strict(value: object) -> object:
     if isinstance(value, (float, np.floating)):
         x = float(value)
         return x if math.isfinite(x) else None if math.isnan(x) else "unbounded" if x > 0 else "unbounded below"
-    return value
+    if value is None or isinstance(value, str):
+        return value
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
 
 
 def _slew(result: Identification) -> tuple[JsonObject, str | None]:
@@ -227,10 +238,11 @@ def to_json(result: Identification, data_name: str) -> IdentifyReport:
     warnings += [f"stage '{f.stage}' failed ({f.error}); what it would have said is missing" for f in failures
                  if f.stage in ("trust", "diagnosis")]
     ref = reference(p)
-    report: dict[str, Any] = {
+    unit = record.unit if record else "deg"
+    report: dict[str, object] = {
         "data": data_name,
         "outputs": p.outputs,
-        "unit": record.unit if record else "deg",
+        "unit": unit,
         "noise_deg": {o: _round(v) for o, v in p.sigma_deg.items()},
         "resolution_deg": {o: _resolution(p, o) for o in p.outputs},
         "reference": {"model": f"{'/'.join(o.split('_')[0] for o in p.outputs)} = command",
@@ -330,7 +342,7 @@ def to_json(result: Identification, data_name: str) -> IdentifyReport:
         if text:
             warnings.append(text)
     # every text in the record's unit (a stage's words in degrees said in mm on a linear rig)
-    out: JsonObject = texts_in_unit(strict(report), report["unit"])
+    out = texts_in_unit(strict(report), unit)
     check(out, identify_schema(), "ema identify")
     return cast(IdentifyReport, out)  # the schema check above is the narrowing
 
@@ -402,7 +414,8 @@ def write_residuals(result: Identification, path: str | Path) -> Path:
         Where to write it.
     """
     p = result.problem
-    cols: dict[str, Any] = {"time_s": p.time_s, "fitted": p.mask.astype(float), "command_deg": p.data.command_deg}
+    cols: dict[str, FloatArray] = {"time_s": p.time_s, "fitted": p.mask.astype(float),
+                                   "command_deg": p.data.command_deg}
     for o in p.outputs:
         meas = p.observed[o]
         col = OUTPUT_COLUMN[o]

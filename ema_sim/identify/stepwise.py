@@ -40,7 +40,7 @@ from ema_sim.identify.declared import not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Context, Effect, report_values
 from ema_sim.identify.fit import TINY, Fit, evaluate, fit, rms
 from ema_sim.identify.outcome import AsDeclared, Identification, Removal, Step, Verdict
-from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread, result
+from ema_sim.identify.parallel import SERIAL, Pool, TaskFuture, one_blas_thread, result
 from ema_sim.identify.problem import Cancelled, Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record
@@ -621,7 +621,7 @@ def likely_needed(cands: list[Candidate]) -> list[Candidate]:
 
 
 def _submit(pool: Pool, problem: Problem, cur: Fit, cands: list[Candidate], ctx: Context
-            ) -> dict[str, tuple[Any, str]]:
+            ) -> dict[str, tuple[TaskFuture, str]]:
     """The round's candidate fits the search will likely need, submitted to the pool's workers at once.
 
     Returns each one's future and cancellation token by effect (empty: every fit is made here in turn; one not

@@ -21,7 +21,7 @@ import argparse
 import math
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Unpack
 
 from rcl_interfaces.msg import ParameterType
 from rosgraph_msgs.msg import Clock
@@ -31,7 +31,7 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos, set_stamp, stamp_ns
 from ema_sim.config import scaling
 from ema_sim.jsontypes import JsonObject
-from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.common import NodeOptions, SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list
 from ema_sim.signals.plans import channel_list
 
@@ -47,11 +47,12 @@ class BridgeNode(SuiteNode):
         The command line's flags (parameter overrides).
     name : str
         The node's name.
-    **options : Any
+    **options : NodeOptions
         rclpy node options (``context``...).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, name: str = "fmu_bridge", **options: Any) -> None:
+    def __init__(self, args: argparse.Namespace | None = None, name: str = "fmu_bridge",
+                 **options: Unpack[NodeOptions]) -> None:
         """The node and its topics (see the class docstring for the arguments)."""
         super().__init__(name, args, **options)
         own = self.params.declare([

@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -31,8 +31,11 @@ from ema_msgs_py.ros import qos
 from ema_sim.config import config_dir, ros_parameters
 from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
-from ema_sim.nodes.params import Spec, names_list
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.params import Spec, as_float, names_list
+from ema_sim.nodes.ports import Ports, PortsFactory
+
+if TYPE_CHECKING:
+    from rclpy.parameter import AllowableParameterValue as ParameterValue
 
 NS = 1_000_000_000
 RESEND_S = 0.1
@@ -60,7 +63,8 @@ class ClockNode(SuiteNode):
         The node's name (a ``-r __node:=`` remapping renames it).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "simclock") -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports,
+                 name: str = "simclock") -> None:
         super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False
@@ -116,12 +120,12 @@ class ClockNode(SuiteNode):
     def _on_ready(self, msg: String) -> None:
         self.ready.add(msg.data)
 
-    def _set_stall(self, value: Any) -> str:
-        old, self.stall_s = self.stall_s, float(value)
+    def _set_stall(self, value: ParameterValue) -> str:
+        old, self.stall_s = self.stall_s, as_float(value)
         return f"stall_timeout_s: {old:g} → {self.stall_s:g} s"
 
-    def _set_silent(self, value: Any) -> str:
-        old, self.silent_s = self.silent_s, float(value)
+    def _set_silent(self, value: ParameterValue) -> str:
+        old, self.silent_s = self.silent_s, as_float(value)
         return f"silent_after_s: {old:g} → {self.silent_s:g} s"
 
     def _on_feedback(self, msg: JointFrame) -> None:

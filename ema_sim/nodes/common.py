@@ -17,7 +17,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol, TypedDict, Unpack
 
 import numpy as np
 import rclpy
@@ -41,6 +41,7 @@ from ema_sim.nodes.params import Declared, Spec, cli_overrides, names_list
 
 if TYPE_CHECKING:
     from rclpy.context import Context
+    from rclpy.executors import Executor
 
 SUMMARY_PREFIX = "EMA_SUMMARY "
 """Each node prints one line with this prefix and a JSON summary when it stops."""
@@ -71,7 +72,21 @@ def process_age_s() -> float:
         return math.nan
 
 
-def command_line(options: dict[str, Any]) -> list[str]:
+class NodeOptions(TypedDict, total=False):
+    """rclpy's node options a suite node passes on (its parameter overrides are its own, from its flags)."""
+
+    context: Context | None
+    cli_args: list[str] | None
+    namespace: str | None
+    use_global_arguments: bool
+    enable_rosout: bool
+    start_parameter_services: bool
+    allow_undeclared_parameters: bool
+    automatically_declare_parameters_from_overrides: bool
+    enable_logger_service: bool
+
+
+def command_line(options: NodeOptions) -> list[str]:
     """The command line a node's ROS arguments come from: its process's, then its own ``cli_args``.
 
     Parameters
@@ -88,7 +103,7 @@ def command_line(options: dict[str, Any]) -> list[str]:
     return own if options.get("use_global_arguments") is False else [*_process_argv, *own]
 
 
-def make_executor(context: Context | None = None) -> Any:
+def make_executor(context: Context | None = None) -> Executor:
     """The executor every node uses (see the module docstring for the measurement behind it).
 
     Parameters
@@ -117,12 +132,12 @@ class SuiteNode(Node):
         The flags given on the node's command line (parameter overrides, :func:`params.cli_overrides`).
     exclude : tuple of str
         Flags of ``args`` the node resolves itself (not parameter overrides).
-    **kwargs : Any
+    **kwargs : NodeOptions
         rclpy node options (``context``, ``cli_args``, ``namespace``...).
     """
 
     def __init__(self, name: str, args: argparse.Namespace | None = None, *, exclude: tuple[str, ...] = (),
-                 **kwargs: Any) -> None:
+                 **kwargs: Unpack[NodeOptions]) -> None:
         """The node, its ``peers`` declared (see the class docstring for the arguments)."""
         overrides = cli_overrides(args, exclude) if args is not None else []
         self.at_frame: set[Subscription] = set()
@@ -430,7 +445,7 @@ def run_nodes(factory: Callable[[argparse.Namespace], tuple[list[SuiteNode], Han
     return status
 
 
-def _loop(nodes: list[SuiteNode], bus: Handover | None, executor: Any, stop: dict[str, int | None]) -> None:
+def _loop(nodes: list[SuiteNode], bus: Handover | None, executor: Executor, stop: dict[str, int | None]) -> None:
     if bus is None and len(nodes) == 1:
         _loop_one(nodes[0], executor, stop)
         return
@@ -458,7 +473,7 @@ def _loop(nodes: list[SuiteNode], bus: Handover | None, executor: Any, stop: dic
         executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
 
 
-def _loop_one(node: SuiteNode, executor: Any, stop: dict[str, int | None]) -> None:
+def _loop_one(node: SuiteNode, executor: Executor, stop: dict[str, int | None]) -> None:
     """:func:`_loop` for a node alone in its process (the ``processes`` layout): the same steps, fewer calls.
 
     The loop runs once per message taken (a channel node of the ``processes`` layout: 2 to 7 a frame, its

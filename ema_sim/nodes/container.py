@@ -27,7 +27,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import ParamSpec, TypeVar
 
 from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
@@ -46,6 +46,9 @@ from ema_sim.nodes.common import SuiteNode, run_nodes
 from ema_sim.nodes.params import Spec, names_list
 from ema_sim.nodes.ports import GRAPH_CACHE_S, ClockPublisher, FramePublisher, Ports, TimeFeed, own_time_source
 from ema_sim.signals.plans import channel_list
+
+P = ParamSpec("P")
+R = TypeVar("R")
 
 NAME = "ema_container"
 MERGED = (ct.EMAC_FEEDBACK, ct.SURFACE, ct.BUS)
@@ -72,7 +75,7 @@ class BusyMeter:
         self._stack: list[str] = []
         self._mark = 0.0
 
-    def wrap(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+    def wrap(self, name: str, fn: Callable[P, R]) -> Callable[P, R]:
         """``fn`` with its own time charged to ``name`` (``fn`` itself when the meter is off).
 
         Parameters
@@ -93,14 +96,14 @@ class BusyMeter:
         seconds, stack = self.seconds, self._stack
         seconds.setdefault(name, 0.0)
 
-        def timed(*args: object) -> object:
+        def timed(*args: P.args, **kwargs: P.kwargs) -> R:
             now = clock()
             if stack:
                 seconds[stack[-1]] += now - self._mark
             self._mark = now
             stack.append(name)
             try:
-                return fn(*args)
+                return fn(*args, **kwargs)
             finally:
                 now = clock()
                 seconds[stack.pop()] += now - self._mark
@@ -382,7 +385,7 @@ class ComposedPorts:
         self.node = node
         self.name = node.get_name()
 
-    def frame_publisher(self, topic: str) -> object:
+    def frame_publisher(self, topic: str) -> _OutletPublisher:
         """In-process delivery and, for the outside, one DDS publisher per topic.
 
         Parameters

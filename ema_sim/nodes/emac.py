@@ -28,21 +28,23 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Unpack
 
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
 
 from ema_sim.emac.stamps import CommandClock, FrameGate
 from ema_sim.errors import EmaError
-from ema_sim.nodes.common import command_line, run
+from ema_sim.nodes.common import NodeOptions, command_line, run
 from ema_sim.nodes.emac_frames import CATCH_UP, EmacFrames
 from ema_sim.nodes.emac_params import channel_specs, default_name, emac_specs, node_specs
 from ema_sim.nodes.emac_receive import LOCKSTEP_LEAD_FRAMES
 from ema_sim.nodes.emac_state import DROPS, FAULT_HOLD_S, IDLE_AFTER_FRAMES, NS
 from ema_sim.nodes.emac_streams import SourceStream, Stream
 from ema_sim.nodes.params import names_list
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.ports import Ports, PortsFactory
 from ema_sim.signals.plans import channel_list
 
 __all__ = [
@@ -73,11 +75,11 @@ class EmacNode(EmacFrames):
     ----------
     args : argparse.Namespace or None
         The command line's flags (parameter overrides; ``channels`` is resolved here).
-    ports : object
+    ports : callable
         How per-frame messages travel (:class:`~ema_sim.nodes.ports.Ports`, or a container's).
     name : str or None
         The node's name (None: from the channels, :func:`~ema_sim.nodes.emac_params.default_name`).
-    **options : Any
+    **options : NodeOptions
         rclpy node options (``context``, ``cli_args``...), as a process's ROS arguments give them.
 
     Raises
@@ -86,8 +88,8 @@ class EmacNode(EmacFrames):
         A configuration error (logged at FATAL through the node's logger, and the node destroyed, first).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: object = Ports, name: str | None = None,
-                 **options: Any) -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports, name: str | None = None,
+                 **options: Unpack[NodeOptions]) -> None:
         """The node, built from its parameters (see the class docstring for the arguments)."""
         flag = channel_list(getattr(args, "channels", None) or []) or None
         argv = command_line(options)
@@ -103,7 +105,7 @@ class EmacNode(EmacFrames):
             self.destroy_node()
             raise
 
-    def _build(self, flag: list[str] | None, argv: list[str], ports: object) -> None:
+    def _build(self, flag: list[str] | None, argv: list[str], ports: PortsFactory) -> None:
         """The node's state (:meth:`_build_state`), then its topics and run-time parameters."""
         self._build_state(flag, argv, ports)
         if self.configured:
@@ -138,21 +140,21 @@ class ManagedEmacNode(LifecycleNodeMixin, EmacNode):
     ----------
     args : argparse.Namespace or None
         The command line's flags (parameter overrides).
-    ports : object
+    ports : callable
         How per-frame messages travel (:class:`~ema_sim.nodes.ports.Ports`).
     name : str or None
         The node's name (None: from the channels, :func:`~ema_sim.nodes.emac_params.default_name`).
-    **options : object
+    **options : NodeOptions
         rclpy node options (``context``, ``cli_args``).
     """
 
     managed = True
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: object = Ports, name: str | None = None,
-                 **options: object) -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports, name: str | None = None,
+                 **options: Unpack[NodeOptions]) -> None:
         EmacNode.__init__(self, args, ports, name, **options)
         LifecycleNodeMixin.__init__(self)
-        self._lifecycle_entities: list[Any] = []
+        self._lifecycle_entities: list[Publisher | Subscription] = []
         service = self._service_change_state
         change = service.callback
 
@@ -274,7 +276,7 @@ class ManagedEmacNode(LifecycleNodeMixin, EmacNode):
 
     def _drop_topics(self) -> None:
         for entity in self._lifecycle_entities:
-            if entity in self.publishers:
+            if isinstance(entity, Publisher):
                 self.destroy_publisher(entity)
             else:
                 self.destroy_subscription(entity)

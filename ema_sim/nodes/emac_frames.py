@@ -20,7 +20,7 @@ from ema_sim.emac.stamps import Lateness
 from ema_sim.nodes.common import MAX_SPIN_S, process_age_s
 from ema_sim.nodes.emac_receive import EmacReceiver
 from ema_sim.nodes.emac_state import IDLE_AFTER_FRAMES, NS
-from ema_sim.nodes.emac_streams import Stream
+from ema_sim.nodes.emac_streams import InputStream
 
 CATCH_UP = 20
 """Idle frames a late loop steps to catch up (0.1 s at 200 Hz); beyond that it skips to the present frame."""
@@ -185,7 +185,7 @@ class EmacFrames(EmacReceiver):
             for name, v in seen:
                 self.meter.observe(name, v, self.slew_v_per_s[name])
 
-    def _wait(self, pending: list[Stream], t: int) -> bool:
+    def _wait(self, pending: list[InputStream], t: int) -> bool:
         """True when the frame may go ahead without the pending inputs (their publishers are gone or late)."""
         now = time.monotonic()
         topics = {id(self.commands): ct.EMAC_COMMAND, id(self.loads): ct.HINGE_MOMENT,

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
 
 from std_msgs.msg import String
 
@@ -21,10 +20,11 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.emac import InputStatus
-from ema_sim.emac.stamps import Verdict
+from ema_sim.emac.stamps import Check, Verdict
 from ema_sim.errors import EmaError
 from ema_sim.nodes.emac_inputs import OUT_OF_RANGE_FACTOR, pick
 from ema_sim.nodes.emac_state import NS, EmacState
+from ema_sim.nodes.emac_streams import CommandItem
 
 LOCKSTEP_LEAD_FRAMES = 20
 """Lockstep: how far ahead of the node's clock an input may be stamped (inputs come frame by frame)."""
@@ -82,7 +82,7 @@ class EmacReceiver(EmacState):
         except Exception as exc:  # a bad message never kills the node
             self._drop("malformed", f"command message dropped: {exc}")
 
-    def _stamp_taken(self, check: Any, stamp: int) -> bool:
+    def _stamp_taken(self, check: Check, stamp: int) -> bool:
         """Real time: count, log and say whether to take a command the command clock judged (``check``)."""
         verdict = check.verdict
         if verdict is Verdict.TAKEN:
@@ -95,6 +95,7 @@ class EmacReceiver(EmacState):
                            "time since the last one: sent faster than the frames and dropped on the way)",
                            check.missing)
             return True
+        assert check.previous_ns is not None  # every verdict but TAKEN names the anchor it is judged against
         last = check.previous_ns / NS
         if verdict is Verdict.RESYNC:
             self.command_resyncs += 1
@@ -234,7 +235,7 @@ class EmacReceiver(EmacState):
         self.throttled(f"drop-{reason}", f"{text} ({self.drops[reason]} {reason.replace('_', ' ')} so far)")
 
     # ----------------------------------------------------------------- inputs into the channels
-    def _apply_commands(self, items: list[tuple[int, Any]]) -> None:
+    def _apply_commands(self, items: list[tuple[int, CommandItem]]) -> None:
         for stamp, (values, wall, _) in items:
             for ch, v in values.items():
                 status = self.units[ch].set_command(v)

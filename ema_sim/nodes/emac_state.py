@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from std_msgs.msg import String
 
@@ -27,10 +27,14 @@ from ema_sim.models import create, model_names
 from ema_sim.nodes.common import DurationHistogram, SuiteNode
 from ema_sim.nodes.emac_inputs import StampPolicy
 from ema_sim.nodes.emac_params import channel_specs, check_files, emac_specs, node_specs, resolve_channels
-from ema_sim.nodes.emac_streams import Outputs, SourceStream, Stream, diagnostics
-from ema_sim.nodes.params import nested
+from ema_sim.nodes.emac_streams import CommandItem, InputStream, Outputs, SourceStream, Stream, diagnostics
+from ema_sim.nodes.params import as_float, nested
+from ema_sim.nodes.ports import PortsFactory
 from ema_sim.signals.plans import channel_list
 from ema_sim.switches import element_names, model_overrides
+
+if TYPE_CHECKING:
+    from rclpy.parameter import AllowableParameterValue as ParameterValue
 
 NS = 1_000_000_000
 DROPS = ("malformed", "unknown_names", "no_names", "lost_commands", "out_of_order", "future_stamp")
@@ -60,7 +64,7 @@ class EmacState(SuiteNode):
     """A managed (lifecycle) node, :class:`~ema_sim.nodes.emac.ManagedEmacNode`: topics made at ``configure``, frames
     only when active."""
 
-    def _build_state(self, flag: list[str] | None, argv: list[str], ports: Any) -> None:
+    def _build_state(self, flag: list[str] | None, argv: list[str], ports: PortsFactory) -> None:
         """The node's parameters, channels, streams and counters (its topics come after, from the node)."""
         name = self.get_name()
         fqn = self.get_fully_qualified_name()
@@ -99,11 +103,11 @@ class EmacState(SuiteNode):
 
     def _init_streams(self) -> None:
         """The input streams and the node's time base."""
-        self.commands = Stream()
-        self.loads = Stream()
+        self.commands: Stream[CommandItem] = Stream()
+        self.loads: Stream[dict[str, float]] = Stream()
         self.source_fb = SourceStream(frozenset(c for c in self.sources if f"emac_{c}" in self.peers))
         """The crosstalk sources: the peers' EMAC channel nodes (see :class:`SourceStream`)."""
-        self._stream_list = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
+        self._stream_list: list[InputStream] = [self.commands, self.loads, *([self.source_fb] if self.sources else [])]
         self._diagnostics_every = round(self.settings.frame_hz)
         self._frames_to_diagnostics = self._diagnostics_every
         self._diagnose_now = False
@@ -178,8 +182,8 @@ class EmacState(SuiteNode):
 
     def _on_changes(self) -> None:
         """The parameters a running EMAC applies at its next frame (every other one is read-only)."""
-        def on(name: str, apply: Callable[[Any], str]) -> None:
-            def applied(value: object) -> str:
+        def on(name: str, apply: Callable[[ParameterValue], str]) -> None:
+            def applied(value: ParameterValue) -> str:
                 self._diagnose_now = True  # the next frame's diagnostics show the change
                 return apply(value)
             self.params.on_change(name, applied)
@@ -204,12 +208,12 @@ class EmacState(SuiteNode):
                 u.motor_power_on = bool(value)
             return f"emac.motor_power_on: {bool(value)} (brake {'released' if value else 'engaged'} at the next frame)"
 
-        def wait(value: Any) -> str:
-            old, self.wait_s = self.wait_s, float(value)
+        def wait(value: ParameterValue) -> str:
+            old, self.wait_s = self.wait_s, as_float(value)
             return f"emac.lockstep_wait_s: {old:g} → {self.wait_s:g} s"
 
-        def source_wait(value: Any) -> str:
-            old, self.source_wait_s = self.source_wait_s, float(value)
+        def source_wait(value: ParameterValue) -> str:
+            old, self.source_wait_s = self.source_wait_s, as_float(value)
             return f"emac.lockstep_source_wait_s: {old:g} → {self.source_wait_s:g} s"
 
         def faults(value: object) -> str:

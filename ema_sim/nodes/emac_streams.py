@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping
-from typing import Any
+from typing import Generic, TypeVar
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -21,18 +21,25 @@ from ema_msgs_py import contract as ct
 from ema_msgs_py.cdr import JointFrame
 from ema_msgs_py.ros import qos
 from ema_sim.emac import EmacChannel, Feedback
+from ema_sim.nodes.ports import NodePorts
+
+T = TypeVar("T")
+
+CommandItem = tuple[dict[str, float], float, bool]
+"""A command message as kept: each channel's command (V), when it arrived (monotonic, s), and whether its stamp
+resynchronized the frame clock."""
 
 
-class Stream:
+class Stream(Generic[T]):
     """Stamped messages of one input topic, consumed frame by frame (lockstep) or as they come."""
 
     def __init__(self) -> None:
-        self.queue: deque[tuple[int, Any]] = deque()
+        self.queue: deque[tuple[int, T]] = deque()
         self.last_stamp: int | None = None
         self.waiting_since: float | None = None
         self.gave_up = False
 
-    def push(self, stamp: int, item: object) -> None:
+    def push(self, stamp: int, item: T) -> None:
         """A message arrived.
 
         Parameters
@@ -76,7 +83,7 @@ class Stream:
         self.waiting_since = None
         self.gave_up = False
 
-    def take_until(self, t_ns: int) -> list[tuple[int, Any]]:
+    def take_until(self, t_ns: int) -> list[tuple[int, T]]:
         """(stamp, item) stamped at or before ``t_ns``, in arrival order.
 
         Every such item, not only those before the first later one: messages of different publishers
@@ -90,7 +97,7 @@ class Stream:
 
         Returns
         -------
-        list of (int, Any)
+        list of (int, item)
             The messages taken, in arrival order.
         """
         queue = self.queue
@@ -106,7 +113,7 @@ class Stream:
         return out
 
 
-class SourceStream(Stream):
+class SourceStream(Stream[list[tuple[str, float]]]):
     """The other channels' feedback (crosstalk sources): a frame is there when every source has sent it.
 
     Which sources exist is the node's to say (:attr:`expected`; the EMAC node takes them from the suite's
@@ -157,6 +164,10 @@ class SourceStream(Stream):
         self._note(stamp, item)
 
 
+InputStream = Stream[CommandItem] | Stream[dict[str, float]] | SourceStream
+"""One of an EMAC node's input streams: its commands, hinge moments, or crosstalk sources."""
+
+
 class Outputs:
     """The node's per-frame publishers and how a frame's feedback becomes their messages.
 
@@ -164,7 +175,7 @@ class Outputs:
     ----------
     node : Node
         The node that owns the diagnostics publisher.
-    ports : object
+    ports : NodePorts
         Its :class:`~ema_sim.nodes.ports.Ports` (or a container's), which make the frame publishers.
     channels : list of str
         The hosted channels, in the order every message lists them.
@@ -174,7 +185,7 @@ class Outputs:
         The model has a motor: feedback carries its current, and the bus is published.
     """
 
-    def __init__(self, node: Node, ports: Any, channels: list[str], frame_id: str, has_current: bool) -> None:
+    def __init__(self, node: Node, ports: NodePorts, channels: list[str], frame_id: str, has_current: bool) -> None:
         self.channels = channels
         self.frame_id = frame_id
         self.has_current = has_current

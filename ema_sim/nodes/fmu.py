@@ -20,9 +20,8 @@ import argparse
 import datetime as dt
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 from rcl_interfaces.msg import ParameterType
 
@@ -48,7 +47,7 @@ from ema_sim.jsontypes import JsonObject
 from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.params import Spec, config_specs, names_list, nested
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.ports import Ports, PortsFactory
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.parameters import ParameterInfo, describe
 
@@ -73,15 +72,21 @@ def default_bag(profile: str) -> Path:
     return stamped_bag(f"ail_{profile}")
 
 
-def _declared(values: dict[str, Any]) -> dict[str, ParameterInfo]:
+def _keys(values: Mapping[str, object], section: str) -> list[object]:
+    """The keys of one section of the vehicle file (none when it is absent or no mapping: its check says so)."""
+    found = values.get(section, {})
+    return list(found) if isinstance(found, Mapping) else []
+
+
+def _declared(values: Mapping[str, object]) -> dict[str, ParameterInfo]:
     """YAML path → the declaration (unit, description) of the vehicle file's vehicle, autopilot and hinge moments."""
     out = {f"vehicle.{p.name}": p for p in describe(VehicleParams)}
     out.update({f"autopilot.{p.name}": p for p in describe(AutopilotParams)})
-    for kind in values.get("hinge_moment", {}):
+    for kind in _keys(values, "hinge_moment"):
         out.update({f"hinge_moment.{kind}.{p.name}": p for p in describe(HingeMomentParams)})
     (held,) = describe(HeldCommand)
-    out.update({f"held_deg.{ch}": held for ch in values.get("held_deg", {})})
-    for profile in values.get("setup", {}):
+    out.update({f"held_deg.{ch}": held for ch in _keys(values, "held_deg")})
+    for profile in _keys(values, "setup"):
         out.update({f"setup.{profile}.{p.name}": p for p in describe(Setup)})
     out.update({f"measure.{p.name}": p for p in describe(MeasureParams)})
     out.update({p.name: p for p in describe(FrameParams)})
@@ -102,7 +107,8 @@ class FmuNode(DriverNode):
         The node's name (a ``-r __node:=`` remapping renames it).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "fmu") -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports,
+                 name: str = "fmu") -> None:
         super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False  # ready when the run starts, after its recorder is matched

@@ -16,7 +16,6 @@ import datetime as dt
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from rcl_interfaces.msg import ParameterType
@@ -30,7 +29,7 @@ from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.frametimes import FrameTimes
 from ema_sim.nodes.params import Spec, names_list
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.ports import Ports, PortsFactory
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.signals.plans import build_plan, channel_list
 
@@ -65,7 +64,8 @@ class ManeuverNode(DriverNode):
         The node's name (a ``-r __node:=`` remapping renames it).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "maneuver") -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports,
+                 name: str = "maneuver") -> None:
         super().__init__(name, args)
         self.ports = ports(self)
         self.auto_ready = False  # ready when the test starts, after its recorder is matched

@@ -19,11 +19,13 @@ import json
 import math
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Unpack
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from ema_msgs_py import contract as ct
@@ -35,9 +37,9 @@ from ema_sim.jsontypes import JsonObject
 from ema_sim.models import model_names
 from ema_sim.monitor import Options, from_name, from_report
 from ema_sim.monitor.online import OnlineMonitor
-from ema_sim.nodes.common import SuiteNode, run
+from ema_sim.nodes.common import NodeOptions, SuiteNode, run
 from ema_sim.nodes.params import Spec, names_list
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.ports import Ports, PortsFactory
 
 
 class MonitorNode(LifecycleNodeMixin, SuiteNode):
@@ -51,12 +53,12 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
         Builds the node's topic ports (:class:`~ema_sim.nodes.ports.Ports`).
     name : str
         The node's name.
-    options : Any
+    options : NodeOptions
         Passed on to :class:`~ema_sim.nodes.common.SuiteNode` (its hosting options).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "ema_monitor",
-                 **options: Any) -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports, name: str = "ema_monitor",
+                 **options: Unpack[NodeOptions]) -> None:
         SuiteNode.__init__(self, name, args, **options)
         LifecycleNodeMixin.__init__(self)
         p = self.params.declare([
@@ -85,7 +87,7 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
         self.cpu_s = 0.0
         self.frames = 0
         self._next_diag = 0.0
-        self._entities: list[Any] = []
+        self._entities: list[Publisher | Subscription] = []
 
     # ----------------------------------------------------------------- lifecycle
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:  # noqa: ARG002
@@ -138,7 +140,7 @@ class MonitorNode(LifecycleNodeMixin, SuiteNode):
             The lifecycle state the transition starts from.
         """
         for e in self._entities:
-            if e in self.publishers:
+            if isinstance(e, Publisher):
                 self.destroy_publisher(e)
             else:
                 self.destroy_subscription(e)

@@ -29,7 +29,7 @@ import socket
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict
 
 import rclpy
 from rclpy.context import Context
@@ -41,7 +41,27 @@ from std_msgs.msg import String
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
 from ema_sim.errors import EmaError
-from ema_sim.jsontypes import JsonObject
+
+
+class Claim(TypedDict):
+    """What a node publishes on ``/ema/nodes``: its full name, pid, host and start time (ns since the epoch)."""
+
+    node: str
+    pid: int
+    host: str
+    since_ns: int
+
+
+def parse_claim(text: str) -> Claim | None:
+    """A claim as published (JSON), or None when the text is no claim."""
+    try:
+        doc = json.loads(text)
+        if not isinstance(doc, dict):
+            return None
+        return {"node": str(doc["node"]), "pid": int(doc["pid"]), "host": str(doc["host"]),
+                "since_ns": int(doc["since_ns"])}
+    except (ValueError, KeyError, TypeError):
+        return None
 
 
 class NameClaim:
@@ -55,31 +75,30 @@ class NameClaim:
 
     def __init__(self, node: Node) -> None:
         self.node = node
-        self.mine: JsonObject = {"node": node.get_fully_qualified_name(), "pid": os.getpid(),
-                                     "host": socket.gethostname(), "since_ns": time.time_ns()}
-        self.taken_by: JsonObject | None = None
+        self.mine: Claim = {"node": node.get_fully_qualified_name(), "pid": os.getpid(),
+                            "host": socket.gethostname(), "since_ns": time.time_ns()}
+        self.taken_by: Claim | None = None
         """The older node of this name, once its claim came: this node must not run."""
         self.pub = node.create_publisher(String, ct.endpoint(ct.NODES), qos(ct.LATCHED_QOS))
         self.sub = node.create_subscription(String, ct.endpoint(ct.NODES), self._on_claim, qos(ct.LATCHED_QOS))
         self.pub.publish(String(data=json.dumps(self.mine)))
 
-    def _key(self, claim: dict[str, Any]) -> tuple[int, str, int]:
-        return int(claim["since_ns"]), str(claim["host"]), int(claim["pid"])
+    def _key(self, claim: Claim) -> tuple[int, str, int]:
+        return claim["since_ns"], claim["host"], claim["pid"]
 
     def _on_claim(self, msg: String) -> None:
-        try:
-            other = json.loads(msg.data)
-            if other.get("node") != self.mine["node"] or (other["host"], other["pid"]) == (
-                    self.mine["host"], self.mine["pid"]):
-                return  # another name, or a node of this process (nodes composed by a caller, a test)
-            if self._key(other) < self._key(self.mine):
-                self.taken_by = other
-            else:
-                self.node.get_logger().warning(
-                    f"a second node named {self.mine['node']} ({describe(other)}) started after this one: "
-                    "it refuses to run, this one goes on")
-        except (ValueError, KeyError, TypeError):
+        other = parse_claim(msg.data)
+        if other is None:
             return  # not a claim of ours: nothing to judge by
+        if other["node"] != self.mine["node"] or (other["host"], other["pid"]) == (
+                self.mine["host"], self.mine["pid"]):
+            return  # another name, or a node of this process (nodes composed by a caller, a test)
+        if self._key(other) < self._key(self.mine):
+            self.taken_by = other
+        else:
+            self.node.get_logger().warning(
+                f"a second node named {self.mine['node']} ({describe(other)}) started after this one: "
+                "it refuses to run, this one goes on")
 
     def refusal(self) -> str | None:
         """The error to stop with when an older node has this name, else None.
@@ -96,7 +115,7 @@ class NameClaim:
                 "stop it, or give this one another name (--ros-args -r __node:=<name>)")
 
 
-def describe(claim: dict[str, Any]) -> str:
+def describe(claim: Claim) -> str:
     """Where a claiming node runs and since when, for a log line.
 
     Parameters
@@ -109,7 +128,7 @@ def describe(claim: dict[str, Any]) -> str:
     str
         ``pid N on host H, up T s``.
     """
-    up_s = (time.time_ns() - int(claim["since_ns"])) / 1e9
+    up_s = (time.time_ns() - claim["since_ns"]) / 1e9
     return f"pid {claim['pid']} on host {claim['host']}, up {up_s:.1f} s"
 
 
@@ -121,7 +140,7 @@ CLAIMS_GRACE_S = 0.5
 class Taken:
     """The names of a run already used on its domain (:func:`running_claims`)."""
 
-    claimed: dict[str, dict[str, Any]] = field(default_factory=dict)
+    claimed: dict[str, Claim] = field(default_factory=dict)
     """Full name → the live claim of a suite node of that name (its run's node would refuse to start)."""
     graph_only: list[str] = field(default_factory=list)
     """Full names in the graph without a live claim: a node killed within its DDS lease, or not a suite node."""
@@ -185,15 +204,12 @@ def running_claims(names: Iterable[str], domain_id: int, look_s: float, discover
         The names claimed by live nodes, and those only in the graph.
     """
     wanted = set(names)
-    claimed: dict[str, dict[str, Any]] = {}
+    claimed: dict[str, Claim] = {}
 
     def on_claim(msg: String) -> None:
-        try:
-            claim = json.loads(msg.data)
-            if claim.get("node") in wanted:
-                claimed[str(claim["node"])] = claim
-        except (ValueError, KeyError, TypeError, AttributeError):
-            return  # not a claim: nothing to judge by
+        claim = parse_claim(msg.data)
+        if claim is not None and claim["node"] in wanted:  # None: not a claim, nothing to judge by
+            claimed[claim["node"]] = claim
 
     context = Context()
     with _environment(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE=discovery_range):

@@ -19,7 +19,7 @@ import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
@@ -30,6 +30,9 @@ from rclpy.parameter import Parameter
 from ema_sim.errors import ConfigError, EmaError
 from ema_sim.jsontypes import JsonObject
 from ema_sim.parameters import ParameterInfo
+
+if TYPE_CHECKING:
+    from rclpy.parameter import AllowableParameterValue as ParameterValue
 
 ARRAYS = frozenset({ParameterType.PARAMETER_BOOL_ARRAY, ParameterType.PARAMETER_INTEGER_ARRAY,
                     ParameterType.PARAMETER_DOUBLE_ARRAY, ParameterType.PARAMETER_STRING_ARRAY,
@@ -267,7 +270,7 @@ class Declared:
     def __init__(self, node: Node) -> None:
         self.node = node
         self.specs: dict[str, Spec] = {}
-        self.appliers: dict[str, Callable[[Any], str]] = {}
+        self.appliers: dict[str, Callable[[ParameterValue], str]] = {}
         node.add_on_set_parameters_callback(self._on_set)
 
     def declare(self, specs: Sequence[Spec], origin: str) -> dict[str, Any]:
@@ -287,7 +290,7 @@ class Declared:
         """
         node = self.node
         overrides = node._parameter_overrides  # a file's 25 for a double parameter becomes 25.0
-        batch: list[tuple[str] | tuple[str, Parameter.Type] | tuple[str, Any, ParameterDescriptor]] = []  # rclpy's type
+        batch: list[tuple[str] | tuple[str, Parameter.Type] | tuple[str, object, ParameterDescriptor]] = []
         empty: list[Parameter] = []  # lists declared empty (by default, or by a file's [], which rcl gives untyped)
         for spec in specs:
             d = spec.descriptor()
@@ -356,7 +359,7 @@ class Declared:
         n = len(prefix) + 1
         return nested({name[n:]: self.value(name) for name in self.specs if name.startswith(prefix + ".")})
 
-    def on_change(self, name: str, apply: Callable[[Any], str]) -> None:
+    def on_change(self, name: str, apply: Callable[[ParameterValue], str]) -> None:
         """``apply(value)`` makes a run-time change take effect and says what changed (for the log).
 
         Parameters
@@ -387,6 +390,29 @@ class Declared:
         for line in applied:
             self.node.get_logger().info(line)
         return SetParametersResult(successful=True)
+
+
+def as_float(value: ParameterValue) -> float:
+    """A double parameter's new value as a float (rclpy checked it against the declared type).
+
+    Parameters
+    ----------
+    value : bool, int, float, str or list
+        The value a set-parameters request carries.
+
+    Returns
+    -------
+    float
+        The value.
+
+    Raises
+    ------
+    ValueError
+        It is no number (the change is refused with this reason).
+    """
+    if isinstance(value, int | float):
+        return float(value)
+    raise ValueError(f"{value!r} is no number")
 
 
 def _coerced(param: Parameter, kind: int) -> Parameter:

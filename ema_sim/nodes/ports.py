@@ -20,8 +20,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol
 
+from rclpy.clock import ROSClock
 from rclpy.exceptions import InvalidHandle
 from rclpy.time import Time
 from rclpy.time_source import TimeSource
@@ -35,9 +36,51 @@ from ema_msgs_py.ros import qos
 if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
+    from rclpy.subscription import Subscription
 
 FrameCallback = Callable[[cdr.JointFrame], None]
 ClockCallback = Callable[[int], None]
+
+
+class FrameOutlet(Protocol):
+    """A per-frame publisher: :class:`FramePublisher` (gives the CDR bytes sent) or a container's (gives None)."""
+
+    def publish(self, frame: cdr.JointFrame) -> bytes | None: ...  # noqa: D102
+
+
+class ClockOutlet(Protocol):
+    """A ``/clock`` publisher: :class:`ClockPublisher` or a container's."""
+
+    def publish(self, ns: int) -> None: ...  # noqa: D102
+
+
+class NodePorts(Protocol):
+    """How a node's per-frame messages travel: :class:`Ports` on DDS, or a container's ``ComposedPorts``."""
+
+    @property
+    def received_ns(self) -> int | None: ...  # noqa: D102
+
+    def take_at_frame(self) -> int: ...  # noqa: D102
+
+    def frame_publisher(self, topic: str) -> FrameOutlet: ...  # noqa: D102
+
+    def frame_subscription(self, topic: str, callback: FrameCallback, on_bad: Callable[[str], None], *,  # noqa: D102
+                           at_frame: bool = False) -> None: ...
+
+    def raw_subscription(self, topic: str, callback: Callable[[bytes], None], *,  # noqa: D102
+                         at_frame: bool = False) -> None: ...
+
+    def clock_publisher(self) -> ClockOutlet: ...  # noqa: D102
+
+    def clock_subscription(self, callback: ClockCallback) -> None: ...  # noqa: D102
+
+    def publishers(self, topic: str) -> int: ...  # noqa: D102
+
+    def endpoint_nodes(self) -> list[Node]: ...  # noqa: D102
+
+
+PortsFactory = Callable[["Node"], NodePorts]
+"""What a node is given to build its ports from itself: the :class:`Ports` class, or a container's ``Bus.ports``."""
 GRAPH_CACHE_S = 0.1
 """How long a publisher count from the ROS graph is reused (a graph query costs ~100 µs)."""
 
@@ -114,7 +157,7 @@ class Ports:
     def __init__(self, node: Node) -> None:
         self.node = node
         self._counts: dict[str, tuple[float, int]] = {}
-        self._at_frame: list[tuple[Any, Callable[[bytes], None]]] = []
+        self._at_frame: list[tuple[Subscription, Callable[[bytes], None]]] = []
         self.received_ns: int | None = None
         """While :meth:`take_at_frame` hands a message over: when DDS received it (system time, ns); else None."""
 
@@ -261,7 +304,7 @@ class Ports:
         return [self.node]
 
 
-def own_time_source(node: Node) -> object:
+def own_time_source(node: Node) -> ROSClock | None:
     """Under ``use_sim_time`` rclpy's TimeSource takes ``/clock`` itself; take that over, return the clock.
 
     The suite's nodes already take every ``/clock`` frame (or get it in-process): their ROS clock is
@@ -284,7 +327,8 @@ def own_time_source(node: Node) -> object:
         if isinstance(owner, TimeSource):  # its /clock subscription, wherever a remapping put it
             node.destroy_subscription(sub)
             found = True
-    return node.get_clock() if found else None
+    clock = node.get_clock()
+    return clock if found and isinstance(clock, ROSClock) else None
 
 
 class TimeFeed:
@@ -296,12 +340,14 @@ class TimeFeed:
         The clocks (None entries, nodes not under sim time, are left out).
     """
 
-    def __init__(self, clocks: list[Any] | None = None) -> None:
-        self.clocks = [c for c in clocks or [] if c is not None]
+    def __init__(self, clocks: list[ROSClock | None] | None = None) -> None:
+        self.clocks: list[ROSClock | None] = [c for c in clocks or [] if c is not None]
 
     def __call__(self, ns: int) -> None:
         """Every clock to ``ns``."""
-        if self.clocks:
-            t = Time(nanoseconds=ns, clock_type=self.clocks[0].clock_type)
-            for clock in self.clocks:
+        t: Time | None = None
+        for clock in self.clocks:
+            if clock is not None:  # a node not under sim time, added by a composed node's ports
+                if t is None:
+                    t = Time(nanoseconds=ns, clock_type=clock.clock_type)
                 clock.set_ros_time_override(t)

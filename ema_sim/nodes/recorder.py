@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -31,6 +30,7 @@ from ema_msgs_py import typestore as ts
 from ema_msgs_py.ros import message_class, qos
 from ema_sim.io.bag import BagWriter
 from ema_sim.jsontypes import JsonObject
+from ema_sim.nodes.ports import NodePorts
 
 NS = 1_000_000_000
 
@@ -82,7 +82,7 @@ class Recorder:
         The hooked topics too are taken at the frame (a driver that reads them once a frame, in real time).
     """
 
-    def __init__(self, node: Node, writer: BagWriter, *, lockstep: bool, ports: Any, own: Iterable[str] = (),
+    def __init__(self, node: Node, writer: BagWriter, *, lockstep: bool, ports: NodePorts, own: Iterable[str] = (),
                  hooks: dict[str, Callable[[bytes, int], None]] | None = None,
                  on_clock: Callable[[int], None] | None = None, hooks_at_frame: bool = False) -> None:
         self.node = node

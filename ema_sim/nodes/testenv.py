@@ -26,7 +26,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterType
@@ -39,9 +39,12 @@ from ema_sim.environment.profile import PATHS, PathSpec
 from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.nodes.clock import watchdog_s
 from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
-from ema_sim.nodes.params import Spec, names_list, nested
-from ema_sim.nodes.ports import Ports
+from ema_sim.nodes.params import Spec, as_float, names_list, nested
+from ema_sim.nodes.ports import Ports, PortsFactory
 from ema_sim.parameters import metas
+
+if TYPE_CHECKING:
+    from rclpy.parameter import AllowableParameterValue as ParameterValue
 
 CHECK_EVERY_S = 0.01
 """How often the feedback of the commanded channels is checked (wall time)."""
@@ -89,7 +92,8 @@ class TestEnvNode(SuiteNode):
         The node's name (a ``-r __node:=`` remapping renames it).
     """
 
-    def __init__(self, args: argparse.Namespace | None = None, ports: Any = Ports, name: str = "testenv") -> None:
+    def __init__(self, args: argparse.Namespace | None = None, ports: PortsFactory = Ports,
+                 name: str = "testenv") -> None:
         super().__init__(name, args)
         self.ports = ports(self)
         own = self.params.declare([
@@ -144,8 +148,8 @@ class TestEnvNode(SuiteNode):
         d = self.profile.describe()
         self.get_logger().info(f"profile {d['profile']}: command {d['command_path']}; feedback {d['feedback_path']}")
 
-    def _set_silent(self, value: Any) -> str:
-        old, self.silent_s = self.silent_s, float(value)
+    def _set_silent(self, value: ParameterValue) -> str:
+        old, self.silent_s = self.silent_s, as_float(value)
         return f"silent_after_s: {old:g} → {self.silent_s:g} s"
 
     def poll(self) -> float:
@@ -191,11 +195,11 @@ class TestEnvNode(SuiteNode):
                                                values=[KeyValue(key="silences", value=str(self.silences))]))
         self.diag_pub.publish(msg)
 
-    def _element_change(self, path: str, key: str) -> Callable[[Any], str]:
+    def _element_change(self, path: str, key: str) -> Callable[[ParameterValue], str]:
         """The run-time change of one element of one path (a :meth:`~ema_sim.nodes.params.Parameters.on_change`)."""
-        def apply(value: Any) -> str:
+        def apply(value: ParameterValue) -> str:
             old = getattr(self.profile, path)
-            spec = PathSpec.from_mapping({**old.as_dict(), key: float(value)}, f"{self.get_name()}: {path}")
+            spec = PathSpec.from_mapping({**old.as_dict(), key: as_float(value)}, f"{self.get_name()}: {path}")
             self.profile = replace(self.profile, command=spec) if path == "command" else \
                 replace(self.profile, feedback=spec)
             paths = self.cmd_paths if path == "command" else self.fb_paths
@@ -209,7 +213,7 @@ class TestEnvNode(SuiteNode):
                     self.cur_delays[ch].reset(self.last_in["current"].get(ch, 0.0))
             self.changes += 1
             now = make(self.frame_s).describe()
-            return (f"{path}.{key}: {getattr(old, key):g} → {float(value):g} (from the next frame); {path} path now "
+            return (f"{path}.{key}: {getattr(old, key):g} → {as_float(value):g} (from the next frame); {path} path now "
                     f"{now}")
         return apply
 

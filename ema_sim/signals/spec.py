@@ -8,17 +8,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import MISSING, Field, dataclass, field, fields
-from typing import Any, ClassVar, TypeVar, get_type_hints
+from typing import ClassVar, TypeVar, get_type_hints
 
 from ema_sim.errors import SpecError, UnknownNameError
 
 T = TypeVar("T")
 FieldValue = bool | int | float | str
 """What a spec field holds (:func:`_convert` makes it from the spec's text)."""
+V = TypeVar("V", bound=FieldValue)
 
 
-def param(default: FieldValue, *, low: float | None = None, high: float | None = None, strict: bool = False,
-          doc: str = "") -> Any:
+def param(default: V, *, low: float | None = None, high: float | None = None, strict: bool = False,
+          doc: str = "") -> V:
     """A spec field with bounds: ``low`` ≤ value (``<`` when ``strict``), value ≤ ``high``.
 
     Parameters
@@ -37,7 +38,7 @@ def param(default: FieldValue, *, low: float | None = None, high: float | None =
     Returns
     -------
     dataclasses.Field
-        The field.
+        The field (typed as its value, as :func:`dataclasses.field` is, for the dataclass body).
     """
     return field(default=default, metadata={"low": low, "high": high, "strict": strict, "doc": doc})
 

@@ -29,7 +29,6 @@ calculation of the report (figure 22) is :func:`hand_calculation`: the 10-90 % r
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -199,19 +198,19 @@ class SecondOrderFit:
             Every estimate as ``{value, sigma, sigma_white}``, the fit's RMS, points, span, residual
             whiteness, quality, and the hand calculation when there is one.
         """
-        out: dict[str, Any] = {
+        out: JsonObject = {
             "test": self.test, "method": self.method, "output": self.output,
             "quality": self.quality, "quality_note": self.quality_note,
             "command_sampled": self.command_sampled,
             "actuator_delay_s": {"value": self.actuator_delay_s,
                                  "sigma": float(np.hypot(self.delay_s.sigma, self.sample_s / np.sqrt(12.0)))
                                  if self.command_sampled else self.delay_s.sigma},
-            "wn_rad_s": self.wn_rad_s.as_dict(), "wn_hz": self.wn_rad_s.value / (2 * np.pi),
-            "zeta": self.zeta.as_dict(), "delay_s": self.delay_s.as_dict(), "gain": self.gain.as_dict(),
-            "bias_deg": self.bias_deg.as_dict() if self.bias_deg else None,
+            "wn_rad_s": dict(self.wn_rad_s.as_dict()), "wn_hz": self.wn_rad_s.value / (2 * np.pi),
+            "zeta": dict(self.zeta.as_dict()), "delay_s": dict(self.delay_s.as_dict()),
+            "gain": dict(self.gain.as_dict()), "bias_deg": dict(self.bias_deg.as_dict()) if self.bias_deg else None,
             f"rms_{self.rms_unit}": self.rms, "points": self.points, "start_s": self.start_s, "end_s": self.end_s,
-            "residual_whiteness": self.residual_whiteness.as_dict(), "uncertainty": UNCERTAINTY_METHOD,
-            "hand_calculation": self.hand.as_dict() if self.hand else None,
+            "residual_whiteness": dict(self.residual_whiteness.as_dict()), "uncertainty": UNCERTAINTY_METHOD,
+            "hand_calculation": dict(self.hand.as_dict()) if self.hand else None,
         }
         return out
 

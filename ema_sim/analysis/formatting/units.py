@@ -11,7 +11,9 @@ a phase, a lead, a lag or an angle is left as it is.
 from __future__ import annotations
 
 import re
-from typing import Any
+from typing import overload
+
+from ema_sim.jsontypes import JsonObject, JsonValue
 
 ANGLE_WORDS = re.compile(r"phase|lead|\blag\b|\blags\b|angle", re.I)
 """Words whose clause carries a phase angle, in degrees whatever the record's unit."""
@@ -63,12 +65,16 @@ def in_unit(text: str, unit: str) -> str:
     return _WORD.sub(word, _DEGREE.sub(degree, text))
 
 
-def texts_in_unit(value: object, unit: str) -> Any:
+@overload
+def texts_in_unit(value: JsonObject, unit: str) -> JsonObject: ...
+@overload
+def texts_in_unit(value: JsonValue, unit: str) -> JsonValue: ...
+def texts_in_unit(value: JsonValue, unit: str) -> JsonValue:
     """Every string in a nested JSON-ready structure :func:`in_unit` (keys, which name fields, untouched).
 
     Parameters
     ----------
-    value : object
+    value : JSON value
         Dicts, lists and scalars.
     unit : str
         The record's unit.

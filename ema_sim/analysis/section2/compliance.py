@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,10 +97,10 @@ class ThreeSegment:
         dict
             Plain values for JSON.
         """
-        out: dict[str, Any] = {"knots_lb": list(self.knots_lb), "slopes_deg_per_lb": list(self.slopes_deg_per_lb),
+        out: JsonObject = {"knots_lb": list(self.knots_lb), "slopes_deg_per_lb": list(self.slopes_deg_per_lb),
                                "offset_deg": self.offset_deg, "rms_deg": self.rms_deg}
         if crank_arm_in:
-            out["stiffness_lb_per_in"] = self.stiffness_lb_per_in(crank_arm_in)
+            out["stiffness_lb_per_in"] = list(self.stiffness_lb_per_in(crank_arm_in))
         return out
 
 

@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -211,7 +211,25 @@ def _crossing(t: FloatArray, z: FloatArray, level: float) -> float | None:
     return float(t[i - 1] + (t[i] - t[i - 1]) * (level - z[i - 1]) / (z[i] - z[i - 1]))
 
 
-def _metrics(t: FloatArray, y: FloatArray, e: Edge, dt: float, noise_floor: float) -> dict[str, Any]:
+class _EdgeMetrics(TypedDict):
+    """One edge's figures as measured, before the step response is judged (times s, positions deg)."""
+
+    start: int
+    stop: int
+    y0: float
+    y1: float
+    noise: float
+    delay: float | None
+    rise: float | None
+    settling: float | None
+    band: float
+    overshoot: float | None
+    peak: float
+    plateau: float
+    plateau_rate: float | None
+
+
+def _metrics(t: FloatArray, y: FloatArray, e: Edge, dt: float, noise_floor: float) -> _EdgeMetrics:
     pre = max(e.before.start, e.index - max(5, round(PRE_S / dt)))
     y0 = float(np.mean(y[pre:e.index]))
     noise = float(np.std(y[pre:e.index])) if e.index - pre > 5 else noise_floor

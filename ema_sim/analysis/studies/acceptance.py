@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from ema_sim.analysis.section2.sine_dwell import sine_dwell
 from ema_sim.jsontypes import JsonObject
-from ema_sim.models import ActuatorModel, Flags, create
+from ema_sim.models import ActuatorModel, Flags, Record, create
+from ema_sim.models.high_order.models import HighOrderModel
 
 FRAME_S = 0.005
 RATED_LOAD_LBF = {"wing": 500.0, "rudder": 526.0, "cowl": 2000.0}
@@ -173,11 +173,12 @@ def bandwidth_hz(name: str = "hoac1", channel: str = "left_wing", amp_deg: float
     return fr.bandwidth_hz()
 
 
-def _unpowered_static(name: str, channel: str, forces_lbf: list[float]) -> tuple[np.ndarray, np.ndarray, Any]:
+def _unpowered_static(name: str, channel: str, forces_lbf: list[float]) -> tuple[np.ndarray, np.ndarray, Record]:
     """Brake on (unpowered): slowly applied loads; LVDT (output against the housing) and surface, in."""
     model = _model(name, channel, n=len(forces_lbf))
-    powered: Any = model  # the high-order models have a power switch; the base interface does not
-    powered.set_power(False)
+    if not isinstance(model, HighOrderModel):  # the high-order models have a power switch; the base interface not
+        raise TypeError(f"{name} has no motor power switch (a high-order model has)")
+    model.set_power(False)
     model.trim(0.0, 0.0)
     arm = model.channel.crank_arm_in
     t = _frames(1.2)

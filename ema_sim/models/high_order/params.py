@@ -50,9 +50,10 @@ def _curve(description: str, size: int, **meta: object) -> Any:
                     **POS, **meta)
 
 
-def _environment(unit: str, description: str, **meta: object) -> Any:
-    """A flight/test element of HOAD2/HOAD3 (in the variant's subsection; 0 for HOAC1)."""
-    return pm.param(unit, description, default=0.0, variants=ENVIRONMENT, **NONNEG, **meta)
+def _environment(unit: str, description: str, **meta: object) -> float:
+    """A flight/test element of HOAD2/HOAD3 (in the variant's subsection; 0 for HOAC1): a float field."""
+    spec: float = pm.param(unit, description, default=0.0, variants=ENVIRONMENT, **NONNEG, **meta)
+    return spec
 
 
 @pm.documented
