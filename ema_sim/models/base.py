@@ -149,9 +149,13 @@ def _as_batch(value: ArrayLike, n: int, what: str) -> FloatArray:
 
 
 def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
+    """A record's inputs as ``(n, m)``; one row for all instances is a read-only view of it, not a copy.
+
+    The run copies it once, into the kernel's contiguous block with the history.
+    """
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 1 and arr.shape[0] == m:
-        return np.broadcast_to(arr, (n, m)).copy()
+        return np.broadcast_to(arr, (n, m))
     if arr.shape != (n, m):
         raise DataError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
     return arr
@@ -556,7 +560,7 @@ class ActuatorModel(ABC):
             raise EmaError("run needs at least one input breakpoint")
         u = _as_record(command_deg, self.n, m, "command_deg")
         if hinge_moment_inlb is None:
-            hm = np.zeros((self.n, m))
+            hm = np.broadcast_to(np.zeros(m), (self.n, m))
         else:
             hm = _as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
         _check_finite(bp_t, "time_s")
