@@ -177,6 +177,30 @@ def test_a_run_in_chunks_equals_one_run_bit_for_bit(name, rich_inputs):
             np.testing.assert_array_equal(getattr(chunked, field), getattr(one, field), err_msg=f"{extra} {field}")
 
 
+
+def test_a_batch_run_owns_its_outputs_and_equals_its_instances_run_alone():
+    """A run's record views the block the kernel wrote, uncopied: a random command per instance gives each instance
+    what it gives alone, in one call or in chunks, and a later run of the same model leaves the record as it was."""
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 3.0, 0.005)
+    cmd = np.cumsum(rng.normal(0.0, 0.4, (4, t.size)), axis=1)
+    hm = rng.normal(0.0, 300.0, (4, t.size))
+    base = SecondOrderParams.from_channel(load_channel("left_wing"))
+    params = [base.replace(wn_rad_s=base.wn_rad_s * f, compliance_deg_per_kinlb=0.3) for f in (0.9, 1.0, 1.05, 1.1)]
+    batch = create("loada", "left_wing", n=4, params=params)
+    whole = batch.run(t, cmd, hm, end_s=3.0)
+    kept = {f: getattr(whole, f).copy() for f in ("position_deg", "surface_deg", "rate_dps", "flags")}
+    batch.trim(0.0, 0.0)
+    chunked = batch.run(t, cmd, hm, end_s=3.0, progress=lambda _: None)
+    for field, value in kept.items():
+        np.testing.assert_array_equal(getattr(whole, field), value, err_msg=f"{field} changed by a later run")
+        np.testing.assert_array_equal(getattr(chunked, field), value, err_msg=f"{field} in chunks")
+    for i, prm in enumerate(params):
+        alone = create("loada", "left_wing", params=prm).run(t, cmd[i], hm[i], end_s=3.0)
+        for field, value in kept.items():
+            np.testing.assert_array_equal(getattr(alone, field)[0], value[i], err_msg=f"instance {i} {field}")
+
+
 PARALLEL_CHECK = """
 import sys, numpy as np
 from ema_sim.models import create

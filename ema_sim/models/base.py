@@ -149,9 +149,13 @@ def _as_batch(value: ArrayLike, n: int, what: str) -> FloatArray:
 
 
 def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
+    """A record's inputs as ``(n, m)``; one row for all instances is a read-only view of it, not a copy.
+
+    The run copies it once, into the kernel's contiguous block with the history.
+    """
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 1 and arr.shape[0] == m:
-        return np.broadcast_to(arr, (n, m)).copy()
+        return np.broadcast_to(arr, (n, m))
     if arr.shape != (n, m):
         raise DataError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
     return arr
@@ -556,7 +560,7 @@ class ActuatorModel(ABC):
             raise EmaError("run needs at least one input breakpoint")
         u = _as_record(command_deg, self.n, m, "command_deg")
         if hinge_moment_inlb is None:
-            hm = np.zeros((self.n, m))
+            hm = np.broadcast_to(np.zeros(m), (self.n, m))
         else:
             hm = _as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
         _check_finite(bp_t, "time_s")
@@ -582,7 +586,7 @@ class ActuatorModel(ABC):
         all_t = np.concatenate([self._hist_t, bp_t])
         all_u = np.ascontiguousarray(np.concatenate([self._hist_u, u], axis=1))
         all_h = np.ascontiguousarray(np.concatenate([self._hist_h, hm], axis=1))
-        out = np.empty((self.n, samples.size, N_OUT))
+        blocks: list[FloatArray] = []  # each fresh from ``_integrate``: one chunk is the output as it is, uncopied
         t_start = self._t
         span = max(t_end - t_start, 1e-12)
         chunk_s = 1.0 if progress is not None else math.inf
@@ -591,7 +595,7 @@ class ActuatorModel(ABC):
             t_stop = min(t_end, self._t + chunk_s)
             last = t_stop >= t_end
             upto = samples.size if last else int(np.searchsorted(samples, self._written_before(t_stop), side="left"))
-            out[:, done:upto] = self._integrate(all_t, all_u, all_h, t_stop, samples[done:upto])
+            blocks.append(self._integrate(all_t, all_u, all_h, t_stop, samples[done:upto]))
             self._t = t_stop
             done = upto
             if progress is not None:
@@ -599,7 +603,7 @@ class ActuatorModel(ABC):
             if last:
                 break
         self._keep_history(all_t, all_u, all_h)
-        return out
+        return blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
 
     def _written_before(self, t_stop: float) -> float:
         """Samples before this instant belong to an integration that ends at ``t_stop``.
