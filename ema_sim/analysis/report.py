@@ -9,12 +9,12 @@ test's section as the test writes it, then what was not computed and why. Schema
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import overload
+from typing import cast, overload
 
 import numpy as np
 
 from ema_sim import __version__
-from ema_sim.analysis.contract import analyze_schema
+from ema_sim.analysis.contract import AnalyzeReport, analyze_schema
 from ema_sim.analysis.estimation.second_order_fit import UNCERTAINTY_METHOD, SecondOrderFit
 from ema_sim.analysis.formatting.markdown import bullets, image, quality, table
 from ema_sim.analysis.formatting.units import in_unit, texts_in_unit
@@ -133,8 +133,8 @@ def slope_json(ra: RecordAnalysis) -> JsonObject:
     return {**base, "statement": slope_statement(ra), "method": SLOPE_METHOD}
 
 
-def to_json(records: Sequence[RecordAnalysis]) -> JsonObject:
-    """The whole ``--json`` document.
+def to_json(records: Sequence[RecordAnalysis]) -> AnalyzeReport:
+    """The whole ``--json`` document, checked against its published schema (:mod:`ema_sim.analysis.contract`).
 
     Parameters
     ----------
@@ -164,7 +164,7 @@ def to_json(records: Sequence[RecordAnalysis]) -> JsonObject:
                        "h_lb_per_in": hysteretic_damping_constant(RW13_AREA_INLB, RW13_PEAK_IN)},
     }))
     check(doc, analyze_schema(), "ema analyze")
-    return doc
+    return cast(AnalyzeReport, doc)  # the schema check above is the narrowing
 
 
 def _one_unit(records: Sequence[RecordAnalysis]) -> str:
