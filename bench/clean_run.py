@@ -8,6 +8,7 @@ every ``dropped_*`` count should stay 0 and every status of the channel OK; a pa
 the machine has. Prints one JSON line; ``--out`` also writes it.
 
     python bench/clean_run.py --duration-s 3600 [--stamps grid|now] [--pause-s 2] [--period-s 30] [--out F]
+                              [--domain-id N]
 """
 
 from __future__ import annotations
@@ -94,9 +95,10 @@ def _drive(ex: SingleThreadedExecutor, pub: Publisher, stamps: str, duration_s: 
     return sent, pauses
 
 
-def run(duration_s: float, stamps: str, pause_s: float, period_s: float) -> dict[str, object]:
+def run(duration_s: float, stamps: str, pause_s: float, period_s: float, domain_id: int | None = None
+        ) -> dict[str, object]:
     """One clean run; its counts (see the module docstring)."""
-    did = free_domain_id(os.getpid() + 7)
+    did = free_domain_id(os.getpid() + 7) if domain_id is None else domain_id
     env = dict(os.environ, ROS_DOMAIN_ID=str(did), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
     with tempfile.TemporaryDirectory(prefix="ema_clean_") as tmp:
         log = Path(tmp) / "emac.log"
@@ -155,8 +157,10 @@ def main() -> int:
     ap.add_argument("--pause-s", type=float, default=2.0)
     ap.add_argument("--period-s", type=float, default=30.0)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--domain-id", type=int, default=None,
+                    help="ROS domain (default: one derived from the pid; give one no test suite uses beside it)")
     a = ap.parse_args()
-    result = run(a.duration_s, a.stamps, a.pause_s, a.period_s)
+    result = run(a.duration_s, a.stamps, a.pause_s, a.period_s, a.domain_id)
     text = json.dumps(result)
     print(text)
     if a.out is not None:
