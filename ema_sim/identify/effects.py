@@ -114,9 +114,7 @@ def _free(name: str, *, log: bool = False, scale: float = 1.0) -> Free:
 
 
 # Every continuously fitted parameter of the second-order family; bounds from the parameter metadata.
-FREE: dict[str, Free] = {
-    f.field: f
-    for f in (
+FREE: dict[str, Free] = {f.field: f for f in (
         _free("wn_rad_s", log=True, scale=60.0),
         _free("zeta", log=True, scale=0.7),
         _free("delay_s", scale=0.01),
@@ -142,8 +140,7 @@ FREE: dict[str, Free] = {
         _free("compliance_stiff_deg_per_kinlb", scale=0.2),
         _free("lvdt_compliance_knee_inlb", log=True, scale=500.0),
         _free("lvdt_compliance_stiff_deg_per_kinlb", scale=0.1),
-    )
-}
+)}
 
 
 class ArmParams(Protocol):

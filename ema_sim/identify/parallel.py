@@ -65,26 +65,62 @@ def one_blas_thread() -> Iterator[None]:
 class TaskFuture(Protocol):
     """A fit submitted to the workers (a Dask future): its value, or cancelled when no longer needed."""
 
-    def result(self) -> Any: ...  # noqa: D102 - what the remote function returned, unpickled
-    def cancel(self) -> object: ...  # noqa: D102
+    def result(self) -> Any:
+        """What the remote function returned, unpickled (its type is the function's: Dask does not carry it)."""
+
+    def cancel(self) -> object:
+        """Cancel the fit (its value is no longer needed)."""
 
 
 class DaskClient(Protocol):
     """What the identification uses of a Dask ``distributed.Client``."""
 
-    def submit(self, fn: Callable[..., object], /, *args: object, pure: bool = ...) -> TaskFuture: ...  # noqa: D102
+    def submit(self, fn: Callable[..., object], /, *args: object, pure: bool = ...) -> TaskFuture:
+        """Run ``fn(*args)`` on a worker.
+
+        Parameters
+        ----------
+        fn : callable
+            The function.
+        *args : object
+            Its arguments (scattered data stays on the workers).
+        pure : bool
+            Whether equal calls may share one result.
+        """
+
     @overload
     def scatter(self, data: list[object], /, *, broadcast: bool = ...) -> list[object]: ...
     @overload
     def scatter(self, data: object, /, *, broadcast: bool = ...) -> object: ...
-    def run(self, fn: Callable[[], object], /) -> object: ...  # noqa: D102
-    def close(self) -> object: ...  # noqa: D102
+    def scatter(self, data: object, /, *, broadcast: bool = ...) -> object:
+        """Send ``data`` to the workers once; the handle stands for it in later calls.
+
+        Parameters
+        ----------
+        data : object
+            The data (a list: one handle per item).
+        broadcast : bool
+            To every worker.
+        """
+
+    def run(self, fn: Callable[[], object], /) -> object:
+        """Run ``fn()`` on every worker.
+
+        Parameters
+        ----------
+        fn : callable
+            The function.
+        """
+
+    def close(self) -> object:
+        """Disconnect from the scheduler."""
 
 
 class DaskCluster(Protocol):
     """What the identification uses of a Dask ``distributed.LocalCluster``: closing it."""
 
-    def close(self) -> object: ...  # noqa: D102
+    def close(self) -> object:
+        """Stop the cluster's scheduler and workers."""
 
 
 def _warm() -> None:

@@ -53,7 +53,13 @@ class Claim(TypedDict):
 
 
 def parse_claim(text: str) -> Claim | None:
-    """A claim as published (JSON), or None when the text is no claim."""
+    """A claim as published (JSON), or None when the text is no claim.
+
+    Parameters
+    ----------
+    text : str
+        The message's text.
+    """
     try:
         doc = json.loads(text)
         if not isinstance(doc, dict):

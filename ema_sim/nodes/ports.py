@@ -45,38 +45,103 @@ ClockCallback = Callable[[int], None]
 class FrameOutlet(Protocol):
     """A per-frame publisher: :class:`FramePublisher` (gives the CDR bytes sent) or a container's (gives None)."""
 
-    def publish(self, frame: cdr.JointFrame) -> bytes | None: ...  # noqa: D102
+    def publish(self, frame: cdr.JointFrame) -> bytes | None:
+        """Publish one frame.
+
+        Parameters
+        ----------
+        frame : JointFrame
+            The frame.
+        """
 
 
 class ClockOutlet(Protocol):
     """A ``/clock`` publisher: :class:`ClockPublisher` or a container's."""
 
-    def publish(self, ns: int) -> None: ...  # noqa: D102
+    def publish(self, ns: int) -> None:
+        """Publish the time.
+
+        Parameters
+        ----------
+        ns : int
+            The time, ns.
+        """
 
 
 class NodePorts(Protocol):
-    """How a node's per-frame messages travel: :class:`Ports` on DDS, or a container's ``ComposedPorts``."""
+    """How a node's per-frame messages travel: :class:`Ports` on DDS, or a container's ``ComposedPorts``.
+
+    Each method is :class:`Ports`' of the same name (documented there).
+    """
 
     @property
-    def received_ns(self) -> int | None: ...  # noqa: D102
+    def received_ns(self) -> int | None:
+        """While :meth:`take_at_frame` hands a message over: when DDS received it (system time, ns); else None."""
 
-    def take_at_frame(self) -> int: ...  # noqa: D102
+    def take_at_frame(self) -> int:
+        """Take the messages of the subscriptions taken at the frame; how many."""
 
-    def frame_publisher(self, topic: str) -> FrameOutlet: ...  # noqa: D102
+    def frame_publisher(self, topic: str) -> FrameOutlet:
+        """A publisher of a per-frame contract topic.
 
-    def frame_subscription(self, topic: str, callback: FrameCallback, on_bad: Callable[[str], None], *,  # noqa: D102
-                           at_frame: bool = False) -> None: ...
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+        """
 
-    def raw_subscription(self, topic: str, callback: Callable[[bytes], None], *,  # noqa: D102
-                         at_frame: bool = False) -> None: ...
+    def frame_subscription(self, topic: str, callback: FrameCallback, on_bad: Callable[[str], None], *,
+                           at_frame: bool = False) -> None:
+        """Frames of a per-frame topic; a malformed message goes to ``on_bad``.
 
-    def clock_publisher(self) -> ClockOutlet: ...  # noqa: D102
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+        callback : callable
+            Takes each decoded frame.
+        on_bad : callable
+            Takes the reason a message could not be decoded.
+        at_frame : bool
+            Taken by :meth:`take_at_frame`, not on arrival.
+        """
 
-    def clock_subscription(self, callback: ClockCallback) -> None: ...  # noqa: D102
+    def raw_subscription(self, topic: str, callback: Callable[[bytes], None], *, at_frame: bool = False) -> None:
+        """A per-frame topic's messages as CDR bytes.
 
-    def publishers(self, topic: str) -> int: ...  # noqa: D102
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+        callback : callable
+            Takes each message's bytes.
+        at_frame : bool
+            Taken by :meth:`take_at_frame`, not on arrival.
+        """
 
-    def endpoint_nodes(self) -> list[Node]: ...  # noqa: D102
+    def clock_publisher(self) -> ClockOutlet:
+        """The lockstep clock's ``/clock`` publisher."""
+
+    def clock_subscription(self, callback: ClockCallback) -> None:
+        """Lockstep ``/clock`` in nanoseconds.
+
+        Parameters
+        ----------
+        callback : callable
+            Takes each ``/clock`` value, ns.
+        """
+
+    def publishers(self, topic: str) -> int:
+        """Publishers of a topic in the graph.
+
+        Parameters
+        ----------
+        topic : str
+            The contract topic.
+        """
+
+    def endpoint_nodes(self) -> list[Node]:
+        """Nodes whose endpoints must be matched before this node calls itself ready."""
 
 
 PortsFactory = Callable[["Node"], NodePorts]
