@@ -96,14 +96,7 @@ class NodePorts(Protocol):
 
         Parameters
         ----------
-        topic : str
-            The contract topic.
-        callback : callable
-            Takes each decoded frame.
-        on_bad : callable
-            Takes the reason a message could not be decoded.
-        at_frame : bool
-            Taken by :meth:`take_at_frame`, not on arrival.
+        topic, callback, on_bad, at_frame : as in :meth:`Ports.frame_subscription`
         """
 
     def raw_subscription(self, topic: str, callback: Callable[[bytes], None], *, at_frame: bool = False) -> None:
@@ -111,12 +104,7 @@ class NodePorts(Protocol):
 
         Parameters
         ----------
-        topic : str
-            The contract topic.
-        callback : callable
-            Takes each message's bytes.
-        at_frame : bool
-            Taken by :meth:`take_at_frame`, not on arrival.
+        topic, callback, at_frame : as in :meth:`Ports.raw_subscription`
         """
 
     def clock_publisher(self) -> ClockOutlet:
