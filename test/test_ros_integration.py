@@ -40,6 +40,8 @@ RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=R
 DEFAULT_QOS = QoSProfile(depth=10)  # what create_publisher(..., 10) gives: reliable, volatile
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)  # rclcpp::ClockQoS
+LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)  # /ema/ready (the contract's LATCHED_QOS)
 
 
 STATUS = "/emac_left_wing: left_wing"
@@ -376,22 +378,25 @@ def test_lockstep_follows_any_clock_publisher_and_keeps_every_frame(client, tmp_
     from ema_sim.models import create  # noqa: PLC0415
 
     log = tmp_path / "emac.log"
-    proc = start(client.did, "ema_sim.nodes.emac", "--model", "loada", "--channel", "left_wing",
-                 "--ros-args", "-p", "use_sim_time:=true", log=log)
     frames = 120
     fb = {}
+    ready = []
+    # the client's endpoints exist before the node starts, and the node is told to see the client as a peer: it
+    # announces itself on /ema/ready only once its own side of every match is made (SuiteNode.matched)
+    sub = client.node.create_subscription(
+        JointState, "/ema/emac/feedback",
+        lambda m: fb.setdefault(m.header.stamp.sec * NS + m.header.stamp.nanosec, []).append(m.position[0]),
+        RELIABLE)
+    clock = client.node.create_publisher(Clock, "/clock", DEFAULT_QOS if qos_name == "default" else CLOCK_QOS)
+    cmd = client.node.create_publisher(JointState, "/ema/emac/command", RELIABLE)
+    client.node.create_subscription(String, "/ema/ready", lambda m: ready.append(m.data), LATCHED)
+    proc = start(client.did, "ema_sim.nodes.emac", "--model", "loada", "--channel", "left_wing",
+                 "--ros-args", "-p", "use_sim_time:=true", "-p", f"peers:=[{client.node.get_name()}]", log=log)
     try:
         wait_for_node(client, "emac_left_wing", 60)
-        sub = client.node.create_subscription(
-            JointState, "/ema/emac/feedback",
-            lambda m: fb.setdefault(m.header.stamp.sec * NS + m.header.stamp.nanosec, []).append(m.position[0]),
-            RELIABLE)
-        clock = client.node.create_publisher(Clock, "/clock", DEFAULT_QOS if qos_name == "default" else CLOCK_QOS)
-        cmd = client.node.create_publisher(JointState, "/ema/emac/command", RELIABLE)
         # discovery of three endpoints: 20 s was once not enough with numba compiling beside it on two cores
         assert client.spin(60, lambda: min(clock.get_subscription_count(), cmd.get_subscription_count(),
-                                           sub.get_publisher_count()) > 0)
-        client.spin(2.0)  # the node's side of each match too (discovery takes longer under load)
+                                           sub.get_publisher_count()) > 0 and "emac_left_wing" in ready), ready
         volts = [command_v(2.0 * math.sin(k / 15.0)) for k in range(frames)]
 
         def tick(ns):
