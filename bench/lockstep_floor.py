@@ -180,7 +180,7 @@ def lockstep_floor() -> Result:
 
 
 BENCHMARKS = [
-    Benchmark("nodes_lockstep_floor", "the lockstep messages' floor, K frames to a message", lockstep_floor),
+    Benchmark("nodes_middleware_lockstep_floor", "the lockstep messages' floor, K frames to a message", lockstep_floor),
 ]
 
 
