@@ -104,8 +104,17 @@ def _role(role: str, frames: int, k: int) -> dict[str, Any]:  # noqa: PLR0912, P
         node.create_subscription(Clock, ct.endpoint(ct.CLOCK_TOPIC), act, qos(ct.CLOCK_SUB_QOS), raw=True)
     if role == "testenv":
         emac_cmd, fb = pub(ct.EMAC_COMMAND), pub(ct.FMU_FEEDBACK)
-        sub(ct.FMU_COMMAND, lambda _raw: (count(_raw), emac_cmd.publish(every)))
-        sub(ct.EMAC_FEEDBACK, lambda _raw: (count(_raw), fb.publish(one)))
+
+        def relay_command(raw: bytes) -> None:
+            count(raw)
+            emac_cmd.publish(every)
+
+        def relay_feedback(raw: bytes) -> None:
+            count(raw)
+            fb.publish(one)
+
+        sub(ct.FMU_COMMAND, relay_command)
+        sub(ct.EMAC_FEEDBACK, relay_feedback)
     elif role.startswith("emac_"):
         out = [pub(ct.EMAC_FEEDBACK), pub(ct.SURFACE), pub(ct.BUS)]
         sub(ct.HINGE_MOMENT, count, later=True)
@@ -120,8 +129,13 @@ def _role(role: str, frames: int, k: int) -> dict[str, Any]:  # noqa: PLR0912, P
 
         sub(ct.EMAC_COMMAND, step)
     reported = [0]
+
+    def report(raw: bytes) -> None:
+        count(raw)
+        reported[0] += 1
+
     if role == "clock":
-        sub(ct.EMAC_FEEDBACK, lambda _raw: (count(_raw), reported.__setitem__(0, reported[0] + 1)))
+        sub(ct.EMAC_FEEDBACK, report)
     deadline = time.monotonic() + 60.0  # the graph: every process, then a settling second
     while len(node.get_node_names()) < len(ROLES) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
