@@ -137,6 +137,9 @@ class RunDescription:
     """Elements switched off (the test environment's and the model's, :mod:`ema_sim.switches`)."""
     window: int = 1
     """Lockstep: frames the clock may run ahead of the slowest EMAC."""
+    frames_per_message: int = 1
+    """Lockstep, ``processes`` layout: frames the clock grants at once, each node sending them as one message per
+    topic (:mod:`ema_msgs_py.batch`; 1: frame by frame, the contract's default)."""
     rt_priority: int = 0
     """Real time: every process at this SCHED_FIFO priority, memory locked, CPUs kept from idle halts."""
     measure_busy: bool = False
@@ -183,6 +186,7 @@ class RunDescription:
             raise EmaError(f"the frame rate must be a positive number of Hz, got {self.frame_hz!r}")
         if self.window < 1:
             raise EmaError(f"the lockstep window must be at least one frame, got {self.window}")
+        self._check_batches()
         self.disable = list(element_names(self.disable))
         model_overrides(self.model, self.disable)  # dead_band on a model without one: one error
         load_profile(self.profile, disable=environment_elements(self.disable))
@@ -224,6 +228,23 @@ class RunDescription:
                               duration_s=self.duration_s)
             self.run_s = plan.duration_s
             self.test_name = plan.test
+
+    def _check_batches(self) -> None:
+        """Several frames a message: lockstep, one process per node, an open-loop driver (one clear error)."""
+        k = self.frames_per_message
+        if k == 1:
+            return
+        if not 1 <= k <= 1000:
+            why = "a number of frames from 1 to 1000"
+        elif not self.lockstep:
+            why = "lockstep (--lockstep): in real time each frame is answered as it comes"
+        elif self.layout != "processes":
+            why = "--layout processes: the composed layouts hand frames over in-process, with nothing to batch"
+        elif self.fmu:
+            why = "an open-loop driver (a maneuver or test): the aircraft-in-the-loop FMU closes its loop every frame"
+        else:
+            return
+        raise EmaError(f"--frames-per-message {k} needs {why}")
 
     def _respawned(self, names: list[str]) -> list[str]:
         """The processes to restart, ``emacs`` expanded and each checked (one clear error naming the choices)."""
@@ -290,7 +311,9 @@ class RunDescription:
         from ema_sim.switches import environment_elements  # noqa: PLC0415 - python-control, see __post_init__
 
         peers = self.node_names()
-        common = {"peers": peers}
+        common: dict[str, Any] = {"peers": peers}
+        if self.frames_per_message > 1:
+            common["frames_per_message"] = self.frames_per_message
         sim = {"use_sim_time": True} if self.lockstep else {}
         waited = [*self.emac_nodes(), "testenv"]
         out: dict[str, dict[str, Any]] = {}
@@ -390,6 +413,7 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
     "lockstep": ("false", "run on the clock, frame by frame (true/false): the nodes' use_sim_time"),
     "use_sim_time": ("", "ROS's name for lockstep (true/false; empty: lockstep decides)"),
     "window": ("1", "lockstep: frames the clock may run ahead of the slowest EMAC"),
+    "frames_per_message": ("1", "lockstep, processes layout: frames granted at once and sent as one message"),
     "bag": ("", "bag directory to create (empty: bags/<test>_<UTC time>)"),
     "disable": ("", "elements switched off, comma-separated (delay, lag, quantization, noise, dead_band...)"),
     "seed": ("", "test-environment noise seed (empty: the profile's)"),
@@ -458,7 +482,8 @@ def from_launch_arguments(values: dict[str, str], layout: str) -> RunDescription
         test=text("test") or None, maneuver=text("maneuver") or None, load=text("load") or None,
         channels=[text("channels")], emac_channels=[text("emacs")], emac=text("emac"),
         duration_s=24.0 if fmu and duration is None else duration, lockstep=lockstep,
-        window=int(number("window") or 1), layout=layout, disable=[text("disable")],
+        window=int(number("window") or 1), frames_per_message=int(number("frames_per_message") or 1),
+        layout=layout, disable=[text("disable")],
         seed=None if seed is None else int(seed), rt_priority=int(number("rt_priority") or 0), fmu=fmu,
         open_loop=flag("open_loop"), bungee_inlb=number("bungee"), namespace=text("namespace"),
         respawn=[text("respawn")] if text("respawn") else [], stall_timeout_s=5.0 if stall is None else stall,

@@ -5,10 +5,11 @@ recorder) and, under lockstep, the clock — hosted three ways (``layout``):
 
 * ``single`` (default): one process composes every node (:mod:`ema_sim.nodes.container`): per-frame
   messages between them are handed over in-process and still published on the contract topics for
-  anyone outside. The only layout that meets the lockstep speed target on a 2-core machine.
+  anyone outside. The fastest in lockstep on a 2-core machine.
 * ``container``: the EMACs, the test environment and the clock composed; the maneuver node in a process
   of its own, talking to them over DDS as an external flight computer would.
-* ``processes``: one process per node.
+* ``processes``: one process per node; in lockstep fast only with several frames a message
+  (``frames_per_message``, :mod:`ema_msgs_py.batch`).
 
 and the EMACs two ways (``emac``): ``box``, one EMAC node hosting the five channels as the real EMAC is
 one box (default), or ``channels``, one EMAC node per channel.

@@ -32,6 +32,7 @@ def _config(args: argparse.Namespace) -> tuple[RunDescription, str, str, float]:
         duration_s=24.0 if args.fmu and args.duration is None else args.duration, lockstep=args.lockstep,
         layout=args.layout, emac="box" if args.emac_box else args.emac, domain_id=args.domain_id,
         disable=args.disable, rt_priority=args.rt_priority, window=args.window, fmu=args.fmu,
+        frames_per_message=args.frames_per_message,
         open_loop=args.open_loop, bungee_inlb=args.bungee, seed=args.seed, namespace=args.namespace,
         faults=args.fault, respawn=args.respawn, stall_timeout_s=args.stall_timeout,
     )
@@ -145,6 +146,9 @@ def register(sub: Subparsers) -> None:
     p.add_argument("--emac-box", action="store_true", help="shorthand for --emac box")
     p.add_argument("--window", type=int, default=1,
                    help="lockstep: frames the clock may run ahead of the slowest EMAC (1: strictly frame by frame)")
+    p.add_argument("--frames-per-message", type=int, default=1, metavar="K",
+                   help="lockstep, --layout processes: the clock grants K frames at once and each node sends them as "
+                        "one message per topic (fewer messages, the same frames in the bag; 1: frame by frame)")
     p.add_argument("--respawn", action="append", default=[], metavar="PROCESS",
                    help="restart this process when it ends before the driver (repeatable, comma-separated; emacs: "
                         "every EMAC process of --layout processes)")

@@ -1,7 +1,9 @@
 """``simclock``: the lockstep clock, one FMU frame at a time.
 
 It publishes each frame of ``/clock`` only once every expected EMAC has reported the frame before
-(``window`` frames of slack), so a suite runs as fast as it can and the same every time. It starts
+(``window`` frames of slack), so a suite runs as fast as it can and the same every time. With
+``frames_per_message`` K > 1 it grants K frames at once after the first (``/clock`` jumps K frames), and the
+nodes send each grant's frames as one message per topic (:mod:`ema_msgs_py.batch`). It starts
 when every node named in ``--wait-for`` has announced itself on ``/ema/ready`` and stops at
 ``--duration``.
 
@@ -32,7 +34,7 @@ from ema_sim.config import config_dir, ros_parameters
 from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
 from ema_sim.nodes.params import Spec, as_float, names_list
-from ema_sim.nodes.ports import Ports, PortsFactory
+from ema_sim.nodes.ports import FRAMES_PER_MESSAGE, Ports, PortsFactory, frames_spec
 
 if TYPE_CHECKING:
     from rclpy.parameter import AllowableParameterValue as ParameterValue
@@ -81,7 +83,10 @@ class ClockNode(SuiteNode):
                  "lockstep status is ERROR (default: the EMACs' watchdog)", "s", 0.0, 3600.0, read_only=False),
             Spec("realtime_factor", 0.0, "pace to this multiple of real time (0: as fast as the suite goes)",
                  low=0.0, high=1e6),
+            frames_spec(),
         ], name)
+        self.grant = int(own[FRAMES_PER_MESSAGE])
+        """Frames granted at once after the first (``frames_per_message``): the nodes send them as one message."""
         frame_hz: float = own["frame_hz"]
         self.frame_ns = round(NS / frame_hz)
         self.last_frame = round(own["duration_s"] * frame_hz) if own["duration_s"] > 0 else None
@@ -134,8 +139,13 @@ class ClockNode(SuiteNode):
             if ns > self.reported.get(name, -1):
                 self.reported[name] = ns
 
+    def _next(self) -> int:
+        """The frame the next tick grants: the first, then :attr:`grant` frames on (never past the last)."""
+        k = self.k + (1 if self.k < 0 else self.grant)
+        return k if self.last_frame is None else min(k, self.last_frame)
+
     def _tick(self) -> None:
-        self.k += 1
+        self.k = self._next()
         self.pub.publish(self.k * self.frame_ns)
         self.waiting_since = self.last_sent = time.monotonic()
 
@@ -178,7 +188,7 @@ class ClockNode(SuiteNode):
         elif now >= self.status_due:
             self._status(now)
         if self.rtf > 0.0:
-            due = self.started_wall + (self.k + 1) * self.frame_ns / NS / self.rtf
+            due = self.started_wall + self._next() * self.frame_ns / NS / self.rtf
             if now < due:
                 return due - now
         self._tick()

@@ -480,6 +480,10 @@ def _loop_one(node: SuiteNode, executor: Executor, stop: dict[str, int | None]) 
     driver 21), so its own overhead counts: no closures or generators, the bound methods looked up once.
     """
     poll, check_ready, spin_once, claim = node.poll, node.check_ready, executor.spin_once, node.name_claim
+    ports = getattr(node, "ports", None)
+    if getattr(ports, "frames_per_message", 1) > 1:  # batched: a turn's frames go out as it ends
+        _loop_batched(node, executor, stop, ports.flush)  # type: ignore[union-attr]  # a Ports: it batches
+        return
     while stop["signal"] is None and not (node.done and node.ends_process):
         if claim.taken_by is not None:  # an older node has this name: stop with one error naming it
             raise EmaError(claim.refusal() or "")
@@ -489,6 +493,24 @@ def _loop_one(node: SuiteNode, executor: Executor, stop: dict[str, int | None]) 
         if node.done and node.ends_process:
             break
         spin_once(timeout_sec=MAX_SPIN_S if timeout > MAX_SPIN_S else (timeout if timeout > 0.0 else 0.0))
+
+
+def _loop_batched(node: SuiteNode, executor: Executor, stop: dict[str, int | None], flush: Callable[[], None]) -> None:
+    """:func:`_loop_one` for a node sending several frames a message.
+
+    What a poll or a callback published goes out when it returns (:meth:`~ema_sim.nodes.ports.Ports.flush`).
+    """
+    while stop["signal"] is None and not (node.done and node.ends_process):
+        if node.name_claim.taken_by is not None:
+            raise EmaError(node.name_claim.refusal() or "")
+        if not node._ready_sent:
+            node.check_ready()
+        timeout = node.poll()
+        flush()
+        if node.done and node.ends_process:
+            break
+        executor.spin_once(timeout_sec=min(max(timeout, 0.0), MAX_SPIN_S))
+        flush()
 
 
 def _finish(nodes: list[SuiteNode], bus: object, rt: realtime.Setup) -> None:

@@ -29,6 +29,7 @@ from ema_sim.errors import ConfigError
 from ema_sim.models import model_names
 from ema_sim.models.registry import model_parameters
 from ema_sim.nodes.params import Spec, config_specs, file_entries, key_matches, params_files, remapped
+from ema_sim.nodes.ports import frames_spec
 from ema_sim.parameters import ParameterInfo, describe, metas
 from ema_sim.signals.plans import channel_list
 
@@ -136,7 +137,7 @@ def node_specs(channels: list[str]) -> list[Spec]:
     Returns
     -------
     list of Spec
-        Model, channels, rate, elements switched off, ``frame_id``.
+        Model, channels, rate, elements switched off, ``frame_id``, ``frames_per_message``.
     """
     return [
         Spec("model", "loada", "actuator model of every hosted channel (ema models)"),
@@ -146,6 +147,7 @@ def node_specs(channels: list[str]) -> list[Spec]:
              "environment's and ignored here)", kind=STRINGS),
         Spec("frame_id", channels[0] if len(channels) == 1 else "emac", "header frame_id of the feedback, surface and "
              "bus messages (default: the channel's name; an EMAC box's: emac)"),
+        frames_spec(),
     ]
 
 

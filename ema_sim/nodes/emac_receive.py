@@ -46,8 +46,9 @@ class EmacReceiver(EmacState):
         for ch in self.channels:
             self.create_subscription(String, ct.endpoint(ct.failure_topic(ch)), self._failure_callback(ch),
                                      qos(ct.FAILURE_QOS))
-        if self.sources:
-            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad, at_frame=True)
+        if self.sources:  # batched, a frame waits for its sources' batch: taken as it comes, not at a 2 ms poll
+            ports.frame_subscription(ct.EMAC_FEEDBACK, self._on_source, self._bad,
+                                     at_frame=getattr(ports, "frames_per_message", 1) == 1)
         if self.lockstep:
             ports.clock_subscription(self._on_clock)
 

@@ -29,7 +29,7 @@ from ema_sim.nodes.emac_inputs import StampPolicy
 from ema_sim.nodes.emac_params import channel_specs, check_files, emac_specs, node_specs, resolve_channels
 from ema_sim.nodes.emac_streams import CommandItem, InputStream, Outputs, SourceStream, Stream, diagnostics
 from ema_sim.nodes.params import as_float, nested
-from ema_sim.nodes.ports import PortsFactory
+from ema_sim.nodes.ports import FRAMES_PER_MESSAGE, PortsFactory, use_batches
 from ema_sim.signals.plans import channel_list
 from ema_sim.switches import element_names, model_overrides
 
@@ -76,6 +76,7 @@ class EmacState(SuiteNode):
             raise UnknownNameError("model", own["model"], model_names())
         self.channels = channel_list(own["channels"])
         self.frame_id = str(own["frame_id"])
+        use_batches(self.ports, int(own[FRAMES_PER_MESSAGE]), self.sim_time, name)
         self.fqn = self.get_fully_qualified_name()
         """The node's full name: its diagnostics' status names are ``<full name>: <channel>``."""
         self.lockstep = self.sim_time

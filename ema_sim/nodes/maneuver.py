@@ -29,7 +29,7 @@ from ema_sim.nodes.common import run
 from ema_sim.nodes.driver import NS, START_DELAY_S, DriverNode, calibration_metadata, driver_specs, stamped_bag
 from ema_sim.nodes.frametimes import FrameTimes
 from ema_sim.nodes.params import Spec, names_list
-from ema_sim.nodes.ports import Ports, PortsFactory
+from ema_sim.nodes.ports import FRAMES_PER_MESSAGE, Ports, PortsFactory, frames_spec, use_batches
 from ema_sim.nodes.recorder import Recorder
 from ema_sim.signals.plans import build_plan, channel_list
 
@@ -80,7 +80,9 @@ class ManeuverNode(DriverNode):
             Spec("command_channels", ["all"], "channels the FMU commands", kind=strings),
             Spec("expect_feedback", [], "channels whose feedback ends each frame (empty: the driven ones)",
                  kind=strings),
+            frames_spec(),
         ], name)
+        use_batches(self.ports, int(own[FRAMES_PER_MESSAGE]), self.lockstep, name)
         frame_hz: float = own["frame_hz"]
         self.plan = build_plan(own["test"] or None, maneuver=own["maneuver"] or None, load=own["load"] or None,
                                channels=own["channels"] or ["left_wing"], duration_s=own["duration_s"] or None)

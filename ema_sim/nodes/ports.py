@@ -10,7 +10,10 @@ half the CPU of publishing and taking rclpy messages).
   (keep last 1000) until the node's frame takes them (:meth:`Ports.take_at_frame`), as a real-time control
   loop reads its inputs at the start of its cycle. A process woken once a frame instead of once a message
   saves the middleware's wake-ups (measured: the ``processes`` layout's messages between bare rclpy processes,
-  ``bench/middleware.py``, 41 % of one core against 48 % taking each on arrival).
+  ``bench/middleware.py``, 41 % of one core against 48 % taking each on arrival). Under lockstep it may send
+  several frames as one message (:attr:`Ports.frames_per_message`, :mod:`ema_msgs_py.batch`): the frames a node
+  publishes in one turn of its loop go out together when the turn ends (:meth:`Ports.flush`); a batch that
+  comes in is handed over frame by frame, whatever the node's own setting.
 * :class:`~ema_sim.nodes.container.Bus` ports, a node composed in the container with others: the bus
   hands each frame to the composed subscribers as a Python object and publishes it once on DDS for
   everyone outside (the ROS 2 notion of intra-process communication).
@@ -29,9 +32,11 @@ from rclpy.time_source import TimeSource
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from ema_msgs_py import cdr
+from ema_msgs_py import batch, cdr
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
+from ema_sim.errors import EmaError
+from ema_sim.nodes.params import Spec
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -132,6 +137,46 @@ class NodePorts(Protocol):
         """Nodes whose endpoints must be matched before this node calls itself ready."""
 
 
+FRAMES_PER_MESSAGE = "frames_per_message"
+"""The parameter of the batched option (the clock's grant and the frames a message carries)."""
+
+
+def frames_spec() -> Spec:
+    """The ``frames_per_message`` parameter: lockstep, frames granted at once and sent as one message per topic."""
+    return Spec(FRAMES_PER_MESSAGE, 1, "lockstep: frames the clock grants at once, each node sending them as one "
+                "message per topic (1: frame by frame, the contract's default)", low=1, high=1000)
+
+
+def use_batches(ports: NodePorts, frames: int, lockstep: bool, node: str) -> None:
+    """Send up to ``frames`` frames a message (:class:`Ports` under lockstep only; one clear error otherwise).
+
+    Parameters
+    ----------
+    ports : NodePorts
+        The node's ports.
+    frames : int
+        The ``frames_per_message`` parameter.
+    lockstep : bool
+        The node runs on ``/clock``.
+    node : str
+        The node's name, for the error.
+
+    Raises
+    ------
+    EmaError
+        Batching asked for in real time, or of a node composed in a container (frames handed over in-process).
+    """
+    if frames <= 1:
+        return
+    if not lockstep:
+        raise EmaError(f"{node}: frames_per_message {frames} needs lockstep (use_sim_time): in real time each frame "
+                       "is answered as it comes")
+    if not isinstance(ports, Ports):
+        raise EmaError(f"{node}: frames_per_message {frames} needs a node in a process of its own (--layout "
+                       "processes): a composed node hands its frames over in-process")
+    ports.frames_per_message = frames
+
+
 PortsFactory = Callable[["Node"], NodePorts]
 """What a node is given to build its ports from itself: the :class:`Ports` class, or a container's ``Bus.ports``."""
 GRAPH_CACHE_S = 0.1
@@ -173,6 +218,59 @@ class FramePublisher:
         return raw
 
 
+class BatchingPublisher(FramePublisher):
+    """Holds the frames of one turn of the node's loop and sends them as one message (:mod:`ema_msgs_py.batch`).
+
+    Frames that cannot share a batch (another layout, a stamp off the step) and the frame past ``limit``
+    send the held ones first; one frame alone goes out as itself.
+
+    Parameters
+    ----------
+    node : Node
+        The node that owns the publisher.
+    topic : str
+        The contract topic.
+    profile : QoSProfile
+        Its QoS.
+    limit : int
+        At most this many frames a message.
+    held_by : list
+        The port's publishers holding frames, in the order they got their first (:meth:`Ports.flush`).
+    """
+
+    def __init__(self, node: Node, topic: str, profile: QoSProfile, limit: int,
+                 held_by: list[BatchingPublisher]) -> None:
+        super().__init__(node, topic, profile)
+        self.limit = limit
+        self.held: list[cdr.JointFrame] = []
+        self._held_by = held_by
+
+    def publish(self, frame: cdr.JointFrame) -> None:  # type: ignore[override]  # held: no bytes sent yet
+        """Hold one frame until the turn ends (a frame that cannot join the held ones sends them first).
+
+        Parameters
+        ----------
+        frame : JointFrame
+            The frame.
+        """
+        held = self.held
+        if held:
+            first = held[0]
+            step = held[1].stamp_ns - first.stamp_ns if len(held) > 1 else frame.stamp_ns - first.stamp_ns
+            if (len(held) >= self.limit or step <= 0 or frame.stamp_ns != first.stamp_ns + len(held) * step
+                    or not batch.compatible(first, frame)):
+                self.send()  # still listed as holding: the new frame goes out at the flush
+        else:
+            self._held_by.append(self)
+        self.held.append(frame)
+
+    def send(self) -> None:
+        """Send the held frames as one message."""
+        if self.held:
+            self.dds.publish(cdr.encode(batch.join(self.held)))
+            self.held = []
+
+
 class ClockPublisher:
     """Publishes lockstep ``/clock`` frames as CDR bytes.
 
@@ -209,10 +307,20 @@ class Ports:
 
     def __init__(self, node: Node) -> None:
         self.node = node
+        self.frames_per_message = 1
+        """Lockstep: frames a message may carry (1: one a message, the contract's default)."""
+        self._held: list[BatchingPublisher] = []
         self._counts: dict[str, tuple[float, int]] = {}
         self._at_frame: list[tuple[Subscription, Callable[[bytes], None]]] = []
         self.received_ns: int | None = None
         """While :meth:`take_at_frame` hands a message over: when DDS received it (system time, ns); else None."""
+
+    def flush(self) -> None:
+        """Send the frames held by batching publishers (the end of a turn of the node's loop), in the order held."""
+        held = self._held  # the list the publishers add themselves to: emptied in place
+        for publisher in held:
+            publisher.send()
+        held.clear()
 
     def _subscribe(self, topic: str, callback: Callable[[bytes], None], at_frame: bool) -> None:
         """A raw subscription, dispatched by the executor or taken at the frame (when the node can hide it)."""
@@ -250,7 +358,7 @@ class Ports:
         return n
 
     def frame_publisher(self, topic: str) -> FramePublisher:
-        """A publisher of a per-frame contract topic (its contract QoS).
+        """A publisher of a per-frame contract topic (its contract QoS), batching when :attr:`frames_per_message` > 1.
 
         Parameters
         ----------
@@ -260,8 +368,10 @@ class Ports:
         Returns
         -------
         FramePublisher
-            The publisher.
+            The publisher (a :class:`BatchingPublisher`, whose ``publish`` gives no bytes, when batching).
         """
+        if self.frames_per_message > 1:
+            return BatchingPublisher(self.node, topic, qos(ct.FRAME_QOS), self.frames_per_message, self._held)
         return FramePublisher(self.node, topic, qos(ct.FRAME_QOS))
 
     def frame_subscription(self, topic: str, callback: FrameCallback, on_bad: Callable[[str], None], *,
@@ -283,10 +393,12 @@ class Ports:
         def take(raw: bytes) -> None:
             try:
                 frame = cdr.decode(raw)
+                frames = batch.split(frame) if frame.frame_id.startswith(batch.PREFIX) else (frame,)
             except ValueError as exc:
                 on_bad(f"{topic}: {exc}")
                 return
-            callback(frame)
+            for one in frames:
+                callback(one)
 
         self._subscribe(topic, take, at_frame)
 
@@ -302,7 +414,19 @@ class Ports:
         at_frame : bool
             Taken by :meth:`take_at_frame`, not on arrival.
         """
-        self._subscribe(topic, callback, at_frame)
+
+        def take(raw: bytes) -> None:
+            if not batch.is_batch(raw):
+                callback(raw)
+                return
+            try:
+                frames = batch.split_raw(raw)
+            except ValueError:  # a malformed batch: as it came (a recorder keeps what was sent)
+                frames = [raw]
+            for one in frames:
+                callback(one)
+
+        self._subscribe(topic, take, at_frame)
 
     def clock_publisher(self) -> ClockPublisher:
         """The lockstep clock's ``/clock`` publisher.

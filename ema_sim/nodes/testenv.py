@@ -40,7 +40,7 @@ from ema_sim.jsontypes import JsonObject, JsonValue
 from ema_sim.nodes.clock import watchdog_s
 from ema_sim.nodes.common import MAX_SPIN_S, SuiteNode, run
 from ema_sim.nodes.params import Spec, as_float, names_list, nested
-from ema_sim.nodes.ports import Ports, PortsFactory
+from ema_sim.nodes.ports import FRAMES_PER_MESSAGE, Ports, PortsFactory, frames_spec, use_batches
 from ema_sim.parameters import metas
 
 if TYPE_CHECKING:
@@ -108,7 +108,9 @@ class TestEnvNode(SuiteNode):
             Spec("silent_after_s", watchdog_s(), "wall seconds a commanded channel may go without its EMAC's "
                  "feedback before its status is ERROR (default: the EMACs' watchdog)", "s", 0.0, 3600.0,
                  read_only=False),
+            frames_spec(),
         ], name)
+        use_batches(self.ports, int(own[FRAMES_PER_MESSAGE]), self.sim_time, name)
         self.silent_s: float = own["silent_after_s"]
         self.params.on_change("silent_after_s", self._set_silent)
         loaded = load_profile(own["profile"])
