@@ -248,3 +248,27 @@ def test_clock_and_diagnostics_are_absolute_feedback_has_a_frame_and_use_sim_tim
     assert from_launch_arguments({"maneuver": "step", "use_sim_time": "true"}, "single").lockstep
     with pytest.raises(EmaError, match="disagree"):
         from_launch_arguments({"maneuver": "step", "lockstep": "true", "use_sim_time": "false"}, "single")
+
+
+# --------------------------------------------------------------------------- a standby's head start
+def test_a_standby_warms_the_model_its_node_will_build(tmp_path):
+    """``warm`` builds the model the node's own sections name (remapped name or flags), not another node's."""
+    import subprocess  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+
+    from ema_sim.nodes.emac import warm  # noqa: PLC0415
+
+    params = tmp_path / "run.yaml"
+    params.write_text(yaml.safe_dump({"emac_left_wing": {"ros__parameters": {"model": "nosuch"}},
+                                      "emac_right_wing": {"ros__parameters": {"model": "loada",
+                                                                              "channels": ["right_wing"]}}}))
+    warm(["--ros-args", "--params-file", str(params), "-r", "__node:=emac_right_wing"])  # the left wing's is not read
+    with pytest.raises(EmaError, match="unknown model 'nosuch'"):
+        warm(["--ros-args", "--params-file", str(params), "-r", "__node:=emac_left_wing"])
+    with pytest.raises(EmaError, match="unknown model 'nosuch'"):
+        warm(["--model", "nosuch", "--channel", "right_wing"])
+    # a standby whose head start fails says so and still waits for its word (here: none, so it ends quietly)
+    out = subprocess.run([sys.executable, "-m", "ema_sim.nodes.standby", "ema_sim.nodes.emac", "--model", "nosuch"],
+                         input="", capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    assert "standby: no head start for ema_sim.nodes.emac (UnknownNameError: " in out.stderr

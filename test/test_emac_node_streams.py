@@ -141,3 +141,34 @@ def test_a_channel_node_started_by_a_run_waits_for_every_input_of_a_frame(right_
             out.append(unit.step(0.0, meter.activity_except("right_wing")).position_v)
     assert friendly == want
     assert sum(a != b for a, b in zip(want, quiet, strict=True)) >= FRAMES - 2  # the crosstalk shows in the frames
+
+
+@pytest.mark.ros
+def test_a_node_that_joins_a_running_clock_waits_only_for_the_inputs_that_have_come(right_wing_node):
+    """A restarted EMAC takes the clock at frame k0: the others' feedback of the frames around k0 went out before it
+    subscribed, so those frames go ahead without it; once the others' feedback has come, each frame waits for it."""
+    node = right_wing_node()
+    take, sent = node.ports.take, node.ports.sent[ct.EMAC_FEEDBACK]
+    k0 = 1000
+
+    def frame(k, sources):
+        s = k * T
+        take[ct.EMAC_COMMAND](JointFrame(s, ["right_wing"], [0.5]))
+        take[ct.HINGE_MOMENT](JointFrame(s, ["right_wing"], [], [], [100.0]))
+        for ch in sources:
+            take[ct.EMAC_FEEDBACK](JointFrame(s, [ch], [_source_v(ch, k)]))
+        take[ct.CLOCK_TOPIC]((k + 1) * T)
+        node.poll()
+
+    others = [ch for ch in CHANNELS if ch != "right_wing"]
+    take[ct.CLOCK_TOPIC](k0 * T)
+    node.poll()  # the trimmed state at the frame it joined
+    for k in range(k0, k0 + 3):
+        frame(k, [])
+    assert [m.stamp_ns for m in sent] == [j * T for j in range(k0, k0 + 4)]
+    frame(k0 + 3, others)
+    frame(k0 + 4, others[1:])  # the left wing's feedback of this frame is late: the frame waits for it
+    assert len(sent) == 5
+    take[ct.EMAC_FEEDBACK](JointFrame((k0 + 4) * T, [others[0]], [_source_v(others[0], k0 + 4)]))
+    node.poll()
+    assert [m.stamp_ns for m in sent][-2:] == [(k0 + 4) * T, (k0 + 5) * T]

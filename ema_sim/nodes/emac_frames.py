@@ -154,13 +154,15 @@ class EmacFrames(EmacReceiver):
         self.ports.take_at_frame()
         if self.model_ns is None:  # first tick: report the trimmed state at the start time
             self.model_ns = self.clock_ns
+            self.joined_ns = self.clock_ns if self.clock_ns > 0 else None
+            self.joined_said = False
             trimmed = {ch: u.last for ch, u in self.units.items()}
             self._observe_own(trimmed)  # as a channel node observes it from the others' first message
             self._publish(self.model_ns, trimmed)
         streams = self._stream_list
         while self.clock_ns >= self.model_ns + self.frame_ns:
             t = self.model_ns
-            pending = [s for s in streams if (s.last_stamp is None or s.last_stamp < t) and not s.gave_up]
+            pending = self._joined([s for s in streams if (s.last_stamp is None or s.last_stamp < t) and not s.gave_up])
             if pending:
                 for s in streams:
                     if s not in pending:
@@ -179,6 +181,23 @@ class EmacFrames(EmacReceiver):
             last_good = self.last_good_ns
             self._step_all(t, {ch: None if (good := last_good[ch]) is None else (t - good) / NS for ch in self.units})
         return 0.05
+
+    def _joined(self, pending: list[InputStream]) -> list[InputStream]:
+        """The inputs a frame waits for; of a node that joined a running clock (a restarted EMAC), fewer.
+
+        The frames around the one it joined at had their inputs published when the others stepped to them,
+        before this node's subscriptions existed, and no input says which frames those were: until an input has
+        brought its first message, a frame goes ahead without it (held values, one line) rather than after the
+        wait's timeout. Once it has, it is waited for as usual. A node that started with the clock waits for all.
+        """
+        if self.joined_ns is None or not pending:
+            return pending
+        gone = [s for s in pending if s.last_stamp is None and not s.queue]
+        if gone and not self.joined_said:
+            self.joined_said = True
+            self.get_logger().info(f"joined the clock at frame {self.joined_ns / NS:.3f} s: inputs sent before this "
+                                   "node subscribed are not waited for; each input is, once it has come")
+        return [s for s in pending if s not in gone] if gone else pending
 
     def _observe_sources(self, items: list[tuple[int, list[tuple[str, float]]]]) -> None:
         for _, seen in items:

@@ -117,6 +117,9 @@ class EmacState(SuiteNode):
         self.last_good_wall: dict[str, float | None] = dict.fromkeys(self.channels)
         self.clock_ns: int | None = None
         self.model_ns: int | None = None
+        self.joined_ns: int | None = None
+        """Lockstep: the frame at which the node took a clock already running (None: it started with it)."""
+        self.joined_said = False
         self.last_step_wall = time.monotonic()
         self.next_idle = self.last_step_wall + IDLE_AFTER_FRAMES * self.frame_s
         """Real time: when the next frame without a command is due (frames keep the frame rate when idle)."""

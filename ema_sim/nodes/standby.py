@@ -1,7 +1,8 @@
 """A node's process started ahead of need, to stand in at once when the node's process dies (``--respawn``).
 
 ``python -m ema_sim.nodes.standby MODULE ARGS...`` imports the node's module (the interpreter's start and the
-imports are most of a node's start: 2 s of its 3 s, measured for an EMAC) and waits on stdin: the line ``run``
+imports are most of a node's start: 2 s of its 3 s, measured for an EMAC), calls its ``warm(ARGS)`` when it has
+one (an EMAC loads its model's compiled kernels, most of the rest) and waits on stdin: the line ``run``
 runs the node's ``main(ARGS)`` there and then; end of input ends the process. ``ema launch``
 (:mod:`ema_sim.suite`) keeps one for each respawned process. It ends with the launcher however the launcher
 ends (:mod:`ema_sim.nodes.lifetime`).
@@ -39,6 +40,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     module, rest = args[0], args[1:]
     lifetime.follow_parent()
     node = importlib.import_module(module)
+    warm = getattr(node, "warm", None)
+    if callable(warm):
+        try:
+            warm(rest)
+        except Exception as exc:  # a head start only: the node reports its own errors when it runs
+            print(f"standby: no head start for {module} ({type(exc).__name__}: {exc})", file=sys.stderr, flush=True)
     if sys.stdin.readline().strip() != GO:
         return 0
     sys.argv = [module, *rest]
