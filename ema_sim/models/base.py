@@ -204,6 +204,9 @@ class ActuatorModel(ABC):
     """Which subsection variant of the section it reads (the high-order family's ``hoad2``, ``hoad3``)."""
     switchable: ClassVar[bool] = True
     """False when the model has none of its parameters' switchable elements (the linear models)."""
+    shared_inputs: ClassVar[bool] = False
+    """True when ``_integrate`` takes one row of inputs for every instance (a batch whose instances share a record
+    runs it without a copy per instance)."""
 
     def __init__(self, channel: str | ChannelConfig = "left_wing", *, n: int = 1, rate_hz: float | None = None) -> None:
         if n < 1:
@@ -506,8 +509,8 @@ class ActuatorModel(ABC):
             model=self.name,
             channel=self.channel.channel,
             time_s=samples,
-            command_deg=np.take(u, held, axis=1),
-            hinge_moment_inlb=np.take(hm, held, axis=1),
+            command_deg=_held_inputs(u, held),
+            hinge_moment_inlb=_held_inputs(hm, held),
             position_deg=out[:, :, O_POS],
             surface_deg=out[:, :, O_SURF],
             rate_dps=out[:, :, O_RATE],
@@ -584,8 +587,8 @@ class ActuatorModel(ABC):
         if samples.size and samples[-1] > t_end + stages.TIME_EPS_S:
             raise EmaError("sample_times go past end_s")
         all_t = np.concatenate([self._hist_t, bp_t])
-        all_u = np.ascontiguousarray(np.concatenate([self._hist_u, u], axis=1))
-        all_h = np.ascontiguousarray(np.concatenate([self._hist_h, hm], axis=1))
+        all_u = self._joined(self._hist_u, u)
+        all_h = self._joined(self._hist_h, hm)
         blocks: list[FloatArray] = []  # each fresh from ``_integrate``: one chunk is the output as it is, uncopied
         t_start = self._t
         span = max(t_end - t_start, 1e-12)
@@ -604,6 +607,16 @@ class ActuatorModel(ABC):
                 break
         self._keep_history(all_t, all_u, all_h)
         return blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
+
+    def _joined(self, history: FloatArray, values: FloatArray) -> FloatArray:
+        """The kept history and a record's inputs as one C-contiguous block for ``_integrate``.
+
+        One row when the family takes :attr:`shared_inputs` and every instance has the same history and record (a
+        record given once for all is a broadcast view): a batch then runs without a copy of it per instance.
+        """
+        if self.shared_inputs and values.strides[0] == 0 and bool(np.all(history == history[:1])):
+            return np.concatenate([history[:1], values[:1]], axis=1)
+        return np.ascontiguousarray(np.concatenate([history, values], axis=1))
 
     def _written_before(self, t_stop: float) -> float:
         """Samples before this instant belong to an integration that ends at ``t_stop``.
@@ -719,6 +732,13 @@ class Tolerances:
         self.rtol = self.default_rtol if rtol is None else float(rtol)
         self.atol = self.default_atol if atol is None else float(atol)
         super().__init__(*args, **kwargs)
+
+
+def _held_inputs(values: FloatArray, held: NDArray[np.int64]) -> FloatArray:
+    """The input in effect at each sample; a record given once for all instances stays one row (a read-only view)."""
+    if values.strides[0] == 0:
+        return np.broadcast_to(values[0, held], (values.shape[0], held.shape[0]))
+    return np.take(values, held, axis=1)
 
 
 def _check_finite(arr: FloatArray, what: str) -> None:

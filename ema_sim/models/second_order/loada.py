@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from typing import Any, cast
 
 import numba as nb
 import numpy as np
+from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order import stage_set
@@ -38,7 +40,7 @@ from ema_sim.models.second_order.figure26 import (
     write_outputs,
 )
 from ema_sim.models.second_order.figure29 import free_play_accel, free_play_euler
-from ema_sim.models.second_order.params import P, X
+from ema_sim.models.second_order.params import N_PARAMS, P, X
 from ema_sim.models.stages import (
     TIME_EPS_S,
     compile_closure,
@@ -55,6 +57,10 @@ METHOD_FORWARD_EULER = 0
 METHOD_LOADF = 1
 """LOADF: backward Euler, the loop closed on the position one frame ahead."""
 
+
+as_tuple = cast("Callable[..., Any]", to_fixed_tuple)
+"""``as_tuple(row, length)`` in a kernel: a row's values as a tuple of a fixed length. Held as values rather than
+memory, what a kernel derives from its parameters is computed once, not again after each store of a state."""
 
 Kernel = Callable[[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, float, int,
                    FloatArray, FloatArray, int, int], None]
@@ -80,16 +86,18 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
         The compiled kernel (see :func:`run_discrete` for its arguments).
     """
 
-    def kernel(  # noqa: PLR0915 - the stages in diagram order, one step
+    def kernel(  # noqa: PLR0912, PLR0915 - the stages in diagram order, one step
         params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
         bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray, first: int,
         stop: int,
     ) -> None:
         k_samples = sample_t.shape[0]
         for i in range(first, stop):
-            p = params[i]
+            p = as_tuple(params[i], N_PARAMS)  # values, not memory: what they derive is computed once
             x = states[i]
             hist = history[i]
+            u_i = bp_u[i if bp_u.shape[0] > 1 else 0]  # one row: the instances share their inputs
+            h_i = bp_h[i if bp_h.shape[0] > 1 else 0]
             jd = 0
             jh = 0
             js = 0
@@ -106,52 +114,65 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
             integral = bool(on & stage_set.INTEGRAL) and p[P.integral_hz] > 0.0
             drive = bool(on & stage_set.DRIVE) and drive_on(p)
             damped = bool(on & stage_set.COMPLIANCE_LAG) and compliance_time_constant_s(p) > 0.0
-            hm = bp_h[i, zoh_index(bp_t, t0, 0)]
-            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt, on)
-            fb_prev = x[X.feedback_lag_deg]
+            # figure 26's own states in locals (registers) over the steps, back in ``x`` for what reads it there
+            cmd_lag, pos, rate = x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps]
+            fp, fp_rate = x[X.free_play_deg], x[X.free_play_rate_dps]
+            fb_lag, compliance = x[X.feedback_lag_deg], x[X.compliance_deg]
+            hm = h_i[zoh_index(bp_t, t0, 0)]
+            _, flags, _, _, _ = servo(p, cmd_lag, pos, rate, x, hm, dt, on)
+            fb_prev = fb_lag
+            jq = -1  # the breakpoint the held command ``uq`` was computed from
+            uq = 0.0
             k0 = int(t0 / dt + 0.5)  # t0 is on the model's step grid: time from the step count, as one run has it
             for k in range(n_steps + 1):
                 t = (k0 + k) * dt
-                fb = x[X.feedback_lag_deg]
+                fb = fb_lag
                 # (a call that continues a run finds its first entry written by the one before, rate and all)
                 if fb_delay > 0.0 and (k > 0 or t > x[X.history_last_s] + TIME_EPS_S):
                     history_write(p, x, hist, t, fb, (fb - fb_prev) / dt, False)
                 fb_prev = fb
-                while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
-                    if fb_delay > 0.0:
-                        fb = history_read(x, hist, sample_t[js] - fb_delay)
-                    write_outputs(p, x, fb, hm, flags, out[i, js], on)
-                    js += 1
+                if js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                    x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps] = cmd_lag, pos, rate
+                    x[X.free_play_deg], x[X.free_play_rate_dps] = fp, fp_rate
+                    x[X.feedback_lag_deg], x[X.compliance_deg] = fb_lag, compliance
+                    while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                        if fb_delay > 0.0:
+                            fb = history_read(x, hist, sample_t[js] - fb_delay)
+                        write_outputs(p, x, fb, hm, flags, out[i, js], on)
+                        js += 1
                 if k == n_steps:
                     break
-                # stages 1-4: delayed command, command error, quantizer, command lag
-                u_del, jd = transport_delay(bp_t, bp_u[i], t, p[P.delay_s], jd)
+                # stages 1-4: delayed command, command error, quantizer (on a new breakpoint), command lag
+                u_del, jd = transport_delay(bp_t, u_i, t, p[P.delay_s], jd)
+                if jd != jq:
+                    uq = command_path(p, u_del)
+                    jq = jd
                 jh = zoh_index(bp_t, t, jh)
-                hm = bp_h[i, jh]
-                x[X.command_lag_deg] = first_order_lag(x[X.command_lag_deg], command_path(p, u_del), g_cmd)
+                hm = h_i[jh]
+                cmd_lag = first_order_lag(cmd_lag, uq, g_cmd)
                 # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
-                pos, rate = x[X.position_deg], x[X.rate_dps]
-                a, flags, _, integrand, drive_accel = servo(p, x[X.command_lag_deg],
-                                                            pos + dt * rate if backward else pos, rate, x, hm, dt, on)
+                a, flags, _, integrand, drive_accel = servo(p, cmd_lag, pos + dt * rate if backward else pos, rate,
+                                                            x, hm, dt, on)
                 pos, rate = euler_pair(pos, rate, a, dt, backward)
-                x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
-                                                                           p[P.position_max_deg])
+                pos, rate, _ = limited_integrator(pos, rate, p[P.position_min_deg], p[P.position_max_deg])
                 if integral:
                     x[X.integral_deg_s] += dt * integrand
                 if drive:
                     x[X.drive_rate_dps] += dt * drive_accel
                 # stage 15: free play; 17: the linkage mode (its exact step on the spring's segment)
                 if free_play:
-                    x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
-                        x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
+                    fp, fp_rate = free_play_euler(fp, fp_rate, hm * fp_acc_per_inlb, dt, half, backward)
                 if linkage:
                     x[X.linkage_deg], x[X.linkage_rate_dps] = linkage_step(p, x, hm, drive_accel if in_loop else a,
                                                                            link_steps)
                 # stages 12-13: LVDT and its feedback lag (gain 1 when off); 16: compliance
-                fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
-                x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm, on), g_fb)
+                fb_pos = pos + dt * rate if backward else pos
+                fb_lag = first_order_lag(fb_lag, lvdt(p, fb_pos, hm, on), g_fb)
                 if damped:  # read only when damped (an undamped compliance is its static deflection)
-                    x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm, on), g_c)
+                    compliance = first_order_lag(compliance, surface_compliance(p, hm, on), g_c)
+            x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps] = cmd_lag, pos, rate
+            x[X.free_play_deg], x[X.free_play_rate_dps] = fp, fp_rate
+            x[X.feedback_lag_deg], x[X.compliance_deg] = fb_lag, compliance
 
     compiled: Kernel = compile_closure(kernel, f"{'backward' if backward else 'forward'}_{on}", forward_copies=True)
     return compiled
@@ -192,6 +213,11 @@ PARALLEL_STEPS = 20_000
 """A batch runs its instances on parallel threads only when it takes at least this many instance-steps in all
 and Numba has more than one thread: a thread pool's start and join cost more than a frame of a few
 instances, and the outputs are the same bit for bit either way."""
+
+
+PARALLEL_CHUNK = 8
+"""Instances a thread takes at a time from a parallel batch: a thread that another process slows takes fewer of
+them, where halves fixed in advance would wait for it."""
 
 
 @functools.cache
@@ -240,9 +266,9 @@ def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp
     bp_t : numpy.ndarray
         Input breakpoint times (s).
     bp_u : numpy.ndarray
-        Command at each breakpoint, one row per instance (deg).
+        Command at each breakpoint, one row per instance or one for all (deg).
     bp_h : numpy.ndarray
-        Hinge moment at each breakpoint, one row per instance (in·lb).
+        Hinge moment at each breakpoint, one row per instance or one for all (in·lb).
     t0 : float
         Time of the first step (s).
     dt : float
@@ -261,4 +287,5 @@ def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp
     """
     n = params.shape[0]
     parallel = n > 1 and n * n_steps >= PARALLEL_STEPS and nb.get_num_threads() > 1
-    kernel(method, on, parallel)(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, 0, n)
+    with nb.parallel_chunksize(PARALLEL_CHUNK if parallel else 0):  # type: ignore[attr-defined]
+        kernel(method, on, parallel)(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, 0, n)
