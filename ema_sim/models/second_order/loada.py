@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any, cast
 
 import numba as nb
 import numpy as np
-from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.compiling import row_values
 from ema_sim.models.second_order import stage_set
 from ema_sim.models.second_order.figure26 import (
     command_path,
@@ -58,10 +57,6 @@ METHOD_LOADF = 1
 """LOADF: backward Euler, the loop closed on the position one frame ahead."""
 
 
-as_tuple = cast("Callable[..., Any]", to_fixed_tuple)
-"""``as_tuple(row, length)`` in a kernel: a row's values as a tuple of a fixed length. Held as values rather than
-memory, what a kernel derives from its parameters is computed once, not again after each store of a state."""
-
 Kernel = Callable[[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, float, int,
                    FloatArray, FloatArray, int, int], None]
 """``kernel(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, first, stop)``: instances
@@ -92,14 +87,28 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
         stop: int,
     ) -> None:
         k_samples = sample_t.shape[0]
+        k0 = int(t0 / dt + 0.5)  # t0 is on the model's step grid: time from the step count, as one run has it
+        # what every instance reads at each step, found once for them all: the load's breakpoint, and the samples
+        # due before the next step (a sample reads the state of the last step at or before it)
+        held = np.empty(n_steps, dtype=np.int64)
+        due = np.empty(n_steps + 1, dtype=np.int64)
+        jh = 0
+        js = 0
+        for k in range(n_steps + 1):
+            t = (k0 + k) * dt
+            while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                js += 1
+            due[k] = js
+            if k < n_steps:
+                jh = zoh_index(bp_t, t, jh)
+                held[k] = jh
         for i in range(first, stop):
-            p = as_tuple(params[i], N_PARAMS)  # values, not memory: what they derive is computed once
+            p = row_values(params[i], N_PARAMS)  # values, not memory: what they derive is computed once
             x = states[i]
             hist = history[i]
             u_i = bp_u[i if bp_u.shape[0] > 1 else 0]  # one row: the instances share their inputs
             h_i = bp_h[i if bp_h.shape[0] > 1 else 0]
             jd = 0
-            jh = 0
             js = 0
             g_cmd = lag_gain(p[P.command_lag_hz], dt)
             g_fb = lag_gain(p[P.feedback_lag_hz], dt)
@@ -123,7 +132,6 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
             fb_prev = fb_lag
             jq = -1  # the breakpoint the held command ``uq`` was computed from
             uq = 0.0
-            k0 = int(t0 / dt + 0.5)  # t0 is on the model's step grid: time from the step count, as one run has it
             for k in range(n_steps + 1):
                 t = (k0 + k) * dt
                 fb = fb_lag
@@ -131,11 +139,12 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
                 if fb_delay > 0.0 and (k > 0 or t > x[X.history_last_s] + TIME_EPS_S):
                     history_write(p, x, hist, t, fb, (fb - fb_prev) / dt, False)
                 fb_prev = fb
-                if js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                until = due[k]
+                if js < until:
                     x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps] = cmd_lag, pos, rate
                     x[X.free_play_deg], x[X.free_play_rate_dps] = fp, fp_rate
                     x[X.feedback_lag_deg], x[X.compliance_deg] = fb_lag, compliance
-                    while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                    while js < until:
                         if fb_delay > 0.0:
                             fb = history_read(x, hist, sample_t[js] - fb_delay)
                         write_outputs(p, x, fb, hm, flags, out[i, js], on)
@@ -147,8 +156,7 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
                 if jd != jq:
                     uq = command_path(p, u_del)
                     jq = jd
-                jh = zoh_index(bp_t, t, jh)
-                hm = h_i[jh]
+                hm = h_i[held[k]]
                 cmd_lag = first_order_lag(cmd_lag, uq, g_cmd)
                 # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
                 a, flags, _, integrand, drive_accel = servo(p, cmd_lag, pos + dt * rate if backward else pos, rate,
@@ -179,7 +187,7 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
 
 
 def make_parallel(serial: Kernel, name: str) -> Kernel:
-    """The instances of ``serial`` spread over Numba's thread pool, one call of it per instance.
+    """The instances of ``serial`` spread over Numba's thread pool, one call of it per :data:`PARALLEL_CHUNK`.
 
     The per-instance arithmetic is ``serial``'s own machine code, so the outputs are the same bit for bit, and
     this thin loop compiles in seconds where a ``prange`` over the whole step loop took minutes.
@@ -202,8 +210,10 @@ def make_parallel(serial: Kernel, name: str) -> Kernel:
         bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray, first: int,
         stop: int,
     ) -> None:
-        for i in nb.prange(first, stop):
-            serial(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, i, i + 1)
+        for c in nb.prange((stop - first + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK):
+            lo = first + c * PARALLEL_CHUNK
+            serial(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, lo,
+                   min(lo + PARALLEL_CHUNK, stop))
 
     compiled: Kernel = compile_closure(kernel, f"{name}_parallel", parallel=True)
     return compiled
@@ -216,8 +226,9 @@ instances, and the outputs are the same bit for bit either way."""
 
 
 PARALLEL_CHUNK = 8
-"""Instances a thread takes at a time from a parallel batch: a thread that another process slows takes fewer of
-them, where halves fixed in advance would wait for it."""
+"""Instances a thread takes at a time from a parallel batch, one call of the serial kernel (which finds what they
+share once per call): a thread that another process slows takes fewer of them, where halves fixed in advance
+would wait for it."""
 
 
 @functools.cache
@@ -287,5 +298,9 @@ def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp
     """
     n = params.shape[0]
     parallel = n > 1 and n * n_steps >= PARALLEL_STEPS and nb.get_num_threads() > 1
-    with nb.parallel_chunksize(PARALLEL_CHUNK if parallel else 0):  # type: ignore[attr-defined]
-        kernel(method, on, parallel)(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, 0, n)
+    args = (params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, 0, n)
+    if not parallel:
+        kernel(method, on)(*args)
+        return
+    with nb.parallel_chunksize(1):  # type: ignore[attr-defined] # threads take chunks as they finish them
+        kernel(method, on, parallel)(*args)
