@@ -31,9 +31,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ema_sim.config import ChannelConfig, load_channel
-from ema_sim.errors import ConfigError, DataError, EmaError
+from ema_sim.errors import ConfigError, EmaError
 from ema_sim.jsontypes import JsonObject
 from ema_sim.models import stages
+from ema_sim.models.inputs import as_batch, as_record, check_finite, held_inputs
 from ema_sim.parameters import ParameterInfo, Slots, describe, elements, switched_off
 
 FloatArray = NDArray[np.float64]
@@ -137,28 +138,6 @@ class Record:
             "bus_v": self.bus_v[i],
             "flags": self.flags[i].astype(float),
         }
-
-
-def _as_batch(value: ArrayLike, n: int, what: str) -> FloatArray:
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 0:
-        return np.full(n, float(arr))
-    if arr.shape != (n,):
-        raise DataError(f"{what}: expected a scalar or {n} values, got shape {arr.shape}")
-    return arr.copy()
-
-
-def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
-    """A record's inputs as ``(n, m)``; one row for all instances is a read-only view of it, not a copy.
-
-    The run copies it once, into the kernel's contiguous block with the history.
-    """
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 1 and arr.shape[0] == m:
-        return np.broadcast_to(arr, (n, m))
-    if arr.shape != (n, m):
-        raise DataError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
-    return arr
 
 
 class ActuatorModel(ABC):
@@ -373,11 +352,11 @@ class ActuatorModel(ABC):
         Sample
             The outputs at time 0.
         """
-        hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
+        hm = as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
         if position_deg is not None:
-            u = self.trim_command(_as_batch(position_deg, self.n, "position_deg"), hm)
+            u = self.trim_command(as_batch(position_deg, self.n, "position_deg"), hm)
         else:
-            u = _as_batch(0.0 if command_deg is None else command_deg, self.n, "command_deg")
+            u = as_batch(0.0 if command_deg is None else command_deg, self.n, "command_deg")
         if not (np.all(np.isfinite(u)) and np.all(np.isfinite(hm))):
             raise EmaError("trim needs finite command, position and hinge moment")
         self._t = 0.0
@@ -449,8 +428,8 @@ class ActuatorModel(ABC):
             else:
                 self._hold_bad(np.array([command_deg]), np.array([hinge_moment_inlb]), hi)
         else:
-            self._hold_bad(_as_batch(command_deg, self.n, "command_deg"),
-                           _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb"), hi)
+            self._hold_bad(as_batch(command_deg, self.n, "command_deg"),
+                           as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb"), hi)
         t0 = self._t
         self._buf_t[hi] = t0
         self._h_hi = hi + 1
@@ -509,8 +488,8 @@ class ActuatorModel(ABC):
             model=self.name,
             channel=self.channel.channel,
             time_s=samples,
-            command_deg=_held_inputs(u, held),
-            hinge_moment_inlb=_held_inputs(hm, held),
+            command_deg=held_inputs(u, held),
+            hinge_moment_inlb=held_inputs(hm, held),
             position_deg=out[:, :, O_POS],
             surface_deg=out[:, :, O_SURF],
             rate_dps=out[:, :, O_RATE],
@@ -561,20 +540,20 @@ class ActuatorModel(ABC):
         m = bp_t.shape[0]
         if m == 0:
             raise EmaError("run needs at least one input breakpoint")
-        u = _as_record(command_deg, self.n, m, "command_deg")
+        u = as_record(command_deg, self.n, m, "command_deg")
         if hinge_moment_inlb is None:
             hm = np.broadcast_to(np.zeros(m), (self.n, m))
         else:
-            hm = _as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
-        _check_finite(bp_t, "time_s")
-        _check_finite(u, "command_deg")
-        _check_finite(hm, "hinge_moment_inlb")
+            hm = as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
+        check_finite(bp_t, "time_s")
+        check_finite(u, "command_deg")
+        check_finite(hm, "hinge_moment_inlb")
         if np.any(np.diff(bp_t) <= 0.0):
             raise EmaError("time_s must be strictly increasing")
         if bp_t[0] < self._t - stages.TIME_EPS_S:
             raise EmaError(f"time_s starts at {bp_t[0]:.6g} s, before the model time {self._t:.6g} s")
         samples = bp_t.copy() if sample_times is None else np.asarray(sample_times, dtype=float).ravel()
-        _check_finite(samples, "sample_times")
+        check_finite(samples, "sample_times")
         if samples.size and (np.any(np.diff(samples) < 0.0) or samples[0] < self._t - stages.TIME_EPS_S):
             raise EmaError("sample_times must be ascending and not before the model time")
         return bp_t, u, hm, samples
@@ -732,20 +711,6 @@ class Tolerances:
         self.rtol = self.default_rtol if rtol is None else float(rtol)
         self.atol = self.default_atol if atol is None else float(atol)
         super().__init__(*args, **kwargs)
-
-
-def _held_inputs(values: FloatArray, held: NDArray[np.int64]) -> FloatArray:
-    """The input in effect at each sample; a record given once for all instances stays one row (a read-only view)."""
-    if values.strides[0] == 0:
-        return np.broadcast_to(values[0, held], (values.shape[0], held.shape[0]))
-    return np.take(values, held, axis=1)
-
-
-def _check_finite(arr: FloatArray, what: str) -> None:
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        idx = np.argwhere(bad)[0]
-        raise EmaError(f"{what}: non-finite value at index {tuple(int(i) for i in idx)}")
 
 
 def batch_params(params: _Params | Sequence[_Params] | None, n: int, default: Callable[[], _Params]) -> list[_Params]:
