@@ -593,7 +593,8 @@ class ActuatorModel(ABC):
         One row when the family takes :attr:`shared_inputs` and every instance has the same history and record (a
         record given once for all is a broadcast view): a batch then runs without a copy of it per instance.
         """
-        if self.shared_inputs and values.strides[0] == 0 and bool(np.all(history == history[:1])):
+        shared = self.shared_inputs and values.shape[0] > 1 and values.strides[0] == 0
+        if shared and bool(np.all(history == history[:1])):
             return np.concatenate([history[:1], values[:1]], axis=1)
         return np.ascontiguousarray(np.concatenate([history, values], axis=1))
 

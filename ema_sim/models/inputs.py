@@ -80,7 +80,7 @@ def held_inputs(values: FloatArray, held: IntArray) -> FloatArray:
     numpy.ndarray
         ``(n, samples)``.
     """
-    if values.strides[0] == 0:
+    if values.shape[0] > 1 and values.strides[0] == 0:  # (one instance: a copy of its row costs less than a view)
         return np.broadcast_to(values[0, held], (values.shape[0], held.shape[0]))
     return np.take(values, held, axis=1)
 

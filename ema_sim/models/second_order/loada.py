@@ -140,10 +140,9 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
                     history_write(p, x, hist, t, fb, (fb - fb_prev) / dt, False)
                 fb_prev = fb
                 until = due[k]
-                if js < until:
-                    x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps] = cmd_lag, pos, rate
-                    x[X.free_play_deg], x[X.free_play_rate_dps] = fp, fp_rate
-                    x[X.feedback_lag_deg], x[X.compliance_deg] = fb_lag, compliance
+                if js < until:  # the states write_outputs reads
+                    x[X.position_deg], x[X.rate_dps] = pos, rate
+                    x[X.free_play_deg], x[X.compliance_deg] = fp, compliance
                     while js < until:
                         if fb_delay > 0.0:
                             fb = history_read(x, hist, sample_t[js] - fb_delay)
