@@ -236,3 +236,42 @@ def test_the_parallel_batch_kernel_equals_the_serial_one_bit_for_bit(name, integ
                           capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.strip() == "same"
+
+
+HETEROGENEOUS = (
+    {}, {"compliance_deg_per_kinlb": 0.3, "free_play_deg": 0.2}, {"delay_s": 0.007, "kcp_per_kinlb": 0.05},
+    {"quantization_deg": 0.02, "offset_deg": 0.01, "kb": 0.01},
+    {"integral_hz": 2.0, "feedback_lag_hz": 40.0, "threshold_deg": 0.05, "servo_compliance_deg_per_kinlb": 0.2},
+    {"feedback_delay_s": 0.003, "linkage_freq_hz": 29.0, "linkage_zeta": 0.12, "feedback_filter_in_loop": 1.0,
+     "free_play_deg": 0.15, "compliance_deg_per_kinlb": 0.39, "lvdt_compliance_deg_per_kinlb": 0.065},
+    {"accel_limit_dps2": 3000.0, "velocity_loop_hz": 300.0, "command_lag_hz": 30.0},
+)
+"""Parameter sets that differ in every way a batch's instances can: the report's stages, then identification's."""
+
+
+@pytest.mark.parametrize("name", ["loada", "loadf"])
+@pytest.mark.parametrize("shared", [True, False], ids=["one record for all", "a record each"])
+def test_a_heterogeneous_batch_equals_each_instance_alone_bit_for_bit(name, shared, rich_inputs):
+    """Instances with different stages and parameters, stepped in one batch (the kernel holds each one's states and
+    parameters in locals), give what each gives alone: one record for all (read once, not copied per instance) or
+    one each, in the report's stage set and in the general one, then stepped on from where the run left them."""
+    t, cmd, hm = rich_inputs
+    base = SecondOrderParams.from_channel(load_channel("left_wing"))
+    fields = ("position_deg", "surface_deg", "rate_dps", "flags", "command_deg", "hinge_moment_inlb")
+    for sets, stages in ((HETEROGENEOUS[:4], stage_set.REPORT), (HETEROGENEOUS, stage_set.ALL)):
+        params = [base.replace(wn_rad_s=base.wn_rad_s * (0.9 + 0.05 * i), zeta=base.zeta * (1.1 - 0.04 * i), **extra)
+                  for i, extra in enumerate(sets)]
+        n = len(params)
+        scale = np.linspace(0.5, 1.5, n)[:, None]
+        u, h = (cmd, hm) if shared else (cmd * scale, hm * scale[::-1])
+        batch = create(name, "left_wing", n=n, params=params)
+        assert batch._on == stages
+        record = batch.run(t, u, h, end_s=float(t[-1]))
+        stepped = [batch.step(2.0 - k * 0.1, 150.0).position_deg for k in range(20)]
+        for i, prm in enumerate(params):
+            alone = create(name, "left_wing", params=prm)
+            one = alone.run(t, u if shared else u[i], h if shared else h[i], end_s=float(t[-1]))
+            for field in fields:
+                assert np.array_equal(getattr(one, field)[0], getattr(record, field)[i], equal_nan=True), (i, field)
+            for k in range(20):
+                assert alone.step(2.0 - k * 0.1, 150.0).position_deg[0] == stepped[k][i], (i, k)

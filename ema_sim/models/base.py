@@ -31,9 +31,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ema_sim.config import ChannelConfig, load_channel
-from ema_sim.errors import ConfigError, DataError, EmaError
+from ema_sim.errors import ConfigError, EmaError
 from ema_sim.jsontypes import JsonObject
 from ema_sim.models import stages
+from ema_sim.models.inputs import as_batch, as_record, check_finite, held_inputs
 from ema_sim.parameters import ParameterInfo, Slots, describe, elements, switched_off
 
 FloatArray = NDArray[np.float64]
@@ -139,28 +140,6 @@ class Record:
         }
 
 
-def _as_batch(value: ArrayLike, n: int, what: str) -> FloatArray:
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 0:
-        return np.full(n, float(arr))
-    if arr.shape != (n,):
-        raise DataError(f"{what}: expected a scalar or {n} values, got shape {arr.shape}")
-    return arr.copy()
-
-
-def _as_record(value: ArrayLike, n: int, m: int, what: str) -> FloatArray:
-    """A record's inputs as ``(n, m)``; one row for all instances is a read-only view of it, not a copy.
-
-    The run copies it once, into the kernel's contiguous block with the history.
-    """
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 1 and arr.shape[0] == m:
-        return np.broadcast_to(arr, (n, m))
-    if arr.shape != (n, m):
-        raise DataError(f"{what}: expected {m} values or shape ({n}, {m}), got shape {arr.shape}")
-    return arr
-
-
 class ActuatorModel(ABC):
     """Base of every fidelity: inputs, time, history, validation; families supply the physics.
 
@@ -204,6 +183,9 @@ class ActuatorModel(ABC):
     """Which subsection variant of the section it reads (the high-order family's ``hoad2``, ``hoad3``)."""
     switchable: ClassVar[bool] = True
     """False when the model has none of its parameters' switchable elements (the linear models)."""
+    shared_inputs: ClassVar[bool] = False
+    """True when ``_integrate`` takes one row of inputs for every instance (a batch whose instances share a record
+    runs it without a copy per instance)."""
 
     def __init__(self, channel: str | ChannelConfig = "left_wing", *, n: int = 1, rate_hz: float | None = None) -> None:
         if n < 1:
@@ -370,11 +352,11 @@ class ActuatorModel(ABC):
         Sample
             The outputs at time 0.
         """
-        hm = _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
+        hm = as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb")
         if position_deg is not None:
-            u = self.trim_command(_as_batch(position_deg, self.n, "position_deg"), hm)
+            u = self.trim_command(as_batch(position_deg, self.n, "position_deg"), hm)
         else:
-            u = _as_batch(0.0 if command_deg is None else command_deg, self.n, "command_deg")
+            u = as_batch(0.0 if command_deg is None else command_deg, self.n, "command_deg")
         if not (np.all(np.isfinite(u)) and np.all(np.isfinite(hm))):
             raise EmaError("trim needs finite command, position and hinge moment")
         self._t = 0.0
@@ -446,8 +428,8 @@ class ActuatorModel(ABC):
             else:
                 self._hold_bad(np.array([command_deg]), np.array([hinge_moment_inlb]), hi)
         else:
-            self._hold_bad(_as_batch(command_deg, self.n, "command_deg"),
-                           _as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb"), hi)
+            self._hold_bad(as_batch(command_deg, self.n, "command_deg"),
+                           as_batch(hinge_moment_inlb, self.n, "hinge_moment_inlb"), hi)
         t0 = self._t
         self._buf_t[hi] = t0
         self._h_hi = hi + 1
@@ -506,8 +488,8 @@ class ActuatorModel(ABC):
             model=self.name,
             channel=self.channel.channel,
             time_s=samples,
-            command_deg=np.take(u, held, axis=1),
-            hinge_moment_inlb=np.take(hm, held, axis=1),
+            command_deg=held_inputs(u, held),
+            hinge_moment_inlb=held_inputs(hm, held),
             position_deg=out[:, :, O_POS],
             surface_deg=out[:, :, O_SURF],
             rate_dps=out[:, :, O_RATE],
@@ -558,20 +540,20 @@ class ActuatorModel(ABC):
         m = bp_t.shape[0]
         if m == 0:
             raise EmaError("run needs at least one input breakpoint")
-        u = _as_record(command_deg, self.n, m, "command_deg")
+        u = as_record(command_deg, self.n, m, "command_deg")
         if hinge_moment_inlb is None:
             hm = np.broadcast_to(np.zeros(m), (self.n, m))
         else:
-            hm = _as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
-        _check_finite(bp_t, "time_s")
-        _check_finite(u, "command_deg")
-        _check_finite(hm, "hinge_moment_inlb")
+            hm = as_record(hinge_moment_inlb, self.n, m, "hinge_moment_inlb")
+        check_finite(bp_t, "time_s")
+        check_finite(u, "command_deg")
+        check_finite(hm, "hinge_moment_inlb")
         if np.any(np.diff(bp_t) <= 0.0):
             raise EmaError("time_s must be strictly increasing")
         if bp_t[0] < self._t - stages.TIME_EPS_S:
             raise EmaError(f"time_s starts at {bp_t[0]:.6g} s, before the model time {self._t:.6g} s")
         samples = bp_t.copy() if sample_times is None else np.asarray(sample_times, dtype=float).ravel()
-        _check_finite(samples, "sample_times")
+        check_finite(samples, "sample_times")
         if samples.size and (np.any(np.diff(samples) < 0.0) or samples[0] < self._t - stages.TIME_EPS_S):
             raise EmaError("sample_times must be ascending and not before the model time")
         return bp_t, u, hm, samples
@@ -584,8 +566,8 @@ class ActuatorModel(ABC):
         if samples.size and samples[-1] > t_end + stages.TIME_EPS_S:
             raise EmaError("sample_times go past end_s")
         all_t = np.concatenate([self._hist_t, bp_t])
-        all_u = np.ascontiguousarray(np.concatenate([self._hist_u, u], axis=1))
-        all_h = np.ascontiguousarray(np.concatenate([self._hist_h, hm], axis=1))
+        all_u = self._joined(self._hist_u, u)
+        all_h = self._joined(self._hist_h, hm)
         blocks: list[FloatArray] = []  # each fresh from ``_integrate``: one chunk is the output as it is, uncopied
         t_start = self._t
         span = max(t_end - t_start, 1e-12)
@@ -604,6 +586,17 @@ class ActuatorModel(ABC):
                 break
         self._keep_history(all_t, all_u, all_h)
         return blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
+
+    def _joined(self, history: FloatArray, values: FloatArray) -> FloatArray:
+        """The kept history and a record's inputs as one C-contiguous block for ``_integrate``.
+
+        One row when the family takes :attr:`shared_inputs` and every instance has the same history and record (a
+        record given once for all is a broadcast view): a batch then runs without a copy of it per instance.
+        """
+        shared = self.shared_inputs and values.shape[0] > 1 and values.strides[0] == 0
+        if shared and bool(np.all(history == history[:1])):
+            return np.concatenate([history[:1], values[:1]], axis=1)
+        return np.ascontiguousarray(np.concatenate([history, values], axis=1))
 
     def _written_before(self, t_stop: float) -> float:
         """Samples before this instant belong to an integration that ends at ``t_stop``.
@@ -719,13 +712,6 @@ class Tolerances:
         self.rtol = self.default_rtol if rtol is None else float(rtol)
         self.atol = self.default_atol if atol is None else float(atol)
         super().__init__(*args, **kwargs)
-
-
-def _check_finite(arr: FloatArray, what: str) -> None:
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        idx = np.argwhere(bad)[0]
-        raise EmaError(f"{what}: non-finite value at index {tuple(int(i) for i in idx)}")
 
 
 def batch_params(params: _Params | Sequence[_Params] | None, n: int, default: Callable[[], _Params]) -> list[_Params]:

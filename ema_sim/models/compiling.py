@@ -241,6 +241,45 @@ def _expect_false(_typingctx: TypingContext, condition: types.Type
     return types.boolean(types.boolean), codegen
 
 
+def _row_values(_typingctx: TypingContext, row: types.Type, length: types.Type
+                ) -> tuple[Signature, Callable[[BaseContext, Any, Signature, list[object]], Any]] | None:
+    """Typing and code of :data:`row_values`: ``length`` loads from a contiguous row, as one tuple.
+
+    Parameters
+    ----------
+    _typingctx : numba.core.typing.Context
+        Numba's typing context (unused).
+    row : numba.core.types.Type
+        The row's type (a C-contiguous one-dimensional array).
+    length : numba.core.types.Type
+        The length's type (an integer literal).
+
+    Returns
+    -------
+    tuple or None
+        The signature and its code generator; None for other argument types.
+    """
+    if not (isinstance(row, types.Array) and row.ndim == 1 and row.layout == "C"
+            and isinstance(length, types.IntegerLiteral)):
+        return None
+    tuple_type = types.UniTuple(row.dtype, int(length.literal_value))  # type: ignore[no-untyped-call]
+
+    def codegen(context: BaseContext, builder: Any, signature: Signature, args: list[object]) -> object:
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data  # type: ignore[no-untyped-call]
+        values = [builder.load(cgutils.gep_inbounds(builder, data, k))  # type: ignore[no-untyped-call]
+                  for k in range(tuple_type.count)]
+        return context.make_tuple(builder, tuple_type, values)  # type: ignore[no-untyped-call]
+
+    return tuple_type(row, length), codegen
+
+
+row_values = cast("Callable[..., Any]", intrinsic(_row_values))
+"""``row_values(row, length)`` in a kernel: the first ``length`` values of a contiguous row (it must hold them) as a
+tuple, one load each. A kernel that takes its parameters this way holds them as values rather than memory, so what
+it derives from them is computed once, not again after each store of a state. (Numba's ``to_fixed_tuple`` builds
+the tuple in a loop that copies it whole per element: thousands of instructions for a row of 33.)"""
+
+
 unlikely = cast("Callable[[bool], bool]", intrinsic(_expect_false))
 """``unlikely(condition)`` in a kernel: the condition, with the branch it decides weighted as rarely taken.
 

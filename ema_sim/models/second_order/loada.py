@@ -21,6 +21,7 @@ import numba as nb
 import numpy as np
 
 from ema_sim.models.arrays import FloatArray
+from ema_sim.models.compiling import row_values
 from ema_sim.models.second_order import stage_set
 from ema_sim.models.second_order.figure26 import (
     command_path,
@@ -38,7 +39,7 @@ from ema_sim.models.second_order.figure26 import (
     write_outputs,
 )
 from ema_sim.models.second_order.figure29 import free_play_accel, free_play_euler
-from ema_sim.models.second_order.params import P, X
+from ema_sim.models.second_order.params import N_PARAMS, P, X
 from ema_sim.models.stages import (
     TIME_EPS_S,
     compile_closure,
@@ -80,18 +81,34 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
         The compiled kernel (see :func:`run_discrete` for its arguments).
     """
 
-    def kernel(  # noqa: PLR0915 - the stages in diagram order, one step
+    def kernel(  # noqa: PLR0912, PLR0915 - the stages in diagram order, one step
         params: FloatArray, states: FloatArray, history: FloatArray, bp_t: FloatArray, bp_u: FloatArray,
         bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray, first: int,
         stop: int,
     ) -> None:
         k_samples = sample_t.shape[0]
+        k0 = int(t0 / dt + 0.5)  # t0 is on the model's step grid: time from the step count, as one run has it
+        # what every instance reads at each step, found once for them all: the load's breakpoint, and the samples
+        # due before the next step (a sample reads the state of the last step at or before it)
+        held = np.empty(n_steps, dtype=np.int64)
+        due = np.empty(n_steps + 1, dtype=np.int64)
+        jh = 0
+        js = 0
+        for k in range(n_steps + 1):
+            t = (k0 + k) * dt
+            while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
+                js += 1
+            due[k] = js
+            if k < n_steps:
+                jh = zoh_index(bp_t, t, jh)
+                held[k] = jh
         for i in range(first, stop):
-            p = params[i]
+            p = row_values(params[i], N_PARAMS)  # values, not memory: what they derive is computed once
             x = states[i]
             hist = history[i]
+            u_i = bp_u[i if bp_u.shape[0] > 1 else 0]  # one row: the instances share their inputs
+            h_i = bp_h[i if bp_h.shape[0] > 1 else 0]
             jd = 0
-            jh = 0
             js = 0
             g_cmd = lag_gain(p[P.command_lag_hz], dt)
             g_fb = lag_gain(p[P.feedback_lag_hz], dt)
@@ -106,59 +123,70 @@ def make_euler(backward: bool, on: int) -> Kernel:  # noqa: PLR0915 - one compil
             integral = bool(on & stage_set.INTEGRAL) and p[P.integral_hz] > 0.0
             drive = bool(on & stage_set.DRIVE) and drive_on(p)
             damped = bool(on & stage_set.COMPLIANCE_LAG) and compliance_time_constant_s(p) > 0.0
-            hm = bp_h[i, zoh_index(bp_t, t0, 0)]
-            _, flags, _, _, _ = servo(p, x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps], x, hm, dt, on)
-            fb_prev = x[X.feedback_lag_deg]
-            k0 = int(t0 / dt + 0.5)  # t0 is on the model's step grid: time from the step count, as one run has it
+            # figure 26's own states in locals (registers) over the steps, back in ``x`` for what reads it there
+            cmd_lag, pos, rate = x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps]
+            fp, fp_rate = x[X.free_play_deg], x[X.free_play_rate_dps]
+            fb_lag, compliance = x[X.feedback_lag_deg], x[X.compliance_deg]
+            hm = h_i[zoh_index(bp_t, t0, 0)]
+            _, flags, _, _, _ = servo(p, cmd_lag, pos, rate, x, hm, dt, on)
+            fb_prev = fb_lag
+            jq = -1  # the breakpoint the held command ``uq`` was computed from
+            uq = 0.0
             for k in range(n_steps + 1):
                 t = (k0 + k) * dt
-                fb = x[X.feedback_lag_deg]
+                fb = fb_lag
                 # (a call that continues a run finds its first entry written by the one before, rate and all)
                 if fb_delay > 0.0 and (k > 0 or t > x[X.history_last_s] + TIME_EPS_S):
                     history_write(p, x, hist, t, fb, (fb - fb_prev) / dt, False)
                 fb_prev = fb
-                while js < k_samples and (k == n_steps or sample_t[js] < t + dt - TIME_EPS_S):
-                    if fb_delay > 0.0:
-                        fb = history_read(x, hist, sample_t[js] - fb_delay)
-                    write_outputs(p, x, fb, hm, flags, out[i, js], on)
-                    js += 1
+                until = due[k]
+                if js < until:  # the states write_outputs reads
+                    x[X.position_deg], x[X.rate_dps] = pos, rate
+                    x[X.free_play_deg], x[X.compliance_deg] = fp, compliance
+                    while js < until:
+                        if fb_delay > 0.0:
+                            fb = history_read(x, hist, sample_t[js] - fb_delay)
+                        write_outputs(p, x, fb, hm, flags, out[i, js], on)
+                        js += 1
                 if k == n_steps:
                     break
-                # stages 1-4: delayed command, command error, quantizer, command lag
-                u_del, jd = transport_delay(bp_t, bp_u[i], t, p[P.delay_s], jd)
-                jh = zoh_index(bp_t, t, jh)
-                hm = bp_h[i, jh]
-                x[X.command_lag_deg] = first_order_lag(x[X.command_lag_deg], command_path(p, u_del), g_cmd)
+                # stages 1-4: delayed command, command error, quantizer (on a new breakpoint), command lag
+                u_del, jd = transport_delay(bp_t, u_i, t, p[P.delay_s], jd)
+                if jd != jq:
+                    uq = command_path(p, u_del)
+                    jq = jd
+                hm = h_i[held[k]]
+                cmd_lag = first_order_lag(cmd_lag, uq, g_cmd)
                 # stages 5-11: the servo on the position (LOADF: one frame ahead), drive, limited integrators
-                pos, rate = x[X.position_deg], x[X.rate_dps]
-                a, flags, _, integrand, drive_accel = servo(p, x[X.command_lag_deg],
-                                                            pos + dt * rate if backward else pos, rate, x, hm, dt, on)
+                a, flags, _, integrand, drive_accel = servo(p, cmd_lag, pos + dt * rate if backward else pos, rate,
+                                                            x, hm, dt, on)
                 pos, rate = euler_pair(pos, rate, a, dt, backward)
-                x[X.position_deg], x[X.rate_dps], _ = limited_integrator(pos, rate, p[P.position_min_deg],
-                                                                           p[P.position_max_deg])
+                pos, rate, _ = limited_integrator(pos, rate, p[P.position_min_deg], p[P.position_max_deg])
                 if integral:
                     x[X.integral_deg_s] += dt * integrand
                 if drive:
                     x[X.drive_rate_dps] += dt * drive_accel
                 # stage 15: free play; 17: the linkage mode (its exact step on the spring's segment)
                 if free_play:
-                    x[X.free_play_deg], x[X.free_play_rate_dps] = free_play_euler(
-                        x[X.free_play_deg], x[X.free_play_rate_dps], hm * fp_acc_per_inlb, dt, half, backward)
+                    fp, fp_rate = free_play_euler(fp, fp_rate, hm * fp_acc_per_inlb, dt, half, backward)
                 if linkage:
                     x[X.linkage_deg], x[X.linkage_rate_dps] = linkage_step(p, x, hm, drive_accel if in_loop else a,
                                                                            link_steps)
                 # stages 12-13: LVDT and its feedback lag (gain 1 when off); 16: compliance
-                fb_pos = x[X.position_deg] + dt * x[X.rate_dps] if backward else x[X.position_deg]
-                x[X.feedback_lag_deg] = first_order_lag(x[X.feedback_lag_deg], lvdt(p, fb_pos, hm, on), g_fb)
+                fb_pos = pos + dt * rate if backward else pos
+                fb_lag = first_order_lag(fb_lag, lvdt(p, fb_pos, hm, on), g_fb)
                 if damped:  # read only when damped (an undamped compliance is its static deflection)
-                    x[X.compliance_deg] = first_order_lag(x[X.compliance_deg], surface_compliance(p, hm, on), g_c)
+                    compliance = first_order_lag(compliance, surface_compliance(p, hm, on), g_c)
+            x[X.command_lag_deg], x[X.position_deg], x[X.rate_dps] = cmd_lag, pos, rate
+            x[X.free_play_deg], x[X.free_play_rate_dps] = fp, fp_rate
+            x[X.feedback_lag_deg], x[X.compliance_deg] = fb_lag, compliance
 
     compiled: Kernel = compile_closure(kernel, f"{'backward' if backward else 'forward'}_{on}", forward_copies=True)
     return compiled
 
 
 def make_parallel(serial: Kernel, name: str) -> Kernel:
-    """The instances of ``serial`` spread over Numba's thread pool, one call of it per instance.
+    """The instances of ``serial`` spread over Numba's thread pool, one call of it per :data:`PARALLEL_CHUNK`.
 
     The per-instance arithmetic is ``serial``'s own machine code, so the outputs are the same bit for bit, and
     this thin loop compiles in seconds where a ``prange`` over the whole step loop took minutes.
@@ -181,8 +209,10 @@ def make_parallel(serial: Kernel, name: str) -> Kernel:
         bp_h: FloatArray, t0: float, dt: float, n_steps: int, sample_t: FloatArray, out: FloatArray, first: int,
         stop: int,
     ) -> None:
-        for i in nb.prange(first, stop):
-            serial(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, i, i + 1)
+        for c in nb.prange((stop - first + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK):
+            lo = first + c * PARALLEL_CHUNK
+            serial(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, lo,
+                   min(lo + PARALLEL_CHUNK, stop))
 
     compiled: Kernel = compile_closure(kernel, f"{name}_parallel", parallel=True)
     return compiled
@@ -192,6 +222,12 @@ PARALLEL_STEPS = 20_000
 """A batch runs its instances on parallel threads only when it takes at least this many instance-steps in all
 and Numba has more than one thread: a thread pool's start and join cost more than a frame of a few
 instances, and the outputs are the same bit for bit either way."""
+
+
+PARALLEL_CHUNK = 8
+"""Instances a thread takes at a time from a parallel batch, one call of the serial kernel (which finds what they
+share once per call): a thread that another process slows takes fewer of them, where halves fixed in advance
+would wait for it."""
 
 
 @functools.cache
@@ -240,9 +276,9 @@ def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp
     bp_t : numpy.ndarray
         Input breakpoint times (s).
     bp_u : numpy.ndarray
-        Command at each breakpoint, one row per instance (deg).
+        Command at each breakpoint, one row per instance or one for all (deg).
     bp_h : numpy.ndarray
-        Hinge moment at each breakpoint, one row per instance (in·lb).
+        Hinge moment at each breakpoint, one row per instance or one for all (in·lb).
     t0 : float
         Time of the first step (s).
     dt : float
@@ -261,4 +297,9 @@ def run_discrete(params: FloatArray, states: FloatArray, history: FloatArray, bp
     """
     n = params.shape[0]
     parallel = n > 1 and n * n_steps >= PARALLEL_STEPS and nb.get_num_threads() > 1
-    kernel(method, on, parallel)(params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, 0, n)
+    args = (params, states, history, bp_t, bp_u, bp_h, t0, dt, n_steps, sample_t, out, 0, n)
+    if not parallel:
+        kernel(method, on)(*args)
+        return
+    with nb.parallel_chunksize(1):  # type: ignore[attr-defined] # threads take chunks as they finish them
+        kernel(method, on, parallel)(*args)

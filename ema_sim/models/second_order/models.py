@@ -136,6 +136,7 @@ class Loada(SecondOrderModel):
     title = "Low-order actuator discrete auto-code model (LOADA)"
     default_rate_hz = 800.0
     method: ClassVar[int] = METHOD_FORWARD_EULER
+    shared_inputs = True
 
     def _trim_states(self, command_deg: FloatArray, hinge_moment_inlb: FloatArray) -> None:
         super()._trim_states(command_deg, hinge_moment_inlb)

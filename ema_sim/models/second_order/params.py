@@ -198,6 +198,8 @@ class SecondOrderParams:
 
 P = pm.kernel_layout(SecondOrderParams)
 """Kernel slots, generated from the declared kernel names (``p[P.wn_rad_s]``)."""
+N_PARAMS = len(P)
+"""Kernel slots in all (a fixed-step kernel holds an instance's as a tuple of this length)."""
 
 X = pm.slots("SecondOrderState", ("position_deg", "rate_dps", "free_play_deg", "free_play_rate_dps",
                                   "command_lag_deg", "feedback_lag_deg", "compliance_deg", "integral_deg_s",
