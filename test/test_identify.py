@@ -39,17 +39,45 @@ def run_case(effects, seed, *, declared=None, noise=NOISE, duration_s=DURATION_S
     return identify(prepare(data, WING), "second_order", declared or {})
 
 
+COAST_NOISE = 2.0
+"""The error, in noise floors, a final model may leave when its threshold is held at the holds' bound (below)."""
+
+
 def check(result, effects, expected_names, noise=NOISE):
     names = [s.effect for s in result.steps]
     assert sorted(set(names)) == sorted(expected_names), f"added {names}"
+    leaves = 1.5
     for name, value in effects.items():
         if name == "compliance" and "compliance" not in expected_names:
             continue  # declared, not added
         fitted = getattr(result.final.params, FIELD[name])
         assert fitted == pytest.approx(value, rel=0.2), f"{name}: fitted {fitted}, true {value}"
+        if name == "static_threshold":
+            leaves = max(leaves, check_threshold_bound(result, value))
     for output, sigma in zip(("position_deg", "surface_deg"), noise, strict=True):
         err = result.problem.errors_deg(result.final.sim)[output]
-        assert np.sqrt(np.mean(err**2)) <= 1.5 * sigma, f"{output} rms above 1.5× noise"
+        assert np.sqrt(np.mean(err**2)) <= leaves * sigma, f"{output} rms above {leaves:g}× noise"
+
+
+def check_threshold_bound(result, true_deg):
+    """A threshold is no wider than the largest error the output settles to; held there, it is said to be a bound.
+
+    The generator's servo stops driving at its threshold and the output coasts inward, so every hold settles
+    inside the band (at 0.0264 of 0.03, 0.077 of 0.08, 0.037 of 0.04 on these seeds, each ±0.0003): the true
+    edge is a figure no hold shows. Held at the largest settled error, the fit reports it as "at least" that,
+    and the coast it leaves unexplained (the model stops at the bound and coasts further in) costs up to
+    :data:`COAST_NOISE` noise floors instead of 1.5. Returns the noise floors the final model may leave.
+    """
+    settled = result.problem.settled
+    fitted = result.final.params.threshold_deg
+    assert fitted <= settled.bound * (1.0 + 1e-9), "a threshold wider than any hold shows"
+    assert fitted <= true_deg, "a lower bound above the true edge"
+    (step,) = [s for s in result.steps if s.effect == "static_threshold"]
+    if fitted < settled.bound * (1.0 - 1e-6):
+        return 1.5  # the fit stopped inside the bound: a point figure that explains the record
+    assert "at least" in step.evidence
+    assert "no hold shows" in step.evidence
+    return COAST_NOISE
 
 
 SINGLE = [
