@@ -8,6 +8,7 @@ vary across cases so nothing is tuned to one.
 from __future__ import annotations
 
 import json
+import tempfile
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.record import prepare
+from ema_sim.identify.report import to_json, write_report
 from ema_sim.io.bag import write_bag
 from ema_sim.io.csv import write_csv
 
@@ -73,10 +75,17 @@ def check_threshold_bound(result, true_deg):
     assert fitted <= settled.bound * (1.0 + 1e-9), "a threshold wider than any hold shows"
     assert fitted <= true_deg, "a lower bound above the true edge"
     (step,) = [s for s in result.steps if s.effect == "static_threshold"]
+    doc = to_json(result, "threshold.csv")
     if fitted < settled.bound * (1.0 - 1e-6):
+        assert "lower_bound" not in doc["final"]
         return 1.5  # the fit stopped inside the bound: a point figure that explains the record
     assert "at least" in step.evidence
     assert "no hold shows" in step.evidence
+    assert doc["final"]["lower_bound"]["threshold_deg"].startswith("at least")  # the JSON says it is a bound
+    with tempfile.TemporaryDirectory() as folder:
+        md = write_report(result, doc, folder).read_text(encoding="utf-8")
+    reported = doc["final"]["params"]["threshold_deg"]
+    assert f"| threshold_deg | ≥ {reported:.6g} |" in md  # and so does report.md's final table
     return COAST_NOISE
 
 
