@@ -8,6 +8,7 @@ vary across cases so nothing is tuned to one.
 from __future__ import annotations
 
 import json
+import re
 import tempfile
 
 import numpy as np
@@ -67,7 +68,8 @@ def check_threshold_bound(result, true_deg):
     The generator's servo stops driving at its threshold and the output coasts inward, so every hold settles
     inside the band (at 0.0264 of 0.03, 0.077 of 0.08, 0.037 of 0.04 on these seeds, each ±0.0003): the true
     edge is a figure no hold shows. Held at the largest settled error, the fit reports it as "at least" that,
-    and the coast it leaves unexplained (the model stops at the bound and coasts further in) costs up to
+    with the edge the fit reaches without the bound (the true one) beside it in the evidence; the coast it
+    leaves unexplained (the model stops at the bound and coasts further in) costs up to
     :data:`COAST_NOISE` noise floors instead of 1.5. Returns the noise floors the final model may leave.
     """
     settled = result.problem.settled
@@ -81,6 +83,9 @@ def check_threshold_bound(result, true_deg):
         return 1.5  # the fit stopped inside the bound: a point figure that explains the record
     assert "at least" in step.evidence
     assert "no hold shows" in step.evidence
+    asked = re.search(r"the fit asked for ([-+.e0-9]+) deg", step.evidence)
+    assert asked is not None, step.evidence
+    assert float(asked.group(1)) == pytest.approx(true_deg, rel=0.1)  # the edge the dynamics show, said beside
     assert doc["final"]["lower_bound"]["threshold_deg"].startswith("at least")  # the JSON says it is a bound
     with tempfile.TemporaryDirectory() as folder:
         md = write_report(result, doc, folder).read_text(encoding="utf-8")

@@ -59,7 +59,7 @@ class Settled:
         """The widest dead band (half width) the holds show: the largest settled error + half a count."""
         return self.max_abs + 0.5 * self.count
 
-    def held(self, fmt: Callable[[float], str], unit: str) -> str:
+    def held(self, fmt: Callable[[float], str], unit: str, asked: float | None = None) -> str:
         """The evidence of a dead band the fit wanted wider, held at :attr:`bound`: a lower bound, with what shows it.
 
         Parameters
@@ -68,11 +68,14 @@ class Settled:
             How a figure is written.
         unit : str
             The record's unit.
+        asked : float, optional
+            The half width the fit reaches without the bound (the edge where the drive stops, in the model).
         """
         se = f" ± {fmt(self.max_se)}" if self.max_se > 0.0 else ""
+        wider = f"{fmt(asked)} {unit}" if asked is not None and asked > self.bound else "a wider one"
         return (f"at least {fmt(self.bound)}{se} {unit}, held there: the largest error the output settles to at the "
                 f"end of the command's holds ({fmt(self.max_abs)} {unit}, + half a count) shows the band that wide; "
-                "the fit asked for a wider one, which no hold shows (an output that coasts into its band stops "
+                f"the fit asked for {wider}, which no hold shows (an output that coasts into its band stops "
                 "inside it)")
 
 
