@@ -635,8 +635,8 @@ def _markdown(result: Identification, report: IdentifyReport, out: Path) -> Path
     unc, bounds = report["final"]["uncertainty"], report["final"].get("lower_bound", {})
     for k, v in report["final"]["params"].items():
         sg = unc.get(k, "—")
-        at_least = "≥ " if k in bounds else ""
-        md.append(f"| {k} | {at_least}{_num(v, '.6g')} | {'not determined' if sg is None else _num(sg, '.3g')} |")
+        bound = "; a lower bound (≥, below)" if k in bounds else ""
+        md.append(f"| {k} | {_num(v, '.6g')} | {'not determined' if sg is None else _num(sg, '.3g')}{bound} |")
     md += ["", *(f"- {k}: {why}" for k, why in bounds.items())] if bounds else []
     if report.get("removed"):
         md += ["", "## Effects taken out again", "", "| effect | where | parameters | why |",
