@@ -13,7 +13,7 @@ beyond every hold (where the drive stopped before the coast) is a figure no hold
 figure a threshold may take (:attr:`Settled.bound`) is the largest settled error plus half the
 output's count (an output in counts cannot settle closer than that). That largest figure is a median
 of n samples, so its own uncertainty is the tail's scatter × √(π/2)/√n (:attr:`Settled.max_se`), not
-a multiple of one sample's noise: it is reported as the bound's ±1σ, never added to it. A threshold the
+a multiple of one sample's noise: it is said beside the bound ("at least … ± …"), never added to it. A threshold the
 record pays for is fitted within the bound (:attr:`ema_sim.identify.problem.Problem.caps`); when the
 fit asks for more it is held there and reported as a lower bound ("at least"), with its evidence.
 """
