@@ -8,6 +8,8 @@ vary across cases so nothing is tuned to one.
 from __future__ import annotations
 
 import json
+import re
+import tempfile
 
 import numpy as np
 import pytest
@@ -20,6 +22,7 @@ from ema_sim.config import load_channel
 from ema_sim.identify.diagnosis import diagnose
 from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.record import prepare
+from ema_sim.identify.report import to_json, write_report
 from ema_sim.io.bag import write_bag
 from ema_sim.io.csv import write_csv
 
@@ -39,17 +42,56 @@ def run_case(effects, seed, *, declared=None, noise=NOISE, duration_s=DURATION_S
     return identify(prepare(data, WING), "second_order", declared or {})
 
 
+COAST_NOISE = 2.0
+"""The error, in noise floors, a final model may leave when its threshold is held at the holds' bound (below)."""
+
+
 def check(result, effects, expected_names, noise=NOISE):
     names = [s.effect for s in result.steps]
     assert sorted(set(names)) == sorted(expected_names), f"added {names}"
+    leaves = 1.5
     for name, value in effects.items():
         if name == "compliance" and "compliance" not in expected_names:
             continue  # declared, not added
         fitted = getattr(result.final.params, FIELD[name])
         assert fitted == pytest.approx(value, rel=0.2), f"{name}: fitted {fitted}, true {value}"
+        if name == "static_threshold":
+            leaves = max(leaves, check_threshold_bound(result, value))
     for output, sigma in zip(("position_deg", "surface_deg"), noise, strict=True):
         err = result.problem.errors_deg(result.final.sim)[output]
-        assert np.sqrt(np.mean(err**2)) <= 1.5 * sigma, f"{output} rms above 1.5× noise"
+        assert np.sqrt(np.mean(err**2)) <= leaves * sigma, f"{output} rms above {leaves:g}× noise"
+
+
+def check_threshold_bound(result, true_deg):
+    """A threshold is no wider than the largest error the output settles to; held there, it is said to be a bound.
+
+    The generator's servo stops driving at its threshold and the output coasts inward, so every hold settles
+    inside the band (at 0.0264 of 0.03, 0.077 of 0.08, 0.037 of 0.04 on these seeds, each ±0.0003): the true
+    edge is a figure no hold shows. Held at the largest settled error, the fit reports it as "at least" that,
+    with the edge the fit reaches without the bound (the true one) beside it in the evidence; the coast it
+    leaves unexplained (the model stops at the bound and coasts further in) costs up to
+    :data:`COAST_NOISE` noise floors instead of 1.5. Returns the noise floors the final model may leave.
+    """
+    settled = result.problem.settled
+    fitted = result.final.params.threshold_deg
+    assert fitted <= settled.bound * (1.0 + 1e-9), "a threshold wider than any hold shows"
+    assert fitted <= true_deg, "a lower bound above the true edge"
+    (step,) = [s for s in result.steps if s.effect == "static_threshold"]
+    doc = to_json(result, "threshold.csv")
+    if fitted < settled.bound * (1.0 - 1e-6):
+        assert "lower_bound" not in doc["final"]
+        return 1.5  # the fit stopped inside the bound: a point figure that explains the record
+    assert "at least" in step.evidence
+    assert "no hold shows" in step.evidence
+    asked = re.search(r"the fit asked for ([-+.e0-9]+) deg", step.evidence)
+    assert asked is not None, step.evidence
+    assert float(asked.group(1)) == pytest.approx(true_deg, rel=0.1)  # the edge the dynamics show, said beside
+    assert doc["final"]["lower_bound"]["threshold_deg"].startswith("at least")  # the JSON says it is a bound
+    with tempfile.TemporaryDirectory() as folder:
+        md = write_report(result, doc, folder).read_text(encoding="utf-8")
+    reported = doc["final"]["params"]["threshold_deg"]
+    assert re.search(rf"^\| threshold_deg \| {reported:.6g} \| .*a lower bound", md, re.M)  # so does report.md
+    return COAST_NOISE
 
 
 SINGLE = [

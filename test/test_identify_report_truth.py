@@ -118,10 +118,10 @@ def test_a_threshold_wider_than_the_settled_error_is_not_added():
                               data=SimpleNamespace(unit="mm"))
     check = BY_KEY["static_threshold/feedback"].check
     ctx = SimpleNamespace(problem=problem)
-    # the largest settled error, half a count and 3x the noise beyond the count's own share
-    assert settled.limit(0.001) == pytest.approx(0.004 + 0.0005 + 3 * 0.001 * np.sqrt(11 / 12))
-    assert check({"threshold_deg": 0.0065}, ctx) is None
-    assert check({"threshold_deg": 0.0085}, ctx) is not None
+    # the largest settled error and half a count: what the holds show, no noise margin added to the point
+    assert settled.bound == pytest.approx(0.004 + 0.0005)
+    assert check({"threshold_deg": 0.0045}, ctx) is None
+    assert check({"threshold_deg": 0.0047}, ctx) is not None
     why = check({"threshold_deg": 0.764}, ctx)
     assert why is not None
     assert "settles to" in why
@@ -134,7 +134,25 @@ def test_an_output_in_counts_that_settles_on_its_command_leaves_room_for_half_a_
     settled = settled_error(t, cmd, cmd.copy(), 0.01)
     assert settled is not None
     assert settled.median_abs == 0.0
-    assert settled.limit(0.01 / np.sqrt(12)) == pytest.approx(0.005)
+    assert settled.bound == pytest.approx(0.005)
+    assert settled.max_se == 0.0
+
+
+def test_the_largest_settled_error_carries_the_standard_error_of_its_own_median():
+    """Each hold's settled error is a median of its tail: its uncertainty is the tail's noise × √(π/2)/√n."""
+    t = np.arange(40000) / 1000.0
+    cmd = np.repeat(np.tile([0.0, 1.0], 20), 1000)
+    offset = np.repeat(np.tile([0.002, -0.003], 20), 1000)
+    offset[-1000:] = 0.006  # one hold stops furthest off
+    pos = cmd + offset + np.random.default_rng(7).normal(0.0, 0.002, t.size)
+    settled = settled_error(t, cmd, pos)
+    assert settled is not None
+    assert settled.max_abs == pytest.approx(0.006, abs=3e-4)
+    assert settled.max_se == pytest.approx(1.2533 * 0.002 / np.sqrt(300), rel=0.15)
+    assert settled.bound == settled.max_abs  # its uncertainty is said beside the bound, not added to it
+    text = settled.held(lambda v: f"{v:.2g}", "mm")
+    assert text.startswith(f"at least {settled.bound:.2g} ± ")
+    assert "no hold shows" in text
 
 
 def test_a_fitted_dead_band_is_bounded_by_what_the_records_holds_allow():

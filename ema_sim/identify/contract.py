@@ -124,6 +124,8 @@ class Final(TypedDict):
     correlation: dict[str, Params]
     not_determined: list[str]
     not_determined_reason: NotRequired[dict[str, str]]
+    lower_bound: NotRequired[dict[str, str]]
+    """Parameters the record shows only as "at least" their figure (a dead band held at its holds' bound), and why."""
     grid_searched: list[str]
     hinge_moment_reversed: bool
     curves: NotRequired[dict[str, list[Num]]]

@@ -19,7 +19,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ema_sim.identify.problem import Problem
-from ema_sim.identify.settled import NOISE_MARGIN
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
 
@@ -386,14 +385,13 @@ def _dead_band(name: str, value: float, what: str, half: float = 1.0) -> Check:
             return low
         p = ctx.problem
         settled = p.settled
-        noise = p.sigma_deg["position_deg" if "position_deg" in p.outputs else "surface_deg"]
-        if settled is None or half * v[name] <= settled.limit(noise) * (1.0 + 1e-9):
+        if settled is None or half * v[name] <= settled.bound * (1.0 + 1e-9):
             return None
         unit = p.data.unit
         return (f"{what} {v[name]:.4g} {unit} is larger than any error the output settles to at the end of the "
                 f"command's holds (median {settled.median_abs:.3g}, largest {settled.max_abs:.3g} {unit} over "
-                f"{settled.holds} holds; + half a count and {NOISE_MARGIN:g}× the noise beyond it: "
-                f"{settled.limit(noise):.3g}): it explains no settled error, it stands in for something else")
+                f"{settled.holds} holds; + half a count: {settled.bound:.3g}): it explains no settled error, it stands "
+                "in for something else")
     return check
 
 

@@ -156,6 +156,7 @@ def fit(
     *,
     flip: bool = False,
     max_nfev: int = 40,
+    capped: bool = True,
 ) -> Fit:
     """Fit ``free_fields`` of ``base`` to the record; everything else stays as in ``base``.
 
@@ -171,8 +172,10 @@ def fit(
         Run with the hinge moment reversed (the hinge_moment_sign effect).
     max_nfev : int
         Most residual evaluations of the optimiser.
+    capped : bool
+        Keep the record's own bounds (:attr:`Problem.caps`); False asks how far the fit would go without them.
     """
-    free = [FREE[f].capped(problem.caps.get(f)) for f in free_fields]
+    free = [FREE[f].capped(problem.caps.get(f) if capped else None) for f in free_fields]
     obj = _Objective(problem, base, free, flip)
     x0 = np.array([f.to_x(getattr(base, f.field)) for f in free], dtype=float)
     if free:

@@ -359,14 +359,13 @@ class Problem:
     def caps(self) -> dict[str, float]:
         """The record's own upper bounds on fitted parameters.
 
-        A dead band no wider than the holds' settled errors allow (:meth:`ema_sim.identify.settled.Settled.limit`):
+        A dead band no wider than the holds' settled errors show (:attr:`ema_sim.identify.settled.Settled.bound`):
         a threshold the holds support is fitted within that.
         """
         settled = self.settled
         if settled is None:
             return {}
-        output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
-        return {"threshold_deg": settled.limit(self.sigma_deg[output])}
+        return {"threshold_deg": settled.bound}
 
     @cached_property
     def settled(self) -> Settled | None:

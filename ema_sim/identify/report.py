@@ -64,6 +64,16 @@ def _params(result: Identification, fit: Fit) -> dict[str, float]:
     return out
 
 
+def _lower_bounds(result: Identification, fit: Fit, unit: str) -> dict[str, str]:
+    """Parameters held at the record's own bound (:attr:`Problem.caps`): figures the record shows only as "at least"."""
+    p, names = result.problem, _names(result, fit)
+    settled = p.settled
+    if settled is None:
+        return {}
+    return {names[f]: settled.held(lambda v: format(v, ".4g"), unit) for f, cap in p.caps.items()
+            if f in fit.free and float(getattr(fit.params, f)) >= cap * (1.0 - 1e-6)}
+
+
 def _physical_final(result: Identification) -> dict[str, object]:
     """The final block of a high-order model whose physical parameters were fitted (model names and units)."""
     pf = result.physical
@@ -288,6 +298,7 @@ def to_json(result: Identification, data_name: str) -> IdentifyReport:
                 ([names[f] for f in ident.not_determined] if ident is not None else [])
                 + [names[f] for f, v in final.sigma.items() if v == 0.0])),
             "not_determined_reason": {names[f]: ZERO_SIGMA for f, v in final.sigma.items() if v == 0.0},
+            **({"lower_bound": bounds} if (bounds := _lower_bounds(result, final, unit)) else {}),
             "grid_searched": [names[f] for f in final.free if final.jac_free and f not in final.jac_free],
             "hinge_moment_reversed": final.flip,
             **_stats(p, final),
@@ -621,10 +632,12 @@ def _markdown(result: Identification, report: IdentifyReport, out: Path) -> Path
     md += ["", "## Final model", "", f"`{report['final']['model']}`", ""]
     md += _md_terms(report)
     md += ["## Final parameters", "", "| parameter | value | ±1σ |", "| --- | --- | --- |"]
-    unc = report["final"]["uncertainty"]
+    unc, bounds = report["final"]["uncertainty"], report["final"].get("lower_bound", {})
     for k, v in report["final"]["params"].items():
         sg = unc.get(k, "—")
-        md.append(f"| {k} | {_num(v, '.6g')} | {'not determined' if sg is None else _num(sg, '.3g')} |")
+        bound = "; a lower bound (≥, below)" if k in bounds else ""
+        md.append(f"| {k} | {_num(v, '.6g')} | {'not determined' if sg is None else _num(sg, '.3g')}{bound} |")
+    md += ["", *(f"- {k}: {why}" for k, why in bounds.items())] if bounds else []
     if report.get("removed"):
         md += ["", "## Effects taken out again", "", "| effect | where | parameters | why |",
                "| --- | --- | --- | --- |"]

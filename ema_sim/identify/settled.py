@@ -6,18 +6,21 @@ threshold larger than the settled error it would explain is a proxy for somethin
 a slow tail), and identification does not add it (:mod:`ema_sim.identify.effects`).
 
 The settled error of one hold is the median of output − command over the last :data:`TAIL` of it.
-A static threshold (a dead band on the servo's error) stops driving the output once the error enters
-its band; the output coasts inward from the edge, so every settled error lies within the band's half
-width and the largest of them is the closest look at it. A band may be as wide as the largest settled
-error, plus half the output's count (an output in counts cannot settle closer than that) and
-:data:`NOISE_MARGIN` times the noise floor beyond the count's own share (q/√12, which the half count
-already covers). A threshold the record pays for is fitted within this bound
-(:attr:`ema_sim.identify.problem.Problem.caps`) and said to be held there when the fit asked for more.
+A dead band stops driving the output once the error enters it; the output coasts inward from the edge,
+so every settled error lies within the band's half width and the largest of them is the closest look
+at it the record has. The holds therefore show the band *at least* that wide, and no wider: an edge
+beyond every hold (where the drive stopped before the coast) is a figure no hold shows. The point
+figure a threshold may take (:attr:`Settled.bound`) is the largest settled error plus half the
+output's count (an output in counts cannot settle closer than that). That largest figure is a median
+of n samples, so its own uncertainty is the tail's scatter × √(π/2)/√n (:attr:`Settled.max_se`), not
+a multiple of one sample's noise: it is said beside the bound ("at least … ± …"), never added to it. A threshold the
+record pays for is fitted within the bound (:attr:`ema_sim.identify.problem.Problem.caps`); when the
+fit asks for more it is held there and reported as a lower bound ("at least"), with its evidence.
 """
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,8 +33,10 @@ TAIL = 0.3
 """The share of each hold, at its end, the settled error is read on."""
 MIN_HOLDS = 3
 """Fewer holds than this say nothing about where the output settles."""
-NOISE_MARGIN = 3.0
-"""Noise floors (beyond the count's share) a settled error may be read short by."""
+MAD_TO_SIGMA = 1.4826
+"""A normal scatter's standard deviation over its median absolute deviation."""
+MEDIAN_EFFICIENCY = 1.2533
+"""A median's standard error over the mean's, for Gaussian noise (√(π/2))."""
 
 
 @dataclass(frozen=True)
@@ -46,17 +51,32 @@ class Settled:
     """How many holds it was read on."""
     count: float
     """The output's count (0: continuous), in the record's unit."""
+    max_se: float = 0.0
+    """Standard error of the largest one: its hold's tail scatter × √(π/2) / √(its samples)."""
 
-    def limit(self, noise: float) -> float:
-        """The widest dead band (half width) the settled errors can explain (module docstring).
+    @property
+    def bound(self) -> float:
+        """The widest dead band (half width) the holds show: the largest settled error + half a count."""
+        return self.max_abs + 0.5 * self.count
+
+    def held(self, fmt: Callable[[float], str], unit: str, asked: float | None = None) -> str:
+        """The evidence of a dead band the fit wanted wider, held at :attr:`bound`: a lower bound, with what shows it.
 
         Parameters
         ----------
-        noise : float
-            The output's noise floor, in the record's unit.
+        fmt : callable
+            How a figure is written.
+        unit : str
+            The record's unit.
+        asked : float, optional
+            The half width the fit reaches without the bound (the edge where the drive stops, in the model).
         """
-        beyond_count = math.sqrt(max(noise * noise - self.count * self.count / 12.0, 0.0))
-        return self.max_abs + 0.5 * self.count + NOISE_MARGIN * beyond_count
+        se = f" ± {fmt(self.max_se)}" if self.max_se > 0.0 else ""
+        wider = f"{fmt(asked)} {unit}" if asked is not None and asked > self.bound else "a wider one"
+        return (f"at least {fmt(self.bound)}{se} {unit}, held there: the largest error the output settles to at the "
+                f"end of the command's holds ({fmt(self.max_abs)} {unit}, + half a count) shows the band that wide; "
+                f"the fit asked for {wider}, which no hold shows (an output that coasts into its band stops "
+                "inside it)")
 
 
 def _holds(time_s: FloatArray, command: FloatArray) -> list[tuple[int, int]]:
@@ -86,13 +106,17 @@ def settled_error(time_s: FloatArray, command: FloatArray, output: FloatArray, c
     Returns
     -------
     Settled or None
-        The settled error and how many holds it was read on.
+        The settled error, its largest value's standard error and how many holds it was read on.
     """
     spans = _holds(np.asarray(time_s, dtype=float), np.asarray(command, dtype=float))
     if len(spans) < MIN_HOLDS:
         return None
-    errs = []
+    errs, ses = [], []
     for a, b in spans:
         k = a + int((1.0 - TAIL) * (b - a))
-        errs.append(abs(float(np.median(output[k:b] - command[k:b]))))
-    return Settled(float(np.median(errs)), float(np.max(errs)), len(errs), float(count or 0.0))
+        e = output[k:b] - command[k:b]
+        mid = float(np.median(e))
+        errs.append(abs(mid))
+        ses.append(MEDIAN_EFFICIENCY * MAD_TO_SIGMA * float(np.median(np.abs(e - mid))) / np.sqrt(e.size))
+    top = int(np.argmax(errs))
+    return Settled(float(np.median(errs)), errs[top], len(errs), float(count or 0.0), float(ses[top]))

@@ -270,8 +270,9 @@ def _entries(problem: Problem, cur: Fit, new: Fit, cand: Candidate) -> list[Step
     instead = f"; replaces {', '.join(removed)}" if removed else ""
     held = [f for f in effect.fields if f in problem.caps
             and float(getattr(new.params, f)) >= problem.caps[f] * (1.0 - 1e-6)]
-    at_cap = "".join(f"; held at {_fmt(problem.caps[f])} {problem.data.unit}, the widest dead band the settled errors "
-                     "of the command's holds allow (the fit asked for more)" for f in held)
+    asked = fit(problem, new.params, new.free, flip=new.flip, capped=False) if held else None
+    at_cap = (f"; {problem.settled.held(_fmt, problem.data.unit, float(getattr(asked.params, held[0])))}"
+              if asked is not None and problem.settled is not None else "")
     evidence = (f"{effect.evidence(problem.data.command_deg)} (partial ρ = {abs(cand.rho):.2f}); fitted {fitted}"
                 f"{where}{instead}{at_cap}; error above the noise floor: {cut}")
     steps.append(Step(effect.name, effect.where, vocab, sigma, before, after, evidence, removed))
