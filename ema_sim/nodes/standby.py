@@ -46,6 +46,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             warm(rest)
         except Exception as exc:  # a head start only: the node reports its own errors when it runs
             print(f"standby: no head start for {module} ({type(exc).__name__}: {exc})", file=sys.stderr, flush=True)
+    print(f"standby: {module} ready", flush=True)  # in the node's log: a restart from here is warm
     if sys.stdin.readline().strip() != GO:
         return 0
     sys.argv = [module, *rest]
