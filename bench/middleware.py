@@ -33,11 +33,12 @@ from sensor_msgs.msg import JointState
 
 from ema_msgs_py import contract as ct
 from ema_msgs_py.ros import qos
+from ema_sim import config
 from ema_sim.benchmark import Benchmark, Result
 from ema_sim.nodes.common import SuiteNode
 from ema_sim.suite import free_domain_id
 
-CHANNELS = ["left_wing", "right_wing", "left_rudder", "right_rudder", "cowl_door"]
+CHANNELS = list(config.CHANNELS)
 ROLES = ["testenv", *(f"emac_{ch}" for ch in CHANNELS), "fmu"]
 SECONDS = float(os.environ.get("EMA_BENCH_MIDDLEWARE_S", "30"))
 PERIOD_S = 0.005
