@@ -42,6 +42,32 @@ def splitmix64(seed: int) -> np.uint64:
 
 
 @jit
+def xorshift(x: np.uint64) -> tuple[np.uint64, np.uint64]:
+    """xorshift64*'s step on a state held in a register: the next state and its output word.
+
+    The kernels hold their generator's state in a local through a run (a state in an array is written
+    back and read again at every draw) and store it once at the end; the array forms below wrap these.
+
+    Parameters
+    ----------
+    x : numpy.uint64
+        The state.
+
+    Returns
+    -------
+    state : numpy.uint64
+        The next state.
+    word : numpy.uint64
+        The output word.
+    """
+    x ^= x >> np.uint64(12)
+    x ^= x << np.uint64(25)
+    x ^= x >> np.uint64(27)
+    out: np.uint64 = x * np.uint64(0x2545F4914F6CDD1D)
+    return x, out
+
+
+@jit
 def next_u64(state: np.ndarray) -> np.uint64:
     """The next 64-bit output of xorshift64*; advances ``state[0]``.
 
@@ -55,13 +81,15 @@ def next_u64(state: np.ndarray) -> np.uint64:
     numpy.uint64
         The output word.
     """
-    x = state[0]
-    x ^= x >> np.uint64(12)
-    x ^= x << np.uint64(25)
-    x ^= x >> np.uint64(27)
+    x, out = xorshift(state[0])
     state[0] = x
-    out: np.uint64 = x * np.uint64(0x2545F4914F6CDD1D)
     return out
+
+
+@jit
+def _unit(word: np.uint64) -> float:
+    """A word's top 53 bits as a uniform draw in (0, 1]."""
+    return (float(word >> np.uint64(11)) + 1.0) * _U53
 
 
 @jit
@@ -78,8 +106,7 @@ def uniform(state: np.ndarray) -> float:
     float
         The draw.
     """
-    r = next_u64(state)
-    return (float(r >> np.uint64(11)) + 1.0) * _U53
+    return _unit(next_u64(state))
 
 
 def _ziggurat_tables(levels: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -113,18 +140,57 @@ _ZIG_R = 3.442619855899
 
 
 @jit
-def _signed_draw(state: np.ndarray) -> tuple[np.int64, np.int64]:
-    """A signed 32-bit integer and an independent 7-bit layer from one 64-bit draw."""
-    r = next_u64(state)
-    hz = np.int64(r >> np.uint64(32))
+def _signed_draw(word: np.uint64) -> tuple[np.int64, np.int64]:
+    """A signed 32-bit integer and an independent 7-bit layer from one 64-bit word."""
+    hz = np.int64(word >> np.uint64(32))
     if hz >= 2147483648:
         hz -= 4294967296
-    return hz, np.int64(r & np.uint64(127))
+    return hz, np.int64(word & np.uint64(127))
+
+
+@jit
+def normal_held(x: np.uint64) -> tuple[float, np.uint64]:
+    """A standard normal draw by the ziggurat from a state held in a register: the draw and the next state.
+
+    One multiply on 98.8 % of draws, exact in the tails (Marsaglia and Tsang).
+
+    Parameters
+    ----------
+    x : numpy.uint64
+        The generator's state.
+
+    Returns
+    -------
+    draw : float
+        The draw.
+    state : numpy.uint64
+        The advanced state.
+    """
+    x, word = xorshift(x)
+    hz, iz = _signed_draw(word)
+    while True:
+        if abs(hz) < _ZIG_K[iz]:
+            return float(hz * _ZIG_W[iz]), x
+        z = float(hz * _ZIG_W[iz])
+        if iz == 0:  # the tail beyond r, by Marsaglia's exponential method
+            while True:
+                x, word = xorshift(x)
+                z = -math.log(_unit(word)) / _ZIG_R
+                x, word = xorshift(x)
+                y = -math.log(_unit(word))
+                if y + y >= z * z:
+                    break
+            return (_ZIG_R + z if hz > 0 else -_ZIG_R - z), x
+        x, word = xorshift(x)
+        if _ZIG_F[iz] + _unit(word) * (_ZIG_F[iz - 1] - _ZIG_F[iz]) < math.exp(-0.5 * z * z):
+            return z, x
+        x, word = xorshift(x)
+        hz, iz = _signed_draw(word)
 
 
 @jit
 def normal(state: np.ndarray) -> float:
-    """A standard normal draw by the ziggurat: one multiply on 98.8 % of draws, exact in the tails.
+    """A standard normal draw by the ziggurat (:func:`normal_held`); advances ``state[0]``.
 
     Parameters
     ----------
@@ -136,21 +202,36 @@ def normal(state: np.ndarray) -> float:
     float
         The draw.
     """
-    hz, iz = _signed_draw(state)
-    while True:
-        if abs(hz) < _ZIG_K[iz]:
-            return float(hz * _ZIG_W[iz])
-        x = float(hz * _ZIG_W[iz])
-        if iz == 0:  # the tail beyond r, by Marsaglia's exponential method
-            while True:
-                x = -math.log(uniform(state)) / _ZIG_R
-                y = -math.log(uniform(state))
-                if y + y >= x * x:
-                    break
-            return _ZIG_R + x if hz > 0 else -_ZIG_R - x
-        if _ZIG_F[iz] + uniform(state) * (_ZIG_F[iz - 1] - _ZIG_F[iz]) < math.exp(-0.5 * x * x):
-            return x
-        hz, iz = _signed_draw(state)
+    draw, state[0] = normal_held(state[0])
+    return draw
+
+
+@jit
+def band_limited_held(value: float, decay: float, innovation: float, x: np.uint64) -> tuple[float, np.uint64]:
+    """One step of first-order noise (:func:`band_limited_step`) from a state held in a register.
+
+    Parameters
+    ----------
+    value : float
+        The noise so far.
+    decay : float
+        ``a = exp(−2π·bandwidth·dt)``.
+    innovation : float
+        ``σ·√(1 − a²)`` (0: the noise is off and nothing is drawn).
+    x : numpy.uint64
+        The generator's state.
+
+    Returns
+    -------
+    noise : float
+        The noise after the step.
+    state : numpy.uint64
+        The advanced state.
+    """
+    if innovation == 0.0:
+        return 0.0, x
+    draw, x = normal_held(x)
+    return decay * value + innovation * draw, x
 
 
 @jit
@@ -175,6 +256,5 @@ def band_limited_step(value: float, decay: float, innovation: float, state: np.n
     float
         The noise after the step.
     """
-    if innovation == 0.0:
-        return 0.0
-    return decay * value + innovation * normal(state)
+    noise, state[0] = band_limited_held(value, decay, innovation, state[0])
+    return noise

@@ -247,6 +247,7 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         xi = x[X.integral_in_s]
         flags = int(x[X.flags])
         head = int(x[X.delay_head])
+        rng_state = rng[0]  # held in a register through the run, stored once at the end
         jd = zoh_index(bp_t, t0 - delay_lo, 0)
         jd_hi = zoh_index(bp_t, t0 - delay_hi, 0)
         jh = zoh_index(bp_t, t0, 0)
@@ -273,8 +274,8 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
             hm = bp_h[i, jh]
             flags = 0
             # stages 1–3: delayed, quantized command with noise (volts → inches at its calibration slope)
-            ncmd = nz.band_limited_step(ncmd, a_cmd, w_cmd, rng)
-            nfb = nz.band_limited_step(nfb, a_cmd, w_fbn, rng)  # stage 17's, drawn with the step's
+            ncmd, rng_state = nz.band_limited_held(ncmd, a_cmd, w_cmd, rng_state)
+            nfb, rng_state = nz.band_limited_held(nfb, a_cmd, w_fbn, rng_state)  # stage 17's, drawn with the step's
             xc = cmd_in[i, jd] + ncmd * cmd_slope[i, jd]
             xc_hi = xc  # the command one step older, when the delay falls between two steps and it differs
             if w_cmd_delay > 0.0:
@@ -343,3 +344,4 @@ def run_discrete(params: FloatArray, states: FloatArray, rngs: UIntArray, buffer
         x[X.integral_in_s] = xi
         x[X.flags] = flags
         x[X.delay_head] = head
+        rng[0] = rng_state
