@@ -226,9 +226,10 @@ def statement(output: str, reg: Regression, unit: str) -> str:
     """
     who = _name(output)
     if not reg.selected:
-        tried = ", ".join(s.term.name for s in reg.dropped)
-        return (f"no term of the library explains the residual on {who}"
-                + (f" ({tried} tried and dropped: the two halves of the record disagree about them)" if tried else ""))
+        tried = "; ".join(f"{s.term.name}, which would explain {100 * s.share:.0f} % of its variance, dropped: {s.why}"
+                          for s in reg.dropped)
+        return (f"no term of the library that holds up explains the residual on {who}"
+                + (f" ({tried})" if tried else ""))
     eq = " ".join(describe(s.term, s.coef, unit) for s in reg.selected)
     meanings = "; ".join(f"{s.term.name}: {s.term.meaning}" for s in reg.selected)
     return (f"the residual on {who} ≈ {eq} ({100 * reg.excess_explained:.0f} % of its variance above the noise "

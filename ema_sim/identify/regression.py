@@ -12,12 +12,12 @@ left first, while
 After each entry a term already in that no longer passes (:data:`ALPHA_OUT`) leaves again. Each term's
 coefficients carry a coloured-residual uncertainty (Morelli and Klein), its share of the variance (what
 it adds when entered last), its significance, and whether the record agrees with itself about it: the
-same terms fitted on each half of the record must give coefficients within three combined sigma and
-of the same sign (a share of their size is no excuse: two halves that disagree beyond their
-uncertainty say the term is no property of the record), and each half must find it on its own (its
-coefficient :data:`HALF_FOUND` standard errors of that half from zero: halves 14× apart that "agree" only
-within a wide uncertainty have not both found it). A half that does not excite a term gives no coefficient
-for it. A term that does not hold up is returned as tried and dropped, with why.
+same terms fitted on each half of the record must give coefficients within three combined sigma (never
+more than six of the whole record's) and of the same sign (a share of their size is no excuse: two halves
+that disagree beyond their uncertainty say the term is no property of the record), and each half must find
+it on its own (its coefficient :data:`HALF_FOUND` standard errors of that half from zero: halves 14×
+apart that "agree" only within a wide uncertainty have not both found it). A half that does not excite a
+term gives no coefficient for it. A term that does not hold up is returned as tried and dropped, with why.
 """
 
 from __future__ import annotations
@@ -261,7 +261,7 @@ def _summarise(e: FloatArray, chosen: list[Term], tss: float, excess: float) -> 
     cov = block_covariance([r], [a])
     sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     ss_all = float(np.dot(r, r))
-    halves = _halves(e, chosen)
+    halves = _halves(e, chosen, sig)
     col = 0
     held: list[Term] = []
     for term in chosen:
@@ -308,8 +308,15 @@ Halves = tuple[bool, str, tuple[tuple[float, ...], tuple[float, ...]]]
 """Whether a term holds on both halves, why not, and its coefficients on each."""
 
 
-def _halves(e: FloatArray, chosen: list[Term]) -> dict[str, Halves]:
-    """Each term's coefficients on the first and the second half, and whether they agree (module docstring)."""
+def _halves(e: FloatArray, chosen: list[Term], whole_sigma: FloatArray) -> dict[str, Halves]:
+    """Each term's coefficients on the first and the second half, and whether they agree (module docstring).
+
+    Two halves that both excite a term differ, by chance alone, by about twice the whole record's standard
+    error (each half has half the samples); their own coloured-residual errors, estimated from half the
+    samples each, scatter about that. The halves are compared within the smaller of the two, so a term
+    whose halves differ beyond six of the whole record's standard errors (the uncertainty reported beside
+    it) is never said to hold.
+    """
     n = e.size
     mid = n // 2
     parts = (slice(0, mid), slice(mid, n))
@@ -337,12 +344,17 @@ def _halves(e: FloatArray, chosen: list[Term]) -> dict[str, Halves]:
         if term.width == 2:  # a tone: compare its amplitude and phase as one complex number
             z1, z2 = complex(c1[k][0], c1[k][1]), complex(c2[k][0], c2[k][1])
             r1, r2 = float(np.hypot(*s1[k])), float(np.hypot(*s2[k]))
-            agree = abs(z1 - z2) <= HALF_SIGMA * math.hypot(r1, r2)
+            spread = math.hypot(r1, r2)
+            if not unexcited:
+                spread = min(spread, 2.0 * float(np.hypot(*whole_sigma[k])))
+            agree = abs(z1 - z2) <= HALF_SIGMA * spread
             found = abs(z1) > HALF_FOUND * r1 and abs(z2) > HALF_FOUND * r2
             same_sign = True
         else:
             d = np.abs(c1[k] - c2[k])
             spread_v = np.hypot(s1[k], s2[k])
+            if not unexcited:
+                spread_v = np.minimum(spread_v, 2.0 * whole_sigma[k])
             agree = bool(np.all(d <= HALF_SIGMA * spread_v))
             found = bool(np.all(np.abs(c1[k]) > HALF_FOUND * s1[k]) and np.all(np.abs(c2[k]) > HALF_FOUND * s2[k]))
             same_sign = unexcited or bool(np.all(np.sign(c1[k]) == np.sign(c2[k])))

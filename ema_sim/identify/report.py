@@ -646,6 +646,7 @@ def _markdown(result: Identification, report: IdentifyReport, out: Path) -> Path
     md += _changes_md(report.get("changes"))
     md += ["", "## What the final model leaves (residual diagnosis)", ""]
     md += [f"- {line}" for line in _texts((report["diagnosis"] or {}).get("text"))]
+    md += [f"- discovery: {line}" for line in _texts((report["discovered"] or {}).get("text"))]
     if report["rejected"]:
         md += ["", "## Candidates fitted and rejected", "", "| effect | where | value | why |",
                "| --- | --- | --- | --- |"]
