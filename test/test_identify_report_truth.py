@@ -26,7 +26,7 @@ from ema_sim.identify.fit import block_covariance, correlation
 from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.library import library
 from ema_sim.identify.record import prepare
-from ema_sim.identify.regression import stepwise
+from ema_sim.identify.regression import Term, _halves, stepwise
 from ema_sim.identify.report import summary, to_json, write_json, write_report
 from ema_sim.identify.settled import settled_error
 
@@ -105,6 +105,24 @@ def test_halves_that_disagree_beyond_their_uncertainty_do_not_hold():
     dropped = {s.term.name: s for s in reg.dropped}
     assert "sign(rate)" not in held
     assert "beyond their uncertainty" in dropped["sign(rate)"].why
+
+
+def test_halves_never_agree_beyond_six_of_the_whole_record_s_reported_sigma():
+    rng = np.random.default_rng(11)
+    n = 20_000
+    column = rng.normal(0.0, 1.0, n)
+    noise = rng.normal(0.0, 1.0, n)
+    whole = 1.0 / np.sqrt(n)  # the coefficient's standard error on white noise of unit rms
+    step = 5.0 * whole  # the halves' coefficients 5 whole-record sigma apart: within 3·(2σ), chance can do it
+    e = np.where(np.arange(n) < n // 2, 0.1, 0.1 + step) * column + noise
+    term = Term("x", column[:, None], "", "a column", "motion")
+    holds, _, (first, second) = _halves(e, [term], np.array([whole]))[term.name]
+    assert holds
+    assert 4.0 * whole < second[0] - first[0] < 6.0 * whole
+    # the same halves against a whole record that reports half that uncertainty: 10 of its sigma apart
+    holds, why, _ = _halves(e, [term], np.array([whole / 2.0]))[term.name]
+    assert not holds
+    assert "beyond their uncertainty" in why
 
 
 def test_a_threshold_wider_than_the_settled_error_is_not_added():
