@@ -108,8 +108,8 @@ FTOL = 1e-8
 """A fit's round stops once a step removes less than this share of its weighted error (least squares' default)."""
 START_FTOL = 1e-6
 """The same for the fits from shifted starts: a millionth of the error (0.07 of 71,000 on the 30 s HOAD3 record)
-moves neither which end is best (their mean costs differ by units) nor their spread (the ends' own spread is
-hundreds); there they spent a third of their runs below it (962 → 637 runs)."""
+moves neither which end is best (their mean costs differ by units) nor their spread (the ends' costs differ by
+hundreds); there they spent a third of their runs below it, and their restarts after converging gained 0.004."""
 KEPT_RUNS_BYTES = 48 * 2**20
 """Most memory a fit's kept runs may take: 66 runs of 30 s at 1 kHz, so a Jacobian's 28 runs at a fit's end are
 still kept when the uncertainty asks for them at the same point."""
@@ -295,7 +295,8 @@ def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEE
          end: dict[str, FloatArray] | None = None, ftol: float = FTOL) -> FloatArray:
     """Least squares over the ``free`` coordinates of ``x`` (the others held).
 
-    ``end`` takes the residual (``fun``) and the free coordinates' Jacobian (``jac``) where it ended.
+    ``end`` takes the residual (``fun``), the free coordinates' Jacobian (``jac``) where it ended and least
+    squares' ``status`` (above 0: a tolerance ended it).
     """
     if not free:
         return x
@@ -322,23 +323,23 @@ def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEE
                         max_nfev=nfev, ftol=ftol)
     if end is not None:
         end["fun"], end["jac"] = np.asarray(out.fun, dtype=float), np.asarray(out.jac, dtype=float)
+        end["status"] = np.array([out.status], dtype=float)
     return put(np.asarray(out.x, dtype=float))
 
 
 def _scan(runs: _Runs, x: FloatArray, i: int, grid: FloatArray) -> FloatArray:
     """Coordinate ``i`` on ``grid`` (the others held), the best kept."""
-    points = []
-    for g in grid:
-        y = x.copy()
+    points = [x.copy() for _ in grid]
+    for y, g in zip(points, grid, strict=True):
         y[i] = max(float(g), 0.0)
-        points.append(y)
-    costs = runs.costs(points)
-    return points[int(np.argmin(costs))]
+    return points[int(np.argmin(runs.costs(points)))]
 
 
 def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None,
-                   why: list[str] | None = None, ftol: float = FTOL) -> FloatArray:
+                   why: list[str] | None = None, shifted: bool = False) -> FloatArray:
     """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`).
+
+    A fit from a shifted start (``shifted``) stops at :data:`START_FTOL`, and once a tolerance ends a round.
 
     With ``beat`` (an escalation's error to get under), the fit runs in rounds of :data:`SCREEN_NFEV`
     evaluations and stops once even :data:`SCREEN_OPTIMISM` times the last round's drop, in every round
@@ -350,14 +351,14 @@ def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEED
     nfev, rounds = (MAX_NFEV, POLISH_ROUNDS) if beat is None else (SCREEN_NFEV, POLISH_ROUNDS * MAX_NFEV // SCREEN_NFEV)
     for k in range(rounds):
         end: dict[str, FloatArray] = {}
-        y = _fit(runs, x, free, nfev, seed, end, ftol)
+        y = _fit(runs, x, free, nfev, seed, end, START_FTOL if shifted else FTOL)
         c = runs.cost(y, seed)
         if c >= cost:
             break
         gain = (cost - c) / max(cost - runs.problem.n_fit, TINY)
         drop = cost - c
         x, cost = y, c
-        if gain < POLISH_SHARE:
+        if gain < POLISH_SHARE or (shifted and end.get("status", np.zeros(1))[0] > 0):
             break
         if beat is None:
             continue
@@ -418,7 +419,7 @@ def remote_start(problem: Problem, model: str, names: list[str], declared: dict[
     """
     runs = _Runs(problem, model, names, declared, options)
     with one_blas_thread():
-        return _fit_restarted(runs, x, free, seed, ftol=START_FTOL), runs.count
+        return _fit_restarted(runs, x, free, seed, shifted=True), runs.count
 
 
 def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL,
@@ -612,7 +613,7 @@ def _other_starts(runs: _Runs, x: FloatArray, free: list[int], pool: Pool) -> li
     client = pool.client()
     starts = [(_shifted(runs, x, free, sign), seed) for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True)]
     if client is None:
-        return [_fit_restarted(runs, start, free, seed, ftol=START_FTOL) for start, seed in starts]
+        return [_fit_restarted(runs, start, free, seed, shifted=True) for start, seed in starts]
     shared = client.scatter(runs.problem, broadcast=True)
     futures = [client.submit(remote_start, shared, runs.model, runs.names, runs.declared, start, free, seed,
                              runs.options, pure=False) for start, seed in starts]
