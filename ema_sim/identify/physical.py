@@ -111,7 +111,7 @@ START_FTOL = 1e-6
 moves neither which end is best (their mean costs differ by units) nor their spread (the ends' costs differ by
 hundreds); there they spent a third of their runs below it, and their restarts after converging gained 0.004."""
 KEPT_RUNS_BYTES = 48 * 2**20
-"""Most memory a fit's kept runs may take: 66 runs of 30 s at 1 kHz, so a Jacobian's 28 runs at a fit's end are
+"""Most memory a fit's kept runs may take: 69 runs of 30 s at 1 kHz, so a Jacobian's 28 runs at a fit's end are
 still kept when the uncertainty asks for them at the same point."""
 TINY = 1e-300
 LOG_LIMIT = math.log(100.0)
