@@ -9,6 +9,7 @@ Klein do it: (JᵀJ)⁻¹·JᵀRJ·(JᵀJ)⁻¹ with R the residual autocovarian
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -57,6 +58,8 @@ def finite(residual: FloatArray) -> FloatArray:
         return residual
     return np.where(np.isfinite(residual), residual, DIVERGED)
 COVARIANCE_LAGS = 200
+BATCHES = 4
+"""Stretches of the record the batch-means uncertainty compares (:func:`batch_sigma`)."""
 
 
 @dataclass(frozen=True)
@@ -215,6 +218,31 @@ def evaluate(problem: Problem, params: SecondOrderParams, free_fields: Sequence[
     return _at(obj, np.array([f.to_x(getattr(params, f.field)) for f in free], dtype=float), tuple(free_fields))
 
 
+def residual_only(problem: Problem, params: SecondOrderParams, free_fields: Sequence[str], *, flip: bool = False
+                  ) -> Fit:
+    """:func:`evaluate` without the Jacobian and the uncertainty: the model's own run, no more.
+
+    For a caller that reads only what the model leaves (its residual), such as a test of whether an effect still pays.
+
+    Parameters
+    ----------
+    problem : Problem
+        The record as fitted.
+    params : SecondOrderParams
+        The parameters, as they are.
+    free_fields : sequence of str
+        The model parameters fitted.
+    flip : bool
+        Run with the hinge moment reversed (the hinge_moment_sign effect).
+    """
+    free = [FREE[f] for f in free_fields]
+    obj = _Objective(problem, params, free, flip)
+    x = np.array([f.to_x(getattr(params, f.field)) for f in free], dtype=float)
+    sim = obj.sim(x)
+    residual = problem.weighted_residual(sim)
+    return Fit(obj.params(x), flip, tuple(free_fields), sim, residual, np.zeros((residual.size, 0)), {}, ())
+
+
 def _at(obj: _Objective, x: FloatArray, free_fields: tuple[str, ...]) -> Fit:
     problem, free = obj.problem, obj.free
     params = obj.params(x)
@@ -284,6 +312,40 @@ def block_covariance(residuals: Sequence[FloatArray], jacobians: Sequence[FloatA
         middle += j.T @ rj
     out[np.ix_(moved, moved)] = inv @ _nearest_psd(middle) @ inv
     return out
+
+
+def batch_sigma(residual: FloatArray, jac: FloatArray, block: int, outputs: int) -> FloatArray:
+    """Batch-means one-sigma: the spread of the Gauss-Newton steps on :data:`BATCHES` stretches, over √BATCHES.
+
+    Each step starts from the optimum and sees one contiguous stretch of the record.
+
+    The residual's covariance covers the noise the sensors add; a friction, a dead band or an integral
+    also answer to the noise inside the loop (where the actuator happens to stick), which leaves the
+    residual white yet moves the estimate from one stretch of the record to the next. The spread
+    between stretches measures that; the larger of the two is the uncertainty.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        The stacked weighted residual at the optimum (outputs one after the other).
+    jac : numpy.ndarray
+        Its Jacobian (one column per fitted coordinate).
+    block : int
+        Rows per output.
+    outputs : int
+        Outputs stacked.
+    """
+    p = jac.shape[1]
+    steps = []
+    edges = np.linspace(0, block, BATCHES + 1).round().astype(int)
+    for a, b in itertools.pairwise(edges):
+        rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
+        j, r = jac[rows], residual[rows]
+        try:
+            steps.append(np.linalg.lstsq(j, r, rcond=None)[0])
+        except np.linalg.LinAlgError:
+            return np.full(p, math.inf)
+    return np.asarray(np.std(np.array(steps), axis=0, ddof=1) / math.sqrt(BATCHES), dtype=float)
 
 
 def _nearest_psd(m: FloatArray) -> FloatArray:

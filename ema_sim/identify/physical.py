@@ -38,11 +38,11 @@ record carries its own).
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -53,7 +53,7 @@ from scipy.optimize import least_squares
 from ema_sim.errors import DataError
 from ema_sim.identify.coarse import COARSE_RATE_HZ, coarse_problem, decimation, on_coarse
 from ema_sim.identify.declared import run_declared
-from ema_sim.identify.fit import block_covariance, correlation, finite
+from ema_sim.identify.fit import batch_sigma, block_covariance, correlation, finite
 from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread, result
 from ema_sim.identify.problem import Problem
 from ema_sim.models import model_parameters
@@ -104,7 +104,15 @@ START_SHIFT = 0.1
 """Two more fits start this far (in log, ~10 %) from the first's end, each coordinate shifted alternately up
 and down (and the other way for the second): the spread of where they end is the optimizer's own
 reproducibility on this record, part of each uncertainty."""
-BATCHES = 4
+FTOL = 1e-8
+"""A fit's round stops once a step removes less than this share of its weighted error (least squares' default)."""
+START_FTOL = 1e-6
+"""The same for the fits from shifted starts: a millionth of the error (0.07 of 71,000 on the 30 s HOAD3 record)
+moves neither which end is best (their mean costs differ by units) nor their spread (the ends' costs differ by
+hundreds); there they spent a third of their runs below it, and their restarts after converging gained 0.004."""
+KEPT_RUNS_BYTES = 48 * 2**20
+"""Most memory a fit's kept runs may take: 69 runs of 30 s at 1 kHz, so a Jacobian's 28 runs at a fit's end are
+still kept when the uncertainty asks for them at the same point."""
 TINY = 1e-300
 LOG_LIMIT = math.log(100.0)
 """No element moves beyond a hundredfold of its declared value either way (past that the model is not HOAD3's
@@ -196,6 +204,9 @@ class _Runs:
         self.declared = declared
         self.count = 0
         self._lock = threading.Lock()
+        self._kept: OrderedDict[tuple[bytes, int], FloatArray] = OrderedDict()
+        """The latest runs by point and seed (the model is deterministic): a round's start and end, the Jacobian
+        the fit ended on, are asked for again."""
         self.delay = np.array([n in DELAYS for n in names])
         self.step = np.where(self.delay, DELAY_DIFF_S, DIFF_STEP)
         self.scale = np.where(self.delay, DELAY_SCALE_S, 1.0)
@@ -213,10 +224,20 @@ class _Runs:
         return out
 
     def sim(self, x: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
-        """The model's outputs at ``x`` with its noise from ``seed``."""
+        """The model's outputs at ``x`` with its noise from ``seed`` (a point just run is not run again)."""
+        key = (np.asarray(x, dtype=float).tobytes(), seed)
         with self._lock:
             self.count += 1
-        return run_model(self.problem, self.model, {**self.values(x), **self.options}, seed)
+            kept = self._kept.get(key)
+            if kept is not None:
+                self._kept.move_to_end(key)
+                return kept.copy()
+        out = run_model(self.problem, self.model, {**self.values(x), **self.options}, seed)
+        with self._lock:
+            self._kept[key] = out
+            while len(self._kept) > max(1, KEPT_RUNS_BYTES // out.nbytes):
+                self._kept.popitem(last=False)
+        return out.copy()
 
     def residual(self, x: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
         """Weighted residual at ``x`` (a run that diverged counts as a very bad one, not an error)."""
@@ -227,10 +248,10 @@ class _Runs:
         r = self.residual(x, seed)
         return float(np.dot(r, r))
 
-    def costs(self, points: list[FloatArray], seed: int = SEEDS[0]) -> list[float]:
-        """:meth:`cost` at each point, on every core."""
+    def costs(self, points: list[FloatArray], seeds: list[int] | None = None) -> list[float]:
+        """:meth:`cost` at each point (under the seed ``seeds`` gives it; the first without), on every core."""
         with ThreadPoolExecutor(WORKERS) as pool:
-            return list(pool.map(lambda y: self.cost(y, seed), points))
+            return list(pool.map(self.cost, points, seeds or [SEEDS[0]] * len(points)))
 
     def jacobian(self, x: FloatArray, cols: list[int], r0: FloatArray, seed: int = SEEDS[0]) -> FloatArray:
         """Central differences of the weighted residual in the ``cols`` coordinates, on every core.
@@ -271,10 +292,11 @@ def _scaled(value: ParamValue, log_scale: float) -> ParamValue:
 
 
 def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEEDS[0],
-         end: dict[str, FloatArray] | None = None) -> FloatArray:
+         end: dict[str, FloatArray] | None = None, ftol: float = FTOL) -> FloatArray:
     """Least squares over the ``free`` coordinates of ``x`` (the others held).
 
-    ``end`` takes the residual (``fun``) and the free coordinates' Jacobian (``jac``) where it ended.
+    ``end`` takes the residual (``fun``), the free coordinates' Jacobian (``jac``) where it ended and least
+    squares' ``status`` (above 0: a tolerance ended it).
     """
     if not free:
         return x
@@ -298,26 +320,26 @@ def _fit(runs: _Runs, x: FloatArray, free: list[int], nfev: int, seed: int = SEE
     upper = np.where(runs.delay[free], MAX_DELAY_S, LOG_LIMIT)
     start = np.clip(x[free], lower + 1e-9, upper - 1e-9)
     out = least_squares(res, start, jac=jac, bounds=(lower, upper), x_scale=runs.scale[free], method="trf",
-                        max_nfev=nfev)
+                        max_nfev=nfev, ftol=ftol)
     if end is not None:
         end["fun"], end["jac"] = np.asarray(out.fun, dtype=float), np.asarray(out.jac, dtype=float)
+        end["status"] = np.array([out.status], dtype=float)
     return put(np.asarray(out.x, dtype=float))
 
 
 def _scan(runs: _Runs, x: FloatArray, i: int, grid: FloatArray) -> FloatArray:
     """Coordinate ``i`` on ``grid`` (the others held), the best kept."""
-    points = []
-    for g in grid:
-        y = x.copy()
+    points = [x.copy() for _ in grid]
+    for y, g in zip(points, grid, strict=True):
         y[i] = max(float(g), 0.0)
-        points.append(y)
-    costs = runs.costs(points)
-    return points[int(np.argmin(costs))]
+    return points[int(np.argmin(runs.costs(points)))]
 
 
 def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEEDS[0], beat: float | None = None,
-                   why: list[str] | None = None) -> FloatArray:
+                   why: list[str] | None = None, shifted: bool = False) -> FloatArray:
     """Restart the fit from where it ended while a restart pays (:data:`POLISH_SHARE`).
+
+    A fit from a shifted start (``shifted``) stops at :data:`START_FTOL`, and once a tolerance ends a round.
 
     With ``beat`` (an escalation's error to get under), the fit runs in rounds of :data:`SCREEN_NFEV`
     evaluations and stops once even :data:`SCREEN_OPTIMISM` times the last round's drop, in every round
@@ -329,14 +351,14 @@ def _fit_restarted(runs: _Runs, x: FloatArray, free: list[int], seed: int = SEED
     nfev, rounds = (MAX_NFEV, POLISH_ROUNDS) if beat is None else (SCREEN_NFEV, POLISH_ROUNDS * MAX_NFEV // SCREEN_NFEV)
     for k in range(rounds):
         end: dict[str, FloatArray] = {}
-        y = _fit(runs, x, free, nfev, seed, end)
+        y = _fit(runs, x, free, nfev, seed, end, START_FTOL if shifted else FTOL)
         c = runs.cost(y, seed)
         if c >= cost:
             break
         gain = (cost - c) / max(cost - runs.problem.n_fit, TINY)
         drop = cost - c
         x, cost = y, c
-        if gain < POLISH_SHARE:
+        if gain < POLISH_SHARE or (shifted and end.get("status", np.zeros(1))[0] > 0):
             break
         if beat is None:
             continue
@@ -397,7 +419,7 @@ def remote_start(problem: Problem, model: str, names: list[str], declared: dict[
     """
     runs = _Runs(problem, model, names, declared, options)
     with one_blas_thread():
-        return _fit_restarted(runs, x, free, seed), runs.count
+        return _fit_restarted(runs, x, free, seed, shifted=True), runs.count
 
 
 def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None = None, pool: Pool = SERIAL,
@@ -456,7 +478,8 @@ def fit_physical(problem: Problem, model: str, log: Callable[[str], None] | None
                "to pay: the shifted starts and the uncertainty were not run")
         return _stopped(runs, x, held, why, t0, say, screen)
     ends = [x, *_other_starts(runs, x, free, pool)]
-    mean_cost = [float(np.mean([runs.cost(e, s) for s in SEEDS])) for e in ends]
+    each = runs.costs([e for e in ends for _ in SEEDS], [s for _ in ends for s in SEEDS])
+    mean_cost = [float(np.mean(each[k:k + len(SEEDS)])) for k in range(0, len(each), len(SEEDS))]
     x = ends[int(np.argmin(mean_cost))]
     start_sigma = np.std(np.array(ends)[:, free], axis=0, ddof=1) if free else np.zeros(0)
     say(f"{model} physical fit: {runs.count} runs; mean cost over the noise seeds from {len(ends)} starts: "
@@ -590,7 +613,7 @@ def _other_starts(runs: _Runs, x: FloatArray, free: list[int], pool: Pool) -> li
     client = pool.client()
     starts = [(_shifted(runs, x, free, sign), seed) for seed, sign in zip(SEEDS[1:], (1.0, -1.0), strict=True)]
     if client is None:
-        return [_fit_restarted(runs, start, free, seed) for start, seed in starts]
+        return [_fit_restarted(runs, start, free, seed, shifted=True) for start, seed in starts]
     shared = client.scatter(runs.problem, broadcast=True)
     futures = [client.submit(remote_start, shared, runs.model, runs.names, runs.declared, start, free, seed,
                              runs.options, pure=False) for start, seed in starts]
@@ -634,35 +657,12 @@ def _positive(v: object) -> bool:
     return all(float(q) > 0.0 for q in vals)
 
 
-def _batch_sigma(residual: FloatArray, jac: FloatArray, block: int, outputs: int) -> FloatArray:
-    """Batch-means one-sigma: the spread of the Gauss-Newton steps on :data:`BATCHES` stretches, over √BATCHES.
-
-    Each step starts from the optimum and sees one contiguous stretch of the record.
-
-    The residual's covariance covers the noise the sensors add; a friction, a dead band or an integral
-    also answer to the noise inside the loop (where the actuator happens to stick), which leaves the
-    residual white yet moves the estimate from one stretch of the record to the next. The spread
-    between stretches measures that; the larger of the two is the uncertainty.
-    """
-    p = jac.shape[1]
-    steps = []
-    edges = np.linspace(0, block, BATCHES + 1).round().astype(int)
-    for a, b in itertools.pairwise(edges):
-        rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
-        j, r = jac[rows], residual[rows]
-        try:
-            steps.append(np.linalg.lstsq(j, r, rcond=None)[0])
-        except np.linalg.LinAlgError:
-            return np.full(p, math.inf)
-    return np.asarray(np.std(np.array(steps), axis=0, ddof=1) / math.sqrt(BATCHES), dtype=float)
-
-
 def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArray, start_sigma: FloatArray
                  ) -> tuple[dict[int, float], dict[int, dict[int, float]], list[str]]:
     """One-sigma of each free parameter, correlations, and those the record leaves vague.
 
-    The larger of the coloured-residual and the batch-means sigma (:func:`_batch_sigma`), combined with
-    the spread of the fits from shifted starts under other noise seeds (:data:`START_SHIFT`,
+    The larger of the coloured-residual and the batch-means sigma (:func:`~ema_sim.identify.fit.batch_sigma`),
+    combined with the spread of the fits from shifted starts under other noise seeds (:data:`START_SHIFT`,
     :data:`SEEDS`): the noise inside the loop decides where a dead band or a friction lets the actuator
     stop, the record's own realization of it is unknown, and on a rough objective where the optimizer
     ends depends on where it starts.
@@ -675,7 +675,7 @@ def _uncertainty(runs: _Runs, x: FloatArray, free: list[int], residual: FloatArr
     k = len(p.outputs)
     cov = block_covariance([residual[b * block:(b + 1) * block] for b in range(k)],
                            [jac[b * block:(b + 1) * block] for b in range(k)])
-    sx = np.hypot(np.maximum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), _batch_sigma(residual, jac, block, k)),
+    sx = np.hypot(np.maximum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), batch_sigma(residual, jac, block, k)),
                   start_sigma)
     sigma: dict[int, float] = {}
     vague: list[str] = []

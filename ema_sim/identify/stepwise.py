@@ -38,7 +38,7 @@ from ema_sim.analysis.estimation import slew
 from ema_sim.identify.criteria import DONE_EXCESS, MAX_DELTA_BIC, bic, blocks, excess, gain, judge
 from ema_sim.identify.declared import not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Context, Effect, report_values
-from ema_sim.identify.fit import TINY, Fit, evaluate, fit, rms
+from ema_sim.identify.fit import TINY, Fit, evaluate, fit, residual_only, rms
 from ema_sim.identify.outcome import AsDeclared, Identification, Removal, Step, Verdict
 from ema_sim.identify.parallel import SERIAL, Pool, TaskFuture, one_blas_thread, result
 from ema_sim.identify.problem import Cancelled, Problem
@@ -87,7 +87,8 @@ def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] |
     The quantizer makes the cost piecewise flat in the parameters before it, so gradients cannot
     move them: the smooth parameters are fitted with them held, then a coordinate search (a grid of
     11 over ±half a step, then one five times finer, for each) picks them, then the smooth
-    parameters are fitted again.
+    parameters are fitted again (unless the grids found nothing that changes the outputs: the smooth fit
+    then stands where it converged).
 
     Parameters
     ----------
@@ -135,19 +136,21 @@ def _fit_quantized(problem: Problem, base: SecondOrderParams, free: tuple[str, .
     first = fit(problem, base, smooth, flip=flip)
     u_max = max(float(np.max(np.abs(problem.data.command_deg))), 1e-6)
     half = {"offset_deg": 0.5 * q, "kb": 0.5 * q / u_max}
-    params = first.params
+    params, outputs = first.params, first.sim
     for scale in (1.0, 0.2):
         for name in held:
             centre = getattr(params, name)
             grid = [params.replace(**{name: centre + d}) for d in np.linspace(-1.0, 1.0, 11) * half[name] * scale]
             sims = problem.simulate(grid, [flip] * len(grid))
             costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
-            params = grid[int(np.argmin(costs))]
-    final = fit(problem, params, smooth, flip=flip)
+            params, outputs = grid[int(np.argmin(costs))], sims[int(np.argmin(costs))]
+    # A grid that found no other outputs leaves the smooth fit where it converged: fitting again would restart it there.
+    final = first if np.array_equal(outputs, first.sim) else fit(problem, params, smooth, flip=flip)
+    params = params if final is first else final.params
     sigma = dict(final.sigma)
     for name in held:
         sigma[name] = half[name] * 0.2 / 10.0  # the finest grid spacing: the resolution the search has
-    return Fit(final.params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
+    return Fit(params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
 
 
 def offs(fields: tuple[str, ...] | list[str], base: SecondOrderParams) -> dict[str, float]:
@@ -422,7 +425,7 @@ def prune(problem: Problem, result: Identification, cur: Fit, base: SecondOrderP
         reason = effect.check(values, ctx)
         free = tuple(f for f in cur.free if f not in off)
         if reason is None:
-            without = evaluate(problem, cur.params.replace(**off), free, flip=cur.flip)
+            without = residual_only(problem, cur.params.replace(**off), free, flip=cur.flip)
             why = gain(problem, without, cur, len(off), result.simulator_error_deg)[0]
             if not why:
                 continue
