@@ -306,7 +306,7 @@ def test_ema_launch_interrupted_in_its_first_second_prints_no_traceback(tmp_path
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=60)
     assert "Traceback" not in out, out[-3000:]
-    assert proc.returncode == 130
+    assert proc.returncode == 130, (proc.returncode, out[-3000:])  # what the process said, should it ever not be
     assert ("ema: interrupted" if when == "importing" else "ema launch: interrupted; closing the bag") in out
     for node_log in logs.glob("*.log"):
         assert "Traceback" not in node_log.read_text(errors="replace"), node_log.name
