@@ -301,7 +301,7 @@ def test_hoad3_data_three_maneuvers_ends_with_the_drives_physics(declared_model)
     and ±400 in·lb), LOADA or the second order declared. The declared family with every effect that pays ends
     at 3.0–3.8× (position) and 18–23× (surface) its floor: it has run out of vocabulary. The tool then fits
     HOAD3's physical parameters (section 4.2.5's loop) and keeps them, with the equivalent beside: both
-    outputs within 2× the floor (measured 1.06–1.07× / 1.12–1.14×), HOAD3's 4 ms and 2 ms delays found
+    outputs within 2× the floor (measured 1.07–1.08× / 1.12–1.15×), HOAD3's 4 ms and 2 ms delays found
     (within 0.02 ms), and every physical parameter fitted in two or more reports agrees across the maneuvers
     within 3σ (measured: 13 of 13 with LOADA)."""
     from ema_sim.identify.consistency import compare, parse_report  # noqa: PLC0415
