@@ -213,9 +213,16 @@ def evaluate(problem: Problem, params: SecondOrderParams, free_fields: Sequence[
     flip : bool
         Run with the hinge moment reversed (the hinge_moment_sign effect).
     """
+    obj, x = _objective_at(problem, params, free_fields, flip)
+    return _at(obj, x, tuple(free_fields))
+
+
+def _objective_at(problem: Problem, params: SecondOrderParams, free_fields: Sequence[str],
+                  flip: bool) -> tuple[_Objective, FloatArray]:
+    """The objective of ``free_fields`` about ``params``, and the point ``params`` are at in its coordinates."""
     free = [FREE[f] for f in free_fields]
-    obj = _Objective(problem, params, free, flip)
-    return _at(obj, np.array([f.to_x(getattr(params, f.field)) for f in free], dtype=float), tuple(free_fields))
+    return _Objective(problem, params, free, flip), np.array([f.to_x(getattr(params, f.field)) for f in free],
+                                                             dtype=float)
 
 
 def residual_only(problem: Problem, params: SecondOrderParams, free_fields: Sequence[str], *, flip: bool = False
@@ -235,9 +242,7 @@ def residual_only(problem: Problem, params: SecondOrderParams, free_fields: Sequ
     flip : bool
         Run with the hinge moment reversed (the hinge_moment_sign effect).
     """
-    free = [FREE[f] for f in free_fields]
-    obj = _Objective(problem, params, free, flip)
-    x = np.array([f.to_x(getattr(params, f.field)) for f in free], dtype=float)
+    obj, x = _objective_at(problem, params, free_fields, flip)
     sim = obj.sim(x)
     residual = problem.weighted_residual(sim)
     return Fit(obj.params(x), flip, tuple(free_fields), sim, residual, np.zeros((residual.size, 0)), {}, ())
