@@ -9,7 +9,7 @@ from ema_sim.analysis.studies.model_error import table6
 from ema_sim.config import load_channel
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.models import Flags, create, model_names
-from ema_sim.models.second_order import Loac, Loada, SecondOrderParams
+from ema_sim.models.second_order import Loac, Loada, SecondOrder, SecondOrderParams
 
 SECOND_ORDER = ("loac", "loadf", "loada")
 # Every nonlinear element off: the plain figure-21 second order with its delay.
@@ -206,6 +206,31 @@ def test_frame_stepping_equals_one_run(name, rich_inputs):
     b.trim(cmd[0], hm[0])
     ran = b.run(t, cmd, hm, sample_times=t + FRAME_S, end_s=t[-1] + FRAME_S).position_deg[0]
     assert np.max(np.abs(stepped - ran)) < 1e-9
+
+
+def test_identification_simulator_takes_no_stop_where_a_breakpoint_holds_its_value():
+    """A record logged at 1 kHz and the same inputs given only where they change: the same run, bit for bit.
+
+    The RK4 simulator stops where the delayed command or the hinge moment changes, not at every logged sample of
+    a held value (the stops it saves are most of a step record's). The samples fall between the breakpoints.
+    """
+    t = np.arange(2000) / 1000.0
+    cmd = np.where(t < 0.3, 0.0, np.where(t < 0.9, 2.0, -1.5))
+    hm = np.where(t < 0.5, 0.0, 400.0)
+    samples = t + 0.0005
+
+    def simulate(tt, cc, hh):
+        model = SecondOrder("left_wing", delay_s=0.0045, free_play_deg=0.05, compliance_deg_per_kinlb=0.2)
+        model.trim(0.0, 0.0)
+        return model.run(tt, cc, hh, sample_times=samples, end_s=2.0)
+
+    logged = simulate(t, cmd, hm)
+    changes = np.r_[True, (np.diff(cmd) != 0.0) | (np.diff(hm) != 0.0)]
+    assert changes.sum() == 4
+    given = simulate(t[changes], cmd[changes], hm[changes])
+    assert np.abs(logged.position_deg).max() > 1.0  # it moved through every change
+    for name in ("position_deg", "surface_deg", "rate_dps"):
+        assert np.array_equal(getattr(logged, name), getattr(given, name)), name
 
 
 @pytest.mark.parametrize(("name", "n"), [("loada", 1), ("loadf", 1), ("loada", 3), ("hoad3", 1), ("hoad3", 2)])

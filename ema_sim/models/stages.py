@@ -103,6 +103,59 @@ def zoh_index(times: FloatArray, t: float, j: int) -> int:
     return j
 
 
+@jit
+def next_change(values: FloatArray, j: int) -> int:
+    """Index of the first breakpoint after ``j`` whose value differs from breakpoint ``j``'s (the count if none).
+
+    An integrator need not stop where a held input keeps its value.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        The input at each breakpoint.
+    j : int
+        The breakpoint held now.
+
+    Returns
+    -------
+    int
+        The breakpoint index.
+    """
+    n = values.shape[0]
+    k = j + 1
+    while k < n and values[k] == values[j]:
+        k += 1
+    return k
+
+
+@jit
+def held_change(times: FloatArray, values: FloatArray, t: float, j: int, j_next: int) -> tuple[int, int]:
+    """The breakpoint held at ``t`` (:func:`zoh_index` from ``j``) and the next that changes its value.
+
+    Parameters
+    ----------
+    times : numpy.ndarray
+        Breakpoint times, increasing (s).
+    values : numpy.ndarray
+        The input at each breakpoint.
+    t : float
+        Now (s).
+    j : int
+        The breakpoint held before (at or before ``t``).
+    j_next : int
+        The change ahead of ``j`` (:func:`next_change`; 0 when not known yet).
+
+    Returns
+    -------
+    tuple of (int, int)
+        The breakpoint held and the next change.
+    """
+    j = zoh_index(times, t, j)
+    if j >= j_next:
+        j_next = next_change(values, j)
+    return j, j_next
+
+
 @nb.njit(cache=True)
 def held_indices(times: FloatArray, at: FloatArray) -> npt.NDArray[np.int64]:
     """The breakpoint each instant reads under a zero-order hold (:func:`zoh_index` for ascending instants).
@@ -415,6 +468,6 @@ def euler_pair(x: float, v: float, a: float, dt: float, backward: bool) -> tuple
 __all__ = [
     "DEG2RAD", "FLAG_BRAKE", "FLAG_CURRENT", "FLAG_FREE_PLAY", "FLAG_POSITION", "FLAG_PWM_DEAD_BAND", "FLAG_RATE",
     "FLAG_STALL", "FLAG_THRESHOLD", "RAD2DEG", "TIME_EPS_S", "TWO_PI", "band_side", "dead_zone",
-    "euler_pair", "first_order_lag", "jit", "lag_gain", "limited_integrator", "quantize", "quantize_array",
-    "transport_delay", "zoh_index",
+    "euler_pair", "first_order_lag", "held_change", "jit", "lag_gain", "limited_integrator", "next_change", "quantize",
+    "quantize_array", "transport_delay", "zoh_index",
 ]

@@ -492,7 +492,7 @@ def actuator_position(p: FloatArray, x: float, v: float, on: int = stage_set.ALL
 
 @jit
 def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float, dydt: FloatArray,
-                on: int = stage_set.ALL) -> None:
+                on: int = stage_set.ALL) -> int:
     """Stages 4–17 in continuous time: the state's derivatives into ``dydt`` (position limits are the integrator's).
 
     Parameters
@@ -509,13 +509,18 @@ def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float
         Filled with the derivatives.
     on : int
         The stages that may be on (:mod:`.stage_set`).
+
+    Returns
+    -------
+    int
+        The smooth piece the state is on (:func:`servo`), for an integrator that must not step across a switch.
     """
     if p[P.command_lag_hz] > 0.0:
         dydt[X.command_lag_deg] = TWO_PI * p[P.command_lag_hz] * (u - y[X.command_lag_deg])
     else:
         dydt[X.command_lag_deg] = 0.0
-    a, _, _, integrand, drive_accel = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], y,
-                                            hinge_moment_inlb, 0.0, on)
+    a, _, piece, integrand, drive_accel = servo(p, servo_input(p, y, u), y[X.position_deg], y[X.rate_dps], y,
+                                                hinge_moment_inlb, 0.0, on)
     dydt[X.position_deg] = y[X.rate_dps]
     dydt[X.rate_dps] = a
     dydt[X.integral_deg_s] = integrand
@@ -541,6 +546,7 @@ def derivatives(p: FloatArray, y: FloatArray, u: float, hinge_moment_inlb: float
         dydt[X.linkage_rate_dps] = 0.0
     dydt[X.history_head] = 0.0
     dydt[X.history_last_s] = 0.0
+    return piece
 
 
 @jit

@@ -50,8 +50,8 @@ _loac_dopri5 = make_dopri5(rhs)
 
 
 @borrowing
-def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, jh: int, sample_t: FloatArray,
-               js: int, k_samples: int, feedback_delay_s: float, jf: int) -> float:
+def next_event(t_end: float, bp_t: FloatArray, m: int, jd_next: int, delay_s: float, jh_next: int,
+               sample_t: FloatArray, js: int, k_samples: int, feedback_delay_s: float, jf: int) -> float:
     """Where an integration step must stop: the next delayed command, hinge moment or sample instant.
 
     Also the instant a delayed position sample reads (stage 14), so its entry is exact.
@@ -64,12 +64,12 @@ def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, 
         Input breakpoint times (s).
     m : int
         Number of breakpoints.
-    jd : int
-        The delayed command's breakpoint now.
+    jd_next : int
+        The delayed command's next breakpoint (the next that changes it, or simply the next).
     delay_s : float
         The command delay (s).
-    jh : int
-        The hinge moment's breakpoint now.
+    jh_next : int
+        The hinge moment's next breakpoint (likewise).
     sample_t : numpy.ndarray
         Sample instants (s).
     js : int
@@ -87,10 +87,10 @@ def next_event(t_end: float, bp_t: FloatArray, m: int, jd: int, delay_s: float, 
         The time to stop at (s).
     """
     t_next = t_end
-    if jd + 1 < m:
-        t_next = min(t_next, bp_t[jd + 1] + delay_s)
-    if jh + 1 < m:
-        t_next = min(t_next, bp_t[jh + 1])
+    if jd_next < m:
+        t_next = min(t_next, bp_t[jd_next] + delay_s)
+    if jh_next < m:
+        t_next = min(t_next, bp_t[jh_next])
     if js < k_samples:
         t_next = min(t_next, sample_t[js])
     if feedback_delay_s > 0.0 and jf < k_samples:
@@ -139,8 +139,8 @@ def record_feedback(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, hi
 
 @borrowing
 def at_stop(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, t_end: float, bp_t: FloatArray,
-            bp_u: FloatArray, bp_h: FloatArray, jd: int, jh: int, js: int, jf: int, sample_t: FloatArray,
-            out: FloatArray, u: FloatArray) -> tuple[int, int, float]:
+            bp_u: FloatArray, bp_h: FloatArray, jd: int, jh: int, jd_next: int, jh_next: int, js: int, jf: int,
+            sample_t: FloatArray, out: FloatArray, u: FloatArray) -> tuple[int, int, float]:
     """What a continuous integrator does at each stop: stage 14's reading, the samples due, the next stop.
 
     LOAC (Dormand–Prince) and RK4 share it; only how they cross to the next stop differs.
@@ -167,6 +167,8 @@ def at_stop(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, t_end: flo
         Breakpoint of the delayed command.
     jh : int
         Breakpoint of the hinge moment.
+    jd_next, jh_next : int
+        The next breakpoint at which each must stop (``jd + 1``, ``jh + 1``, or the next that changes the input).
     js : int
         Next sample to take.
     jf : int
@@ -190,7 +192,7 @@ def at_stop(p: FloatArray, y: FloatArray, hist: FloatArray, t: float, t_end: flo
         js += 1
     if t >= t_end - TIME_EPS_S:
         return js, jf, t
-    t_next = next_event(t_end, bp_t, bp_t.shape[0], jd, p[P.delay_s], jh, sample_t, js, k_samples,
+    t_next = next_event(t_end, bp_t, bp_t.shape[0], jd_next, p[P.delay_s], jh_next, sample_t, js, k_samples,
                         p[P.feedback_delay_s], jf)
     u[0] = command_path(p, bp_u[jd])
     u[1] = bp_h[jh]
@@ -260,7 +262,8 @@ def run_continuous(params: FloatArray, states: FloatArray, history: FloatArray, 
         js = 0
         jf = 0
         while True:
-            js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, js, jf, sample_t, out[i], u)
+            js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, jd + 1, jh + 1, js, jf,
+                                     sample_t, out[i], u)
             if t >= t_end - TIME_EPS_S:
                 break
             if t_next > t + TIME_EPS_S:

@@ -1,6 +1,7 @@
 """The identification simulator: figure 26 by fixed-step RK4 that never steps across an event.
 
-Steps are at most ``h_max`` and never straddle an input breakpoint (delayed or not), a sample, or a
+Steps are at most ``h_max`` and never straddle an input breakpoint that changes its input (the delayed
+command's or the hinge moment's; one that holds the value it had is no event), a sample, or a
 switch of the rate limit or dead zone (located by bisection on :func:`figure26.servo`'s smooth
 piece, the same classification the dynamics use); the free play is solved exactly
 (:func:`figure29.free_play_exact`). Fast, accurate far below sensor noise and smooth in its
@@ -27,7 +28,7 @@ from ema_sim.models.second_order.figure26 import (
 from ema_sim.models.second_order.figure29 import free_play_exact
 from ema_sim.models.second_order.loac import at_stop
 from ema_sim.models.second_order.params import P, X
-from ema_sim.models.stages import TIME_EPS_S, compile_closure, limited_integrator, zoh_index
+from ema_sim.models.stages import TIME_EPS_S, compile_closure, held_change, limited_integrator
 
 SWITCH_TOL_S = 1e-10
 """How closely a switch of the rate limit or dead zone is located inside an RK4 step."""
@@ -59,7 +60,7 @@ def smooth_piece(p: FloatArray, y: FloatArray, u: FloatArray, on: int = stage_se
 
 @borrowing
 def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArray, k2: FloatArray, k3: FloatArray,
-             k4: FloatArray, yt: FloatArray, out: FloatArray, on: int = stage_set.ALL) -> None:
+             k4: FloatArray, yt: FloatArray, out: FloatArray, on: int = stage_set.ALL) -> int:
     """One RK4 step of the actuator states from ``y`` into ``out``; free play solved exactly.
 
     Parameters
@@ -78,9 +79,14 @@ def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArr
         The state at the end of the step.
     on : int
         The stages that may be on (:mod:`.stage_set`).
+
+    Returns
+    -------
+    int
+        The smooth piece ``y`` is on (:func:`smooth_piece`), from the step's first evaluation.
     """
     n = y.shape[0]
-    derivatives(p, y, u[0], u[1], k1, on)
+    piece = derivatives(p, y, u[0], u[1], k1, on)
     for a in range(n):
         yt[a] = y[a] + 0.5 * h * k1[a]
     derivatives(p, yt, u[0], u[1], k2, on)
@@ -97,6 +103,7 @@ def rk4_step(p: FloatArray, y: FloatArray, u: FloatArray, h: float, k1: FloatArr
     free_play_exact(p, out, u[1], h)
     out[X.position_deg], out[X.rate_dps], _ = limited_integrator(out[X.position_deg], out[X.rate_dps],
                                                                  p[P.position_min_deg], p[P.position_max_deg])
+    return piece
 
 
 PARALLEL_SPAN_S = 0.05
@@ -139,23 +146,21 @@ def make_rk4(parallel: bool) -> Callable[..., None]:
             yt = np.empty(n)
             y1 = np.empty(n)
             t = t0
-            jd = zoh_index(bp_t, t - p[P.delay_s], 0)
-            jh = zoh_index(bp_t, t, 0)
+            u_i = bp_u[i]
+            h_i = bp_h[i]
+            jd, jd_next = held_change(bp_t, u_i, t - p[P.delay_s], 0, 0)  # a breakpoint that holds a value: no stop
+            jh, jh_next = held_change(bp_t, h_i, t, 0, 0)
             js = 0
             jf = 0
             while True:
-                js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, bp_u[i], bp_h[i], jd, jh, js, jf, sample_t,
-                                         out[i], u)
+                js, jf, t_next = at_stop(p, y, hist, t, t_end, bp_t, u_i, h_i, jd, jh, jd_next, jh_next, js, jf,
+                                         sample_t, out[i], u)
                 if t >= t_end - TIME_EPS_S:
                     break
-                known = False  # the piece the state is on, known from the step that reached it (inputs held)
-                s1 = 0
                 while t_next - t > TIME_EPS_S:
                     h = min(h_max, max_step_s(p), t_next - t)
-                    s0 = s1 if known else smooth_piece(p, y, u, on)
-                    rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)
+                    s0 = rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)  # the piece the step starts on
                     s1 = smooth_piece(p, y1, u, on)
-                    known = True
                     if s1 != s0 and h > SWITCH_TOL_S:
                         lo = 0.0  # the step to the switch: last length still on s0's piece
                         hi = h
@@ -168,13 +173,12 @@ def make_rk4(parallel: bool) -> Callable[..., None]:
                                 hi = mid
                         h = hi
                         rk4_step(p, y, u, h, k1, k2, k3, k4, yt, y1, on)
-                        known = False
                     for a in range(n):
                         y[a] = y1[a]
                     t += h
                 t = t_next
-                jd = zoh_index(bp_t, t - p[P.delay_s], jd)
-                jh = zoh_index(bp_t, t, jh)
+                jd, jd_next = held_change(bp_t, u_i, t - p[P.delay_s], jd, jd_next)
+                jh, jh_next = held_change(bp_t, h_i, t, jh, jh_next)
 
     compiled: Callable[..., None] = compile_closure(kernel, "parallel" if parallel else "serial", parallel=parallel,
                                                     forward_copies=not parallel)
