@@ -7,14 +7,15 @@ Every speed target is a **ratio against a yardstick measured in the same run**, 
 wall-clock figure on a shared two-core machine says more of what else it runs than of the code. The
 yardstick is JSBSim's actuator chain (:func:`jsbsim_realtime`: figure 21's servo written as JSBSim
 flight-control components under ``bench/jsbsim``, stepped from Python one frame at a time as a host does),
-measured once per process at each rate and shared by every benchmark of the run. A time is stated in
+measured again for each benchmark right beside its workload: a shared machine's speed drifts by a third over
+minutes (measured: JSBSim at 10 kHz 20× real time in one sitting, 28× in another, HOAD3 1,354× and 1,858× beside
+it), and a yardstick measured minutes before a figure would carry that drift into it. A time is stated in
 **JSBSim runs** (:func:`jsbsim_seconds`: how long JSBSim takes to simulate the same span at the model's
 rate), a speed in **× JSBSim**.
 """
 
 from __future__ import annotations
 
-import functools
 import importlib.util
 import json
 import math
@@ -190,9 +191,8 @@ YARDSTICK_S = 10.0
 """Simulated seconds of each yardstick measurement (best of three)."""
 
 
-@functools.cache
 def jsbsim_realtime(rate_hz: float) -> float:
-    """JSBSim's real-time ratio on the X-43A servo at ``rate_hz``: the yardstick (module docstring), once a process.
+    """JSBSim's real-time ratio on the X-43A servo at ``rate_hz``: the yardstick (module docstring), measured now.
 
     The command changes every 5 ms frame (a sine), the model is stepped one JSBSim frame at a time from Python,
     as a host simulation drives an actuator; the best of three runs of :data:`YARDSTICK_S`.
