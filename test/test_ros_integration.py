@@ -454,8 +454,14 @@ def test_a_namespace_moves_every_topic_of_a_node(client):
 
 
 # --------------------------------------------------------------------------- 9. idle feedback
-def test_idle_feedback_keeps_the_frame_rate_with_stamps_on_the_frame_grid(client):
-    proc = start(client.did, "ema_sim.nodes.emac", "--channel", "left_wing")
+def test_idle_feedback_keeps_the_frame_rate_with_stamps_on_the_frame_grid(client, tmp_path):
+    """Every frame, stamped on the grid; a frame missing only where the node says it skipped it.
+
+    A process held up more than ``CATCH_UP`` frames (a loaded machine) jumps to the present frame by design,
+    with the stamps kept on the grid, and counts the frames it skipped in its summary.
+    """
+    log = tmp_path / "emac.log"
+    proc = start(client.did, "ema_sim.nodes.emac", "--channel", "left_wing", log=log)
     rows = []
     try:
         client.node.create_subscription(
@@ -467,11 +473,39 @@ def test_idle_feedback_keeps_the_frame_rate_with_stamps_on_the_frame_grid(client
     finally:
         stop(proc)
     wall, stamp = np.array(rows, dtype=np.int64).T
-    assert np.all(np.diff(stamp) == FRAME_NS)  # every frame, on the grid
+    gaps = np.diff(stamp)
+    assert np.all(gaps > 0), gaps[gaps != FRAME_NS]  # in order
+    assert np.all(gaps % FRAME_NS == 0), gaps[gaps != FRAME_NS]  # on the grid
+    missing = int(gaps.sum() // FRAME_NS - gaps.size)
+    assert missing <= summary(log)["skipped_frames"], (missing, gaps[gaps != FRAME_NS])  # every frame not skipped
     period_ms = np.median(np.diff(wall)) / 1e6
     assert 4.5 < period_ms < 5.5, period_ms  # was 7.5 ms (133 Hz)
     slope = np.polyfit((wall - wall[0]) / 1e9, (stamp - stamp[0]) / 1e9, 1)[0]
     assert 0.98 < slope < 1.02, slope  # stamps advance with the wall clock: was 0.67 (1 s behind after 3 s)
+
+
+def test_a_node_held_up_skips_frames_on_the_grid_and_counts_each_one(client, tmp_path):
+    log = tmp_path / "emac.log"
+    proc = start(client.did, "ema_sim.nodes.emac", "--channel", "left_wing", log=log)
+    stamps = []
+    try:
+        client.node.create_subscription(
+            JointState, "/ema/emac/feedback",
+            lambda m: stamps.append(m.header.stamp.sec * NS + m.header.stamp.nanosec), RELIABLE)
+        assert client.spin(60, lambda: len(stamps) > 20)  # kept: the frames before the hold
+        proc.send_signal(signal.SIGSTOP)  # held up 0.5 s: 100 frames, more than the 20 it catches up
+        client.spin(0.5)
+        proc.send_signal(signal.SIGCONT)
+        assert client.spin(60, lambda: len(stamps) > 220)
+    finally:
+        proc.send_signal(signal.SIGCONT)
+        stop(proc)
+    gaps = np.diff(stamps)
+    assert np.all(gaps > 0), gaps[gaps != FRAME_NS]
+    assert np.all(gaps % FRAME_NS == 0), gaps[gaps != FRAME_NS]
+    missing = int(gaps.sum() // FRAME_NS - gaps.size)
+    assert missing >= 60, gaps[gaps != FRAME_NS]  # the hold is not stepped frame by frame afterwards
+    assert missing <= summary(log)["skipped_frames"], (missing, gaps[gaps != FRAME_NS])
 
 
 # --------------------------------------------------------------------------- 10. drops counted
