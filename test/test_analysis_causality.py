@@ -193,3 +193,47 @@ def test_a_measured_response_whose_coherent_points_lead_is_not_causal_whatever_i
                             None, "", [], None, "", None, None, (0.5, 5.0), bandwidth_quality="on_bound")
     assert clean.leads == ""
     assert clean.quality == "not_determined"
+
+
+def _delayed_servo_log(demand_of_t, delay_s: float, tau_s: float, span_s: float = 12.0, rate_hz: float = 1000.0):
+    """``demand_of_t`` sampled at ``rate_hz`` and held, through a delay and a first-order servo, logged with noise."""
+    fine = np.arange(0.0, span_s, FINE_S)
+    t = np.arange(0.0, span_s - 0.01, 1.0 / rate_hz)
+    u = demand_of_t(t)
+    held = u[np.clip(np.searchsorted(t, fine - delay_s, side="right") - 1, 0, t.size - 1)]
+    y = _servo(held, tau_s)[np.round(t / FINE_S).astype(int)]
+    return t, u, y + np.random.default_rng(3).normal(0.0, 1e-3, t.size)
+
+
+def _chirp(t: np.ndarray) -> np.ndarray:
+    return np.sin(2 * np.pi * (0.5 * t + 0.5 * (6.0 / 12.0) * t**2))  # 0.5 → 6.5 Hz over 12 s
+
+
+def test_a_chirp_through_a_long_delay_lags_by_the_delay_and_the_servo_s_lag_never_leads():
+    """40 ms of transport delay and a 20 ms servo: about 60 ms, beyond the ±30 samples the search once had."""
+    t, u, y = _delayed_servo_log(_chirp, 0.040, 0.020)
+    c = causality.measure(t, u, y, 3e-3)
+    assert c.method == "windows"
+    assert c.measured
+    assert c.lag_sampled_s == pytest.approx(0.060, abs=0.006)
+    assert not c.sampled_leads
+    assert not c.held_leads
+
+
+def test_a_sine_dwell_lagging_beyond_the_old_search_is_never_taken_for_a_lead():
+    """An 8 Hz dwell lagging 50 ms aligns as well with the opposite sign 12.5 ms early, and one period later:
+    the lag is known only modulo the period, so the dwell decides nothing (and claims no lead)."""
+    t, u, y = _delayed_servo_log(lambda x: np.sin(2 * np.pi * 8.0 * x), 0.025, 0.025)
+    c = causality.measure(t, u, y, 3e-3)
+    assert not c.sampled_leads
+    assert not c.held_leads
+    assert not c.measured  # every window is ambiguous: nothing decided
+
+
+def test_an_output_that_leads_a_chirp_is_still_caught():
+    t, u, y = _delayed_servo_log(_chirp, 0.0, 0.002)
+    lead = 25  # samples: the output logged 25 ms early
+    c = causality.measure(t[:-lead], u[:-lead], y[lead:], 3e-3)
+    assert c.measured
+    assert c.lag_sampled_s == pytest.approx(-0.023, abs=0.004)
+    assert c.sampled_leads

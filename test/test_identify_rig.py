@@ -336,7 +336,7 @@ def test_a_prepared_record_says_what_it_found(rig):
 
 
 def _rows(n: int, cell: str) -> str:
-    return "\n".join(f"{i},{cell},{0.01 * i}" for i in range(n))
+    return "\n".join(f"{i / 100},{cell},{0.01 * i}" for i in range(n))
 
 
 BAD = [
@@ -347,8 +347,12 @@ BAD = [
     ("ragged.csv", "time_s,command_deg,position_deg\n" + _rows(150, "1") + "\n1,2\n", [], "cells"),
     ("backwards.csv", "time_s,command_deg,position_deg\n" + _rows(150, "1") + "\n0,1,1\n", [], "does not increase"),
     ("flat_command.csv", "time_s,command_deg,position_deg\n" + _rows(200, "1"), [], "never changes"),
-    ("huge.csv", "time_s,command_deg,position_deg\n" + "\n".join(f"{i},{1e30 * (i % 7)},0" for i in range(200)), [],
-     "beyond"),
+    ("huge.csv", "time_s,command_deg,position_deg\n" + "\n".join(f"{i / 100},{1e30 * (i % 7)},0" for i in range(200)),
+     [], "1e+30 deg at data row 2 and 170 more: no actuator moves beyond"),
+    ("ms_as_s.csv",
+     "time_s,command_deg,position_deg\n" + "\n".join(f"{i},{i // 50 % 2},{i // 50 % 2}" for i in range(300)), [],
+     "sampled every 1 s over 299 s, slower than the 5 Hz identification needs to see an actuator move; "
+     "whole-number stamps 1 apart look like milliseconds"),
     ("tab.tsv", "t\tdemand\tpos\n" + "\n".join(f"{i}\t{i % 9}\t{i % 9}" for i in range(200)), [], "--columns"),
     ("tab_wrong.tsv", "t\tdemand\tpos\n" + "\n".join(f"{i}\t{i % 9}\t{i % 9}" for i in range(200)),
      ["--columns", "time_ms=t,command_deg=demand,position_deg=actual"], "no column 'actual'"),

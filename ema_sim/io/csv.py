@@ -40,6 +40,11 @@ LINEAR_UNITS_IN = {"mm": 1.0 / 25.4, "in": 1.0}
 POSITIONAL = ("command", "position", "surface")
 DELIMITERS = {"tab": "\t", "comma": ",", "semicolon": ";"}
 MIN_ROWS = 100
+SIGNAL_FULL_SCALE_V = 10.0
+"""The contract's raw command and LVDT signals are ±10 V: a reading beyond it (with
+:data:`SIGNAL_MARGIN` for a converter's own overrange) is not one of them."""
+SIGNAL_MARGIN = 0.05
+SIGNAL_COLUMNS = ("command_v", "position_v")
 
 
 def _parse_metadata(line: str) -> tuple[str, str] | None:
@@ -227,6 +232,8 @@ def _rig_hint(fmt: RigFormat | None) -> str:
 
 def _number(cell: str, sep: str) -> float:
     """A cell's value; with a semicolon or tab delimiter, a decimal comma is read as a decimal point."""
+    if "_" in cell:  # Python's float() reads 1_0.0 as 10.0; no logger writes digit separators
+        raise ValueError(cell)
     try:
         return float(cell)
     except ValueError:
@@ -325,11 +332,29 @@ def parse_csv(text: str, source: str = "<csv>", fmt: RigFormat | None = None) ->
             f"{source}: data row {bad + 1}, column {column!r}: time does not increase "
             f"({values['time_s'][bad - 1] / scale:g} then {values['time_s'][bad] / scale:g})"
         )
+    _check_signals(arrays, wanted, source)
     if fmt is not None:
         metadata.setdefault("columns", ", ".join(f"{name}={column}" for name, column in fmt.columns.items()))
         if fmt.crank_arm_in:
             metadata.setdefault("crank_arm_in", f"{fmt.crank_arm_in:g}")
     return MeasuredData(metadata=metadata, source=source, unit=unit, **arrays)  # type: ignore[arg-type]
+
+
+def _check_signals(arrays: Mapping[str, FloatArray], wanted: Mapping[str, tuple[int, str, float]], source: str
+                   ) -> None:
+    """One clear error for a raw ±10 V signal beyond its full scale (the first such row and its column)."""
+    limit = SIGNAL_FULL_SCALE_V * (1.0 + SIGNAL_MARGIN)
+    for name in SIGNAL_COLUMNS:
+        if name not in arrays:
+            continue
+        beyond = np.flatnonzero(np.abs(arrays[name]) > limit)
+        if beyond.size:
+            k = int(beyond[0])
+            column = wanted[name][1]
+            label = repr(column) if column == name else f"{column!r} ({name})"
+            raise DataError(f"{source}: data row {k + 1}, column {label}: {arrays[name][k]:g} V is beyond the "
+                            f"contract's ±{SIGNAL_FULL_SCALE_V:g} V signals ({beyond.size} rows are): is the "
+                            "column in volts, and the raw signal?")
 
 
 def write_csv(

@@ -19,8 +19,13 @@ followed (the demand logged is itself a filtered target, the log was resampled, 
 is stamped late against the output's).
 
 Records without rest-to-rest moves (a sine or a sweep) are cut into windows and the lag is the pure
-delay that best aligns the output with the linearly interpolated command (gain and offset free), its
-held counterpart half a sample less: the equivalent delay at the frequencies the record excites.
+delay that best aligns the output with the linearly interpolated command (offset free, the gain positive:
+a servo follows its command, never its opposite), its held counterpart half a sample less: the equivalent
+delay at the frequencies the record excites. The search reaches :data:`MAX_LAG_S` either way, beyond a
+servo's equivalent delay (a transport delay and its loop's lag). A window whose command is nearly one
+frequency aligns about as well a whole period earlier or later: its lag is known only modulo that period,
+so it decides nothing (:data:`AMBIGUOUS_SHARE`), and a sine dwell whose lag exceeds half its period is
+never taken for a lead.
 
 The uncertainty is the moves' (or windows') spread over √n: it holds the noise, the stamps' jitter and
 any dependence on amplitude or direction. Fewer than :data:`MIN_MOVES` moves (or windows) decide nothing.
@@ -54,8 +59,13 @@ MATERIAL_SHARE = 0.1
 """...and by more than this share of a sample interval: a lead smaller than that is no evidence of a hold."""
 WINDOW_S = 2.0
 """Windows of a record without rests, for the delay fit (at least :data:`MIN_MOVES` of them)."""
-MAX_LAG_SAMPLES = 30
-"""The delay fit's search: up to this many samples either way."""
+MAX_LAG_S = 0.25
+"""The delay fit's search: up to this lag either way, s (a few times a servo's equivalent delay)."""
+COARSE_STEPS = 25
+"""The delay fit's coarse search: this many steps each way before each minimum is refined to a sample."""
+AMBIGUOUS_SHARE = 0.01
+"""A window is ambiguous when another alignment leaves less than twice the best's unexplained share of the
+output's variance plus this share: a sine dwell's alignments a period apart leave the same."""
 
 
 @dataclass(frozen=True)
@@ -187,31 +197,50 @@ def move_lags(time_s: FloatArray, command: FloatArray, output: FloatArray, band:
 
 
 def _delay_fit(t: FloatArray, u: FloatArray, y: FloatArray, dt: float) -> float | None:
-    """The pure delay (s) that best aligns ``y`` with ``u`` interpolated linearly, gain and offset free."""
+    """The pure delay (s) that best aligns ``y`` with ``u`` interpolated linearly (module docstring).
+
+    A coarse search (:data:`COARSE_STEPS` steps each way), each of its minima refined sample by sample. None when
+    the command does not move, the best alignment is at the search's edge, or another alignment leaves nearly as
+    little unexplained (:data:`AMBIGUOUS_SHARE`).
+    """
     if np.ptp(u) <= 0.0:
         return None
-    lags = np.arange(-MAX_LAG_SAMPLES, MAX_LAG_SAMPLES + 1) * dt
-    lo, hi = t[0] + MAX_LAG_SAMPLES * dt, t[-1] - MAX_LAG_SAMPLES * dt
-    inner = (t >= lo) & (t <= hi)
+    reach = max(1, round(MAX_LAG_S / dt))
+    inner = (t >= t[0] + reach * dt) & (t <= t[-1] - reach * dt)
     if inner.sum() < 10:
         return None
-    ti, yi = t[inner], y[inner]
+    ti, yc = t[inner], y[inner] - float(np.mean(y[inner]))
+    total = float(np.dot(yc, yc))
+    if total <= 0.0:
+        return None
 
-    def cost(d: float) -> float:
-        x = np.interp(ti - d, t, u)
-        a = np.column_stack([x, np.ones_like(x)])
-        coef, *_ = np.linalg.lstsq(a, yi, rcond=None)
-        r = yi - a @ coef
-        return float(np.dot(r, r))
+    def unexplained(k: int) -> float:
+        """The share of the output's variance a delay of ``k`` samples leaves (a positive gain only)."""
+        x = np.interp(ti - k * dt, t, u)
+        x -= float(np.mean(x))
+        cov, var = float(np.dot(x, yc)), float(np.dot(x, x))
+        return 1.0 - cov * cov / var / total if cov > 0.0 and var > 0.0 else 1.0
 
-    costs = np.array([cost(float(d)) for d in lags])
-    k = int(np.argmin(costs))
-    if k in (0, lags.size - 1):
+    step = max(1, reach // COARSE_STEPS)
+    grid = np.arange(-reach, reach + 1, step)
+    coarse = np.array([unexplained(int(k)) for k in grid])
+    inside = (coarse[1:-1] < coarse[:-2]) & (coarse[1:-1] <= coarse[2:])
+    minima = [*(np.flatnonzero(inside) + 1).tolist(), 0, grid.size - 1]  # an edge may hide a minimum beyond it
+
+    def refined(m: int) -> tuple[int, float]:
+        ks = range(max(-reach, int(grid[m]) - step), min(reach, int(grid[m]) + step) + 1)
+        return min(((k, unexplained(k)) for k in ks), key=lambda kc: kc[1])
+
+    ends = [refined(m) for m in minima]
+    best_k, best = min(ends, key=lambda kc: kc[1])
+    if abs(best_k) >= reach or best >= 1.0:
         return None  # no minimum inside the search
-    c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
-    den = c0 - 2.0 * c1 + c2
+    if any(abs(k - best_k) > step and c < 2.0 * best + AMBIGUOUS_SHARE for k, c in ends):
+        return None  # as good a whole period away: the lag is known only modulo it
+    c0, c2 = unexplained(best_k - 1), unexplained(best_k + 1)
+    den = c0 - 2.0 * best + c2
     shift = 0.5 * (c0 - c2) / den if den > 0.0 else 0.0
-    return float(lags[k] + shift * dt)
+    return float((best_k + shift) * dt)
 
 
 def window_lags(time_s: FloatArray, command: FloatArray, output: FloatArray) -> FloatArray:
@@ -239,7 +268,7 @@ def window_lags(time_s: FloatArray, command: FloatArray, output: FloatArray) -> 
     n = max(MIN_MOVES, int(span // WINDOW_S))
     out = []
     for idx in np.array_split(np.arange(t.size), n):
-        if idx.size < 4 * MAX_LAG_SAMPLES:
+        if idx.size * dt < 4.0 * MAX_LAG_S:
             continue
         d = _delay_fit(t[idx], u[idx], y[idx], dt)
         if d is not None:
