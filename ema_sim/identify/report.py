@@ -109,9 +109,10 @@ def _stats(problem: Problem, fit: Fit) -> dict[str, object]:
         "nrmse": {o: _round(rms[o] / float(np.std(problem.observed[o][problem.mask]))) for o in errors},
         "rms_over_noise": {o: _round(rms[o] / problem.sigma_deg[o], 4) for o in errors},
         "whiteness": {o: whiteness(e, lags=50).as_dict() for o, e in errors.items()},
-        "independence": {
+        "independence": {  # the hinge moment only when the record logged one (a zero column tests nothing)
             o: {"command_deg": input_independence(e, problem.data.command_deg[problem.mask]).as_dict(),
-                "hinge_moment_inlb": input_independence(e, problem.hinge_moment[problem.mask]).as_dict()}
+                **({"hinge_moment_inlb": input_independence(e, problem.hinge_moment[problem.mask]).as_dict()}
+                   if problem.data.hinge_moment_inlb is not None else {})}
             for o, e in errors.items()
         },
     }
