@@ -329,6 +329,18 @@ def test_strict_json_has_no_nan_or_infinity_tokens():
     strict_loads(json.dumps(out, allow_nan=False))
 
 
+def test_an_output_that_mirrors_its_command_is_named_reversed_and_a_follower_is_not():
+    t = np.arange(0.0, 6.0, 0.001)
+    u = np.where(np.mod(t, 2.0) < 1.0, 2.0, -1.0)
+    y = np.convolve(u, np.full(20, 0.05))[: t.size] + np.random.default_rng(0).normal(0.0, 0.003, t.size)
+    follower = prepare(MeasuredData(time_s=t, command_deg=u, position_deg=y, source="follower"), WING)
+    assert not [w for w in follower.warnings if "opposite" in w]
+    mirror = prepare(MeasuredData(time_s=t, command_deg=u, position_deg=-y, source="mirror"), WING)
+    said = [w for w in mirror.warnings if "opposite" in w]
+    assert len(said) == 1
+    assert said[0].startswith("position_deg moves opposite to the command (correlation -0.99, slope -0.98")
+
+
 def test_a_prepared_record_says_what_it_found(rig):
     data = rig["linear_mm_70hz"][3]
     record = prepare(data, WING, channel_note="no channel in the metadata")

@@ -64,6 +64,7 @@ def analyze_record(data: MeasuredData, options: Options | None = None,
     p = prepare(data, channel, channel_note=note, command=options.command)
     ra = _analyze(p, options, p.hold, say)
     ra.notes += [line for name, nf in p.noise.items() for line in nf.findings(name, p.unit)]
+    ra.notes += p.radians + p.reversed_outputs
     if p.hold.sampled is None and p.hold.source == "detected":
         other = _analyze(p, replace(options, command="sampled"), replace(p.hold, sampled=True), lambda _share: None)
         ra.other_timing = timing_alternatives(ra, other)

@@ -212,7 +212,7 @@ def identification_record(p: PreparedRecord) -> Record:
     warnings: list[str] = []
     if p.channel_note:
         notes.append(p.channel_note)
-    warnings += p.radians
+    warnings += p.radians + p.reversed_outputs
     if unit != "deg":
         line = (f"positions in {unit} as logged (no --crank-arm-in): every *_deg figure of this report is "
                 f"in {unit}, every rate in {unit}/s")

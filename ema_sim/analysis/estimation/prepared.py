@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,8 @@ from ema_sim.io.measured import OUTPUTS, MeasuredData
 FloatArray = NDArray[np.float64]
 Check = Callable[[FloatArray, dict[str, FloatArray]], None]
 """A tool's own test of a record's command and outputs, before anything is measured on them."""
+REVERSED_CORRELATION = -0.5
+"""An output whose correlation with the command is below this moves opposite to it."""
 RADIAN_MATCH = 0.1
 """How close an output's span must come to π/180 (or 180/π) of the command's to be called a unit slip."""
 NOISELESS_DEG = 1e-6
@@ -91,6 +93,8 @@ class PreparedRecord:
     travel: Travel
     radians: list[str]
     """A warning for each output that looks logged in the other angular unit (:func:`radian_slips`)."""
+    reversed_outputs: list[str] = field(default_factory=list)
+    """A warning for each output that moves opposite to its command (:func:`reversed_outputs`)."""
 
     @property
     def unit(self) -> str:
@@ -322,6 +326,37 @@ def radian_slips(command_deg: FloatArray, outputs: dict[str, FloatArray], unit: 
     return out
 
 
+def reversed_outputs(command_deg: FloatArray, outputs: dict[str, FloatArray]) -> list[str]:
+    """A warning for each output that moves opposite to its command: a sign reversed in the wiring or the log.
+
+    A servo follows its command; an output that mirrors it is a column (or a command) whose sign is reversed,
+    which no effect of the vocabulary stands for: a model fitted to it explains it with terms that mean nothing.
+
+    Parameters
+    ----------
+    command_deg : numpy.ndarray
+        The command.
+    outputs : dict
+        Output name → its samples.
+
+    Returns
+    -------
+    list of str
+        One warning per reversed output.
+    """
+    out = []
+    for name, y in outputs.items():
+        if np.ptp(command_deg) <= 0.0 or np.ptp(y) <= 0.0:
+            continue
+        r = float(np.corrcoef(command_deg, y)[0, 1])
+        if r < REVERSED_CORRELATION:
+            slope = float(np.polyfit(command_deg, y, 1)[0])
+            out.append(f"{name} moves opposite to the command (correlation {r:.2f}, slope {slope:.3g}): a servo "
+                       "follows its command, so the column's sign (or the command's) is reversed; negate it before "
+                       "fitting, or the fit's terms stand for the reversal, not for the actuator")
+    return out
+
+
 def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | None = None,
             command: HoldMode = "detect", check: Check | None = None) -> PreparedRecord:
     """Read the record's columns once and measure what both tools start from (module docstring).
@@ -364,4 +399,5 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
                            saturation=saturation)
     slips = radian_slips(command_deg, outputs, data.unit)
     return PreparedRecord(data, time_s, command_deg, outputs, data.hinge_moment, channel, channel_note, noise, hold,
-                          slope, stamp_jitter.measure(time_s), saturation, travel, slips)
+                          slope, stamp_jitter.measure(time_s), saturation, travel, slips,
+                          reversed_outputs(command_deg, outputs))
