@@ -341,6 +341,22 @@ def test_an_output_that_mirrors_its_command_is_named_reversed_and_a_follower_is_
     assert said[0].startswith("position_deg moves opposite to the command (correlation -0.99, slope -0.98")
 
 
+def test_a_single_sample_glitch_sets_no_travel_and_a_reading_held_two_samples_does():
+    t = np.arange(0.0, 6.0, 0.001)
+    u = np.where(np.mod(t, 2.0) < 1.0, 2.0, -1.0)
+    y = np.convolve(u, np.full(20, 0.05))[: t.size] + np.random.default_rng(0).normal(0.0, 0.003, t.size)
+    glitch = y.copy()
+    glitch[3000] = 90.0
+    travel = prepare(MeasuredData(time_s=t, command_deg=u, position_deg=glitch, source="glitch"), WING).travel
+    assert travel.source == "declared"
+    assert travel.limits == (WING.position_min_deg, WING.position_max_deg)
+    held = y.copy()
+    held[3000:3002] = 50.0
+    travel = prepare(MeasuredData(time_s=t, command_deg=u, position_deg=held, source="held"), WING).travel
+    assert travel.outside
+    assert "…50°, outside left_wing" in travel.statement
+
+
 def test_a_prepared_record_says_what_it_found(rig):
     data = rig["linear_mm_70hz"][3]
     record = prepare(data, WING, channel_note="no channel in the metadata")

@@ -229,6 +229,14 @@ def _stop(dt: float, command_deg: FloatArray, y: FloatArray, nf: NoiseFloor, sid
     return side * top if pinned.sum() * dt >= STOP_S else None
 
 
+def _spikeless(y: FloatArray) -> FloatArray:
+    """``y`` through a three-sample median: a single sample's glitch sets no travel, a reading held two does."""
+    if y.size < 3:
+        return y
+    mid = np.median(np.stack([y[:-2], y[1:-1], y[2:]]), axis=0)
+    return np.concatenate([[np.median(y[:2])], mid, [np.median(y[-2:])]])
+
+
 def travel_limits(time_s: FloatArray, command_deg: FloatArray, outputs: dict[str, FloatArray], unit: str,
                   channel: ChannelConfig, noise: dict[str, NoiseFloor], *, stand_in: bool,
                   saturation: dict[str, tuple[float, float]] | None = None) -> Travel:
@@ -257,7 +265,7 @@ def travel_limits(time_s: FloatArray, command_deg: FloatArray, outputs: dict[str
         The limits to simulate with and the sentence that says where they come from.
     """
     declared = (channel.position_min_deg, channel.position_max_deg)
-    values = [command_deg, *outputs.values()]
+    values = [command_deg, *(_spikeless(y) for y in outputs.values())]
     lo, hi = float(min(np.min(v) for v in values)), float(max(np.max(v) for v in values))
     sign = "°" if unit == "deg" else f" {unit}"
     outside = unit == "deg" and not stand_in and (lo < declared[0] or hi > declared[1])
