@@ -104,6 +104,18 @@ def test_a_line_at_rest_with_the_current_swinging_is_a_limit_cycle_with_its_freq
     assert f"{lc.freq_hz:.3g} Hz" in said
 
 
+def test_a_slow_hunt_in_short_rests_is_read_at_its_own_frequency():
+    """3 Hz in rests of 1.2 s (under four cycles each): the periodogram's peak alone read 3.33 Hz."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 16.0, 0.001)
+    cmd = _square(t, 1.5)
+    since = t - t[np.maximum.accumulate(np.where(np.r_[True, np.diff(cmd) != 0], np.arange(t.size), 0))]
+    y = _servo(t, cmd, 0.02) + 0.05 * np.sin(2 * np.pi * 3.0 * t) * (since > 0.3) + rng.normal(0.0, 0.003, t.size)
+    lc = rests.read_rests(t, cmd, y, None, 0.0).limit_cycle
+    assert lc is not None
+    assert lc.freq_hz == pytest.approx(3.0, rel=0.02)
+
+
 def test_without_a_current_column_the_line_is_a_limit_cycle_the_current_could_not_confirm():
     d = hunting_record(2, quiet_start=True, current="none")
     r = rests.read_rests(d.time_s, d.command_deg, d.position_deg, None, 0.001)
