@@ -247,3 +247,34 @@ def test_each_result_is_its_own_image_and_no_empty_load_panel(tmp_path):
     md = to_markdown([steps, moves], plots)
     for j in range(n_steps):
         assert f"(r0_steps{j}.png)" in md
+
+
+def _stepped_servo(accel_limit_dps2: float) -> MeasuredData:
+    """Steps of 0.5° and 2° through a second order (ωn 60, ζ 0.7, 4 ms delay) whose acceleration is clipped."""
+    dt, sub = 1e-3, 10
+    t = np.arange(0.0, 8.0, dt)
+    u = np.array([0.0, 0.5, 0.0, 2.0, 0.0, -0.5, 0.0, -2.0])[t.astype(int)]
+    x = v = 0.0
+    y = np.empty_like(t)
+    h = dt / sub
+    for k in range(t.size):
+        target = u[max(k - 4, 0)]
+        for _ in range(sub):
+            a = float(np.clip(3600.0 * (target - x) - 84.0 * v, -accel_limit_dps2, accel_limit_dps2))
+            v += a * h
+            x += v * h
+        y[k] = x
+    y += np.random.default_rng(2).normal(0.0, 0.002, t.size)
+    return MeasuredData(time_s=t, command_deg=u, position_deg=y, source="stepped")
+
+
+def test_a_larger_step_slowed_by_an_acceleration_limit_is_said_not_linear_and_a_linear_servo_is_not():
+    """No rate test sees an acceleration limit (the rate never plateaus): the 2° steps' fits differ from the
+    0.5° steps' beyond their uncertainty, and the step says its fit is that amplitude's equivalent."""
+    limited = analyze_record(_stepped_servo(2000.0), Options()).results["steps"]
+    big = [s for s in limited if abs(s.command_step_deg) == 2.0 and s.fit is not None]
+    assert big
+    assert all("not linear over the amplitudes" in s.fit_note for s in big)
+    linear = analyze_record(_stepped_servo(1e9), Options()).results["steps"]
+    assert [s for s in linear if s.fit is not None and abs(s.command_step_deg) == 2.0]
+    assert all(s.fit_note == "fitted" for s in linear if s.fit is not None)

@@ -47,7 +47,13 @@ from typing_extensions import override
 
 from ema_sim.analysis.estimation import settling, slew
 from ema_sim.analysis.estimation.quality import Quality
-from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit, fit_step, hand_calculation, simulate
+from ema_sim.analysis.estimation.second_order_fit import (
+    Estimate,
+    SecondOrderFit,
+    fit_step,
+    hand_calculation,
+    simulate,
+)
 from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.formatting.markdown import image, num, quality, table
 from ema_sim.analysis.records.series import Edge, derivative, moving_average, settled
@@ -282,6 +288,49 @@ def _predicted_peak_rate(amp: float, wn: float, zeta: float) -> float:
     return float(abs(amp) * wn / np.sqrt(1.0 - zeta * zeta) * np.exp(-zeta * wn * tp) * np.sin(wd * tp))
 
 
+LINEAR_SIGMAS = 3.0
+"""A step's ωn or delay differs from the smallest step's beyond this many combined standard errors..."""
+LINEAR_WN_SHARE = 0.05
+"""...and ωn by more than this share of the smallest step's, or the delay by more than :data:`LINEAR_DELAY_S`:
+the servo is not linear over the two amplitudes."""
+LINEAR_DELAY_S = 0.001
+
+
+def amplitude_change(reference: SecondOrderFit, reference_amp: float, fit: SecondOrderFit) -> str:
+    """How a larger step's linear fit differs from the smallest step's, in words (empty: it does not).
+
+    A servo linear over the two amplitudes gives both the same ωn and delay; an acceleration or current limit
+    that acts before the rate plateau slows the larger one without flattening its rate, so no rate test sees it
+    and its fit is that amplitude's equivalent, not the servo's.
+
+    Parameters
+    ----------
+    reference : SecondOrderFit
+        The smallest fitted step's fit.
+    reference_amp : float
+        Its measured change, deg.
+    fit : SecondOrderFit
+        A larger step's fit.
+
+    Returns
+    -------
+    str
+        The difference, or an empty string.
+    """
+    def beyond(a: Estimate, b: Estimate, material: float) -> bool:
+        se = math.hypot(a.sigma or 0.0, b.sigma or 0.0)
+        return abs(a.value - b.value) > max(LINEAR_SIGMAS * se, material)
+
+    wn = beyond(fit.wn_rad_s, reference.wn_rad_s, LINEAR_WN_SHARE * reference.wn_rad_s.value)
+    delay = beyond(fit.delay_s, reference.delay_s, LINEAR_DELAY_S)
+    if not (wn or delay):
+        return ""
+    return (f"not linear over the amplitudes: ωn {fit.wn_rad_s.value:.3g} and delay {1e3 * fit.delay_s.value:.3g} ms "
+            f"here, {reference.wn_rad_s.value:.3g} and {1e3 * reference.delay_s.value:.3g} ms at the "
+            f"{abs(reference_amp):.3g}° step (a limit on acceleration or current acting before the rate plateau): "
+            "this fit is this amplitude's equivalent")
+
+
 def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge], *, output: str,
                   noise_floor: float, rated_slew_dps: float | None = None, fit: bool = True,
                   sampled: bool = False, counts: float | None = None,
@@ -323,6 +372,7 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
     rows = [(e, _metrics(t, y, e, dt, noise_floor)) for e in edges]
     order = sorted(range(len(rows)), key=lambda i: abs(rows[i][1]["y1"] - rows[i][1]["y0"]))
     reference: SecondOrderFit | None = None
+    reference_amp = 0.0
     results: dict[int, StepResponse] = {}
     for i in order:
         e, m = rows[i]
@@ -358,7 +408,9 @@ def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge]
                                 delay0=m["delay"] or 0.005, hand=hand, sampled=sampled)
             note = "fitted"
             if reference is None:
-                reference = step_fit
+                reference, reference_amp = step_fit, amp
+            elif changed := amplitude_change(reference, reference_amp, step_fit):
+                note = f"fitted; {changed}"
         results[i] = StepResponse(
             time_s=float(t[e.index]), command_from_deg=e.before.value, command_to_deg=e.after.value, output=output,
             initial_deg=m["y0"], final_deg=m["y1"], noise_deg=m["noise"], delay_s=m["delay"], rise_s=m["rise"],
@@ -615,6 +667,8 @@ class Steps(Section2Test[StepResponse]):
         f = r.fit
         extra = (f"; fit ωn {f.wn_rad_s.value:.2f} ± {f.wn_rad_s.sigma:.2g}, ζ {f.zeta.value:.3f}, delay "
                  f"{1e3 * f.delay_s.value:.2f} ms" if f else f"; {r.fit_note}")
+        if f and r.fit_note.startswith("fitted; "):
+            extra += f" ({r.fit_note.removeprefix('fitted; ')})"
         flag = "" if r.quality in ("ok", "saturated") else f" [{r.quality}: {r.quality_note}]"
         c = r.against_command
         left = f"; {c.statement}" if c is not None and not c.settled else ""
