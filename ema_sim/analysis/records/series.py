@@ -52,7 +52,7 @@ JITTER_LIMIT = 0.5
 
 
 def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> MeasuredData:
-    """The record on a uniform grid (unchanged when it already is uniform).
+    """The record on a uniform grid (unchanged when it already is uniform); cut it at its gaps first.
 
     Time stamps that only jitter belong to regular sampling: when every stamp lies within half a
     sample of the least-squares line through them (a missing sample or a burst shifts the later
@@ -105,8 +105,13 @@ def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> Meas
         changes[f.name] = value[idx] if f.name in held else np.interp(grid, t, value)
     changes["extra"] = {k: v[idx] if k in held else np.interp(grid, t, v) for k, v in data.extra.items()}
     meta["resampled"] = (f"time stamps not uniform (intervals {1e3 * dt_all.min():.3g}-{1e3 * dt_all.max():.3g} ms): "
-                         f"{t.size} samples logged, resampled onto {n} at {1.0 / dt:.6g} Hz, command "
-                         f"{'interpolated (sampled)' if command_sampled else 'held'}, outputs interpolated")
+                         f"resampled at {1.0 / dt:.6g} Hz, command "
+                         f"{'interpolated (sampled)' if command_sampled else 'held'}, outputs interpolated: {n} "
+                         f"samples on the grid from the {t.size} logged")
+    gaps = find_gaps(t)
+    if gaps:
+        meta["resampled"] += (f", across {gap_statement(gaps, dt)} too: what was in them is made up "
+                              "(ema analyze cuts a record at its gaps instead)")
     changes["metadata"] = meta
     return replace(data, **changes)  # type: ignore[arg-type]
 

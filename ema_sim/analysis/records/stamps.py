@@ -86,7 +86,20 @@ def find_gaps(time_s: FloatArray) -> tuple[Gap, ...]:
 
 
 def stretches(n: int, gaps: tuple[Gap, ...]) -> list[tuple[int, int]]:
-    """The samples ``[start, stop)`` of each contiguous stretch between ``gaps`` of a record of ``n`` samples."""
+    """The samples ``[start, stop)`` of each contiguous stretch between a record's gaps.
+
+    Parameters
+    ----------
+    n : int
+        The record's samples.
+    gaps : tuple of Gap
+        Its gaps (:func:`find_gaps`).
+
+    Returns
+    -------
+    list of tuple
+        ``(start, stop)`` of each stretch, in order.
+    """
     cuts = [0, *(g.index for g in gaps), n]
     return [(a, b) for a, b in pairwise(cuts) if b > a]
 
