@@ -11,7 +11,7 @@ schema published as ``docs/schema/analyze.schema.json``.
 from __future__ import annotations
 
 from functools import cache
-from typing import Literal, TypedDict
+from typing import Literal, NotRequired, TypedDict
 
 from ema_sim.io.contract import schema_of
 
@@ -29,6 +29,8 @@ class RecordReport(TypedDict):
     data: str
     channel: str
     samples: int
+    samples_resampled: NotRequired[int]
+    """The grid's samples when the record was resampled (``samples`` counts them as logged)."""
     sample_hz: Num
     duration_s: Num
     outputs: list[str]

@@ -6,7 +6,9 @@
    from too): its channel, its slew, each output's noise floor and resolution, read where the output cannot
    move (a limit cycle at rest and a floor that grows with the excitation are said, not taken for noise), and
    whether the command is held or sampled, on the samples as logged;
-2. puts the record on a uniform grid (:func:`ema_sim.analysis.records.series.uniform_record`);
+2. puts the record on a uniform grid (:func:`ema_sim.analysis.records.series.uniform_record`), never across a
+   gap in its stamps: :func:`analyze_records` first cuts a record with gaps into its contiguous stretches
+   (:func:`ema_sim.analysis.records.series.split_at_gaps`), each analysed as a record of its own;
 3. recognises its segments (:mod:`ema_sim.analysis.recognize`);
 4. runs every test of :data:`ema_sim.analysis.registry.TESTS` in order; a test that finds nothing to
    run on says why in ``not_computed``, and a segment no test runs on gets a note.
@@ -79,13 +81,12 @@ def _analyze(p: PreparedRecord, options: Options, hold: CommandHold, say: Callab
     raw_stamps = p.time_s
     data = series.uniform_record(p.data, command_sampled=hold.assumed_sampled)
     rec = recognize(data)
-    ra = RecordAnalysis(data, p.channel, rec, p.noise, hold, options,
-                        stamps=raw_stamps if raw_stamps.size == data.time_s.size else None, slew=p.slew,
-                        stand_in=p.channel_note is not None)
+    same = raw_stamps.size == data.time_s.size
+    ra = RecordAnalysis(data, p.channel, rec, p.noise, hold, options, stamps=raw_stamps if same else None,
+                        slew=p.slew, stand_in=p.channel_note is not None, logged=None if same else raw_stamps.size)
     if p.channel_note:
         ra.notes.append(p.channel_note)
-    if "resampled" in data.metadata:
-        ra.notes.append(data.metadata["resampled"])
+    ra.notes += [data.metadata[k] for k in ("gaps", "resampled") if k in data.metadata]
     jitter = p.stamps
     if jitter.jitters and data.outputs:
         ra.notes.append(f"{jitter.statement(stamps.output_rate(jitter, data.column(data.outputs[0])), data.unit)}; no "
@@ -167,6 +168,9 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None,
                     progress: Callable[[int, float], None] | None = None) -> list[RecordAnalysis]:
     """Analyse several records, then let each use what another of the same channel measured.
 
+    A record with gaps in its stamps is analysed stretch by stretch
+    (:func:`ema_sim.analysis.records.series.split_at_gaps`): one analysis per stretch, in order.
+
     A crosstalk record judged against table A2's threshold is judged again against a static threshold
     measured on the same channel; free-play jumps with no compliance taken out get the total compliance
     measured on a load staircase of the same channel.
@@ -183,11 +187,14 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None,
     Returns
     -------
     list of RecordAnalysis
-        One per record, in order.
+        One per record (per stretch of a record with gaps), in order.
     """
     options = options or Options()
-    done = [analyze_record(d, options, None if progress is None else _for_record(progress, i))
-            for i, d in enumerate(records)]
+    done = []
+    for i, d in enumerate(records):
+        parts = series.split_at_gaps(d)
+        done += [analyze_record(part, options, None if progress is None else _for_record(progress, i, j, len(parts)))
+                 for j, part in enumerate(parts)]
     for ra in done:
         same = [o for o in done if o.channel.channel == ra.channel.channel and o is not ra]
         for test in TESTS:
@@ -195,10 +202,10 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None,
     return done
 
 
-def _for_record(progress: Callable[[int, float], None], i: int) -> Callable[[float], None]:
-    """``progress`` bound to record ``i``."""
+def _for_record(progress: Callable[[int, float], None], i: int, j: int = 0, parts: int = 1) -> Callable[[float], None]:
+    """``progress`` bound to record ``i`` (its stretch ``j`` of ``parts``)."""
     def say(share: float) -> None:
-        progress(i, share)
+        progress(i, (j + share) / parts)
 
     return say
 

@@ -72,7 +72,8 @@ def record_json(ra: RecordAnalysis) -> JsonObject:
     d = ra.data
     t = d.time_s
     doc: dict[str, object] = {
-        "data": d.source, "channel": ra.channel_name, "samples": len(d), "sample_hz": d.sample_hz,
+        "data": d.source, "channel": ra.channel_name, "samples": len(d) if ra.logged is None else ra.logged,
+        **({} if ra.logged is None else {"samples_resampled": len(d)}), "sample_hz": d.sample_hz,
         "duration_s": float(t[-1] - t[0]), "outputs": d.outputs, "unit": d.unit, "metadata": d.metadata,
         "noise_deg": ra.noise_deg, "resolution_deg": ra.resolution_deg,
         "noise": {k: v.as_dict() for k, v in ra.noise.items()},
@@ -196,7 +197,8 @@ def _header(i: int, ra: RecordAnalysis, plots: dict[str, str]) -> list[str]:
     lines = [f"## Record {i + 1}: `{d.source}`", ""]
     res = ", ".join(f"{k} {v:g}{ra.unit}" if v else f"{k} continuous" for k, v in ra.resolution_deg.items())
     lines += table(["channel", "samples", "rate", "span", "outputs", "noise floor", "resolution", "command"], [[
-        ra.channel_name, f"{len(d):,}", f"{d.sample_hz:.6g} Hz", f"{t[-1] - t[0]:.4g} s", ", ".join(d.outputs),
+        ra.channel_name, f"{len(d):,}" if ra.logged is None else f"{ra.logged:,} logged, resampled onto {len(d):,}",
+        f"{d.sample_hz:.6g} Hz", f"{t[-1] - t[0]:.4g} s", ", ".join(d.outputs),
         ", ".join(f"{k} {v:.2g}{ra.unit}" for k, v in ra.noise_deg.items()), res,
         "sampled" if ra.command.assumed_sampled else "held"]])
     lines += [f"Command: {ra.command.statement}.", ""]

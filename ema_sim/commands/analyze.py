@@ -38,9 +38,11 @@ def _summary(ra: RecordAnalysis) -> list[str]:
     from ema_sim.analysis.report import slope_statement  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     d = ra.data
-    lines = [f"{d.source}: {len(d)} samples at {d.sample_hz:.6g} Hz, channel {ra.channel_name}; "
-             f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}",
-             f"  command: {ra.command.statement}"]
+    count = f"{len(d)} samples" if ra.logged is None else f"{ra.logged} samples logged, resampled onto {len(d)}"
+    lines = [f"{d.source}: {count} at {d.sample_hz:.6g} Hz, channel {ra.channel_name}; "
+             f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}"]
+    lines += [f"  {k}: {d.metadata[k]}" for k in ("gaps", "resampled") if k in d.metadata]
+    lines.append(f"  command: {ra.command.statement}")
     if ra.command.leads:
         lines.append(f"  causality: {ra.command.leads}")
     for f in ra.other_timing:

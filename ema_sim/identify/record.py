@@ -192,6 +192,19 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     return identification_record(shared.prepare(data, channel, channel_note=channel_note, command=command, check=check))
 
 
+def _stamps_notes(stamps: stamp_jitter.Stamps, y: FloatArray, unit: str) -> list[str]:
+    """The stamps' gaps (a pause of the logger, first: also a warning) and jitter, each a note."""
+    out = []
+    if stamps.gaps:
+        out.append(f"{stamp_jitter.gap_statement(stamps.gaps, stamps.interval_s)}: a pause of the logger, not "
+                   "jitter; the model runs through it on the command last logged before it (held), so an output "
+                   "that moved in it is error after it")
+    if stamps.jitters:
+        out.append(f"{stamps.statement(stamp_jitter.output_rate(stamps, y), unit)}: fitted on the record's own "
+                   "stamps, nothing straightened or resampled")
+    return out
+
+
 def identification_record(p: PreparedRecord) -> Record:
     """The record as identification takes it: the travel the data requires, and what was found, worded.
 
@@ -233,10 +246,10 @@ def identification_record(p: PreparedRecord) -> Record:
     if hold.leads:
         warnings.append(hold.leads)
     stamps = p.stamps
-    if stamps.jitters:
-        rate = stamp_jitter.output_rate(stamps, p.outputs[p.first])
-        notes.append(f"{stamps.statement(rate, unit)}: fitted on the record's own stamps, nothing straightened "
-                     "or resampled")
+    said = _stamps_notes(stamps, p.outputs[p.first], unit)
+    notes += said
+    if stamps.gaps:
+        warnings.append(said[0])
     notes.append(f"travel: {travel.statement}")
     if travel.outside:
         warnings.append(f"data outside the declared travel: {travel.statement}")

@@ -2,7 +2,9 @@
 
 The data contract allows non-uniform time; spectral and filter-based analyses need a uniform grid, so
 :func:`uniform_record` resamples onto one (the command by zero-order hold, as the contract defines
-it, the measured columns linearly). A *hold* is a run of samples over which a signal keeps its value
+it, the measured columns linearly). A gap in the stamps
+(:func:`ema_sim.analysis.records.stamps.find_gaps`) is never bridged: :func:`split_at_gaps` cuts the
+record into its contiguous stretches first. A *hold* is a run of samples over which a signal keeps its value
 (the digital command of a step or staircase, a static load level); an *edge* is a jump between two
 holds.
 """
@@ -15,6 +17,7 @@ from itertools import pairwise
 import numpy as np
 from numpy.typing import NDArray
 
+from ema_sim.analysis.records.stamps import find_gaps, gap_statement, stretches
 from ema_sim.errors import DataError
 from ema_sim.io.measured import MeasuredData
 
@@ -49,7 +52,7 @@ JITTER_LIMIT = 0.5
 
 
 def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> MeasuredData:
-    """The record on a uniform grid (unchanged when it already is uniform).
+    """The record on a uniform grid (unchanged when it already is uniform); cut it at its gaps first.
 
     Time stamps that only jitter belong to regular sampling: when every stamp lies within half a
     sample of the least-squares line through them (a missing sample or a burst shifts the later
@@ -103,9 +106,70 @@ def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> Meas
     changes["extra"] = {k: v[idx] if k in held else np.interp(grid, t, v) for k, v in data.extra.items()}
     meta["resampled"] = (f"time stamps not uniform (intervals {1e3 * dt_all.min():.3g}-{1e3 * dt_all.max():.3g} ms): "
                          f"resampled at {1.0 / dt:.6g} Hz, command "
-                         f"{'interpolated (sampled)' if command_sampled else 'held'}, outputs interpolated")
+                         f"{'interpolated (sampled)' if command_sampled else 'held'}, outputs interpolated: {n} "
+                         f"samples on the grid from the {t.size} logged")
+    gaps = find_gaps(t)
+    if gaps:
+        meta["resampled"] += (f", across {gap_statement(gaps, dt)} too: what was in them is made up "
+                              "(ema analyze cuts a record at its gaps instead)")
     changes["metadata"] = meta
     return replace(data, **changes)  # type: ignore[arg-type]
+
+
+MIN_STRETCH = 100
+"""A stretch between gaps with fewer samples is not analysed (the data contract's shortest record)."""
+
+
+def _part(data: MeasuredData, a: int, b: int) -> MeasuredData:
+    """Samples ``[a, b)`` of a record, every column cut alike."""
+    changes: dict[str, object] = {f.name: getattr(data, f.name)[a:b] for f in fields(data)
+                                  if isinstance(getattr(data, f.name), np.ndarray)}
+    changes["extra"] = {k: v[a:b] for k, v in data.extra.items()}
+    return replace(data, **changes)  # type: ignore[arg-type]
+
+
+def split_at_gaps(data: MeasuredData) -> list[MeasuredData]:
+    """The record's contiguous stretches between gaps in its stamps, each a record of its own.
+
+    A gap (an interval of several sample intervals) is a pause of the logger: what the actuator did in
+    it is unknown, so no analysis may bridge it, and resampling would invent the samples. Each stretch
+    of at least :data:`MIN_STRETCH` samples comes back as a record named by its span, its metadata's
+    ``gaps`` saying where the gaps are and which stretch it is; shorter ones are left out and said.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        A record as read.
+
+    Returns
+    -------
+    list of MeasuredData
+        ``[data]`` unchanged when it has no gap, else its stretches long enough to analyse.
+
+    Raises
+    ------
+    DataError
+        No stretch between the gaps is long enough.
+    """
+    gaps = find_gaps(data.time_s)
+    if not gaps:
+        return [data]
+    t = data.time_s
+    parts = stretches(t.size, gaps)
+    kept = [(a, b) for a, b in parts if b - a >= MIN_STRETCH]
+    head = gap_statement(gaps, float(np.median(np.diff(t))))
+    if not kept:
+        raise DataError(f"{data.source}: {head}; no stretch between them has {MIN_STRETCH} samples to analyse")
+    short = len(parts) - len(kept)
+    dropped = f"; {short} stretch(es) under {MIN_STRETCH} samples not analysed" if short else ""
+    out = []
+    for i, (a, b) in enumerate(kept):
+        meta = dict(data.metadata)
+        span = f"{t[a]:.4g}-{t[b - 1]:.4g} s"
+        meta["gaps"] = (f"{head}: analysed stretch by stretch, never across a gap (nothing interpolated in it)"
+                        f"{dropped}; this is stretch {i + 1} of {len(kept)}: {span}, {b - a} samples")
+        out.append(replace(_part(data, a, b), metadata=meta, source=f"{data.source} [{span}]"))
+    return out
 
 
 def sample_period(data: MeasuredData) -> float:

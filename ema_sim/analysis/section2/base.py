@@ -130,6 +130,8 @@ class RecordAnalysis:
     stand_in : bool
         The channel's configuration is a stand-in (no ``--channel``, and the record names none of ours): no
         X-43A table applies to it.
+    logged : int or None
+        The samples as logged, when the record was resampled onto ``data``'s grid (None: they are ``data``'s).
     """
 
     data: MeasuredData
@@ -153,6 +155,8 @@ class RecordAnalysis:
     other_timing: list[TimingAlternative] = field(default_factory=list)
     """When the record cannot tell held from sampled: each timing figure under both assumptions
     (:func:`ema_sim.analysis.pipeline.timing_alternatives`)."""
+    logged: int | None = None
+    """The samples as logged when the record was resampled (None: ``data`` holds them as logged)."""
 
     @property
     def channel_named(self) -> bool:
