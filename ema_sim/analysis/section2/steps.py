@@ -46,14 +46,9 @@ from numpy.typing import NDArray
 from typing_extensions import override
 
 from ema_sim.analysis.estimation import settling, slew
+from ema_sim.analysis.estimation.linearity import amplitude_change
 from ema_sim.analysis.estimation.quality import Quality
-from ema_sim.analysis.estimation.second_order_fit import (
-    Estimate,
-    SecondOrderFit,
-    fit_step,
-    hand_calculation,
-    simulate,
-)
+from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit, fit_step, hand_calculation, simulate
 from ema_sim.analysis.formatting import figure
 from ema_sim.analysis.formatting.markdown import image, num, quality, table
 from ema_sim.analysis.records.series import Edge, derivative, moving_average, settled
@@ -286,49 +281,6 @@ def _predicted_peak_rate(amp: float, wn: float, zeta: float) -> float:
     wd = wn * np.sqrt(1.0 - zeta * zeta)
     tp = np.arctan2(np.sqrt(1.0 - zeta * zeta), zeta) / wd
     return float(abs(amp) * wn / np.sqrt(1.0 - zeta * zeta) * np.exp(-zeta * wn * tp) * np.sin(wd * tp))
-
-
-LINEAR_SIGMAS = 3.0
-"""A step's ωn or delay differs from the smallest step's beyond this many combined standard errors..."""
-LINEAR_WN_SHARE = 0.05
-"""...and ωn by more than this share of the smallest step's, or the delay by more than :data:`LINEAR_DELAY_S`:
-the servo is not linear over the two amplitudes."""
-LINEAR_DELAY_S = 0.001
-
-
-def amplitude_change(reference: SecondOrderFit, reference_amp: float, fit: SecondOrderFit) -> str:
-    """How a larger step's linear fit differs from the smallest step's, in words (empty: it does not).
-
-    A servo linear over the two amplitudes gives both the same ωn and delay; an acceleration or current limit
-    that acts before the rate plateau slows the larger one without flattening its rate, so no rate test sees it
-    and its fit is that amplitude's equivalent, not the servo's.
-
-    Parameters
-    ----------
-    reference : SecondOrderFit
-        The smallest fitted step's fit.
-    reference_amp : float
-        Its measured change, deg.
-    fit : SecondOrderFit
-        A larger step's fit.
-
-    Returns
-    -------
-    str
-        The difference, or an empty string.
-    """
-    def beyond(a: Estimate, b: Estimate, material: float) -> bool:
-        se = math.hypot(a.sigma or 0.0, b.sigma or 0.0)
-        return abs(a.value - b.value) > max(LINEAR_SIGMAS * se, material)
-
-    wn = beyond(fit.wn_rad_s, reference.wn_rad_s, LINEAR_WN_SHARE * reference.wn_rad_s.value)
-    delay = beyond(fit.delay_s, reference.delay_s, LINEAR_DELAY_S)
-    if not (wn or delay):
-        return ""
-    return (f"not linear over the amplitudes: ωn {fit.wn_rad_s.value:.3g} and delay {1e3 * fit.delay_s.value:.3g} ms "
-            f"here, {reference.wn_rad_s.value:.3g} and {1e3 * reference.delay_s.value:.3g} ms at the "
-            f"{abs(reference_amp):.3g}° step (a limit on acceleration or current acting before the rate plateau): "
-            "this fit is this amplitude's equivalent")
 
 
 def analyze_steps(t: FloatArray, u: FloatArray, y: FloatArray, edges: list[Edge], *, output: str,
