@@ -12,12 +12,25 @@ model is chosen:
    carries the same excitation and differs only in time; any other record in :data:`PLAIN_WINDOWS` equal
    parts. Each cut is moved to the end of the longest rest of the command near it, and each window's fit
    runs its model from up to :data:`LEAD_S` before the cut, on the samples before it, not fitted.
+   A window fits only the samples the whole record fits: what the record's mask leaves out (a dropout, a
+   spike) is left out of every window too.
 2. **The final model's parameters refitted on each window** with identification's own fit
-   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with its coloured-residual
-   uncertainty. Whether a parameter **changes**, and its **trend** (falls, grows or wanders), is decided by
-   :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze`` applies to a periodic
-   test's cycles; a value on its search's bound does not vote. The report gives the value per window, not
-   one equivalent for the whole.
+   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values. Each window's uncertainty is the larger
+   of its coloured-residual σ and its stretch σ (:func:`ema_sim.identify.fit.stretch_covariance`: the scatter of
+   the fit's score over :data:`STRETCHES` stretches of the window). The coloured-residual σ treats what the model
+   leaves as noise independent of the parameters; a model that misses structure leaves a misfit that pulls a
+   parameter by what each stretch excites (a dead band fitted as a threshold pulls the delay one way on small
+   steps, another on large ones), and the parts of a record that does not repeat excite unlike. The scatter within
+   a window is what that misfit does where only the excitation differs, so a difference between windows counts
+   only beyond it; a window excited uniformly unlike another shows no such scatter, and only its error above the
+   floor says the model lacks structure: the σ is multiplied by the window's rms weighted error when that exceeds
+   1 (a misfit does not average out over the samples as the coloured σ assumes). A change is claimed when it
+   survives the model's own misfit, not only the noise. Whether a parameter **changes**, and its **trend** (falls,
+   grows or wanders), is decided by :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze``
+   applies to a periodic test's cycles; a value on its search's bound does not vote, nor does one found by a grid
+   search (Kb and offset behind a quantizer, :func:`ema_sim.identify.stepwise.fit_model`): its ± is the grid's
+   finest spacing, a resolution, not a statistical σ, so it is said to be untested. The report gives the value per
+   window, not one equivalent for the whole.
 3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
    record allows: the windows refitted without it. When the windows, each with its own parameters, do
    not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
@@ -41,12 +54,12 @@ from numpy.typing import NDArray
 from ema_sim.analysis.estimation.trend import MIN_CHANGE, Trend, trend
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
-from ema_sim.identify.fit import TINY, Fit
+from ema_sim.identify.fit import TINY, Fit, stretch_covariance
 from ema_sim.identify.outcome import Identification, Removal, Step
 from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread
 from ema_sim.identify.parallel import result as value_of
 from ema_sim.identify.problem import SETTLE_S, Cancelled, Problem
-from ema_sim.identify.stepwise import fit_model, no_worse, offs
+from ema_sim.identify.stepwise import PRE_QUANTIZER, fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
 from ema_sim.io.measured import MeasuredData
 from ema_sim.jsontypes import JsonObject
@@ -64,6 +77,7 @@ PERIODIC = 0.9
 """Normalised autocorrelation of the command at its period for it to count as repeating."""
 LEAD_S = 0.5
 """A window's model runs from this much before its first fitted sample (within the rest before it)."""
+STRETCHES = 8  # a window's stretches whose scores' scatter gives its σ beside the coloured one (window_sigma)
 SNAP_SHARE = 0.25
 """A cut moves to the end of the longest rest of the command within this share of a window around it."""
 LABELS = {"wn_rad_s": "ωn (wn_rad_s)", "zeta": "ζ (zeta)", "delay_s": "the command delay (delay_s)",
@@ -322,13 +336,14 @@ def window_problem(problem: Problem, w: Window) -> Problem:
     Returns
     -------
     Problem
-        Fitted on the window's samples, its model run from :attr:`Window.lead`.
+        Fitted on the window's samples that the record fits (its mask), its model run from :attr:`Window.lead`.
     """
     t = problem.time_s
     settle = float(t[w.start] - t[w.lead]) if w.lead < w.start else problem.settle_s
     sub = Problem(_sub(problem.data, w.lead, w.end), problem.channel, step_s=problem.step_s,
                   settle_s=settle if settle > 0.0 else SETTLE_S, noise=problem.noise,
                   command_sampled=problem.command_sampled, output_range=dict(problem.output_range))
+    sub.mask &= problem.mask[w.lead:w.end]  # what the record leaves out of its fit, every window leaves out
     if problem.timing_s > 0.0:
         sub.set_timing(problem.timing_s, {o: r[w.lead:w.end] for o, r in problem.timing_rates.items()})
     return sub
@@ -474,7 +489,46 @@ def refit_without(subs: list[Problem], params: SecondOrderParams, free: tuple[st
     return without, _pays(without, with_), len(subs)
 
 
-def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
+def grid_searched(params: SecondOrderParams, name: str) -> bool:
+    """Whether ``name`` is found by a grid search (behind a quantizer), its ± the grid's spacing, no σ.
+
+    Parameters
+    ----------
+    params : SecondOrderParams
+        The fitted parameters.
+    name : str
+        The model parameter.
+    """
+    return params.quantization_deg > 0.0 and name in PRE_QUANTIZER
+
+
+def window_sigma(sub: Problem, f: Fit, name: str) -> float:
+    """A window's σ of ``name``: its coloured or stretch σ, the larger, times its error over the floor (item 2).
+
+    Parameters
+    ----------
+    sub : Problem
+        The window.
+    f : Fit
+        The window's fit.
+    name : str
+        The model parameter.
+
+    Returns
+    -------
+    float
+        One sigma; inf when the window cannot move it; the grid's spacing for a grid-searched one (untested).
+    """
+    sigma = float(f.sigma.get(name, math.inf))
+    if grid_searched(f.params, name) or name not in f.jac_free or not math.isfinite(sigma):
+        return sigma
+    k, i = len(sub.outputs), f.jac_free.index(name)
+    var = float(stretch_covariance(f.residual, f.jacobian, f.residual.size // k, k, STRETCHES)[i, i])
+    spread = math.sqrt(max(var, 0.0)) * abs(FREE[name].derivative(float(getattr(f.params, name))))
+    return max(1.0, math.sqrt(float(np.mean(f.residual**2)))) * max(sigma, spread)
+
+
+def track(name: str, wf: WindowFit, ws: list[Window], subs: list[Problem]) -> Track:
     """One parameter across the windows, and its trend (:func:`ema_sim.analysis.estimation.trend.trend`).
 
     Parameters
@@ -485,19 +539,23 @@ def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
         The windows' fits.
     ws : list of Window
         The windows.
+    subs : list of Problem
+        The windows as fitted (:func:`window_problem`).
 
     Returns
     -------
     Track
-        Its values, uncertainty and trend.
+        Its values, uncertainty (:func:`window_sigma`) and trend; ``not determined`` for a grid-searched one
+        (its ± a resolution: no test of a change can be built on it).
     """
     values = np.array([float(getattr(f.params, name)) for f in wf.fits])
-    sigma = np.array([float(f.sigma.get(name, math.inf)) for f in wf.fits])
+    sigma = np.array([window_sigma(sub, f, name) for sub, f in zip(subs, wf.fits, strict=True)])
     times = np.array([0.5 * (w.start_s + w.end_s) for w in ws])
     free = FREE.get(name)
     bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)
                                               or v >= free.high - 1e-6 * (free.high - free.low)) for v in values])
-    tr = trend(values, sigma, times, usable=~bounded)
+    grid = np.array([grid_searched(f.params, name) for f in wf.fits])
+    tr = trend(values, sigma, times, usable=~bounded & ~grid)
     return Track(**{f.name: getattr(tr, f.name) for f in fields(tr)}, name=name)
 
 
@@ -546,11 +604,11 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
     out.windows = ws
     subs = [window_problem(problem, w) for w in ws]
     cur = fit_windows(subs, final.params, final.free, final.flip, pool)
-    out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in final.free], cur)
+    out.tracks, ridge = _on_the_ridge([track(f, cur, ws, subs) for f in final.free], cur)
     say(f"changes: {how}; " + ", ".join(f"{t.name} {t.kind}" for t in out.tracks))
     if out.changed:
         cur = _proxies(problem, result, declared, subs, cur, out, say, pool)
-        out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in result.final.free], cur)
+        out.tracks, ridge = _on_the_ridge([track(f, cur, ws, subs) for f in result.final.free], cur)
     out.bandwidth_hz = tuple(bandwidth_hz(f.params) for f in cur.fits)
     out.rms_over_noise = {
         o: float(np.sqrt(sum(float(np.sum(sub.errors_deg(f.sim)[o] ** 2)) for sub, f in zip(subs, cur.fits,
@@ -568,6 +626,9 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
         out.statements = [f"the parameters hold over the record ({how}): "
                           + "; ".join(t.statement() for t in out.tracks if t.kind != "not determined")]
     out.statements += ridge
+    if grid := " and ".join(t.name for t in out.tracks if grid_searched(result.final.params, t.name)):
+        out.statements.append(f"{grid} not tested for a change over the record: found by a grid search behind the "
+                              "quantizer, the ± per window is the grid's finest spacing, a resolution, not a σ")
     early = [t for t in out.tests if t.fitted < t.windows]
     if early:
         out.statements.append("the added effects tested on the windows with their own parameters, the refits without "
