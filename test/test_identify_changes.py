@@ -31,6 +31,7 @@ from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_report
 from ema_sim.identify.stepwise import fit_model, start_point
 from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.identify.window_sigma import window_sigma
 from ema_sim.models.second_order import SecondOrderParams
 
 DURATION_S = 24.0
@@ -300,8 +301,8 @@ def test_a_grid_searched_parameter_is_not_tested_for_a_change():
 
 
 def test_a_window_sigma_covers_the_misfit_not_only_the_noise():
-    """A misfit that pulls the estimate one way on one stretch and the other way on the next (its score sums to
-    nought: the window's optimum) widens the σ beyond the coloured-residual one; so does an error above the floor."""
+    """A misfit that pulls the estimate one way on one stretch and the other way on the next widens the σ beyond the
+    coloured-residual one; an error above the floor widens it further between windows of unlike excitation."""
     problem, _, _ = _fitted(record(DURATION_S, seed=2))
     sub = changes.window_problem(problem, changes.windows(problem)[0][0])
     n = int(sub.mask.sum())
@@ -313,10 +314,12 @@ def test_a_window_sigma_covers_the_misfit_not_only_the_noise():
     base = SecondOrderParams.basic(load_channel("left_wing"))
     coloured = abs(FREE["wn_rad_s"].derivative(base.wn_rad_s)) / float(np.linalg.norm(jac))  # white unit noise
 
-    def sigma(residual):
+    def sigma(residual, alike):
         f = Fit(base, False, ("wn_rad_s",), np.zeros((n, 3)), residual, jac, {"wn_rad_s": coloured}, ("wn_rad_s",))
-        return changes.window_sigma(sub, f, "wn_rad_s")
+        return window_sigma(sub, f, "wn_rad_s", alike)
 
-    assert sigma(noise) == pytest.approx(coloured, rel=0.5)  # noise alone: about the coloured σ
-    assert sigma(noise + 5.0 * half * jac[:, 0]) > 3.0 * coloured
-    assert sigma(3.0 * noise) >= 3.0 * coloured
+    for alike in (True, False):  # noise alone: about the coloured σ
+        assert sigma(noise, alike) == pytest.approx(coloured, rel=0.5)
+    assert sigma(noise + 5.0 * half * jac[:, 0], True) > 3.0 * coloured
+    assert sigma(3.0 * noise, True) >= 2.0 * coloured
+    assert sigma(3.0 * noise, False) > 2.0 * sigma(3.0 * noise, True)

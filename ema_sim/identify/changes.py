@@ -15,22 +15,14 @@ model is chosen:
    A window fits only the samples the whole record fits: what the record's mask leaves out (a dropout, a
    spike) is left out of every window too.
 2. **The final model's parameters refitted on each window** with identification's own fit
-   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values. Each window's uncertainty is the larger
-   of its coloured-residual σ and its stretch σ (:func:`ema_sim.identify.fit.stretch_covariance`: the scatter of
-   the fit's score over :data:`STRETCHES` stretches of the window). The coloured-residual σ treats what the model
-   leaves as noise independent of the parameters; a model that misses structure leaves a misfit that pulls a
-   parameter by what each stretch excites (a dead band fitted as a threshold pulls the delay one way on small
-   steps, another on large ones), and the parts of a record that does not repeat excite unlike. The scatter within
-   a window is what that misfit does where only the excitation differs, so a difference between windows counts
-   only beyond it; a window excited uniformly unlike another shows no such scatter, and only its error above the
-   floor says the model lacks structure: the σ is multiplied by the window's rms weighted error when that exceeds
-   1 (a misfit does not average out over the samples as the coloured σ assumes). A change is claimed when it
-   survives the model's own misfit, not only the noise. Whether a parameter **changes**, and its **trend** (falls,
-   grows or wanders), is decided by :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze``
-   applies to a periodic test's cycles; a value on its search's bound does not vote, nor does one found by a grid
-   search (Kb and offset behind a quantizer, :func:`ema_sim.identify.stepwise.fit_model`): its ± is the grid's
-   finest spacing, a resolution, not a statistical σ, so it is said to be untested. The report gives the value per
-   window, not one equivalent for the whole.
+   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with an uncertainty that covers
+   the model's misfit as well as the noise (:func:`ema_sim.identify.window_sigma.window_sigma`: a model that
+   lacks structure gives windows of unlike excitation unlike equivalents, not a changed actuator). Whether a
+   parameter **changes**, and its **trend** (falls, grows or wanders), is decided by
+   :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze`` applies to a periodic test's
+   cycles; a value on its search's bound does not vote, nor does one found by a grid search (Kb and offset
+   behind a quantizer): its ± is the grid's finest spacing, a resolution, not a σ, so it is said to be
+   untested. The report gives the value per window, not one equivalent for the whole.
 3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
    record allows: the windows refitted without it. When the windows, each with its own parameters, do
    not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
@@ -54,13 +46,14 @@ from numpy.typing import NDArray
 from ema_sim.analysis.estimation.trend import MIN_CHANGE, Trend, trend
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
-from ema_sim.identify.fit import TINY, Fit, stretch_covariance
+from ema_sim.identify.fit import TINY, Fit
 from ema_sim.identify.outcome import Identification, Removal, Step
 from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread
 from ema_sim.identify.parallel import result as value_of
 from ema_sim.identify.problem import SETTLE_S, Cancelled, Problem
-from ema_sim.identify.stepwise import PRE_QUANTIZER, fit_model, no_worse, offs
+from ema_sim.identify.stepwise import fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.identify.window_sigma import grid_searched, window_sigma
 from ema_sim.io.measured import MeasuredData
 from ema_sim.jsontypes import JsonObject
 from ema_sim.models.second_order import SecondOrderParams
@@ -77,7 +70,6 @@ PERIODIC = 0.9
 """Normalised autocorrelation of the command at its period for it to count as repeating."""
 LEAD_S = 0.5
 """A window's model runs from this much before its first fitted sample (within the rest before it)."""
-STRETCHES = 8  # a window's stretches whose scores' scatter gives its σ beside the coloured one (window_sigma)
 SNAP_SHARE = 0.25
 """A cut moves to the end of the longest rest of the command within this share of a window around it."""
 LABELS = {"wn_rad_s": "ωn (wn_rad_s)", "zeta": "ζ (zeta)", "delay_s": "the command delay (delay_s)",
@@ -98,6 +90,8 @@ class Window:
     """One past the last sample."""
     start_s: float
     end_s: float
+    alike: bool = False
+    """Every window carries the same excitation (a period of a repeating command)."""
 
 
 @dataclass
@@ -300,6 +294,7 @@ def windows(problem: Problem) -> tuple[list[Window], str]:
         reach = round(SNAP_SHARE * length / dt)
         cuts = [first] + [_rest_end(u, int(np.searchsorted(t, t[first] + k * length)), reach)[0]
                           for k in range(1, count)] + [t.size]
+        period = None  # parts, not periods: unlike excitation
     if len(cuts) < 3 or length < MIN_WINDOW_S:
         return [], f"the record ({span:.3g} s fitted) is too short for two windows of {MIN_WINDOW_S:g} s"
     lead = round(LEAD_S / dt)
@@ -308,7 +303,7 @@ def windows(problem: Problem) -> tuple[list[Window], str]:
         if b - a < 10:
             continue
         start = a if a <= first else max(0, a - lead)
-        out.append(Window(0 if a <= first else start, a, b, float(t[a]), float(t[b - 1])))
+        out.append(Window(0 if a <= first else start, a, b, float(t[a]), float(t[b - 1]), period is not None))
     return (out, f"{how}: {len(out)} windows") if len(out) >= 2 else ([], "the record's windows are too short")
 
 
@@ -489,45 +484,6 @@ def refit_without(subs: list[Problem], params: SecondOrderParams, free: tuple[st
     return without, _pays(without, with_), len(subs)
 
 
-def grid_searched(params: SecondOrderParams, name: str) -> bool:
-    """Whether ``name`` is found by a grid search (behind a quantizer), its ± the grid's spacing, no σ.
-
-    Parameters
-    ----------
-    params : SecondOrderParams
-        The fitted parameters.
-    name : str
-        The model parameter.
-    """
-    return params.quantization_deg > 0.0 and name in PRE_QUANTIZER
-
-
-def window_sigma(sub: Problem, f: Fit, name: str) -> float:
-    """A window's σ of ``name``: its coloured or stretch σ, the larger, times its error over the floor (item 2).
-
-    Parameters
-    ----------
-    sub : Problem
-        The window.
-    f : Fit
-        The window's fit.
-    name : str
-        The model parameter.
-
-    Returns
-    -------
-    float
-        One sigma; inf when the window cannot move it; the grid's spacing for a grid-searched one (untested).
-    """
-    sigma = float(f.sigma.get(name, math.inf))
-    if grid_searched(f.params, name) or name not in f.jac_free or not math.isfinite(sigma):
-        return sigma
-    k, i = len(sub.outputs), f.jac_free.index(name)
-    var = float(stretch_covariance(f.residual, f.jacobian, f.residual.size // k, k, STRETCHES)[i, i])
-    spread = math.sqrt(max(var, 0.0)) * abs(FREE[name].derivative(float(getattr(f.params, name))))
-    return max(1.0, math.sqrt(float(np.mean(f.residual**2)))) * max(sigma, spread)
-
-
 def track(name: str, wf: WindowFit, ws: list[Window], subs: list[Problem]) -> Track:
     """One parameter across the windows, and its trend (:func:`ema_sim.analysis.estimation.trend.trend`).
 
@@ -549,7 +505,7 @@ def track(name: str, wf: WindowFit, ws: list[Window], subs: list[Problem]) -> Tr
         (its ± a resolution: no test of a change can be built on it).
     """
     values = np.array([float(getattr(f.params, name)) for f in wf.fits])
-    sigma = np.array([window_sigma(sub, f, name) for sub, f in zip(subs, wf.fits, strict=True)])
+    sigma = np.array([window_sigma(sub, f, name, w.alike) for sub, f, w in zip(subs, wf.fits, ws, strict=True)])
     times = np.array([0.5 * (w.start_s + w.end_s) for w in ws])
     free = FREE.get(name)
     bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)
