@@ -16,7 +16,7 @@ model is chosen:
    spike) is left out of every window too.
 2. **The final model's parameters refitted on each window** with identification's own fit
    (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with an uncertainty that covers
-   the model's misfit as well as the noise (:func:`ema_sim.identify.window_sigma.window_sigma`: a model that
+   the model's misfit as well as the noise (:func:`ema_sim.identify.window_sigma.window_sigmas`: a model that
    lacks structure gives windows of unlike excitation unlike equivalents, not a changed actuator). Whether a
    parameter **changes**, and its **trend** (falls, grows or wanders), is decided by
    :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze`` applies to a periodic test's
@@ -53,7 +53,7 @@ from ema_sim.identify.parallel import result as value_of
 from ema_sim.identify.problem import SETTLE_S, Cancelled, Problem
 from ema_sim.identify.stepwise import fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
-from ema_sim.identify.window_sigma import grid_searched, window_sigma
+from ema_sim.identify.window_sigma import grid_searched, window_sigmas
 from ema_sim.io.measured import MeasuredData
 from ema_sim.jsontypes import JsonObject
 from ema_sim.models.second_order import SecondOrderParams
@@ -501,11 +501,11 @@ def track(name: str, wf: WindowFit, ws: list[Window], subs: list[Problem]) -> Tr
     Returns
     -------
     Track
-        Its values, uncertainty (:func:`window_sigma`) and trend; ``not determined`` for a grid-searched one
-        (its ± a resolution: no test of a change can be built on it).
+        Its values, uncertainty (:func:`~ema_sim.identify.window_sigma.window_sigmas`) and trend; ``not
+        determined`` for a grid-searched one (its ± a resolution: no test of a change can be built on it).
     """
     values = np.array([float(getattr(f.params, name)) for f in wf.fits])
-    sigma = np.array([window_sigma(sub, f, name, w.alike) for sub, f, w in zip(subs, wf.fits, ws, strict=True)])
+    sigma = np.array(window_sigmas(subs, wf.fits, name, all(w.alike for w in ws)))
     times = np.array([0.5 * (w.start_s + w.end_s) for w in ws])
     free = FREE.get(name)
     bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)

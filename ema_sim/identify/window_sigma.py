@@ -11,11 +11,13 @@ window itself: the scatter of the fit's score over :data:`STRETCHES` stretches o
 * **windows of one excitation** (a repeating command cut at its period): the misfit pulls each window
   alike, so their difference keeps only what differs inside a window: σ is the larger of the coloured
   σ and the stretch σ (the σ of the window's estimate from its stretches' scatter);
-* **windows of unlike excitation** (any other record): one window can differ from the other by what the
+* **windows of unlike excitation** (any other record): one window can differ from another by what the
   misfit pulls one stretch from another, S·σ_stretch² (a stretch's own estimate scatters that much), of
-  which the share m = 1 − 1/r² of the window's mean square weighted error r² is misfit, not noise:
-  σ² = σ_coloured² + m·S·σ_stretch². A model at its noise floor (r ≈ 1) keeps the coloured σ, so a
-  change of a well-fitted actuator is found as sharply as before.
+  which the share m = 1 − 1/r² of the window's mean square weighted error r² is misfit, not noise. The
+  actuator and the model are one over the record when nothing changed, so what the misfit does is one
+  too: the largest m·S·σ_stretch² of the windows (a window whose stretches happen to be excited alike
+  shows less of it than it suffers) is added to every window's coloured variance. A model at its noise
+  floor (r ≈ 1) keeps the coloured σ, so a change of a well-fitted actuator is found as sharply as before.
 
 A parameter found by a grid search (Kb and the offset behind a quantizer,
 :func:`ema_sim.identify.stepwise.fit_model`) has no σ at all: its ± is the grid's finest spacing, a
@@ -51,15 +53,15 @@ def grid_searched(params: SecondOrderParams, name: str) -> bool:
     return params.quantization_deg > 0.0 and name in PRE_QUANTIZER
 
 
-def window_sigma(sub: Problem, f: Fit, name: str, alike: bool) -> float:
-    """A window's σ of ``name``, one that covers the model's misfit as well as the noise (module docstring).
+def window_sigmas(subs: list[Problem], fits: list[Fit], name: str, alike: bool) -> list[float]:
+    """Each window's σ of ``name``, one that covers the model's misfit as well as the noise (module docstring).
 
     Parameters
     ----------
-    sub : Problem
-        The window.
-    f : Fit
-        The window's fit.
+    subs : list of Problem
+        The windows.
+    fits : list of Fit
+        Their fits.
     name : str
         The model parameter.
     alike : bool
@@ -67,16 +69,19 @@ def window_sigma(sub: Problem, f: Fit, name: str, alike: bool) -> float:
 
     Returns
     -------
-    float
-        One sigma; inf when the window cannot move it; the grid's spacing for a grid-searched one (untested).
+    list of float
+        One sigma per window; inf where the window cannot move it; the grid's spacing for a grid-searched one
+        (untested).
     """
-    sigma = float(f.sigma.get(name, math.inf))
-    if grid_searched(f.params, name) or name not in f.jac_free or not math.isfinite(sigma):
-        return sigma
-    k, i = len(sub.outputs), f.jac_free.index(name)
-    var = float(stretch_covariance(f.residual, f.jacobian, f.residual.size // k, k, STRETCHES)[i, i])
-    stretch = math.sqrt(max(var, 0.0)) * abs(FREE[name].derivative(float(getattr(f.params, name))))
+    coloured = [float(f.sigma.get(name, math.inf)) for f in fits]
+    if any(grid_searched(f.params, name) or name not in f.jac_free for f in fits):
+        return coloured
+    stretch, misfit = [], []
+    for sub, f in zip(subs, fits, strict=True):
+        k, i = len(sub.outputs), f.jac_free.index(name)
+        var = float(stretch_covariance(f.residual, f.jacobian, f.residual.size // k, k, STRETCHES)[i, i])
+        stretch.append(math.sqrt(max(var, 0.0)) * abs(FREE[name].derivative(float(getattr(f.params, name)))))
+        misfit.append(max(0.0, 1.0 - 1.0 / max(float(np.mean(f.residual**2)), 1e-300)) * STRETCHES * stretch[-1] ** 2)
     if alike:
-        return max(sigma, stretch)
-    misfit = max(0.0, 1.0 - 1.0 / max(float(np.mean(f.residual**2)), 1e-300))
-    return math.sqrt(sigma**2 + misfit * STRETCHES * stretch**2)
+        return [max(c, s) for c, s in zip(coloured, stretch, strict=True)]
+    return [math.sqrt(c**2 + max(misfit)) for c in coloured]
