@@ -22,7 +22,7 @@ from ema_sim.identify import artefacts, changes
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.declared import declared
 from ema_sim.identify.effects import FREE
-from ema_sim.identify.fit import Fit
+from ema_sim.identify.fit import Fit, stretch_covariance
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import Identification, Step
 from ema_sim.identify.parallel import Pool
@@ -328,3 +328,12 @@ def test_a_window_sigma_covers_the_misfit_not_only_the_noise():
     assert alike[1] > 3.0 * pulled[1].sigma["wn_rad_s"]
     assert unlike[0] > 3.0 * pulled[0].sigma["wn_rad_s"]  # the other window's misfit, on this one too
     assert unlike[1] >= alike[1]
+
+
+def test_a_parameter_the_record_cannot_move_leaves_the_others_their_stretch_covariance():
+    """A zero Jacobian column is infinitely uncertain on its own; the others keep a finite stretch covariance."""
+    rng = np.random.default_rng(2)
+    jac = np.column_stack([rng.normal(0.0, 1.0, 800), np.zeros(800)])
+    cov = stretch_covariance(rng.normal(0.0, 1.0, 800), jac, 800, 1)
+    assert 0.0 < cov[0, 0] < 10.0 / 800  # finite, of the order white unit noise gives over 800 samples (1/800)
+    assert cov[1, 1] == np.inf

@@ -378,16 +378,23 @@ def stretch_covariance(residual: FloatArray, jac: FloatArray, block: int, output
         Stretches the record is cut into (at least 2).
     """
     p = jac.shape[1]
+    out = np.full((p, p), math.inf)
+    norms = np.sqrt(np.sum(jac * jac, axis=0))
+    moved = np.flatnonzero(norms > 1e-12 * max(float(norms.max(initial=0.0)), 1e-300))
+    if moved.size == 0:  # as in block_covariance: a column the record cannot move is infinitely uncertain
+        return out
+    j = jac[:, moved]
     try:
-        inv = np.linalg.inv(jac.T @ jac)
+        inv = np.linalg.inv(j.T @ j)
     except np.linalg.LinAlgError:
-        return np.full((p, p), math.inf)
+        return out
     scores = []
     for a, b in itertools.pairwise(np.linspace(0, block, stretches + 1).round().astype(int)):
         rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
-        scores.append(jac[rows].T @ residual[rows])
+        scores.append(j[rows].T @ residual[rows])
     s = np.array(scores)
-    return np.asarray(inv @ (stretches / (stretches - 1) * (s.T @ s)) @ inv, dtype=float)
+    out[np.ix_(moved, moved)] = inv @ (stretches / (stretches - 1) * (s.T @ s)) @ inv
+    return out
 
 
 def _nearest_psd(m: FloatArray) -> FloatArray:

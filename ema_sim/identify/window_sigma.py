@@ -84,4 +84,5 @@ def window_sigmas(subs: list[Problem], fits: list[Fit], name: str, alike: bool) 
         misfit.append(max(0.0, 1.0 - 1.0 / max(float(np.mean(f.residual**2)), 1e-300)) * STRETCHES * stretch[-1] ** 2)
     if alike:
         return [max(c, s) for c, s in zip(coloured, stretch, strict=True)]
-    return [math.sqrt(c**2 + max(misfit)) for c in coloured]
+    seen = [m for m in misfit if math.isfinite(m)]  # a window that cannot move it says nothing of the misfit
+    return [math.sqrt(c**2 + max(seen, default=0.0)) for c in coloured]
