@@ -8,7 +8,7 @@ wanders between 2 and 12 ms, a steady servo, and a steady servo whose integer-ms
 from __future__ import annotations
 
 import json
-from dataclasses import astuple
+from dataclasses import astuple, replace
 
 import numpy as np
 import pytest
@@ -18,10 +18,11 @@ from scipy.optimize import brentq
 from ema_sim.analysis.pipeline import resolve_channel
 from ema_sim.analysis.records import stamps
 from ema_sim.config import load_channel
-from ema_sim.identify import changes
+from ema_sim.identify import artefacts, changes
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.declared import declared
-from ema_sim.identify.fit import Fit
+from ema_sim.identify.effects import FREE
+from ema_sim.identify.fit import Fit, stretch_covariance
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import Identification, Step
 from ema_sim.identify.parallel import Pool
@@ -30,17 +31,21 @@ from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_report
 from ema_sim.identify.stepwise import fit_model, start_point
 from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.identify.window_sigma import window_sigmas
 from ema_sim.models.second_order import SecondOrderParams
 
 DURATION_S = 24.0
 
 
-def _fitted(data, free_extra=(), start=None):
-    """The record prepared, its problem, and the declared second order fitted (with ``free_extra`` free too)."""
+def _fitted(data, free_extra=(), start=None, exclude=False):
+    """The record prepared, its problem, and the declared second order fitted (with ``free_extra`` free too); with
+    ``exclude``, the record's artefacts taken out of the fit first."""
     ch, note = resolve_channel(data, None)
     rec = prepare(data, ch, channel_note=note)
     problem = Problem(rec.data, rec.channel, noise=rec.noise, command_sampled=rec.command_sampled,
                       output_range=rec.sensor_range)
+    if exclude:
+        artefacts.exclude(problem, artefacts.find(problem))
     base, free = declared("second_order", rec.channel, {}, 0.0)
     params = start_point(problem, base, free, False).replace(**(start or {}))
     fit = fit_model(problem, params, (*free, *free_extra), flip=False)
@@ -260,3 +265,75 @@ def test_wn_and_zeta_that_trade_while_the_bandwidth_holds_are_no_change_of_the_r
                                       fits(first, slower))
     assert [t.kind for t in kept] == ["wanders", "wanders"]
     assert why == []
+
+
+def test_a_dropout_the_record_leaves_out_is_left_out_of_every_window():
+    """A 200 ms stale stretch of a steady servo is taken out of the fit: the windows leave it out too, so it moves no
+    window's parameters and the windows fit at the noise floor."""
+    data = record(DURATION_S, seed=2)
+    y = data.position_deg.copy()
+    a, b = np.searchsorted(data.time_s, [9.0, 9.2])
+    y[a:b] = y[a - 1]
+    problem, result, base = _fitted(replace(data, position_deg=y), exclude=True)
+    assert not problem.mask[a + 2:b].any()
+    ws, _ = changes.windows(problem)
+    for w in ws:
+        sub = changes.window_problem(problem, w)
+        assert not (sub.mask & ~problem.mask[w.lead:w.end]).any()
+    found = changes.analyse(problem, result, base)
+    assert not found.changed
+    assert found.rms_over_noise["position_deg"] < 1.2  # 6× with the dropout fitted in its window
+
+
+def test_a_grid_searched_parameter_is_not_tested_for_a_change():
+    """Kb behind a quantizer is found by a grid search: its ± is the grid's spacing, no σ a change is tested on."""
+    problem, _, _ = _fitted(record(DURATION_S, seed=2))
+    ws, _ = changes.windows(problem)
+    subs = [changes.window_problem(problem, w) for w in ws]
+    params = SecondOrderParams.basic(load_channel("left_wing"), quantization_deg=0.02)
+    fits = [Fit(params.replace(kb=-0.0002 - 0.001 * k), False, ("kb",), np.zeros((1, 3)), np.zeros(1),
+                np.zeros((1, 0)), {"kb": 2e-5}) for k in range(len(ws))]
+    kb = changes.track("kb", changes.WindowFit(("kb",), fits, 2), ws, subs)
+    assert kb.kind == "not determined"
+    assert kb.sigma == (2e-5,) * len(ws)
+    smooth = [replace(f, params=f.params.replace(quantization_deg=0.0)) for f in fits]
+    assert changes.track("kb", changes.WindowFit(("kb",), smooth, 2), ws, subs).changed  # a σ: tested
+
+
+def test_a_window_sigma_covers_the_misfit_not_only_the_noise():
+    """A misfit that pulls the estimate one way on one stretch and the other way on the next widens the σ beyond the
+    coloured-residual one; between windows of unlike excitation, the largest misfit a window shows widens them all."""
+    problem, _, _ = _fitted(record(DURATION_S, seed=2))
+    subs = [changes.window_problem(problem, w) for w in changes.windows(problem)[0][:2]]
+    rng = np.random.default_rng(1)
+    base = SecondOrderParams.basic(load_channel("left_wing"))
+
+    def fit(sub, pull, scale=1.0):
+        n = int(sub.mask.sum())
+        jac = rng.normal(0.0, 0.1, (n, 1))
+        noise = rng.normal(0.0, 1.0, n)
+        noise -= jac[:, 0] * (jac[:, 0] @ noise) / (jac[:, 0] @ jac[:, 0])  # the optimum: no score left
+        residual = scale * noise + pull * np.where(np.arange(n) < n // 2, 1.0, -1.0) * jac[:, 0]
+        coloured = abs(FREE["wn_rad_s"].derivative(base.wn_rad_s)) / float(np.linalg.norm(jac))  # white noise
+        return Fit(base, False, ("wn_rad_s",), np.zeros((n, 3)), residual, jac, {"wn_rad_s": coloured}, ("wn_rad_s",))
+
+    quiet = [fit(sub, 0.0) for sub in subs]
+    coloured = [f.sigma["wn_rad_s"] for f in quiet]
+    for alike in (True, False):  # noise alone: about the coloured σ
+        assert window_sigmas(subs, quiet, "wn_rad_s", alike) == pytest.approx(coloured, rel=0.5)
+    pulled = [fit(subs[0], 0.0), fit(subs[1], 5.0)]
+    alike = window_sigmas(subs, pulled, "wn_rad_s", True)
+    unlike = window_sigmas(subs, pulled, "wn_rad_s", False)
+    assert alike[0] == pytest.approx(pulled[0].sigma["wn_rad_s"], rel=0.5)
+    assert alike[1] > 3.0 * pulled[1].sigma["wn_rad_s"]
+    assert unlike[0] > 3.0 * pulled[0].sigma["wn_rad_s"]  # the other window's misfit, on this one too
+    assert unlike[1] >= alike[1]
+
+
+def test_a_parameter_the_record_cannot_move_leaves_the_others_their_stretch_covariance():
+    """A zero Jacobian column is infinitely uncertain on its own; the others keep a finite stretch covariance."""
+    rng = np.random.default_rng(2)
+    jac = np.column_stack([rng.normal(0.0, 1.0, 800), np.zeros(800)])
+    cov = stretch_covariance(rng.normal(0.0, 1.0, 800), jac, 800, 1)
+    assert 0.0 < cov[0, 0] < 10.0 / 800  # finite, of the order white unit noise gives over 800 samples (1/800)
+    assert cov[1, 1] == np.inf

@@ -12,12 +12,17 @@ model is chosen:
    carries the same excitation and differs only in time; any other record in :data:`PLAIN_WINDOWS` equal
    parts. Each cut is moved to the end of the longest rest of the command near it, and each window's fit
    runs its model from up to :data:`LEAD_S` before the cut, on the samples before it, not fitted.
+   A window fits only the samples the whole record fits: what the record's mask leaves out (a dropout, a
+   spike) is left out of every window too.
 2. **The final model's parameters refitted on each window** with identification's own fit
-   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with its coloured-residual
-   uncertainty. Whether a parameter **changes**, and its **trend** (falls, grows or wanders), is decided by
-   :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze`` applies to a periodic
-   test's cycles; a value on its search's bound does not vote. The report gives the value per window, not
-   one equivalent for the whole.
+   (:func:`ema_sim.identify.stepwise.fit_model`), from the final values, each with an uncertainty that covers
+   the model's misfit as well as the noise (:func:`ema_sim.identify.window_sigma.window_sigmas`: a model that
+   lacks structure gives windows of unlike excitation unlike equivalents, not a changed actuator). Whether a
+   parameter **changes**, and its **trend** (falls, grows or wanders), is decided by
+   :func:`ema_sim.analysis.estimation.trend.trend`, the same test ``ema analyze`` applies to a periodic test's
+   cycles; a value on its search's bound does not vote, nor does one found by a grid search (Kb and offset
+   behind a quantizer): its ± is the grid's finest spacing, a resolution, not a σ, so it is said to be
+   untested. The report gives the value per window, not one equivalent for the whole.
 3. **No proxy for the change.** With a parameter changing, each effect the search added is tested as the
    record allows: the windows refitted without it. When the windows, each with its own parameters, do
    not need it (their summed ΔBIC does not reach :data:`~ema_sim.identify.criteria.MAX_DELTA_BIC`), the
@@ -48,6 +53,7 @@ from ema_sim.identify.parallel import result as value_of
 from ema_sim.identify.problem import SETTLE_S, Cancelled, Problem
 from ema_sim.identify.stepwise import fit_model, no_worse, offs
 from ema_sim.identify.trust import bandwidth_hz
+from ema_sim.identify.window_sigma import grid_searched, window_sigmas
 from ema_sim.io.measured import MeasuredData
 from ema_sim.jsontypes import JsonObject
 from ema_sim.models.second_order import SecondOrderParams
@@ -84,6 +90,8 @@ class Window:
     """One past the last sample."""
     start_s: float
     end_s: float
+    alike: bool = False
+    """Every window carries the same excitation (a period of a repeating command)."""
 
 
 @dataclass
@@ -286,6 +294,7 @@ def windows(problem: Problem) -> tuple[list[Window], str]:
         reach = round(SNAP_SHARE * length / dt)
         cuts = [first] + [_rest_end(u, int(np.searchsorted(t, t[first] + k * length)), reach)[0]
                           for k in range(1, count)] + [t.size]
+        period = None  # parts, not periods: unlike excitation
     if len(cuts) < 3 or length < MIN_WINDOW_S:
         return [], f"the record ({span:.3g} s fitted) is too short for two windows of {MIN_WINDOW_S:g} s"
     lead = round(LEAD_S / dt)
@@ -294,7 +303,7 @@ def windows(problem: Problem) -> tuple[list[Window], str]:
         if b - a < 10:
             continue
         start = a if a <= first else max(0, a - lead)
-        out.append(Window(0 if a <= first else start, a, b, float(t[a]), float(t[b - 1])))
+        out.append(Window(0 if a <= first else start, a, b, float(t[a]), float(t[b - 1]), period is not None))
     return (out, f"{how}: {len(out)} windows") if len(out) >= 2 else ([], "the record's windows are too short")
 
 
@@ -322,13 +331,14 @@ def window_problem(problem: Problem, w: Window) -> Problem:
     Returns
     -------
     Problem
-        Fitted on the window's samples, its model run from :attr:`Window.lead`.
+        Fitted on the window's samples that the record fits (its mask), its model run from :attr:`Window.lead`.
     """
     t = problem.time_s
     settle = float(t[w.start] - t[w.lead]) if w.lead < w.start else problem.settle_s
     sub = Problem(_sub(problem.data, w.lead, w.end), problem.channel, step_s=problem.step_s,
                   settle_s=settle if settle > 0.0 else SETTLE_S, noise=problem.noise,
                   command_sampled=problem.command_sampled, output_range=dict(problem.output_range))
+    sub.mask &= problem.mask[w.lead:w.end]  # what the record leaves out of its fit, every window leaves out
     if problem.timing_s > 0.0:
         sub.set_timing(problem.timing_s, {o: r[w.lead:w.end] for o, r in problem.timing_rates.items()})
     return sub
@@ -474,7 +484,7 @@ def refit_without(subs: list[Problem], params: SecondOrderParams, free: tuple[st
     return without, _pays(without, with_), len(subs)
 
 
-def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
+def track(name: str, wf: WindowFit, ws: list[Window], subs: list[Problem]) -> Track:
     """One parameter across the windows, and its trend (:func:`ema_sim.analysis.estimation.trend.trend`).
 
     Parameters
@@ -485,19 +495,23 @@ def track(name: str, wf: WindowFit, ws: list[Window]) -> Track:
         The windows' fits.
     ws : list of Window
         The windows.
+    subs : list of Problem
+        The windows as fitted (:func:`window_problem`).
 
     Returns
     -------
     Track
-        Its values, uncertainty and trend.
+        Its values, uncertainty (:func:`~ema_sim.identify.window_sigma.window_sigmas`) and trend; ``not
+        determined`` for a grid-searched one (its ± a resolution: no test of a change can be built on it).
     """
     values = np.array([float(getattr(f.params, name)) for f in wf.fits])
-    sigma = np.array([float(f.sigma.get(name, math.inf)) for f in wf.fits])
+    sigma = np.array(window_sigmas(subs, wf.fits, name, all(w.alike for w in ws)))
     times = np.array([0.5 * (w.start_s + w.end_s) for w in ws])
     free = FREE.get(name)
     bounded = np.array([free is not None and (v <= free.low + 1e-6 * (free.high - free.low)
                                               or v >= free.high - 1e-6 * (free.high - free.low)) for v in values])
-    tr = trend(values, sigma, times, usable=~bounded)
+    grid = np.array([grid_searched(f.params, name) for f in wf.fits])
+    tr = trend(values, sigma, times, usable=~bounded & ~grid)
     return Track(**{f.name: getattr(tr, f.name) for f in fields(tr)}, name=name)
 
 
@@ -546,11 +560,11 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
     out.windows = ws
     subs = [window_problem(problem, w) for w in ws]
     cur = fit_windows(subs, final.params, final.free, final.flip, pool)
-    out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in final.free], cur)
+    out.tracks, ridge = _on_the_ridge([track(f, cur, ws, subs) for f in final.free], cur)
     say(f"changes: {how}; " + ", ".join(f"{t.name} {t.kind}" for t in out.tracks))
     if out.changed:
         cur = _proxies(problem, result, declared, subs, cur, out, say, pool)
-        out.tracks, ridge = _on_the_ridge([track(f, cur, ws) for f in result.final.free], cur)
+        out.tracks, ridge = _on_the_ridge([track(f, cur, ws, subs) for f in result.final.free], cur)
     out.bandwidth_hz = tuple(bandwidth_hz(f.params) for f in cur.fits)
     out.rms_over_noise = {
         o: float(np.sqrt(sum(float(np.sum(sub.errors_deg(f.sim)[o] ** 2)) for sub, f in zip(subs, cur.fits,
@@ -568,6 +582,9 @@ def analyse(problem: Problem, result: Identification, declared: SecondOrderParam
         out.statements = [f"the parameters hold over the record ({how}): "
                           + "; ".join(t.statement() for t in out.tracks if t.kind != "not determined")]
     out.statements += ridge
+    if grid := " and ".join(t.name for t in out.tracks if grid_searched(result.final.params, t.name)):
+        out.statements.append(f"{grid} not tested for a change over the record: found by a grid search behind the "
+                              "quantizer, the ± per window is the grid's finest spacing, a resolution, not a σ")
     early = [t for t in out.tests if t.fitted < t.windows]
     if early:
         out.statements.append("the added effects tested on the windows with their own parameters, the refits without "

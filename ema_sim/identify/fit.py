@@ -353,6 +353,50 @@ def batch_sigma(residual: FloatArray, jac: FloatArray, block: int, outputs: int)
     return np.asarray(np.std(np.array(steps), axis=0, ddof=1) / math.sqrt(BATCHES), dtype=float)
 
 
+def stretch_covariance(residual: FloatArray, jac: FloatArray, block: int, outputs: int, stretches: int = BATCHES
+                       ) -> FloatArray:
+    """Covariance in scaled coordinates from the scatter of the fit's score over contiguous stretches of the record.
+
+    (JᵀJ)⁻¹·S·(JᵀJ)⁻¹ with S = k/(k−1)·Σ sₖsₖᵀ, sₖ = Jₖᵀrₖ the score of stretch k (they sum to nought at the
+    optimum): the sandwich of :func:`covariance` with the residual's correlation taken over whole stretches
+    instead of :data:`COVARIANCE_LAGS` samples. A misfit that pulls the estimate one way where the record
+    excites one thing and another way elsewhere (the model lacks structure) scatters the scores, and shows
+    here as the uncertainty it is; noise alone gives about :func:`covariance`. Unlike :func:`batch_sigma`
+    it needs no stretch to determine every parameter on its own.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        The stacked weighted residual at the optimum (outputs one after the other).
+    jac : numpy.ndarray
+        Its Jacobian (one column per fitted coordinate).
+    block : int
+        Rows per output.
+    outputs : int
+        Outputs stacked.
+    stretches : int
+        Stretches the record is cut into (at least 2).
+    """
+    p = jac.shape[1]
+    out = np.full((p, p), math.inf)
+    norms = np.sqrt(np.sum(jac * jac, axis=0))
+    moved = np.flatnonzero(norms > 1e-12 * max(float(norms.max(initial=0.0)), 1e-300))
+    if moved.size == 0:  # as in block_covariance: a column the record cannot move is infinitely uncertain
+        return out
+    j = jac[:, moved]
+    try:
+        inv = np.linalg.inv(j.T @ j)
+    except np.linalg.LinAlgError:
+        return out
+    scores = []
+    for a, b in itertools.pairwise(np.linspace(0, block, stretches + 1).round().astype(int)):
+        rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
+        scores.append(j[rows].T @ residual[rows])
+    s = np.array(scores)
+    out[np.ix_(moved, moved)] = inv @ (stretches / (stretches - 1) * (s.T @ s)) @ inv
+    return out
+
+
 def _nearest_psd(m: FloatArray) -> FloatArray:
     """The symmetric positive semi-definite matrix nearest ``m`` (its negative eigenvalues set to zero).
 
