@@ -39,7 +39,7 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "ema = ema_sim.cli:main",
+            "ema = ema_sim.cli:entry",
             "emac = ema_sim.nodes.emac:main",
             "testenv = ema_sim.nodes.testenv:main",
             "maneuver = ema_sim.nodes.maneuver:main",

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -82,7 +83,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         if interrupted:  # raised inside a library's import that swallowed it (a bare ``except:``): still Ctrl-C
             raise KeyboardInterrupt
-    except KeyboardInterrupt:
+    except BaseException as exc:  # a Ctrl-C raised in some import's machinery may come out as another error
+        if not interrupted and not isinstance(exc, KeyboardInterrupt):  # (RuntimeError from __set_name__)
+            raise
         print("ema: interrupted", file=sys.stderr)
         return 130
     finally:
@@ -100,5 +103,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
+def entry() -> NoReturn:
+    """Console script ``ema``: :func:`main`'s status as the process's exit status, 130 included.
+
+    A Ctrl-C raised inside an import that runs code through CPython's embedded-evaluation calls leaves the
+    interpreter's "unhandled KeyboardInterrupt" mark set even though :func:`main` handled it; at exit CPython
+    would then kill the process with SIGINT instead of returning 130 (measured: 4 of 25 launches interrupted
+    at ``import numpy`` on a loaded machine). An interrupted run ends here, its output flushed, without
+    that last step.
+    """
+    status = main()
+    if status == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

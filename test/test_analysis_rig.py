@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from rig_data import Actuator, rig_record, sine_sweep, square_wave, trapezoid_moves
 
+from ema_sim.analysis.estimation.linearity import amplitude_change
 from ema_sim.analysis.estimation.noise import detect_resolution, output_noise
 from ema_sim.analysis.estimation.second_order_fit import fit_step
 from ema_sim.analysis.pipeline import Options, analyze_record
@@ -278,3 +279,13 @@ def test_a_larger_step_slowed_by_an_acceleration_limit_is_said_not_linear_and_a_
     linear = analyze_record(_stepped_servo(1e9), Options()).results["steps"]
     assert [s for s in linear if s.fit is not None and abs(s.command_step_deg) == 2.0]
     assert all(s.fit_note == "fitted" for s in linear if s.fit is not None)
+
+
+def test_the_smallest_steps_fit_against_its_twin_is_linear_and_against_a_slowed_larger_step_is_not():
+    steps = [s for s in analyze_record(_stepped_servo(2000.0), Options()).results["steps"] if s.fit is not None]
+    small = [s for s in steps if abs(s.command_step_deg) == 0.5]
+    big = next(s for s in steps if abs(s.command_step_deg) == 2.0)
+    assert amplitude_change(small[0].fit, small[0].amplitude_deg, small[1].fit) == ""
+    said = amplitude_change(small[0].fit, small[0].amplitude_deg, big.fit)
+    assert said.startswith("not linear over the amplitudes: ωn 54.8 and delay 9.")
+    assert "at the 0.5° step" in said
