@@ -30,7 +30,7 @@ def test_setup_py_registers_the_ament_index_marker_and_config():
     text = ast.unparse(tree)
     assert "share/ament_index/resource_index/packages" in text
     assert "config/*.yaml" in text
-    assert "ema = ema_sim.cli:main" in text
+    assert "ema = ema_sim.cli:entry" in text
 
 
 FORBIDDEN = ("rclpy", "rosbags", "mcap", "std_msgs", "sensor_msgs", "rosgraph_msgs", "builtin_interfaces",
