@@ -342,9 +342,7 @@ def batch_sigma(residual: FloatArray, jac: FloatArray, block: int, outputs: int)
     """
     p = jac.shape[1]
     steps = []
-    edges = np.linspace(0, block, BATCHES + 1).round().astype(int)
-    for a, b in itertools.pairwise(edges):
-        rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
+    for rows in _stretch_rows(block, outputs, BATCHES):
         j, r = jac[rows], residual[rows]
         try:
             steps.append(np.linalg.lstsq(j, r, rcond=None)[0])
@@ -389,12 +387,18 @@ def stretch_covariance(residual: FloatArray, jac: FloatArray, block: int, output
     except np.linalg.LinAlgError:
         return out
     scores = []
-    for a, b in itertools.pairwise(np.linspace(0, block, stretches + 1).round().astype(int)):
-        rows = np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
+    for rows in _stretch_rows(block, outputs, stretches):
         scores.append(j[rows].T @ residual[rows])
     s = np.array(scores)
     out[np.ix_(moved, moved)] = inv @ (stretches / (stretches - 1) * (s.T @ s)) @ inv
     return out
+
+
+def _stretch_rows(block: int, outputs: int, stretches: int) -> list[NDArray[np.int64]]:
+    """The stacked residual's rows of each of ``stretches`` contiguous stretches of the record, every output's."""
+    edges = np.linspace(0, block, stretches + 1).round().astype(int)
+    return [np.concatenate([np.arange(o * block + a, o * block + b) for o in range(outputs)])
+            for a, b in itertools.pairwise(edges)]
 
 
 def _nearest_psd(m: FloatArray) -> FloatArray:
