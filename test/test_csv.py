@@ -169,3 +169,46 @@ def test_identify_reads_the_rig_file_through_the_same_loader(tmp_path):
                                               crank_arm_in=1.7317))
     assert data.unit == "deg"
     assert data.time_s[1] == pytest.approx(0.013)
+
+
+def _logged(rows: int = 200) -> str:
+    """A contract CSV of ``rows`` rows with six decimals, no line end after the last."""
+    t = np.arange(rows) / 1000.0
+    return "\n".join(["time_s,command_deg,position_deg",
+                      *(f"{a:.6f},{np.sin(a):.6f},{0.9 * np.sin(a):.6f}" for a in t)])
+
+
+def test_a_last_line_cut_mid_number_is_left_out_and_said():
+    """A logger stopped while writing: the last number lost its last digits. It read as 0.177 before; now the row
+    is left out and the record says why."""
+    whole = _logged()
+    data = parse_csv(whole[:-3], "cut.csv")
+    assert data.time_s.size == 199
+    assert data.position_deg[-1] == pytest.approx(0.9 * np.sin(0.198), abs=1e-6)
+    assert "line 201, the last, has no line end" in data.metadata["truncated"]
+    assert "'0.177' in 'position_deg'" in data.metadata["truncated"]
+
+
+def test_a_last_line_cut_mid_row_is_left_out_not_an_error():
+    data = parse_csv(_logged() + "\n0.2000", "cut.csv")
+    assert data.time_s.size == 200
+    assert "1 of the header's 3 cells" in data.metadata["truncated"]
+    with pytest.raises(DataError, match="line 2: 1 cells"):  # a short row inside the file is still an error
+        parse_csv(_logged().replace("\n", "\n0.5\n", 1) + "\n", "short.csv")
+
+
+def test_a_whole_last_line_without_a_line_end_is_kept():
+    data = parse_csv(_logged(), "whole.csv")
+    assert data.time_s.size == 200
+    assert "truncated" not in data.metadata
+    ends_short = _logged().rsplit(",", 1)[0] + ",0.5"  # fewer decimals, but a line end follows: a whole number
+    assert parse_csv(ends_short + "\n", "d.csv").position_deg[-1] == 0.5
+
+
+def test_both_tools_print_a_cut_last_line(tmp_path, capsys):
+    path = tmp_path / "cut.csv"
+    path.write_text(_logged(5000)[:-3], encoding="utf-8")
+    assert main(["analyze", str(path), "--channel", "left_wing"]) == 0
+    assert "truncated: line 5001" in capsys.readouterr().out
+    assert main(["identify", str(path), "--channel", "left_wing", "--max-effects", "0"]) == 0
+    assert "truncated: line 5001" in capsys.readouterr().out

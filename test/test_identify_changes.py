@@ -23,13 +23,14 @@ from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.declared import declared
 from ema_sim.identify.effects import FREE
 from ema_sim.identify.fit import Fit, stretch_covariance
+from ema_sim.identify.grid_fit import fit_model
 from ema_sim.identify.identification import identify
 from ema_sim.identify.outcome import Identification, Step
 from ema_sim.identify.parallel import Pool
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare
 from ema_sim.identify.report import summary, to_json, write_report
-from ema_sim.identify.stepwise import fit_model, start_point
+from ema_sim.identify.stepwise import start_point
 from ema_sim.identify.trust import bandwidth_hz
 from ema_sim.identify.window_sigma import window_sigmas
 from ema_sim.models.second_order import SecondOrderParams

@@ -25,12 +25,13 @@ from ema_sim.cli import main
 from ema_sim.config import load_channel
 from ema_sim.identify.effects import EFFECTS, FREE, Context
 from ema_sim.identify.fit import evaluate
+from ema_sim.identify.grid_fit import no_worse
 from ema_sim.identify.identification import Search, identify
 from ema_sim.identify.outcome import REFERENCE, Step
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare, sensor_range, travel_limits
 from ema_sim.identify.report import strict, to_json
-from ema_sim.identify.stepwise import STEP_RISE, no_worse, prune
+from ema_sim.identify.stepwise import STEP_RISE, prune
 from ema_sim.identify.trust import frequency_hz, on_bound
 from ema_sim.io.measured import MeasuredData
 from ema_sim.models.second_order import Loac

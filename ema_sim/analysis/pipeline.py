@@ -7,8 +7,9 @@
    move (a limit cycle at rest and a floor that grows with the excitation are said, not taken for noise), and
    whether the command is held or sampled, on the samples as logged;
 2. puts the record on a uniform grid (:func:`ema_sim.analysis.records.series.uniform_record`), never across a
-   gap in its stamps: :func:`analyze_records` first cuts a record with gaps into its contiguous stretches
-   (:func:`ema_sim.analysis.records.series.split_at_gaps`), each analysed as a record of its own;
+   gap in its stamps nor a dropout of its outputs: :func:`analyze_records` first cuts a record at them into its
+   contiguous stretches (:func:`ema_sim.analysis.records.artefacts.split_at_dropouts`,
+   :func:`ema_sim.analysis.records.series.split_at_gaps`), each analysed as a record of its own;
 3. recognises its segments (:mod:`ema_sim.analysis.recognize`);
 4. runs every test of :data:`ema_sim.analysis.registry.TESTS` in order; a test that finds nothing to
    run on says why in ``not_computed``, and a segment no test runs on gets a note.
@@ -28,7 +29,7 @@ import numpy as np
 from ema_sim.analysis.estimation.prepared import PreparedRecord, prepare, resolve_channel
 from ema_sim.analysis.estimation.second_order_fit import SecondOrderFit
 from ema_sim.analysis.recognize import recognize
-from ema_sim.analysis.records import series, stamps
+from ema_sim.analysis.records import artefacts, series, stamps
 from ema_sim.analysis.records.command_hold import CommandHold
 from ema_sim.analysis.registry import TESTS
 from ema_sim.analysis.section2.base import Options, RecordAnalysis, TimingAlternative
@@ -86,7 +87,7 @@ def _analyze(p: PreparedRecord, options: Options, hold: CommandHold, say: Callab
                         slew=p.slew, stand_in=p.channel_note is not None, logged=None if same else raw_stamps.size)
     if p.channel_note:
         ra.notes.append(p.channel_note)
-    ra.notes += [data.metadata[k] for k in ("gaps", "resampled") if k in data.metadata]
+    ra.notes += [data.metadata[k] for k in series.SAID if k in data.metadata]
     jitter = p.stamps
     if jitter.jitters and data.outputs:
         ra.notes.append(f"{jitter.statement(stamps.output_rate(jitter, data.column(data.outputs[0])), data.unit)}; no "
@@ -168,8 +169,9 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None,
                     progress: Callable[[int, float], None] | None = None) -> list[RecordAnalysis]:
     """Analyse several records, then let each use what another of the same channel measured.
 
-    A record with gaps in its stamps is analysed stretch by stretch
-    (:func:`ema_sim.analysis.records.series.split_at_gaps`): one analysis per stretch, in order.
+    A record with gaps in its stamps or dropouts in its outputs is analysed stretch by stretch
+    (:func:`ema_sim.analysis.records.series.split_at_gaps`,
+    :func:`ema_sim.analysis.records.artefacts.split_at_dropouts`): one analysis per stretch, in order.
 
     A crosstalk record judged against table A2's threshold is judged again against a static threshold
     measured on the same channel; free-play jumps with no compliance taken out get the total compliance
@@ -192,7 +194,7 @@ def analyze_records(records: list[MeasuredData], options: Options | None = None,
     options = options or Options()
     done = []
     for i, d in enumerate(records):
-        parts = series.split_at_gaps(d)
+        parts = [g for s in artefacts.split_at_dropouts(d) for g in series.split_at_gaps(s)]
         done += [analyze_record(part, options, None if progress is None else _for_record(progress, i, j, len(parts)))
                  for j, part in enumerate(parts)]
     for ra in done:

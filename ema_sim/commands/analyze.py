@@ -34,6 +34,7 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def _summary(ra: RecordAnalysis) -> list[str]:
     """A few lines per record for the terminal."""
+    from ema_sim.analysis.records.series import SAID  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.registry import TESTS  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
     from ema_sim.analysis.report import slope_statement  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
@@ -41,7 +42,7 @@ def _summary(ra: RecordAnalysis) -> list[str]:
     count = f"{len(d)} samples" if ra.logged is None else f"{ra.logged} samples logged, resampled onto {len(d)}"
     lines = [f"{d.source}: {count} at {d.sample_hz:.6g} Hz, channel {ra.channel_name}; "
              f"tests: {', '.join(s.kind for s in ra.recognition.segments) or 'none recognised'}"]
-    lines += [f"  {k}: {d.metadata[k]}" for k in ("gaps", "resampled") if k in d.metadata]
+    lines += [f"  {k}: {d.metadata[k]}" for k in SAID if k in d.metadata]
     lines.append(f"  command: {ra.command.statement}")
     if ra.command.leads:
         lines.append(f"  causality: {ra.command.leads}")

@@ -47,11 +47,12 @@ from ema_sim.analysis.estimation.trend import MIN_CHANGE, Trend, trend
 from ema_sim.identify.criteria import MAX_DELTA_BIC
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Effect
 from ema_sim.identify.fit import TINY, Fit
+from ema_sim.identify.grid_fit import fit_model, no_worse
 from ema_sim.identify.outcome import Identification, Removal, Step
 from ema_sim.identify.parallel import SERIAL, Pool, one_blas_thread
 from ema_sim.identify.parallel import result as value_of
 from ema_sim.identify.problem import SETTLE_S, Cancelled, Problem
-from ema_sim.identify.stepwise import fit_model, no_worse, offs
+from ema_sim.identify.stepwise import offs
 from ema_sim.identify.trust import bandwidth_hz
 from ema_sim.identify.window_sigma import grid_searched, window_sigmas
 from ema_sim.io.measured import MeasuredData

@@ -165,6 +165,7 @@ def fit(
     flip: bool = False,
     max_nfev: int = 40,
     capped: bool = True,
+    ftol: float = FTOL,
 ) -> Fit:
     """Fit ``free_fields`` of ``base`` to the record; everything else stays as in ``base``.
 
@@ -182,6 +183,8 @@ def fit(
         Most residual evaluations of the optimiser.
     capped : bool
         Keep the record's own bounds (:attr:`Problem.caps`); False asks how far the fit would go without them.
+    ftol : float
+        The relative drop in cost at which the optimiser stops.
     """
     free = [FREE[f].capped(problem.caps.get(f) if capped else None) for f in free_fields]
     obj = _Objective(problem, base, free, flip)
@@ -191,7 +194,7 @@ def fit(
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
         res = least_squares(
             obj.residual, x0, jac=lambda x: -obj.jacobian(x), bounds=(lo, hi), method="trf",
-            x_scale=1.0, max_nfev=max_nfev, xtol=1e-8, ftol=FTOL, gtol=1e-10,
+            x_scale=1.0, max_nfev=max_nfev, xtol=1e-8, ftol=ftol, gtol=1e-10,
         )
         x = res.x
     else:

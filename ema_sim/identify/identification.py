@@ -32,13 +32,14 @@ from ema_sim.identify.declared import HIGH_ORDER, declared
 from ema_sim.identify.discovery import STRUCTURED, Discovery, discover, named_stands
 from ema_sim.identify.escalation import adopt_physical, escalation, keep_declared, within
 from ema_sim.identify.fit import TINY, Fit, evaluate, rms
+from ema_sim.identify.grid_fit import fit_model
 from ema_sim.identify.outcome import REFERENCE, AsDeclared, Identification, Removal, Step
 from ema_sim.identify.parallel import MIN_SAMPLES, SERIAL, Pool, one_blas_thread
 from ema_sim.identify.physical import ESCALATE_TO, PHYSICAL_MODELS, PhysicalFit, fit_physical
 from ema_sim.identify.problem import EQUIVALENT_EXCESS, Problem
 from ema_sim.identify.record import Record
 from ema_sim.identify.stages import Clock, Failure, Outcome, allow, ceiling, guarded, trade, worse
-from ema_sim.identify.stepwise import MAX_EFFECTS, as_declared, choose_hold, fit_model, prune, reference_fit, search
+from ema_sim.identify.stepwise import MAX_EFFECTS, as_declared, choose_hold, prune, reference_fit, search
 from ema_sim.models.second_order import SecondOrderParams
 
 BALANCE_WEIGHTS = (4.0, 16.0, 64.0)
@@ -201,7 +202,7 @@ def _identify(problem: Problem, record: Record, model: str, overrides: dict[str,
     artefacts.exclude(problem, found)
     peak = float(np.percentile(np.abs(problem.hinge_moment), 98))
     base, free = declared(model, record.channel, overrides or {}, peak)
-    notes: list[str] = [a.statement for a in found]
+    notes: list[str] = [a.statement() for a in found]
     key = model.strip().lower()
     decl = as_declared(problem, key, base, free, notes) if key in HIGH_ORDER else None
     if decl is not None:

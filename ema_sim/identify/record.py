@@ -225,7 +225,9 @@ def identification_record(p: PreparedRecord) -> Record:
     warnings: list[str] = []
     if p.channel_note:
         notes.append(p.channel_note)
-    warnings += p.radians + p.reversed_outputs
+    cut = [f"truncated: {p.data.metadata['truncated']}"] if "truncated" in p.data.metadata else []
+    notes += cut
+    warnings += p.radians + p.reversed_outputs + cut
     if unit != "deg":
         line = (f"positions in {unit} as logged (no --crank-arm-in): every *_deg figure of this report is "
                 f"in {unit}, every rate in {unit}/s")

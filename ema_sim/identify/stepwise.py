@@ -39,6 +39,7 @@ from ema_sim.identify.criteria import DONE_EXCESS, MAX_DELTA_BIC, bic, blocks, e
 from ema_sim.identify.declared import not_determinable, run_declared
 from ema_sim.identify.effects import BY_KEY, FREE, KEYS, Context, Effect, report_values
 from ema_sim.identify.fit import TINY, Fit, evaluate, fit, residual_only, rms
+from ema_sim.identify.grid_fit import finish, fit_model, no_worse
 from ema_sim.identify.outcome import AsDeclared, Identification, Removal, Step, Verdict
 from ema_sim.identify.parallel import SERIAL, Pool, TaskFuture, one_blas_thread, result
 from ema_sim.identify.problem import Cancelled, Problem
@@ -61,8 +62,6 @@ MAX_EFFECTS = 8
 START_WN_RAD_S = (8.0, 15.0, 30.0, 60.0, 120.0, 250.0, 480.0)
 START_ZETA = (0.35, 0.7, 1.2, 2.0)
 """The coarse grid the baseline may start from (when it does better than the declared values)."""
-PRE_QUANTIZER = ("kb", "offset_deg")
-"""Parameters acting before the quantizer: the cost is piecewise flat in them once a step is on."""
 MOVE_SHARE = 1e-3
 """A parameter whose Jacobian column is below this share of the largest one cannot be moved by the record."""
 RIVALS: dict[str, tuple[str, ...]] = {
@@ -79,78 +78,6 @@ AMBIGUOUS_BIC = 10.0
 """Two accepted explanations within this of each other's BIC fit the record about equally."""
 SAME_RESIDUAL = 0.8
 """Two corrections that correlate at least this much explain the same part of the residual."""
-
-
-def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] | list[str], *, flip: bool) -> Fit:
-    """:func:`fit`, except that with a quantizer on, Kb and offset are found by batched grid searches.
-
-    The quantizer makes the cost piecewise flat in the parameters before it, so gradients cannot
-    move them: the smooth parameters are fitted with them held, then a coordinate search (a grid of
-    11 over ±half a step, then one five times finer, for each) picks them, then the smooth
-    parameters are fitted again (unless the grids found nothing that changes the outputs: the smooth fit
-    then stands where it converged).
-
-    Parameters
-    ----------
-    problem : Problem
-        The record as fitted.
-    base : SecondOrderParams
-        The starting parameters (everything not fitted stays as here).
-    free : sequence of str
-        The model parameters fitted.
-    flip : bool
-        Run with the hinge moment reversed (the hinge_moment_sign effect).
-    """
-    q = base.quantization_deg
-    held = [f for f in free if f in PRE_QUANTIZER]
-    if q <= 0.0 or not held:
-        return fit(problem, base, free, flip=flip)
-    return no_worse(problem, base, free, _fit_quantized(problem, base, free, held, flip=flip))
-
-
-def no_worse(problem: Problem, start: SecondOrderParams, free: tuple[str, ...] | list[str], new: Fit) -> Fit:
-    """``new``, unless it ends worse than the parameters it started from: then the start, as a fit.
-
-    Parameters
-    ----------
-    problem : Problem
-        The record as fitted.
-    start : SecondOrderParams
-        The parameters the fit started from.
-    free : sequence of str
-        The model parameters fitted.
-    new : Fit
-        The fit.
-    """
-    at_start = problem.weighted_residual(problem.simulate([start], [new.flip])[0])
-    if new.rss <= float(np.dot(at_start, at_start)):
-        return new
-    return evaluate(problem, start, tuple(free), flip=new.flip)
-
-
-def _fit_quantized(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] | list[str], held: list[str],
-                   *, flip: bool) -> Fit:
-    """:func:`fit_model` with a quantizer on: smooth fit, coordinate grids on ``held``, smooth fit again."""
-    q = base.quantization_deg
-    smooth = [f for f in free if f not in PRE_QUANTIZER]
-    first = fit(problem, base, smooth, flip=flip)
-    u_max = max(float(np.max(np.abs(problem.data.command_deg))), 1e-6)
-    half = {"offset_deg": 0.5 * q, "kb": 0.5 * q / u_max}
-    params, outputs = first.params, first.sim
-    for scale in (1.0, 0.2):
-        for name in held:
-            centre = getattr(params, name)
-            grid = [params.replace(**{name: centre + d}) for d in np.linspace(-1.0, 1.0, 11) * half[name] * scale]
-            sims = problem.simulate(grid, [flip] * len(grid))
-            costs = [float(np.dot(r, r)) for r in (problem.weighted_residual(x) for x in sims)]
-            params, outputs = grid[int(np.argmin(costs))], sims[int(np.argmin(costs))]
-    # A grid that found no other outputs leaves the smooth fit where it converged: fitting again would restart it there.
-    final = first if np.array_equal(outputs, first.sim) else fit(problem, params, smooth, flip=flip)
-    params = params if final is first else final.params
-    sigma = dict(final.sigma)
-    for name in held:
-        sigma[name] = half[name] * 0.2 / 10.0  # the finest grid spacing: the resolution the search has
-    return Fit(params, flip, tuple(free), final.sim, final.residual, final.jacobian, sigma, final.jac_free)
 
 
 def offs(fields: tuple[str, ...] | list[str], base: SecondOrderParams) -> dict[str, float]:
@@ -183,7 +110,7 @@ def _fit_candidate(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) ->
     if not swap:
         return new
     base = new.params.replace(**offs(swap, ctx.declared))
-    alt = fit_model(problem, base, tuple(f for f in new.free if f not in swap), flip=new.flip)
+    alt = fit_model(problem, base, tuple(f for f in new.free if f not in swap), flip=new.flip, grids=False)
     return alt if bic(problem, alt) < bic(problem, new) else new
 
 
@@ -202,18 +129,19 @@ def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit
     effect = cand.effect
     extra = _companions(cur, effect, ctx)
     if not effect.fields and not extra:
-        return fit_model(problem, effect.apply(cur.params, cand.value, ctx), cur.free, flip=cand.flip)
+        return fit_model(problem, effect.apply(cur.params, cand.value, ctx), cur.free, flip=cand.flip, grids=False)
     start = {f: min(max(v, FREE[f].low), FREE[f].high) if f in FREE else v for f, v in cand.value.items()}
     base = effect.apply(cur.params, start, ctx)
     if not effect.discrete:
         for companion in extra:
             base = base.replace(**companion.probes(ctx)[0])
         fields = [f for e in (effect, *extra) for f in e.fields]
-        new = fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *fields))), flip=cand.flip)
+        new = fit_model(problem, base, tuple(dict.fromkeys((*cur.free, *fields))), flip=cand.flip, grids=False)
         failed = [f for e in extra if e.check({g: getattr(new.params, g) for g in e.fields}, ctx) for f in e.fields]
         if failed:
             base = new.params.replace(**offs(failed, ctx.declared))
-            new = fit_model(problem, base, tuple(f for f in new.free if f not in failed), flip=cand.flip)
+            new = fit_model(problem, base, tuple(f for f in new.free if f not in failed), flip=cand.flip,
+                            grids=False)
         return new
     # A quantizer's step: the linear search's (step, offset) candidates, each checked with the full
     # simulation on a fine local grid (one batch), then the continuous parameters refitted with it.
@@ -766,6 +694,7 @@ def search(problem: Problem, result: Identification, cur: Fit, base: SecondOrder
                                    f"{'s' if len(tried) != 1 else ''} paid for itself")
             break
         new, cand = best
+        new = finish(problem, new)
         result.steps.extend(_entries(problem, cur, new, cand))
         cur = new
     return cur

@@ -32,8 +32,8 @@ import numpy as np
 
 from ema_sim.identify.effects import FREE
 from ema_sim.identify.fit import Fit, stretch_covariance
+from ema_sim.identify.grid_fit import PRE_QUANTIZER
 from ema_sim.identify.problem import Problem
-from ema_sim.identify.stepwise import PRE_QUANTIZER
 from ema_sim.models.second_order import SecondOrderParams
 
 STRETCHES = 8

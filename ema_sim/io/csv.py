@@ -1,7 +1,10 @@
 """The measured-data CSV of ``../shared/data-contract.md``: strict reading, faithful writing, rig files.
 
 Reading checks every rule of the contract and fails with one :class:`~ema_sim.errors.DataError`
-that names the file line and the column; it never returns partial data.
+that names the file line and the column; it never returns partial data. One exception: a last line with
+no line end that is cut short (fewer cells than the header, or a cell with fewer decimals than the same
+column's two lines before: a logger stopped while writing) is no row; it is left out and said in the
+record's ``truncated`` metadata, which both tools print.
 
 A contract file saved with tabs or semicolons (a spreadsheet's export; then a decimal comma is read as
 a decimal point) is read as well, the delimiter sniffed from the header; a ``#`` line before the header
@@ -304,9 +307,16 @@ def parse_csv(text: str, source: str = "<csv>", fmt: RigFormat | None = None) ->
         raise DataError(f"{source}: line {first + 1}: column {dup!r} appears twice")
     wanted, unit = _mapping(header, fmt, source, first + 1)
     values: dict[str, list[float]] = {name: [] for name in wanted}
+    last = _unterminated_line(text, lines)
+    before: list[list[str]] = []
     for offset, row in enumerate(reader, start=first + 2):
         if not row or all(not cell.strip() for cell in row):
             continue
+        if offset == last and (why := _cut_short(row, header, before)):
+            metadata["truncated"] = (f"line {offset}, the last, has no line end and {why}: cut off while being "
+                                     "written, it is left out")
+            break
+        before = [*before[-1:], row]
         if len(row) != len(header):
             raise DataError(f"{source}: line {offset}: {len(row)} cells, header has {len(header)}")
         for name, (idx, column, factor) in wanted.items():
@@ -338,6 +348,38 @@ def parse_csv(text: str, source: str = "<csv>", fmt: RigFormat | None = None) ->
         if fmt.crank_arm_in:
             metadata.setdefault("crank_arm_in", f"{fmt.crank_arm_in:g}")
     return MeasuredData(metadata=metadata, source=source, unit=unit, **arrays)  # type: ignore[arg-type]
+
+
+def _unterminated_line(text: str, lines: list[str]) -> int:
+    """The file line number of the last line when the file does not end with a line end (0: it does)."""
+    if not text or text.endswith(("\n", "\r")):
+        return 0
+    return next((k + 1 for k in range(len(lines) - 1, -1, -1) if lines[k].strip()), 0)
+
+
+def _decimals(cell: str) -> int | None:
+    """Digits after the decimal point of a plain decimal number (None: no point, or an exponent)."""
+    cell = cell.strip().replace(",", ".")
+    if "." not in cell or "e" in cell.lower():
+        return None
+    return len(cell) - cell.index(".") - 1
+
+
+def _cut_short(row: list[str], header: list[str], before: list[list[str]]) -> str:
+    """Why an unterminated last row was cut short (empty: it looks whole).
+
+    Fewer cells than the header, or a cell with fewer decimals than the same column's two rows before it.
+    """
+    if len(row) < len(header):
+        return f"{len(row)} of the header's {len(header)} cells"
+    if len(before) < 2 or len(row) != len(header):
+        return ""
+    for k, cell in enumerate(row):
+        d = _decimals(cell)
+        prior = [_decimals(r[k]) for r in before if k < len(r)]
+        if d is not None and all(p is not None and p > d for p in prior):
+            return f"its cell {cell.strip()!r} in {header[k]!r} has fewer decimals than that column's rows before it"
+    return ""
 
 
 def _check_signals(arrays: Mapping[str, FloatArray], wanted: Mapping[str, tuple[int, str, float]], source: str

@@ -118,10 +118,25 @@ def uniform_record(data: MeasuredData, *, command_sampled: bool = False) -> Meas
 
 MIN_STRETCH = 100
 """A stretch between gaps with fewer samples is not analysed (the data contract's shortest record)."""
+SAID = ("truncated", "dropouts", "gaps", "resampled")
+"""The metadata a record's reading, cuts and resampling leave, said with every analysis of it."""
 
 
-def _part(data: MeasuredData, a: int, b: int) -> MeasuredData:
-    """Samples ``[a, b)`` of a record, every column cut alike."""
+def part(data: MeasuredData, a: int, b: int) -> MeasuredData:
+    """Samples ``[a, b)`` of a record, every column cut alike.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    a, b : int
+        The first sample and the one after the last.
+
+    Returns
+    -------
+    MeasuredData
+        The part.
+    """
     changes: dict[str, object] = {f.name: getattr(data, f.name)[a:b] for f in fields(data)
                                   if isinstance(getattr(data, f.name), np.ndarray)}
     changes["extra"] = {k: v[a:b] for k, v in data.extra.items()}
@@ -168,7 +183,7 @@ def split_at_gaps(data: MeasuredData) -> list[MeasuredData]:
         span = f"{t[a]:.4g}-{t[b - 1]:.4g} s"
         meta["gaps"] = (f"{head}: analysed stretch by stretch, never across a gap (nothing interpolated in it)"
                         f"{dropped}; this is stretch {i + 1} of {len(kept)}: {span}, {b - a} samples")
-        out.append(replace(_part(data, a, b), metadata=meta, source=f"{data.source} [{span}]"))
+        out.append(replace(part(data, a, b), metadata=meta, source=f"{data.source} [{span}]"))
     return out
 
 
