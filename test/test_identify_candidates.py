@@ -8,6 +8,8 @@ and offset on their grids and converges the rest. The record: the basic second o
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from identgen import make_record
@@ -18,7 +20,7 @@ from ema_sim.identify.grid_fit import PRE_QUANTIZER, finish, fit_model
 from ema_sim.identify.identification import identify
 from ema_sim.identify.problem import Problem
 from ema_sim.identify.record import prepare
-from ema_sim.identify.stepwise import start_point
+from ema_sim.identify.stepwise import _quick, start_point
 
 KB, OFFSET = -0.03, -0.01
 
@@ -60,13 +62,26 @@ def test_finish_never_ends_worse_than_the_candidate(fitted):
 
 
 def test_the_identification_finishes_what_it_accepts():
-    """Every accepted step's model is a full fit: the final model's Kb and offset are searched, not held at the
-    declared values, and its error is at the noise floor."""
+    """Every accepted step's model is a full fit: the final model's Kb and offset are searched (a 3 % gain error is
+    tens of grid widths away: the grids widen, and alternate with the smooth fit), and its error is at the noise
+    floor. A fixed grid ended at Kb −0.005 and offset −0.0215°, 4.6 times the floor."""
     data = make_record({"command_gain": KB, "command_bias": OFFSET, "time_delay": 0.008}, seed=6, duration_s=10.0,
                        quantization_deg=0.02)
     result = identify(prepare(data, load_channel("left_wing")), "loada")
     p = result.final.params
-    assert abs(p.kb - KB) < 0.2 * abs(KB)
-    assert abs(p.offset_deg - OFFSET) < 0.5 * abs(OFFSET)
+    assert abs(p.kb - KB) < 0.05 * abs(KB)
+    assert abs(p.offset_deg - OFFSET) < 0.1 * abs(OFFSET)
     rms = {o: float(np.sqrt(np.mean(e**2))) for o, e in result.problem.errors_deg(result.final.sim).items()}
-    assert all(rms[o] < 1.3 * result.problem.sigma_deg[o] for o in rms)
+    assert all(rms[o] < 1.1 * result.problem.sigma_deg[o] for o in rms)
+
+
+def test_a_quick_fit_that_ends_worse_than_the_current_model_is_redone_in_full(fitted):
+    """Holding Kb and offset can strand a candidate (a lag filter behind LOADA's quantizer ended 1.49 times the
+    current model's error): one that ends worse than the current model is fitted again with the grids."""
+    problem, start, free = fitted
+    quick = fit_model(problem, start, free, flip=False, grids=False)
+    assert _quick(problem, start, tuple(free), False, quick).params == quick.params  # no worse: kept as it is
+    better = replace(quick, residual=0.5 * quick.residual)  # a current model the quick fit cannot match
+    redone = _quick(problem, start, tuple(free), False, better)
+    assert (redone.params.kb, redone.params.offset_deg) != (start.kb, start.offset_deg)  # the grids ran
+    assert redone.rss < quick.rss

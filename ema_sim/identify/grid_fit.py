@@ -17,6 +17,7 @@ import numpy as np
 from ema_sim.identify.effects import FREE
 from ema_sim.identify.fit import FTOL, Fit, evaluate, fit
 from ema_sim.identify.problem import Problem
+from ema_sim.models.arrays import FloatArray
 from ema_sim.models.second_order import SecondOrderParams
 
 CANDIDATE_FTOL = 1e-4
@@ -27,7 +28,9 @@ PRE_QUANTIZER = ("kb", "offset_deg")
 WIDEN = 3.0
 MAX_WIDEN = 6
 """A pre-quantizer grid whose best point is at its edge is moved there and widened this many times, at most so often
-(:func:`_grid_search`)."""
+(:func:`_grids`)."""
+MAX_CYCLES = 3
+"""Most rounds of grids and smooth fit after a grid widened (:func:`_grid_search`)."""
 
 
 def fit_model(problem: Problem, base: SecondOrderParams, free: tuple[str, ...] | list[str], *, flip: bool,
@@ -130,13 +133,32 @@ def no_worse(problem: Problem, start: SecondOrderParams, free: tuple[str, ...] |
 def _grid_search(problem: Problem, first: Fit, free: tuple[str, ...] | list[str], held: list[str]) -> Fit:
     """Coordinate grids on ``held`` from a smooth fit, then the smooth parameters fitted again.
 
+    When the grids had to widen (a large move), the smooth parameters were fitted far from where Kb and offset
+    ended: grids and smooth fit alternate again, up to :data:`MAX_CYCLES` times, until the grids stay put.
+    """
+    smooth = [f for f in free if f not in PRE_QUANTIZER]
+    cur = first
+    for _ in range(MAX_CYCLES):
+        params, outputs, widened = _grids(problem, cur, held)
+        # A grid that found no other outputs leaves the smooth fit where it converged: fitting again would restart
+        # it there.
+        if np.array_equal(outputs, cur.sim):  # the grid's point, which runs the same as the smooth fit's
+            return _held(problem, replace(cur, params=params), free, held)
+        cur = fit(problem, params, smooth, flip=cur.flip)
+        if not widened:
+            break
+    return _held(problem, cur, free, held)
+
+
+def _grids(problem: Problem, first: Fit, held: list[str]) -> tuple[SecondOrderParams, FloatArray, bool]:
+    """The coordinate grids on ``held`` from ``first``: where they end, its outputs, and whether one widened.
+
     Each parameter's grid of 11 spans ±half a step; while its best point is at an edge, and better there than
     anywhere inside, the grid is moved there and widened :data:`WIDEN` times (at most :data:`MAX_WIDEN` times:
     a gain error of a few per cent is many half steps away), the parameters in turn until none widened; then each
     grid is narrowed fivefold until it is five times finer than half a step.
     """
     flip = first.flip
-    smooth = [f for f in free if f not in PRE_QUANTIZER]
     half = _half_steps(problem, first.params.quantization_deg)
     params, outputs = first.params, first.sim
     span = dict(half)
@@ -154,6 +176,7 @@ def _grid_search(problem: Problem, first: Fit, free: tuple[str, ...] | list[str]
         params, outputs = grid[best], sims[best]
         return best in (0, len(grid) - 1) and costs[best] < min(costs[1:-1])
 
+    moved = False
     for _ in range(MAX_WIDEN):  # passes over the parameters while one of them widened
         widened = False
         for name in held:
@@ -161,14 +184,11 @@ def _grid_search(problem: Problem, first: Fit, free: tuple[str, ...] | list[str]
                 if not search(name):
                     break
                 span[name] *= WIDEN
-                widened = True
+                widened = moved = True
         if not widened:
             break
     for name in held:  # the finer grids (when nothing widened: one, a fifth as wide)
         while span[name] > 0.2 * half[name] * (1.0 + 1e-9):
             span[name] = max(0.2 * span[name], 0.2 * half[name])
             search(name)
-    # A grid that found no other outputs leaves the smooth fit where it converged: fitting again would restart it there.
-    if np.array_equal(outputs, first.sim):  # the grid's point, which runs the same as the smooth fit's
-        return _held(problem, replace(first, params=params), free, held)
-    return _held(problem, fit(problem, params, smooth, flip=flip), free, held)
+    return params, outputs, moved
