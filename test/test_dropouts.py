@@ -1,7 +1,8 @@
 """Dropouts (stale readings) in a record's outputs: ``ema analyze`` cuts the record there, never reads across them.
 
-The records are made here (numpy only): a damped, rate-limited servo following a held staircase at 1 kHz; a
-dropout repeats the position's last reading for 200 ms in the middle of a move, then jumps to catch up.
+The records are made with numpy alone (``servo_records``): a damped, rate-limited servo following a held
+staircase at 1 kHz; a dropout repeats the position's last reading for 200 ms in the middle of a move, then jumps
+to catch up.
 """
 
 from __future__ import annotations
@@ -9,43 +10,20 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from servo_records import servo
 
 from ema_sim.analysis.pipeline import analyze_records
 from ema_sim.analysis.records import artefacts
 from ema_sim.analysis.report import to_json
 from ema_sim.io.measured import MeasuredData
 
-FINE_S = 1e-4
 RATE_DPS = 80.0
-
-
-def _servo(t: np.ndarray, levels: list[tuple[float, float]], seed: int = 0, noise: float = 0.003
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """The held command and a 60 rad/s, ζ 0.7 response whose rate is clipped at :data:`RATE_DPS`, at ``t``."""
-    fine = np.arange(0.0, t[-1] + 2 * FINE_S, FINE_S)
-    starts = np.array([a for a, _ in levels])
-    values = np.array([v for _, v in levels])
-
-    def held(x: np.ndarray) -> np.ndarray:
-        return values[np.clip(np.searchsorted(starts, x, side="right") - 1, 0, values.size - 1)]
-
-    u = held(fine)
-    wn, zeta = 60.0, 0.7
-    y, v = np.zeros_like(fine), 0.0
-    for i in range(1, fine.size):
-        v += FINE_S * (wn * wn * (u[i - 1] - y[i - 1]) - 2.0 * zeta * wn * v)
-        v = min(max(v, -RATE_DPS), RATE_DPS)
-        y[i] = y[i - 1] + FINE_S * v
-    rng = np.random.default_rng(seed)
-    return held(t), np.interp(t, fine, y) + rng.normal(0.0, noise, t.size)
-
-
 LEVELS = [(0.0, 0.0), (1.0, 0.5), (2.0, -0.5), (3.0, 2.0), (4.0, -2.0), (5.0, 10.0), (6.0, -10.0), (7.0, 0.0)]
 
 
 def _record(dropout: bool) -> tuple[MeasuredData, slice]:
     t = np.arange(0.0, 8.0, 1e-3)
-    u, y = _servo(t, LEVELS)
+    u, y = servo(t, LEVELS, rate_dps=RATE_DPS)
     a, b = np.searchsorted(t, [5.05, 5.25])
     if dropout:
         y[a:b] = y[a - 1]

@@ -1,14 +1,16 @@
 """Gaps and wandering instants in a record's stamps: never bridged, never taken for jitter.
 
-The records are made here (numpy only): a damped servo following a held staircase, sampled either on a
-uniform grid with one long pause of the logger, or at instants whose every interval jitters (so they
-drift as a random walk), now and then a sample late by one or two intervals, stamped in integer ms.
+The records are made with numpy alone (``servo_records``): a damped servo following a held staircase,
+sampled either on a uniform grid with one long pause of the logger, or at instants whose every interval
+jitters (so they drift as a random walk), now and then a sample late by one or two intervals, stamped in
+integer ms.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from servo_records import servo
 
 from ema_sim.analysis.estimation.prepared import prepare, resolve_channel
 from ema_sim.analysis.pipeline import analyze_records
@@ -17,34 +19,13 @@ from ema_sim.analysis.report import to_json
 from ema_sim.identify.record import identification_record
 from ema_sim.io.measured import MeasuredData
 
-FINE_S = 1e-4
-
-
-def _servo(t: np.ndarray, levels: list[tuple[float, float]], seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """The held command (``(from_s, level)`` pairs) and a 60 rad/s, ζ 0.7 response with 0.003° of noise at ``t``."""
-    fine = np.arange(0.0, t[-1] + 2 * FINE_S, FINE_S)
-    starts = np.array([a for a, _ in levels])
-    values = np.array([v for _, v in levels])
-
-    def held(x: np.ndarray) -> np.ndarray:
-        return values[np.clip(np.searchsorted(starts, x, side="right") - 1, 0, values.size - 1)]
-
-    u = held(fine)
-    wn, zeta = 60.0, 0.7
-    y, v = np.zeros_like(fine), 0.0
-    for i in range(1, fine.size):
-        v += FINE_S * (wn * wn * (u[i - 1] - y[i - 1]) - 2.0 * zeta * wn * v)
-        y[i] = y[i - 1] + FINE_S * v
-    rng = np.random.default_rng(seed)
-    return held(t), np.interp(t, fine, y) + rng.normal(0.0, 0.003, t.size)
-
 
 def _gapped(gap_s: float = 5.0) -> MeasuredData:
     """Two 6 s stretches at 500 Hz with a pause of ``gap_s`` between, the command held at 2° across it."""
     first = np.arange(0.0, 6.0, 0.002)
     t = np.concatenate([first, first + 6.0 + gap_s])
     levels = [(0.0, 0.0), (1.0, 1.0), (2.5, 0.0), (3.5, 2.0), (6.0 + gap_s + 3.0, -1.0), (6.0 + gap_s + 4.5, 0.0)]
-    command, position = _servo(t, levels)
+    command, position = servo(t, levels)
     return MeasuredData(time_s=t, command_deg=command, position_deg=position, source="gapped.csv")
 
 
@@ -56,7 +37,7 @@ def _wandering(n: int = 4000, seed: int = 3) -> MeasuredData:
     dt[late] += rng.choice([2e-3, 3e-3], int(late.sum()))
     true = np.cumsum(dt)
     levels = [(0.0, 0.0), (1.0, 3.0), (2.5, -2.0), (4.0, 0.0), (5.5, 1.0)]
-    command, position = _servo(true, levels, seed)
+    command, position = servo(true, levels, seed)
     stamp = np.round(true * 1e3) / 1e3
     keep = np.concatenate([[True], np.diff(stamp) > 0])
     return MeasuredData(time_s=stamp[keep], command_deg=command[keep], position_deg=position[keep],

@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ema_sim.analysis.records.series import MIN_STRETCH, part
-from ema_sim.errors import DataError
+from ema_sim.analysis.records.series import cut
 from ema_sim.io.measured import OUTPUTS, MeasuredData
 
 FloatArray = NDArray[np.float64]
@@ -274,17 +273,6 @@ def split_at_dropouts(data: MeasuredData) -> list[MeasuredData]:
         bad[np.asarray(a.indices, dtype=int)] = True
     edges = np.flatnonzero(np.diff(np.concatenate([[1], bad.astype(int), [1]])))
     parts = [(int(lo), int(hi)) for lo, hi in zip(edges[::2], edges[1::2], strict=True) if hi > lo]
-    kept = [(lo, hi) for lo, hi in parts if hi - lo >= MIN_STRETCH]
     head = "; ".join(f.statement("cut out: the record is analysed on each side of it, never across it")
                      for f in found)
-    if not kept:
-        raise DataError(f"{data.source}: {head}; no stretch between them has {MIN_STRETCH} samples to analyse")
-    short = len(parts) - len(kept)
-    dropped = f"; {short} stretch(es) under {MIN_STRETCH} samples not analysed" if short else ""
-    out = []
-    for i, (lo, hi) in enumerate(kept):
-        meta = dict(data.metadata)
-        span = f"{t[lo]:.4g}-{t[hi - 1]:.4g} s"
-        meta["dropouts"] = f"{head}{dropped}; this is stretch {i + 1} of {len(kept)}: {span}, {hi - lo} samples"
-        out.append(replace(part(data, lo, hi), metadata=meta, source=f"{data.source} [{span}]"))
-    return out
+    return cut(data, parts, "dropouts", head)

@@ -170,9 +170,42 @@ def split_at_gaps(data: MeasuredData) -> list[MeasuredData]:
     if not gaps:
         return [data]
     t = data.time_s
-    parts = stretches(t.size, gaps)
-    kept = [(a, b) for a, b in parts if b - a >= MIN_STRETCH]
     head = gap_statement(gaps, float(np.median(np.diff(t))))
+    return cut(data, stretches(t.size, gaps), "gaps", head,
+               ": analysed stretch by stretch, never across a gap (nothing interpolated in it)")
+
+
+def cut(data: MeasuredData, parts: list[tuple[int, int]], key: str, head: str, how: str = "") -> list[MeasuredData]:
+    """The record's ``parts`` of :data:`MIN_STRETCH` samples or more, each a record named by its span.
+
+    Each part's metadata ``key`` says why the record was cut (``head``, then ``how``), what was left out and which
+    part it is; shorter parts are left out and said.
+
+    Parameters
+    ----------
+    data : MeasuredData
+        The record.
+    parts : list of tuple
+        ``(start, stop)`` samples of each part, in order.
+    key : str
+        The metadata entry that says the cut.
+    head : str
+        What the record was cut at.
+    how : str
+        How it is analysed, after ``head``.
+
+    Returns
+    -------
+    list of MeasuredData
+        The parts long enough to analyse.
+
+    Raises
+    ------
+    DataError
+        No part is long enough.
+    """
+    t = data.time_s
+    kept = [(a, b) for a, b in parts if b - a >= MIN_STRETCH]
     if not kept:
         raise DataError(f"{data.source}: {head}; no stretch between them has {MIN_STRETCH} samples to analyse")
     short = len(parts) - len(kept)
@@ -181,8 +214,7 @@ def split_at_gaps(data: MeasuredData) -> list[MeasuredData]:
     for i, (a, b) in enumerate(kept):
         meta = dict(data.metadata)
         span = f"{t[a]:.4g}-{t[b - 1]:.4g} s"
-        meta["gaps"] = (f"{head}: analysed stretch by stretch, never across a gap (nothing interpolated in it)"
-                        f"{dropped}; this is stretch {i + 1} of {len(kept)}: {span}, {b - a} samples")
+        meta[key] = f"{head}{how}{dropped}; this is stretch {i + 1} of {len(kept)}: {span}, {b - a} samples"
         out.append(replace(part(data, a, b), metadata=meta, source=f"{data.source} [{span}]"))
     return out
 
