@@ -387,7 +387,7 @@ BAD = [
      [], "1e+30 deg at data row 2 and 170 more: no actuator moves beyond"),
     ("ms_as_s.csv",
      "time_s,command_deg,position_deg\n" + "\n".join(f"{i},{i // 50 % 2},{i // 50 % 2}" for i in range(300)), [],
-     "sampled every 1 s over 299 s, slower than the 5 Hz identification needs to see an actuator move; "
+     "sampled every 1 s over 299 s, slower than the 5 Hz needed to see an actuator move; "
      "whole-number stamps 1 apart look like milliseconds"),
     ("tab.tsv", "t\tdemand\tpos\n" + "\n".join(f"{i}\t{i % 9}\t{i % 9}" for i in range(200)), [], "--columns"),
     ("tab_wrong.tsv", "t\tdemand\tpos\n" + "\n".join(f"{i}\t{i % 9}\t{i % 9}" for i in range(200)),

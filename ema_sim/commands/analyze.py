@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ema_sim.analysis.formatting.units import in_unit
-from ema_sim.commands.common import Subparsers, add_data_args, check_channel, rig_format
+from ema_sim.commands.common import Subparsers, add_data_args, check_channel, check_outputs, rig_format
 from ema_sim.errors import SpecError
 from ema_sim.models import model_class
 from ema_sim.progress import ProgressBar
@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from ema_sim.analysis.report import to_json, to_markdown  # noqa: PLC0415 - loaded when this subcommand runs, not at every ema start
 
     check_channel(args.channel)
+    check_outputs([args.json], [args.report])
     rig = rig_format(args)
     options = Options(at_hz=_floats(args.at_hz), model=args.model, threshold_deg=args.threshold_deg,
                       compliance_deg_per_kinlb=args.compliance, channel=args.channel, command=args.command_hold)

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, TypeAlias
 
 from ema_sim.config import CHANNELS
-from ema_sim.errors import DataError, SpecError, UnknownNameError
+from ema_sim.errors import DataError, EmaError, SpecError, UnknownNameError
 
 if TYPE_CHECKING:
     from ema_sim.io.csv import RigFormat
@@ -119,3 +121,36 @@ def check_channel(name: str | None) -> None:
     """
     if name is not None and name not in CHANNELS:
         raise UnknownNameError("channel", name, CHANNELS)
+
+
+def check_outputs(files: Sequence[str | Path | None] = (), folders: Sequence[str | Path | None] = ()) -> None:
+    """Make sure what a command will write can be written, before its work: one clear error now, not after a fit.
+
+    Each file's folder and each folder are created when missing (as the writers do).
+
+    Parameters
+    ----------
+    files : sequence of path or None
+        Files the command will write (None: not asked for).
+    folders : sequence of path or None
+        Folders it will write into.
+
+    Raises
+    ------
+    EmaError
+        A folder cannot be created, or is not writable, or a file names a folder.
+    """
+    wanted: list[tuple[Path, Path | None]] = [(Path(f).parent, Path(f)) for f in files if f is not None]
+    wanted += [(Path(d), None) for d in folders if d is not None]
+    for folder, file in wanted:
+        blocker = next((a for a in (folder, *folder.parents) if a.exists() and not a.is_dir()), None)
+        if blocker is not None:
+            raise EmaError(f"cannot write {file or folder}: {blocker} is a file, not a folder")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise EmaError(f"cannot write {file or folder}: {exc.strerror or exc} ({folder})") from None
+        if not os.access(folder, os.W_OK):
+            raise EmaError(f"cannot write {file or folder}: the folder {folder} is not writable")
+        if file is not None and file.is_dir():
+            raise EmaError(f"cannot write {file}: it is a folder")

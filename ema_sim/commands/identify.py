@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from ema_sim import io as ema_io
 from ema_sim.analysis.estimation.prepared import resolve_channel
-from ema_sim.commands.common import Subparsers, add_data_args, check_channel, parse_overrides, rig_format
+from ema_sim.commands.common import Subparsers, add_data_args, check_channel, check_outputs, parse_overrides, rig_format
 from ema_sim.errors import EmaError, UnknownNameError
 from ema_sim.identify.declared import DECLARED
 from ema_sim.identify.identification import Search, identify
@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model.strip().lower() not in DECLARED:
         raise UnknownNameError("declared model for identification", args.model, DECLARED)
     overrides = parse_overrides(args.overrides)
+    check_outputs([args.json, args.residuals], [args.report])
     data = load_measured(args.data, args.channel, rig_format(args))
     channel, note = resolve_channel(data, args.channel)
     record = prepare(data, channel, channel_note=note, command=args.command_hold)

@@ -349,10 +349,20 @@ class Problem:
 
     @cached_property
     def measured_rate_dps(self) -> float:
-        """Fastest the measured output moves (99.9th percentile of a smoothed derivative)."""
+        """Fastest the measured output moves (99.9th percentile of a smoothed derivative).
+
+        Samples taken out of the fit after its start (a sensor's spike, a stale reading: :mod:`.artefacts`) are
+        bridged first: a 10⁴° glitch read as a 10⁵ °/s move started a rate limit beyond its range.
+        """
         output = "position_deg" if "position_deg" in self.outputs else "surface_deg"
+        y = self.observed[output]
+        out = ~self.mask & (self.time_s >= self.settle_s)
+        if out.any() and not out.all():
+            y = y.copy()
+            y[out] = np.interp(self.time_s[out], self.time_s[~out], y[~out])
         window = max(round(0.015 * self.sample_hz) | 1, 5)
-        rate = savgol_filter(self.observed[output], window, 2, deriv=1, delta=1.0 / self.sample_hz)
+        window = min(window, y.size if y.size % 2 else y.size - 1)  # never longer than the record
+        rate = savgol_filter(y, window, 2, deriv=1, delta=1.0 / self.sample_hz)
         return float(np.percentile(np.abs(rate), 99.9))
 
     @cached_property

@@ -43,14 +43,8 @@ from ema_sim.config import ChannelConfig
 from ema_sim.errors import DataError
 from ema_sim.io.measured import MeasuredData
 
-__all__ = ["Record", "Travel", "check_identifiable", "check_sampling", "prepare", "rest_warnings", "sensor_range",
+__all__ = ["Record", "Travel", "check_identifiable", "prepare", "rest_warnings", "sensor_range",
            "travel_limits"]
-
-MAX_ABS = 1e6
-"""No command or output in degrees or millimetres is this large: such a column is not what it is named."""
-MIN_SAMPLE_HZ = 5.0
-"""Slowest sampling identification takes: every actuator of the report moves within a fraction of a second, and
-the simulations' cost grows with the span in seconds (a 1 Hz log of 20,000 rows took 7 minutes and 14 GB)."""
 
 
 @dataclass
@@ -101,13 +95,6 @@ def check_identifiable(source: str, unit: str, command_deg: FloatArray, outputs:
         Output name → its samples.
     """
     source = source or "data"
-    for name, x in {"command_deg": command_deg, **outputs}.items():
-        beyond = np.flatnonzero(np.abs(x) > MAX_ABS)
-        if beyond.size:
-            k = int(beyond[0])
-            rows = f"data row {k + 1}" + (f" and {beyond.size - 1} more" if beyond.size > 1 else "")
-            raise DataError(f"{source}: {name} reaches {float(x[k]):.3g} {unit} at {rows}: no actuator moves "
-                            f"beyond ±{MAX_ABS:g}; is the column mapped to the right signal and unit?")
     span = float(np.ptp(command_deg))
     if span == 0.0:
         raise DataError(f"{source}: the command never changes ({command_deg[0]:g} {unit} throughout): "
@@ -116,30 +103,6 @@ def check_identifiable(source: str, unit: str, command_deg: FloatArray, outputs:
         if float(np.ptp(y)) == 0.0:
             raise DataError(f"{source}: {name} never changes while the command spans {span:.4g} {unit}: the "
                             "actuator did not move, or the column is not its position")
-
-
-def check_sampling(source: str, time_s: FloatArray) -> None:
-    """One clear error for a record sampled too slowly to identify an actuator from (:data:`MIN_SAMPLE_HZ`).
-
-    Whole-number stamps a whole second or more apart are, as a rule, milliseconds logged under ``time_s``: the
-    message says how to read them as such.
-
-    Parameters
-    ----------
-    source : str
-        Where the record was read from (for the message).
-    time_s : numpy.ndarray
-        The record's stamps, s.
-    """
-    interval = float(np.median(np.diff(time_s)))
-    if interval <= 1.0 / MIN_SAMPLE_HZ:
-        return
-    hint = ""
-    if np.all(time_s == np.round(time_s)):
-        hint = (f"; whole-number stamps {interval:g} apart look like milliseconds: if they are, read them as such "
-                "(--columns time_ms=<the time column>,...)")
-    raise DataError(f"{source or 'data'}: sampled every {interval:g} s over {float(time_s[-1] - time_s[0]):g} s, "
-                    f"slower than the {MIN_SAMPLE_HZ:g} Hz identification needs to see an actuator move{hint}")
 
 
 def rest_warnings(name: str, nf: NoiseFloor, unit: str) -> list[str]:
@@ -187,7 +150,6 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     Record
         The prepared record, its notes and warnings.
     """
-    check_sampling(data.source, np.asarray(data.time_s, dtype=float))
     check = partial(check_identifiable, data.source, data.unit)
     return identification_record(shared.prepare(data, channel, channel_note=channel_note, command=command, check=check))
 

@@ -38,6 +38,25 @@ class Candidate:
     """The largest share of one output's error above its noise floor it would remove (ranking)."""
 
 
+def within_range(values: Values) -> Values:
+    """Each :data:`~ema_sim.identify.effects.FREE` parameter's value clipped to its range, for a probe or a fit's start.
+
+    A value read off the record beyond the range (a rate at a glitch's slope) starts at the bound instead of
+    failing the model's validation.
+
+    Parameters
+    ----------
+    values : dict
+        Model parameter → value.
+
+    Returns
+    -------
+    dict
+        The same, each fitted parameter's value within its bounds.
+    """
+    return {f: min(max(v, FREE[f].low), FREE[f].high) if f in FREE else v for f, v in values.items()}
+
+
 def screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     """Every applicable effect's best probe, ranked by what it would remove if it entered linearly.
 
@@ -62,7 +81,7 @@ def screen(problem: Problem, cur: Fit, ctx: Context) -> list[Candidate]:
     probes: list[tuple[Effect, Values]] = [(e, v) for e in effects for v in e.probes(ctx)]
     if not probes:
         return []
-    params = [e.apply(cur.params, v, ctx) for e, v in probes]
+    params = [e.apply(cur.params, within_range(v), ctx) for e, v in probes]
     flips = [cur.flip != (e.name == "hinge_moment_sign") for e, _ in probes]
     sims = problem.simulate(params, flips)
     r = cur.residual

@@ -45,7 +45,7 @@ from ema_sim.identify.parallel import SERIAL, Pool, TaskFuture, one_blas_thread,
 from ema_sim.identify.problem import Cancelled, Problem
 from ema_sim.identify.quantization import step_candidates
 from ema_sim.identify.record import Record
-from ema_sim.identify.screening import Candidate, screen
+from ema_sim.identify.screening import Candidate, screen, within_range
 from ema_sim.identify.stages import allow, worse
 from ema_sim.models.second_order import SecondOrderParams
 from ema_sim.parameters import metas
@@ -141,8 +141,7 @@ def _fit_added(problem: Problem, cur: Fit, cand: Candidate, ctx: Context) -> Fit
     extra = _companions(cur, effect, ctx)
     if not effect.fields and not extra:
         return _quick(problem, effect.apply(cur.params, cand.value, ctx), cur.free, cand.flip, cur)
-    start = {f: min(max(v, FREE[f].low), FREE[f].high) if f in FREE else v for f, v in cand.value.items()}
-    base = effect.apply(cur.params, start, ctx)
+    base = effect.apply(cur.params, within_range(cand.value), ctx)
     if not effect.discrete:
         for companion in extra:
             base = base.replace(**companion.probes(ctx)[0])

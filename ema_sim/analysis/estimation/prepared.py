@@ -19,6 +19,9 @@
   opened past the data where it shows none), a saturated side being no stop (:func:`travel_limits`);
 * the **unit**, and an output logged in radians while named in degrees (:func:`radian_slips`).
 
+A record sampled too slowly or too short to show an actuator move is one error first (:func:`check_sampling`):
+stamps logged in another unit than the column says are the usual cause.
+
 The helpers take arrays, not a record to look columns up in. The module lives below ``analysis.pipeline`` and
 ``ema_sim.identify`` so that both read the same facts and neither reaches into the other's engine.
 """
@@ -53,6 +56,14 @@ NOISELESS_DEG = 1e-6
 """An output whose white noise is under this is a simulation's, read through no sensor."""
 STOP_S = 0.2
 """The command must sit beyond the output's extreme this long, the output resting there, to show a stop."""
+MAX_ABS = 1e6
+"""No command or output in degrees or millimetres is this large: such a column is not what it is named."""
+MIN_SAMPLE_HZ = 5.0
+"""Slowest sampling either tool takes: every actuator of the report moves within a fraction of a second, and
+identification's simulations cost grows with the span in seconds (a 1 Hz log of 20,000 rows took 7 minutes and
+14 GB; ``ema analyze`` failed inside its step fits on a 0.5 Hz log)."""
+MIN_SPAN_S = 0.1
+"""Shortest record an actuator's move fits in: a step of a 50 rad/s servo takes about this long to settle."""
 
 
 @dataclass(frozen=True)
@@ -365,6 +376,59 @@ def reversed_outputs(command_deg: FloatArray, outputs: dict[str, FloatArray]) ->
     return out
 
 
+def check_sampling(source: str, time_s: FloatArray) -> None:
+    """One clear error for a record sampled too slowly (:data:`MIN_SAMPLE_HZ`) or too short (:data:`MIN_SPAN_S`).
+
+    Whole-number stamps a whole second or more apart are, as a rule, milliseconds logged under ``time_s``: the
+    message says how to read them as such. A record a fraction of a millisecond long with thousands of rows is, as
+    a rule, microseconds or nanoseconds logged as seconds.
+
+    Parameters
+    ----------
+    source : str
+        Where the record was read from (for the message).
+    time_s : numpy.ndarray
+        The record's stamps, s.
+    """
+    where = source or "data"
+    interval = float(np.median(np.diff(time_s))) if time_s.size > 1 else 0.0
+    span = float(time_s[-1] - time_s[0]) if time_s.size else 0.0
+    if interval > 1.0 / MIN_SAMPLE_HZ:
+        hint = ""
+        if np.all(time_s == np.round(time_s)):
+            hint = (f"; whole-number stamps {interval:g} apart look like milliseconds: if they are, read them as "
+                    "such (--columns time_ms=<the time column>,...)")
+        raise DataError(f"{where}: sampled every {interval:g} s over {span:g} s, slower than the {MIN_SAMPLE_HZ:g} Hz "
+                        f"needed to see an actuator move{hint}")
+    if span < MIN_SPAN_S:
+        raise DataError(f"{where}: {time_s.size} samples over {span:g} s, shorter than the {MIN_SPAN_S:g} s an "
+                        "actuator's move takes; are the stamps in another unit than the column says (µs or ns "
+                        "logged under time_s)?")
+
+
+def check_values(source: str, unit: str, command_deg: FloatArray, outputs: dict[str, FloatArray]) -> None:
+    """One clear error for a command or output beyond :data:`MAX_ABS`, its first row named.
+
+    Parameters
+    ----------
+    source : str
+        Where the record was read from (for the message).
+    unit : str
+        The record's unit.
+    command_deg : numpy.ndarray
+        The command.
+    outputs : dict
+        Output name → its samples.
+    """
+    for name, x in {"command_deg": command_deg, **outputs}.items():
+        beyond = np.flatnonzero(np.abs(x) > MAX_ABS)
+        if beyond.size:
+            k = int(beyond[0])
+            rows = f"data row {k + 1}" + (f" and {beyond.size - 1} more" if beyond.size > 1 else "")
+            raise DataError(f"{source or 'data'}: {name} reaches {float(x[k]):.3g} {unit} at {rows}: no actuator "
+                            f"moves beyond ±{MAX_ABS:g}; is the column mapped to the right signal and unit?")
+
+
 def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | None = None,
             command: HoldMode = "detect", check: Check | None = None) -> PreparedRecord:
     """Read the record's columns once and measure what both tools start from (module docstring).
@@ -389,11 +453,13 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
         The columns and the facts.
     """
     time_s = np.asarray(data.time_s, dtype=float)
+    check_sampling(data.source, time_s)
     command_deg = np.asarray(data.command_deg, dtype=float)
     columns = {name: getattr(data, name) for name in OUTPUTS}
     outputs = {name: np.asarray(y, dtype=float) for name, y in columns.items() if y is not None}
     if not outputs:
         raise DataError(f"{data.source or 'data'}: needs a position_deg or surface_deg column")
+    check_values(data.source, data.unit, command_deg, outputs)
     if check is not None:
         check(command_deg, outputs)
     given_counts = data.metadata.get("resolution_deg")

@@ -178,7 +178,8 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: boo
     Returns
     -------
     DitherResult or None
-        None when the stretch is shorter than 4 periods of the lowest frequency searched.
+        None when the stretch is shorter than 4 periods of the lowest frequency searched, or sampled too slowly
+        to see it.
     """
     fs = 1.0 / float(np.median(np.diff(t)))
     span = float(t[-1] - t[0]) + 1.0 / fs  # the record's length: n samples of 1/fs each
@@ -191,6 +192,8 @@ def detect_dither(t: FloatArray, y: FloatArray, *, output: str, fold_always: boo
     sp = spectra.welch(yd, yd[None, :], fs, min(8.0, span / 2.0), overlap=0.5)
     f, p = sp.freq_hz, sp.gxx
     band = (f >= BAND_HZ[0]) & (f <= min(BAND_HZ[1], fs / 2.5))
+    if not band.any():  # sampled too slowly for the band (below 2.5× its lowest frequency)
+        return None
     fb, pb = f[band], p[band]
     i = int(np.argmax(pb))
     mask = np.ones(pb.size, dtype=bool)
