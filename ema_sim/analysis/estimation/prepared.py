@@ -406,20 +406,8 @@ def check_sampling(source: str, time_s: FloatArray) -> None:
                         "logged under time_s)?")
 
 
-def check_values(source: str, unit: str, command_deg: FloatArray, outputs: dict[str, FloatArray]) -> None:
-    """One clear error for a command or output beyond :data:`MAX_ABS`, its first row named.
-
-    Parameters
-    ----------
-    source : str
-        Where the record was read from (for the message).
-    unit : str
-        The record's unit.
-    command_deg : numpy.ndarray
-        The command.
-    outputs : dict
-        Output name → its samples.
-    """
+def _check_values(source: str, unit: str, command_deg: FloatArray, outputs: dict[str, FloatArray]) -> None:
+    """One clear error for a command or output beyond :data:`MAX_ABS` (in ``unit``), its first row named."""
     for name, x in {"command_deg": command_deg, **outputs}.items():
         beyond = np.flatnonzero(np.abs(x) > MAX_ABS)
         if beyond.size:
@@ -459,7 +447,7 @@ def prepare(data: MeasuredData, channel: ChannelConfig, *, channel_note: str | N
     outputs = {name: np.asarray(y, dtype=float) for name, y in columns.items() if y is not None}
     if not outputs:
         raise DataError(f"{data.source or 'data'}: needs a position_deg or surface_deg column")
-    check_values(data.source, data.unit, command_deg, outputs)
+    _check_values(data.source, data.unit, command_deg, outputs)
     if check is not None:
         check(command_deg, outputs)
     given_counts = data.metadata.get("resolution_deg")
